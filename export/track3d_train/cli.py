@@ -1,0 +1,32 @@
+"""`track3d-train`: train and export the networks (needs the `train` extra: torch, onnx).
+
+    track3d-train boxnet  ...   A3BoxNet (see `track3d-train boxnet --help`)
+    track3d-train siamfc  ...   SiamFC, faithful and edge variants
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+
+COMMANDS = {
+    "boxnet": ("track3d_train.boxnet.cli", "train, export and check A3BoxNet"),
+    "siamfc": ("track3d_train.siamfc.cli", "train, export and check SiamFC"),
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
+        print(__doc__.strip())
+        for name, (_, text) in COMMANDS.items():
+            print(f"  {name:8s} {text}")
+        if argv and argv[0] not in ("-h", "--help"):
+            print(f"\nerror: unknown command {argv[0]!r}", file=sys.stderr)
+            return 2
+        return 0 if argv else 2
+    module = importlib.import_module(COMMANDS[argv[0]][0])
+    return int(module.main(argv[1:]) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

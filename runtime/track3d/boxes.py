@@ -1,0 +1,154 @@
+"""Boxes and overlaps: the ONE implementation of box formulas in the project.
+
+- 2D box: [x, y, w, h] pixels, top-left corner + size (OTB / GOT-10k convention).
+- 3D box: axis-aligned [cx, cy, cz, sx, sy, sz] in the left camera frame, metres.
+- BEV box: the x-z plane, [cx, cz, sx, sz].
+- Size classes: the 14 x/y/z ratio templates of the paper's Table 1.
+
+All functions take single boxes or stacks (N, k) and broadcast like numpy.
+Degenerate boxes (zero or negative size, nan) have IoU 0 with everything.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "SIZE_TEMPLATES", "NUM_SIZE_CLASSES",
+    "iou_2d", "iou_3d", "iou_bev", "box3d_to_bev", "center_2d", "center_error_2d", "center_error_3d",
+    "size_class_of", "encode_size", "decode_size", "box3d_from_points", "clip_box2d",
+]
+
+_T = 1.0 / 3.0
+# Table 1 of the paper: columns are categories 0..13, rows the x, y, z ratios.
+SIZE_TEMPLATES = np.array([
+    [1, 1, 1], [1 / 2, 1, 1], [_T, 1, 1], [2 / 3, 1, 1], [1, 1 / 2, 1], [1, 2 / 3, 1], [1, 1, 1 / 2],
+    [1, 1, 2 / 3], [1 / 2, 1 / 2, 1], [2 / 3, 2 / 3, 1], [1 / 2, 1, 1 / 2], [2 / 3, 1, 2 / 3],
+    [1, 1 / 2, 1 / 2], [1, 2 / 3, 2 / 3],
+], dtype=np.float64)
+NUM_SIZE_CLASSES = len(SIZE_TEMPLATES)
+
+
+def _overlap_1d(a0, a1, b0, b1):
+    return np.clip(np.minimum(a1, b1) - np.maximum(a0, b0), 0.0, None)
+
+
+def _iou_from(inter, va, vb):
+    union = va + vb - inter
+    with np.errstate(divide="ignore", invalid="ignore"):
+        iou = np.where((va > 0) & (vb > 0) & (union > 0), inter / union, 0.0)
+    return np.nan_to_num(iou, nan=0.0)
+
+
+def _valid_sizes(*sizes):
+    ok = True
+    for s in sizes:
+        ok = ok & np.isfinite(s) & (s > 0)
+    return ok
+
+
+def iou_2d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """IoU of [x, y, w, h] boxes; (..., 4) x (..., 4) -> (...)."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    ix = _overlap_1d(a[..., 0], a[..., 0] + a[..., 2], b[..., 0], b[..., 0] + b[..., 2])
+    iy = _overlap_1d(a[..., 1], a[..., 1] + a[..., 3], b[..., 1], b[..., 1] + b[..., 3])
+    va = np.where(_valid_sizes(a[..., 2], a[..., 3]), a[..., 2] * a[..., 3], 0.0)
+    vb = np.where(_valid_sizes(b[..., 2], b[..., 3]), b[..., 2] * b[..., 3], 0.0)
+    return _iou_from(ix * iy, va, vb)
+
+
+def _iou_axis_aligned(a: np.ndarray, b: np.ndarray, dims: int) -> np.ndarray:
+    inter = 1.0
+    va = 1.0
+    vb = 1.0
+    for k in range(dims):
+        ca, sa, cb, sb = a[..., k], a[..., dims + k], b[..., k], b[..., dims + k]
+        inter = inter * _overlap_1d(ca - sa / 2, ca + sa / 2, cb - sb / 2, cb + sb / 2)
+        va = va * np.where(_valid_sizes(sa), sa, 0.0)
+        vb = vb * np.where(_valid_sizes(sb), sb, 0.0)
+    return _iou_from(inter, va, vb)
+
+
+def iou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """IoU of axis-aligned [cx, cy, cz, sx, sy, sz] boxes; (..., 6) x (..., 6) -> (...)."""
+    return _iou_axis_aligned(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64), 3)
+
+
+def box3d_to_bev(box3d: np.ndarray) -> np.ndarray:
+    """(..., 6) 3D boxes -> (..., 4) bird's-eye-view boxes [cx, cz, sx, sz] (the x-z plane)."""
+    b = np.asarray(box3d, dtype=np.float64)
+    return np.stack([b[..., 0], b[..., 2], b[..., 3], b[..., 5]], axis=-1)
+
+
+def iou_bev(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Bird's-eye-view IoU of two 3D boxes (..., 6), in the x-z plane."""
+    return _iou_axis_aligned(box3d_to_bev(a), box3d_to_bev(b), 2)
+
+
+def center_2d(box2d: np.ndarray) -> np.ndarray:
+    """(..., 4) [x, y, w, h] -> (..., 2) centres."""
+    b = np.asarray(box2d, dtype=np.float64)
+    return b[..., :2] + b[..., 2:4] / 2.0
+
+
+def center_error_2d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Euclidean distance in pixels between 2D box centres."""
+    return np.linalg.norm(center_2d(a) - center_2d(b), axis=-1)
+
+
+def center_error_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Euclidean distance in metres between 3D box centres."""
+    return np.linalg.norm(np.asarray(a, np.float64)[..., :3] - np.asarray(b, np.float64)[..., :3], axis=-1)
+
+
+def size_class_of(size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Size class coding of the paper (Table 1, Appendix B).
+
+    size: (..., 3) full extents (metres). The class is the template nearest (Euclidean)
+    to size / max(size); the residual is size / max(size) - template[class], i.e. the
+    size residual normalised by the largest extent.
+    Returns (cls (...,) int64, residual (..., 3) float64).
+    """
+    s = np.asarray(size, dtype=np.float64)
+    scale = s.max(axis=-1, keepdims=True)
+    if np.any(~np.isfinite(s)) or np.any(scale <= 0):
+        raise ValueError("size_class_of needs finite, positive sizes")
+    ratio = s / scale
+    d = np.linalg.norm(ratio[..., None, :] - SIZE_TEMPLATES, axis=-1)
+    cls = d.argmin(axis=-1)
+    return cls.astype(np.int64), ratio - SIZE_TEMPLATES[cls]
+
+
+encode_size = size_class_of
+
+
+def decode_size(cls: np.ndarray, residual: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Inverse of the coding: (template[cls] + residual) * scale -> (..., 3) metres.
+
+    scale is the remapping length: at training time max(size); at inference the largest
+    extent of the points' enclosing box (paper section IV-B).
+    """
+    cls = np.asarray(cls, dtype=np.int64)
+    return (SIZE_TEMPLATES[cls] + np.asarray(residual, np.float64)) * np.asarray(scale, np.float64)[..., None]
+
+
+def box3d_from_points(points: np.ndarray) -> np.ndarray:
+    """Minimum enclosing axis-aligned box (6,) of (N, 3) points: the paper's 3D baseline.
+
+    Raises ValueError on an empty set (the caller turns that into a 'no points' status).
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(p) == 0:
+        raise ValueError("no points to enclose")
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    return np.concatenate([(lo + hi) / 2.0, hi - lo])
+
+
+def clip_box2d(box2d: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Clip [x, y, w, h] to the image; a box wholly outside gets zero width/height."""
+    b = np.asarray(box2d, dtype=np.float64)
+    x0 = np.clip(b[..., 0], 0, width)
+    y0 = np.clip(b[..., 1], 0, height)
+    x1 = np.clip(b[..., 0] + b[..., 2], 0, width)
+    y1 = np.clip(b[..., 1] + b[..., 3], 0, height)
+    return np.stack([x0, y0, x1 - x0, y1 - y0], axis=-1)

@@ -1,0 +1,222 @@
+"""The dataset on disk: file-format constants and the reader (DESIGN.md, "Dataset on disk").
+
+The simulator (track3d_sim) writes this layout; training and evaluation read it here::
+
+    <root>/dataset.json
+    <root>/<split>/<sequence>/left/000001.png  right/000001.png  depth/000001.png
+                             groundtruth_2d.txt  groundtruth_3d.txt
+                             absence.label  cut_by_image.label  meta.json
+
+Point clouds are not stored: they are the depth map back-projected with K on load.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+
+from .camera import Camera
+
+__all__ = [
+    "FORMAT", "FORMAT_VERSION", "DATASET_JSON", "LEFT_DIR", "RIGHT_DIR", "DEPTH_DIR", "GT2D", "GT3D",
+    "ABSENCE", "CUT", "META", "frame_name", "write_depth_png", "read_depth_png", "read_rgb", "write_rgb",
+    "DatasetError", "Dataset", "Sequence", "Frame",
+]
+
+FORMAT = "track3d-dataset"
+FORMAT_VERSION = 1
+DATASET_JSON = "dataset.json"
+LEFT_DIR, RIGHT_DIR, DEPTH_DIR = "left", "right", "depth"
+GT2D, GT3D = "groundtruth_2d.txt", "groundtruth_3d.txt"
+ABSENCE, CUT, META = "absence.label", "cut_by_image.label", "meta.json"
+DEPTH_MAX_M = 65.535  # uint16 millimetres
+
+
+class DatasetError(Exception):
+    """A dataset, split or sequence on disk is missing or malformed; the message says which."""
+
+
+def frame_name(index: int) -> str:
+    """File name of the frame with 0-based index `index` (files are numbered from 1)."""
+    return f"{index + 1:06d}.png"
+
+
+def write_depth_png(path: str | Path, depth_m: np.ndarray) -> None:
+    """Write z in metres as 16-bit PNG millimetres; 0 (or non-finite) = no return."""
+    d = np.asarray(depth_m, dtype=np.float64)
+    if np.any(d[np.isfinite(d)] > DEPTH_MAX_M):
+        raise ValueError(f"depth beyond {DEPTH_MAX_M} m cannot be stored in 16-bit millimetres")
+    mm = np.where(np.isfinite(d) & (d > 0), np.rint(d * 1000.0), 0).astype(np.uint16)
+    if not cv2.imwrite(str(path), mm, [cv2.IMWRITE_PNG_COMPRESSION, 3]):
+        raise OSError(f"could not write {path}")
+
+
+def read_depth_png(path: str | Path) -> np.ndarray:
+    """16-bit millimetre PNG -> (H, W) float32 metres, 0 = no return."""
+    mm = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if mm is None:
+        raise DatasetError(f"cannot read depth map {path}")
+    if mm.dtype != np.uint16 or mm.ndim != 2:
+        raise DatasetError(f"depth map {path} is not a 16-bit single-channel PNG")
+    return mm.astype(np.float32) / 1000.0
+
+
+def write_rgb(path: str | Path, rgb: np.ndarray) -> None:
+    """Write an (H, W, 3) uint8 RGB image as PNG (deterministic bytes)."""
+    if not cv2.imwrite(str(path), cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR),
+                       [cv2.IMWRITE_PNG_COMPRESSION, 3]):
+        raise OSError(f"could not write {path}")
+
+
+def read_rgb(path: str | Path) -> np.ndarray:
+    """PNG -> (H, W, 3) uint8 RGB."""
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise DatasetError(f"cannot read image {path}")
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def _read_table(path: Path, cols: int) -> np.ndarray:
+    if not path.is_file():
+        raise DatasetError(f"missing label file {path}")
+    try:
+        a = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
+    except ValueError as e:
+        raise DatasetError(f"malformed label file {path}: {e}") from None
+    if a.size == 0:
+        a = a.reshape(0, cols)
+    if a.shape[1] != cols:
+        raise DatasetError(f"{path} has {a.shape[1]} columns, expected {cols}")
+    return a
+
+
+def _read_flags(path: Path, n: int) -> np.ndarray:
+    if not path.is_file():
+        return np.zeros(n, dtype=bool)
+    f = np.loadtxt(path, dtype=np.int64, ndmin=1)
+    if len(f) != n:
+        raise DatasetError(f"{path} has {len(f)} flags for {n} frames")
+    return f.astype(bool)
+
+
+@dataclass
+class Frame:
+    """One frame of a sequence. Arrays: image/right (H, W, 3) uint8 RGB; depth_m (H, W) float32;
+    points (M, 3) float32 in the left frame; box2d (4,) [x, y, w, h]; box3d (6,)."""
+
+    index: int
+    image: np.ndarray
+    right: np.ndarray | None
+    depth_m: np.ndarray
+    points: np.ndarray
+    box2d: np.ndarray
+    box3d: np.ndarray
+    absent: bool
+    cut: bool
+
+
+class Sequence:
+    """One sequence folder; labels load eagerly (small), images lazily per frame."""
+
+    def __init__(self, path: str | Path, camera: Camera, split: str | None = None):
+        self.path = Path(path)
+        if not self.path.is_dir():
+            raise DatasetError(f"sequence folder {self.path} does not exist")
+        self.name = self.path.name
+        self.split = split
+        self.camera = camera
+        self.gt2d = _read_table(self.path / GT2D, 4)
+        self.gt3d = _read_table(self.path / GT3D, 6)
+        if len(self.gt2d) != len(self.gt3d):
+            raise DatasetError(f"{self.path}: {len(self.gt2d)} 2D labels but {len(self.gt3d)} 3D labels")
+        n = len(self.gt2d)
+        self.absent = _read_flags(self.path / ABSENCE, n)
+        self.cut = _read_flags(self.path / CUT, n)
+        meta = self.path / META
+        self.meta: dict = json.loads(meta.read_text()) if meta.is_file() else {}
+        left = self.path / LEFT_DIR
+        if not left.is_dir():
+            raise DatasetError(f"{self.path} has no {LEFT_DIR}/ image folder")
+
+    def __len__(self) -> int:
+        return len(self.gt2d)
+
+    def __repr__(self) -> str:
+        return f"Sequence({self.split}/{self.name}, {len(self)} frames)"
+
+    @property
+    def category(self) -> int:
+        """Index of the coarse category (shape family), -1 if unknown."""
+        return int(self.meta.get("family_index", -1))
+
+    def image_path(self, i: int, side: str = LEFT_DIR) -> Path:
+        return self.path / side / frame_name(i)
+
+    def image(self, i: int) -> np.ndarray:
+        return read_rgb(self.image_path(i))
+
+    def depth(self, i: int) -> np.ndarray:
+        return read_depth_png(self.path / DEPTH_DIR / frame_name(i))
+
+    def points(self, i: int) -> np.ndarray:
+        """(M, 3) float32 point cloud of frame i, back-projected from its depth map."""
+        return self.camera.backproject_depth(self.depth(i))
+
+    def frame(self, i: int, right: bool = False) -> Frame:
+        if not 0 <= i < len(self):
+            raise IndexError(f"frame {i} out of range for {self!r}")
+        depth = self.depth(i)
+        return Frame(i, self.image(i), read_rgb(self.image_path(i, RIGHT_DIR)) if right else None, depth,
+                     self.camera.backproject_depth(depth), self.gt2d[i].copy(), self.gt3d[i].copy(),
+                     bool(self.absent[i]), bool(self.cut[i]))
+
+    def __getitem__(self, i: int) -> Frame:
+        return self.frame(i, right=True)
+
+    def __iter__(self) -> Iterator[Frame]:
+        for i in range(len(self)):
+            yield self.frame(i)
+
+
+class Dataset:
+    """A dataset root written by the simulator."""
+
+    def __init__(self, root: str | Path):
+        self.root = Path(root)
+        meta = self.root / DATASET_JSON
+        if not meta.is_file():
+            raise DatasetError(f"no dataset at {self.root}: {DATASET_JSON} is missing "
+                               f"(generate one with `track3d-sim generate --out {self.root}`)")
+        try:
+            self.info: dict = json.loads(meta.read_text())
+        except json.JSONDecodeError as e:
+            raise DatasetError(f"{meta} is not valid JSON: {e}") from None
+        if self.info.get("format") != FORMAT:
+            raise DatasetError(f"{meta} is not a {FORMAT} file")
+        if int(self.info.get("version", -1)) > FORMAT_VERSION:
+            raise DatasetError(f"{meta} has format version {self.info.get('version')}, "
+                               f"this reader knows up to {FORMAT_VERSION}")
+        self.camera = Camera.from_dict(self.info["camera"])
+
+    @cached_property
+    def splits(self) -> dict[str, list[str]]:
+        return {k: list(v) for k, v in self.info.get("splits", {}).items()}
+
+    @property
+    def categories(self) -> dict:
+        return self.info.get("categories", {})
+
+    def sequences(self, split: str) -> list[Sequence]:
+        if split not in self.splits:
+            raise DatasetError(f"split {split!r} not in {self.root} (has: {', '.join(self.splits) or 'none'})")
+        return [Sequence(self.root / split / name, self.camera, split) for name in self.splits[split]]
+
+    def sequence(self, split: str, name: str) -> Sequence:
+        if name not in self.splits.get(split, []):
+            raise DatasetError(f"sequence {name!r} not in split {split!r} of {self.root}")
+        return Sequence(self.root / split / name, self.camera, split)

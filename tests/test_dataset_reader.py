@@ -1,0 +1,61 @@
+import json
+
+import numpy as np
+import pytest
+
+from track3d import dataset as D
+from track3d.camera import Camera
+
+
+def _write_fake(root, n=3):
+    cam = Camera.from_fov(32, 24, 45.0)
+    seq = root / "test" / "0001"
+    for sub in (D.LEFT_DIR, D.RIGHT_DIR, D.DEPTH_DIR):
+        (seq / sub).mkdir(parents=True)
+    depth = np.zeros((24, 32), np.float32)
+    depth[10:12, 10:14] = 5.0
+    for i in range(n):
+        img = np.full((24, 32, 3), i * 10, np.uint8)
+        D.write_rgb(seq / D.LEFT_DIR / D.frame_name(i), img)
+        D.write_rgb(seq / D.RIGHT_DIR / D.frame_name(i), img)
+        D.write_depth_png(seq / D.DEPTH_DIR / D.frame_name(i), depth)
+    np.savetxt(seq / D.GT2D, np.tile([10, 10, 4, 2], (n, 1)), delimiter=",", fmt="%.3f")
+    np.savetxt(seq / D.GT3D, np.tile([0, 0, 5, 1, 1, 1], (n, 1)), delimiter=",", fmt="%.4f")
+    np.savetxt(seq / D.ABSENCE, [0, 1, 0][:n], fmt="%d")
+    (seq / D.META).write_text(json.dumps({"family_index": 2}))
+    (root / D.DATASET_JSON).write_text(json.dumps({
+        "format": D.FORMAT, "version": 1, "camera": cam.to_dict(), "splits": {"test": ["0001"]}}))
+    return cam
+
+
+def test_reader_roundtrip(tmp_path):
+    cam = _write_fake(tmp_path)
+    ds = D.Dataset(tmp_path)
+    assert ds.camera == cam
+    (seq,) = ds.sequences("test")
+    assert len(seq) == 3 and seq.category == 2
+    assert seq.absent.tolist() == [False, True, False]
+    f = seq[1]
+    assert f.image.shape == (24, 32, 3) and f.image[0, 0, 0] == 10
+    assert f.points.shape == (8, 3) and np.allclose(f.points[:, 2], 5.0)
+    np.testing.assert_allclose(f.box2d, [10, 10, 4, 2])
+
+
+def test_depth_png_is_millimetres(tmp_path):
+    d = np.array([[1.2344, 0.0], [np.nan, 44.9999]])
+    D.write_depth_png(tmp_path / "d.png", d)
+    back = D.read_depth_png(tmp_path / "d.png")
+    np.testing.assert_allclose(back, [[1.234, 0], [0, 45.0]], atol=1e-6)
+    with pytest.raises(ValueError):
+        D.write_depth_png(tmp_path / "e.png", np.array([[70.0]]))
+
+
+def test_clear_errors(tmp_path):
+    with pytest.raises(D.DatasetError, match="dataset.json is missing"):
+        D.Dataset(tmp_path)
+    _write_fake(tmp_path)
+    ds = D.Dataset(tmp_path)
+    with pytest.raises(D.DatasetError, match="split 'train'"):
+        ds.sequences("train")
+    with pytest.raises(D.DatasetError, match="sequence 'nope'"):
+        ds.sequence("test", "nope")
