@@ -1,10 +1,159 @@
-// Frustum proposal extension of track3d (paper section IV-A).
-// Placeholder module proving the C++ build path; the frustum kernels arrive with issue #3.
+// Frustum proposal extension of track3d (paper section IV-A), exposed as track3d._frustum.
+//
+// extract_frustum: one pass over an (N, 3) float32 cloud: depth crop, projection with the
+//   3x4 camera matrix, half-open box test; returns the kept points in input order.
+// sample_indices / sample_points: the seeded random sampling A3BoxNet needs (SplitMix64).
+//
+// The semantics are defined by the numpy references in runtime/track3d/frustum.py; the
+// arithmetic here follows them operation by operation (float64, same order, no FMA
+// contraction: CMakeLists passes -ffp-contract=off) so both select exactly the same points.
+// The GIL is released around every loop; no Python object is touched per point.
+#include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <numeric>
+#include <stdexcept>
+#include <vector>
 
 namespace py = pybind11;
 
+namespace {
+
+using FloatArray = py::array_t<float, py::array::c_style | py::array::forcecast>;
+using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+// Selection rule of the paper (IV-A); see frustum_mask_numpy for the reference.
+std::vector<int64_t> frustum_indices(const float* pts, int64_t n, const double* b, const double* m,
+                                     double z_min, double z_max) {
+  std::vector<int64_t> keep;
+  const double x0 = b[0], y0 = b[1];
+  const double x1 = b[0] + b[2], y1 = b[1] + b[3];
+  if (!(std::isfinite(x0) && std::isfinite(y0) && std::isfinite(b[2]) && std::isfinite(b[3])) ||
+      !(b[2] > 0.0) || !(b[3] > 0.0))
+    return keep;
+  keep.reserve(static_cast<size_t>(n / 16 + 16));
+  for (int64_t i = 0; i < n; ++i) {
+    const double x = pts[3 * i], y = pts[3 * i + 1], z = pts[3 * i + 2];
+    if (!(std::isfinite(x) && std::isfinite(y) && std::isfinite(z))) continue;
+    if (!(z >= z_min && z <= z_max)) continue;
+    const double p2 = m[8] * x + m[9] * y + m[10] * z + m[11];
+    if (!(p2 > 0.0)) continue;
+    const double u = (m[0] * x + m[1] * y + m[2] * z + m[3]) / p2;
+    if (!(u >= x0 && u < x1)) continue;
+    const double v = (m[4] * x + m[5] * y + m[6] * z + m[7]) / p2;
+    if (!(v >= y0 && v < y1)) continue;
+    keep.push_back(i);
+  }
+  return keep;
+}
+
+py::array_t<float> extract_frustum(FloatArray points, DoubleArray box2d, DoubleArray M, double z_min,
+                                   double z_max) {
+  if (points.ndim() != 2 || points.shape(1) != 3)
+    throw std::invalid_argument("points must have shape (N, 3)");
+  if (box2d.size() != 4) throw std::invalid_argument("box2d must have 4 values [x, y, w, h]");
+  if (M.ndim() != 2 || M.shape(0) != 3 || M.shape(1) != 4)
+    throw std::invalid_argument("M must have shape (3, 4)");
+  const int64_t n = points.shape(0);
+  const float* pts = points.data();
+  const double* b = box2d.data();
+  const double* m = M.data();
+  std::vector<int64_t> keep;
+  {
+    py::gil_scoped_release release;
+    keep = frustum_indices(pts, n, b, m, z_min, z_max);
+  }
+  const auto k = static_cast<py::ssize_t>(keep.size());
+  py::array_t<float> out({k, static_cast<py::ssize_t>(3)});
+  float* o = out.mutable_data();
+  {
+    py::gil_scoped_release release;
+    for (py::ssize_t j = 0; j < k; ++j) std::memcpy(o + 3 * j, pts + 3 * keep[j], 3 * sizeof(float));
+  }
+  return out;
+}
+
+// SplitMix64 (Steele, Lea, Flood 2014); identical to _SplitMix64 in frustum.py.
+struct SplitMix64 {
+  uint64_t state;
+  explicit SplitMix64(uint64_t seed) : state(seed) {}
+  uint64_t next() {
+    uint64_t z = (state += 0x9E3779B97F4A7C15ULL);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+  }
+  // Uniform integer in [0, k): 53 random bits times k, keep the top bits (exact, 128-bit).
+  uint64_t below(uint64_t k) {
+    const unsigned __int128 r = static_cast<unsigned __int128>(next() >> 11) * k;
+    return static_cast<uint64_t>(r >> 53);
+  }
+};
+
+// Without replacement (n >= num): partial Fisher-Yates; with replacement (n < num): every
+// index once in order, then num - n random repeats.
+void fill_indices(int64_t n, int64_t num, uint64_t seed, int64_t* out) {
+  SplitMix64 rng(seed);
+  if (n >= num) {
+    std::vector<int64_t> idx(static_cast<size_t>(n));
+    std::iota(idx.begin(), idx.end(), int64_t{0});
+    for (int64_t i = 0; i < num; ++i) {
+      const int64_t j = i + static_cast<int64_t>(rng.below(static_cast<uint64_t>(n - i)));
+      std::swap(idx[i], idx[j]);
+    }
+    std::memcpy(out, idx.data(), static_cast<size_t>(num) * sizeof(int64_t));
+  } else {
+    for (int64_t i = 0; i < n; ++i) out[i] = i;
+    for (int64_t i = n; i < num; ++i) out[i] = static_cast<int64_t>(rng.below(static_cast<uint64_t>(n)));
+  }
+}
+
+void check_sampling(int64_t n, int64_t num) {
+  if (num < 1) throw std::invalid_argument("num must be >= 1");
+  if (n <= 0) throw std::invalid_argument("cannot sample from an empty point set");
+}
+
+py::array_t<int64_t> sample_indices(int64_t n, int64_t num, uint64_t seed) {
+  check_sampling(n, num);
+  py::array_t<int64_t> out(static_cast<py::ssize_t>(num));
+  int64_t* o = out.mutable_data();
+  {
+    py::gil_scoped_release release;
+    fill_indices(n, num, seed, o);
+  }
+  return out;
+}
+
+py::array_t<float> sample_points(FloatArray points, int64_t num, uint64_t seed) {
+  if (points.ndim() != 2 || points.shape(1) != 3)
+    throw std::invalid_argument("points must have shape (N, 3)");
+  const int64_t n = points.shape(0);
+  check_sampling(n, num);
+  const float* pts = points.data();
+  py::array_t<float> out({static_cast<py::ssize_t>(num), static_cast<py::ssize_t>(3)});
+  float* o = out.mutable_data();
+  {
+    py::gil_scoped_release release;
+    std::vector<int64_t> idx(static_cast<size_t>(num));
+    fill_indices(n, num, seed, idx.data());
+    for (int64_t j = 0; j < num; ++j) std::memcpy(o + 3 * j, pts + 3 * idx[j], 3 * sizeof(float));
+  }
+  return out;
+}
+
+}  // namespace
+
 PYBIND11_MODULE(_frustum, m) {
-    m.doc() = "track3d C++ frustum extension";
-    m.attr("ABI_VERSION") = 1;
+  m.doc() = "track3d C++ frustum extension: frustum proposal (paper IV-A) and point sampling";
+  m.attr("ABI_VERSION") = 2;
+  m.def("extract_frustum", &extract_frustum, py::arg("points"), py::arg("box2d"), py::arg("M"),
+        py::arg("z_min") = 1.0, py::arg("z_max") = 45.0,
+        "(N,3) float32 points, [x,y,w,h] box, (3,4) camera matrix -> (n,3) float32 frustum points");
+  m.def("sample_indices", &sample_indices, py::arg("n"), py::arg("num"), py::arg("seed"),
+        "(num,) int64 indices: num of n points, SplitMix64-seeded (see track3d.frustum)");
+  m.def("sample_points", &sample_points, py::arg("points"), py::arg("num"), py::arg("seed"),
+        "(n,3) float32 -> (num,3) float32 sampled points (see track3d.frustum)");
 }

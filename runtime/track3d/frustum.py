@@ -1,0 +1,195 @@
+"""Frustum proposal (paper section IV-A) and the random point sampling A3BoxNet needs.
+
+Two implementations with identical results:
+
+- the compiled extension ``track3d._frustum`` (one C++ pass over the cloud, GIL released),
+  used by :func:`extract_frustum` and :func:`sample_points`;
+- plain numpy references, :func:`extract_frustum_numpy` and :func:`sample_points_numpy`,
+  which define the semantics and which the tests compare the extension against.
+
+Frustum semantics (paper IV-A): keep the points with ``z_min <= z <= z_max`` (1 .. 45 m),
+project them with the 3x4 camera matrix M, ``(u, v) = (p0 / p2, p1 / p2)`` with
+``p = M [x y z 1]^T``, and keep those whose projection lies in the half-open box
+``x <= u < x + w`` and ``y <= v < y + h`` (pixel (i, j) covers [i, i+1) x [j, j+1), see
+camera.py). Input order is preserved. Points with a NaN/inf coordinate are dropped.
+An empty cloud, a zero-size or non-finite box, a box outside the image: an empty (0, 3) result.
+
+The projection is computed in float64 in both implementations, with the same operation
+order, so the two agree bit for bit on which points are kept.
+
+Sampling semantics (:func:`sample_points`), for ``n`` input points and ``num`` wanted:
+
+- ``n >= num``: ``num`` distinct points (without replacement), in random order;
+- ``0 < n < num``: every point once, then ``num - n`` extra points drawn with replacement,
+  the whole result in input order followed by the extras (so no information is lost);
+- ``n == 0``: ValueError (the caller reports a 'no points' status instead).
+
+The random generator is a fixed, documented algorithm so that results are reproducible
+across platforms and identical between C++ and numpy: SplitMix64 seeded with ``seed``;
+a uniform index below ``k`` is ``(next() >> 11) * k >> 53`` computed exactly (a 53-bit
+fixed-point multiply, bias < 2^-53 * k). Without replacement uses a partial Fisher-Yates
+shuffle of ``arange(n)``: for ``i in 0..num-1`` swap ``idx[i]`` with ``idx[i + r]``,
+``r = uniform(n - i)``; the first ``num`` entries are the sample. With replacement draws
+``uniform(n)`` for each extra point.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "Z_MIN", "Z_MAX", "extract_frustum", "extract_frustum_numpy", "frustum_mask_numpy",
+    "sample_points", "sample_points_numpy", "sample_indices_numpy", "HAVE_EXTENSION",
+]
+
+Z_MIN = 1.0   # metres, paper IV-A: 1 <= z <= 45
+Z_MAX = 45.0
+
+try:  # the compiled extension; the numpy reference stands in only if it lacks a function
+    from . import _frustum as _ext
+except ImportError:  # pragma: no cover - the package is always built with it
+    _ext = None
+
+# Per function: an older build of the extension may lack one; numpy then stands in for it.
+_ext_extract = getattr(_ext, "extract_frustum", None)
+_ext_sample = getattr(_ext, "sample_points", None)
+HAVE_EXTENSION = _ext_extract is not None and _ext_sample is not None
+
+_MASK64 = (1 << 64) - 1
+
+
+def _check_points(points: np.ndarray) -> np.ndarray:
+    p = np.asarray(points)
+    if p.ndim != 2 or p.shape[1] != 3:
+        if p.size == 0:
+            return np.zeros((0, 3), np.float32)
+        raise ValueError(f"points must have shape (N, 3), got {p.shape}")
+    return np.ascontiguousarray(p, dtype=np.float32)
+
+
+def _check_box(box2d: np.ndarray) -> np.ndarray:
+    b = np.asarray(box2d, dtype=np.float64).reshape(-1)
+    if b.shape != (4,):
+        raise ValueError(f"box2d must be [x, y, w, h], got shape {np.shape(box2d)}")
+    return b
+
+
+def _check_matrix(M: np.ndarray) -> np.ndarray:
+    m = np.ascontiguousarray(M, dtype=np.float64)
+    if m.shape != (3, 4):
+        raise ValueError(f"camera matrix M must have shape (3, 4), got {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise ValueError("camera matrix M has non-finite entries")
+    return m
+
+
+def frustum_mask_numpy(points: np.ndarray, box2d: np.ndarray, M: np.ndarray,
+                       z_min: float = Z_MIN, z_max: float = Z_MAX) -> np.ndarray:
+    """(N,) bool mask of the frustum points; the numpy reference of the selection rule."""
+    p = _check_points(points)
+    b = _check_box(box2d)
+    m = _check_matrix(M)
+    if len(p) == 0 or not np.all(np.isfinite(b)) or b[2] <= 0 or b[3] <= 0:
+        return np.zeros(len(p), dtype=bool)
+    x = p[:, 0].astype(np.float64)
+    y = p[:, 1].astype(np.float64)
+    z = p[:, 2].astype(np.float64)
+    finite = np.isfinite(x) & np.isfinite(y) & np.isfinite(z)
+    keep = finite & (z >= z_min) & (z <= z_max)
+    # Same operation order as the C++ kernel: ((m0*x + m1*y) + m2*z) + m3.
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        p0 = m[0, 0] * x + m[0, 1] * y + m[0, 2] * z + m[0, 3]
+        p1 = m[1, 0] * x + m[1, 1] * y + m[1, 2] * z + m[1, 3]
+        p2 = m[2, 0] * x + m[2, 1] * y + m[2, 2] * z + m[2, 3]
+        u = p0 / p2
+        v = p1 / p2
+        x0, y0 = b[0], b[1]
+        x1, y1 = b[0] + b[2], b[1] + b[3]
+        keep &= (p2 > 0) & (u >= x0) & (u < x1) & (v >= y0) & (v < y1)
+    return keep
+
+
+def extract_frustum_numpy(points: np.ndarray, box2d: np.ndarray, M: np.ndarray,
+                          z_min: float = Z_MIN, z_max: float = Z_MAX) -> np.ndarray:
+    """Numpy reference of :func:`extract_frustum`: (N, 3) float32 -> (n, 3) float32."""
+    p = _check_points(points)
+    return p[frustum_mask_numpy(p, box2d, M, z_min, z_max)]
+
+
+def extract_frustum(points: np.ndarray, box2d: np.ndarray, M: np.ndarray,
+                    z_min: float = Z_MIN, z_max: float = Z_MAX) -> np.ndarray:
+    """Frustum proposal: the points of the cloud whose projection falls in the 2D box.
+
+    points: (N, 3) float32 in the camera frame of M (other float dtypes are converted);
+    box2d: (4,) [x, y, w, h] pixels; M: (3, 4) float64 camera matrix (``Camera.M``);
+    z_min, z_max: depth crop in metres. Returns (n, 3) float32, input order preserved.
+    """
+    p = _check_points(points)
+    b = _check_box(box2d)
+    m = _check_matrix(M)
+    if _ext_extract is None:
+        return extract_frustum_numpy(p, b, m, z_min, z_max)
+    return _ext_extract(p, b, m, float(z_min), float(z_max))
+
+
+# --- sampling -------------------------------------------------------------------------------
+
+class _SplitMix64:
+    """SplitMix64 (Steele, Lea, Flood 2014): the generator the C++ kernel uses too."""
+
+    def __init__(self, seed: int):
+        self.state = int(seed) & _MASK64
+
+    def next(self) -> int:
+        self.state = (self.state + 0x9E3779B97F4A7C15) & _MASK64
+        z = self.state
+        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK64
+        return z ^ (z >> 31)
+
+    def below(self, k: int) -> int:
+        """Uniform integer in [0, k): 53 random bits times k, top bits (exact integer math)."""
+        return ((self.next() >> 11) * k) >> 53
+
+
+def _check_sampling(n: int, num: int) -> None:
+    if int(num) < 1:
+        raise ValueError(f"num must be >= 1, got {num}")
+    if n == 0:
+        raise ValueError("cannot sample from an empty point set")
+
+
+def sample_indices_numpy(n: int, num: int, seed: int) -> np.ndarray:
+    """Reference of the sampling algorithm (module docstring): (num,) int64 indices into n points.
+
+    Pure Python integer arithmetic: slow, for tests; the extension does the same in C++.
+    """
+    _check_sampling(n, num)
+    rng = _SplitMix64(seed)
+    if n >= num:
+        idx = list(range(n))
+        for i in range(num):
+            j = i + rng.below(n - i)
+            idx[i], idx[j] = idx[j], idx[i]
+        return np.asarray(idx[:num], dtype=np.int64)
+    extra = [rng.below(n) for _ in range(num - n)]
+    return np.concatenate([np.arange(n, dtype=np.int64), np.asarray(extra, dtype=np.int64)])
+
+
+def sample_points_numpy(points: np.ndarray, num: int, seed: int) -> np.ndarray:
+    """Reference of :func:`sample_points` (same indices, same result)."""
+    p = _check_points(points)
+    return p[sample_indices_numpy(len(p), num, seed)]
+
+
+def sample_points(points: np.ndarray, num: int, seed: int) -> np.ndarray:
+    """Random sampling of a frustum to exactly ``num`` points, as A3BoxNet's input needs.
+
+    points: (n, 3) float32, n >= 1; returns (num, 3) float32. Without replacement when
+    n >= num; all points plus ``num - n`` random repeats when n < num. Deterministic for a
+    seed (SplitMix64, module docstring). Raises ValueError when n == 0 or num < 1.
+    """
+    p = _check_points(points)
+    _check_sampling(len(p), num)
+    if _ext_sample is None:
+        return sample_points_numpy(p, num, seed)
+    return _ext_sample(p, int(num), int(seed) & _MASK64)
