@@ -1,0 +1,85 @@
+"""`track3d-sim preview`: a contact sheet (PNG) or an animation (GIF) of a sequence with its labels.
+
+Green: the 2D label (tight silhouette box). Red: the 3D label (amodal box) projected with
+the camera (its 8 corners, edges drawn). Yellow frame number; 'ABSENT' / 'CUT' flags.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SimError
+
+_EDGES = [(0, 1), (1, 3), (3, 2), (2, 0), (4, 5), (5, 7), (7, 6), (6, 4), (0, 4), (1, 5), (2, 6), (3, 7)]
+
+
+def _open_sequence(path: Path):
+    from track3d.camera import Camera
+    from track3d.dataset import DATASET_JSON, DatasetError, Sequence
+    path = Path(path)
+    root = path.parent.parent
+    if not (root / DATASET_JSON).is_file():
+        raise SimError(f"{path} is not a sequence of a dataset (no {DATASET_JSON} in {root})")
+    cam = Camera.from_dict(json.loads((root / DATASET_JSON).read_text())["camera"])
+    try:
+        return Sequence(path, cam, path.parent.name)
+    except DatasetError as e:
+        raise SimError(str(e)) from None
+
+
+def draw_frame(seq, i: int, gain: float = 1.0, right: bool = False):
+    from PIL import Image, ImageDraw
+    fr = seq.frame(i, right=right)
+    img = np.clip(fr.image.astype(np.float32) * gain, 0, 255).astype(np.uint8)
+    im = Image.fromarray(img)
+    d = ImageDraw.Draw(im)
+    b = fr.box3d
+    corners = np.array([[b[0] + sx * b[3] / 2, b[1] + sy * b[4] / 2, b[2] + sz * b[5] / 2]
+                        for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    if np.all(corners[:, 2] > 0.05):
+        uv = seq.camera.project(corners)
+        for a, c in _EDGES:
+            d.line([tuple(uv[a]), tuple(uv[c])], fill=(255, 60, 60), width=1)
+    if not fr.absent:
+        x, y, w, h = fr.box2d
+        d.rectangle([x, y, x + w - 1, y + h - 1], outline=(60, 255, 60))
+    tag = f"{seq.name}#{i + 1}" + (" ABSENT" if fr.absent else "") + (" CUT" if fr.cut else "")
+    d.text((3, 2), tag, fill=(255, 255, 0))
+    if right:
+        r = Image.fromarray(np.clip(fr.right.astype(np.float32) * gain, 0, 255).astype(np.uint8))
+        both = Image.new("RGB", (im.width * 2 + 4, im.height), (40, 40, 40))
+        both.paste(im, (0, 0))
+        both.paste(r, (im.width + 4, 0))
+        im = both
+    return im
+
+
+def preview(sequence: str | Path, out: str | Path, n: int = 12, gain: float = 1.0, right: bool = False) -> Path:
+    from PIL import Image, ImageDraw
+    seq = _open_sequence(Path(sequence))
+    out = Path(out)
+    N = len(seq)
+    if N == 0:
+        raise SimError(f"{sequence} has no frames")
+    if out.suffix.lower() == ".gif":
+        frames = [draw_frame(seq, i, gain, right) for i in range(N)]
+        frames[0].save(out, save_all=True, append_images=frames[1:], duration=100, loop=0)
+        return out
+    if out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
+        raise SimError(f"preview output must be .png, .jpg or .gif, got {out.name}")
+    idx = np.unique(np.linspace(0, N - 1, max(1, min(n, N))).round().astype(int))
+    tiles = [draw_frame(seq, int(i), gain, right) for i in idx]
+    cols = min(4 if not right else 2, len(tiles))
+    rows = (len(tiles) + cols - 1) // cols
+    tw, th = tiles[0].size
+    sheet = Image.new("RGB", (cols * (tw + 2), rows * (th + 2) + 16), (30, 30, 30))
+    for k, t in enumerate(tiles):
+        sheet.paste(t, ((k % cols) * (tw + 2), (k // cols) * (th + 2) + 16))
+    m = seq.meta
+    ImageDraw.Draw(sheet).text((4, 2), f"{seq.split}/{seq.name}: {m.get('fine_category')}  scene={m.get('scene')}  "
+                               f"sun E={m.get('sun', {}).get('irradiance', 0):.2f} phase={m.get('sun', {}).get('phase_deg', 0):.0f}deg",
+                               fill=(255, 255, 255))
+    sheet.save(out)
+    return out

@@ -1,0 +1,72 @@
+"""`track3d-sim stats`: the paper's Fig. 4 — size classes, box volumes, motion speeds, illumination."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SimError
+
+
+def collect(root: str | Path, split: str = "all") -> dict:
+    from track3d import boxes
+    from track3d.dataset import Dataset, DatasetError
+    try:
+        data = Dataset(root)
+        splits = ["train", "test"] if split == "all" else [split]
+        seqs = [s for sp in splits if sp in data.splits for s in data.sequences(sp)]
+    except DatasetError as e:
+        raise SimError(str(e)) from None
+    if not seqs:
+        raise SimError(f"no sequences in {root} ({split})")
+    sizes, speeds, irr, dn = [], [], [], []
+    for s in seqs:
+        b = s.gt3d
+        sizes.append(b[:, 3:])
+        fps = float(s.meta.get("fps", 10.0))
+        if len(b) > 1:
+            speeds.append(np.linalg.norm(np.diff(b[:, :3], axis=0), axis=1) * fps)
+        irr.append(float(s.meta.get("sun", {}).get("irradiance", np.nan)))
+        m = s.meta.get("frame_data", {}).get("mean_object_dn", [])
+        dn.extend(x for x in m if x is not None)
+    sizes = np.concatenate(sizes)
+    cls, _ = boxes.size_class_of(sizes)
+    return {"size_class": cls, "volume": np.prod(sizes, axis=1),
+            "speed": np.concatenate(speeds) if speeds else np.zeros(0),
+            "irradiance": np.array(irr), "object_dn": np.array(dn), "n_seq": len(seqs),
+            "n_frames": len(sizes)}
+
+
+def plot_stats(root: str | Path, out: str | Path, split: str = "all") -> dict:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from track3d import boxes
+    st = collect(root, split)
+    fig, ax = plt.subplots(2, 2, figsize=(10, 7.5))
+    nc = len(boxes.SIZE_TEMPLATES)
+    ax[0, 0].bar(np.arange(nc), np.bincount(st["size_class"], minlength=nc), color="tab:blue")
+    ax[0, 0].set(title="(a) size classes (Table 1)", xlabel="size class", ylabel="frames", xticks=np.arange(nc))
+    v = st["volume"]
+    ax[0, 1].hist(v, bins=np.logspace(np.log10(max(v.min(), 1e-3)), np.log10(v.max() + 1e-9), 40), color="tab:orange")
+    ax[0, 1].set_xscale("log")
+    ax[0, 1].axvline(16, color="k", ls="--", lw=0.8)
+    ax[0, 1].axvline(1600, color="k", ls="--", lw=0.8)
+    ax[0, 1].set(title=f"(b) box volumes, m^3 ({v.min():.0f} .. {v.max():.0f})", xlabel="axis-aligned box volume (m^3)",
+                 ylabel="frames")
+    ax[1, 0].hist(st["speed"], bins=40, color="tab:green")
+    ax[1, 0].set(title=f"(c) translation speed (mean {st['speed'].mean():.2f} m/s)", xlabel="speed (m/s)",
+                 ylabel="frame pairs")
+    ax[1, 1].hist(st["object_dn"], bins=np.arange(0, 256, 4), color="tab:gray", label="mean object value / frame")
+    ax[1, 1].set(title="(d) illumination: mean object pixel value (0..255)", xlabel="DN", ylabel="frames")
+    ax2 = ax[1, 1].twinx()
+    ax2.hist(255 * 0.9 * st["irradiance"] * 0.5, bins=np.arange(0, 256, 8), histtype="step", color="tab:red",
+             label="sun irradiance x gain x 0.5 / seq")
+    ax2.set_ylabel("sequences", color="tab:red")
+    ax[1, 1].legend(loc="upper right", fontsize=7)
+    ax2.legend(loc="center right", fontsize=7)
+    fig.suptitle(f"{Path(root).name}: {st['n_seq']} sequences, {st['n_frames']} frames ({split})")
+    fig.tight_layout()
+    fig.savefig(out, dpi=90)
+    plt.close(fig)
+    return st

@@ -1,0 +1,169 @@
+"""Determinism (1 vs 2 workers), resume after a kill, clear errors without a dataset that looks complete."""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("embreex")
+trimesh = pytest.importorskip("trimesh")
+
+from track3d.dataset import DATASET_JSON, Dataset  # noqa: E402
+
+from track3d_sim import SimError  # noqa: E402
+from track3d_sim.cli import main  # noqa: E402
+from track3d_sim.generate import RUN_FILE, generate, make_settings  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "runtime"), str(ROOT / "sim"),
+                                                    os.environ.get("PYTHONPATH", "")])}
+
+
+def _hashes(root: Path) -> dict:
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def _quiet(msg):
+    pass
+
+
+def test_same_seed_same_bytes_for_1_and_2_workers(tmp_path):
+    s = make_settings("tiny", seed=11, train=3, test=1, frames=4)
+    a = generate(s, tmp_path / "a", workers=1, progress=False, log=_quiet)
+    b = generate(s, tmp_path / "b", workers=2, progress=False, log=_quiet)
+    ha, hb = _hashes(a), _hashes(b)
+    assert len(ha) == 4 * (3 * 4 + 5) + 2
+    assert ha == hb
+    c = generate(make_settings("tiny", seed=12, train=3, test=1, frames=4), tmp_path / "c", progress=False, log=_quiet)
+    assert _hashes(c)["train/0001/left/000001.png"] != ha["train/0001/left/000001.png"]
+
+
+def test_killed_run_resumes_to_the_same_result(tmp_path):
+    args = ["generate", "--preset", "tiny", "--seed", "5", "--train", "4", "--test", "2", "--frames", "12",
+            "--no-progress"]
+    ref = tmp_path / "ref"
+    assert main(args + ["--out", str(ref)]) == 0
+    out = tmp_path / "killed"
+    proc = subprocess.Popen([sys.executable, "-m", "track3d_sim", *args, "--out", str(out)], env=ENV,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 60
+    try:
+        while time.time() < deadline:  # kill while a sequence is half written, after one is complete
+            if (out / "train" / "0001").is_dir() and list((out / "train").glob(".partial-*/left/*.png")):
+                break
+            if proc.poll() is not None:
+                break
+            time.sleep(0.01)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert not (out / DATASET_JSON).exists(), "a killed run must not look complete"
+    with pytest.raises(Exception):
+        Dataset(out)
+    assert main(args + ["--out", str(out)]) == 0
+    assert _hashes(out) == _hashes(ref)
+    assert not list(out.rglob(".partial-*"))
+    # a complete run started again is a no-op
+    assert main(args + ["--out", str(out)]) == 0
+    assert _hashes(out) == _hashes(ref)
+
+
+def test_resume_refuses_other_settings(tmp_path):
+    out = tmp_path / "d"
+    assert main(["generate", "--preset", "tiny", "--train", "1", "--test", "0", "--frames", "2", "--out", str(out),
+                 "--no-progress"]) == 0
+    with pytest.raises(SimError, match="different settings.*seed"):
+        generate(make_settings("tiny", seed=1, train=1, test=0, frames=2), out, progress=False, log=_quiet)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--workers", "0"], "--workers"),
+    (["--frames", "0"], "frames"),
+    (["--resolution", "8x8"], "resolution"),
+    (["--fov", "200"], "field of view"),
+    (["--train", "0", "--test", "0"], "train/test"),
+    (["--seed", "-3"], "seed"),
+])
+def test_bad_arguments_give_clear_errors(tmp_path, capsys, argv, needle):
+    out = tmp_path / "bad"
+    rc = main(["generate", "--preset", "tiny", "--out", str(out), "--no-progress", *argv])
+    assert rc == 2
+    assert needle in capsys.readouterr().err
+    assert not (out / DATASET_JSON).exists()
+
+
+def test_argparse_errors(capsys):
+    for argv in (["generate", "--preset", "huge", "--out", "x"], ["generate", "--resolution", "abc", "--out", "x"],
+                 ["generate"]):
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "huge" in err and "resolution" in err and "--out" in err
+
+
+def test_foreign_output_folder_is_refused(tmp_path, capsys):
+    (tmp_path / "keep.txt").write_text("precious")
+    assert main(["generate", "--preset", "tiny", "--out", str(tmp_path), "--no-progress"]) == 2
+    assert "not empty" in capsys.readouterr().err
+    assert (tmp_path / "keep.txt").read_text() == "precious"
+
+
+def _write_mesh(path: Path, kind: str):
+    if kind == "garbage":
+        path.write_text("this is not a mesh\n\x00\x01 nonsense\n")
+    elif kind == "flat":
+        path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\nf 1 3 2\nf 2 3 4\n")
+    elif kind == "empty":
+        path.write_text("# nothing\n")
+
+
+@pytest.mark.parametrize("kind, needle", [("missing", "does not exist"), ("garbage", "mesh"),
+                                          ("flat", "degenerate"), ("empty", "mesh")])
+def test_bad_user_mesh(tmp_path, capsys, kind, needle):
+    mesh = tmp_path / f"{kind}.obj"
+    if kind != "missing":
+        _write_mesh(mesh, kind)
+    out = tmp_path / "out"
+    rc = main(["generate", "--preset", "tiny", "--mesh", f"{mesh}:5", "--out", str(out), "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2 and needle in err and str(mesh.name) in err
+    assert not out.exists() or not (out / DATASET_JSON).exists()
+
+
+def test_user_mesh_is_used_with_its_size(tmp_path):
+    mesh = tmp_path / "rock.ply"
+    trimesh.creation.box(extents=(2.0, 1.0, 0.5)).export(mesh)
+    out = tmp_path / "user"
+    assert main(["generate", "--preset", "tiny", "--train", "1", "--test", "0", "--frames", "3",
+                 "--mesh", f"{mesh}:6", "--out", str(out), "--no-progress"]) == 0
+    data = Dataset(out)
+    seq = data.sequences("train")[0]
+    assert seq.meta["shape"]["family"] == "user"
+    assert np.allclose(sorted(seq.meta["shape"]["extent_m"]), [1.5, 3.0, 6.0])
+    size = seq.gt3d[:, 3:]
+    assert np.all(np.linalg.norm(size, axis=1) <= np.sqrt(6 ** 2 + 3 ** 2 + 1.5 ** 2) * np.sqrt(3) + 1e-6)
+    assert np.all(size.max(1) >= 6.0 * 0.57)
+
+
+def test_stats_and_preview(tmp_path):
+    out = tmp_path / "sp"
+    assert main(["generate", "--preset", "tiny", "--train", "2", "--test", "1", "--frames", "4", "--out", str(out),
+                 "--no-progress"]) == 0
+    assert main(["stats", str(out), "--out", str(tmp_path / "stats.png")]) == 0
+    assert main(["preview", str(out / "train" / "0001"), "--out", str(tmp_path / "p.png")]) == 0
+    assert main(["preview", str(out / "test" / "0001"), "--out", str(tmp_path / "p.gif"), "--right"]) == 0
+    for f in ("stats.png", "p.png", "p.gif"):
+        assert (tmp_path / f).stat().st_size > 1000
+    assert main(["stats", str(tmp_path / "nothing"), "--out", str(tmp_path / "x.png")]) == 2
+    run = json.loads((out / RUN_FILE).read_text())
+    assert run["seed"] == 0 and run["preset"] == "tiny"
