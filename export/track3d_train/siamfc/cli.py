@@ -1,0 +1,180 @@
+"""`track3d-train siamfc prepare|train|export|eval`: the SiamFC pipeline.
+
+    track3d-train siamfc prepare --data /work/data/small --out /work/data/cache/siamfc
+    track3d-train siamfc train   --variant edge --cache /work/data/cache/siamfc --out runs/siamfc_edge
+    track3d-train siamfc export  --checkpoint runs/siamfc_edge/ckpt.pt --out runtime/track3d/models/siamfc_edge
+    track3d-train siamfc eval    --model runtime/track3d/models/siamfc_edge --data /work/data/small --split test
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+
+def _prepare(a) -> int:
+    from .data import build_cache, sequences_from_dataset, synthetic_sequences
+
+    if a.synthetic:
+        seqs = synthetic_sequences(a.synthetic, frames=a.synthetic_frames, seed=a.seed)
+    else:
+        if not a.data:
+            print("error: give --data ROOT (a dataset) or --synthetic N", file=sys.stderr)
+            return 2
+        seqs = sequences_from_dataset(a.data, a.split, stride=a.stride)
+    t0 = time.perf_counter()
+    out = build_cache(seqs, a.out, max_frames=a.max_frames, progress=not a.quiet)
+    info = json.loads((out / "index.json").read_text())
+    print(f"cache {out}: {len(info['seq'])} crops from {len(info['sequences'])} sequences "
+          f"in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+def _cfg(a):
+    from .model import config_for
+
+    return config_for(a.variant, width=a.width, train_instance_size=a.train_instance_size)
+
+
+def _train(a) -> int:
+    from .train import train
+
+    cfg = _cfg(a)
+    print(f"SiamFC {cfg.variant}: channels {cfg.channels}, train crops {cfg.exemplar_size}/"
+          f"{cfg.train_instance_size}, batch {a.batch}, {a.steps} steps, {a.threads} thread(s)")
+    s = train(cfg, a.cache, a.out, steps=a.steps, batch=a.batch, lr=a.lr, lr_end=a.lr_end, seed=a.seed,
+              threads=a.threads, time_budget_s=a.time_budget_min * 60 if a.time_budget_min else None,
+              init_from=a.init_from, resume=not a.no_resume, progress=not a.quiet, max_gap=a.max_gap)
+    print(json.dumps(s))
+    return 0
+
+
+def _export(a) -> int:
+    import dataclasses
+
+    from .export import export_onnx, parity, quantize_search
+    from .train import load_checkpoint
+
+    net, ck = load_checkpoint(a.checkpoint)
+    over = {k: getattr(a, k) for k in ("instance_size", "scale_num", "window_influence", "scale_lr",
+                                       "scale_step", "scale_penalty") if getattr(a, k) is not None}
+    if over:
+        net.cfg = dataclasses.replace(net.cfg, **over)
+    extra = {"training": {"steps": ck.get("step"), "batch": ck.get("batch"), "seed": ck.get("seed"),
+                          "elapsed_s": round(float(ck.get("elapsed_s", 0)), 1),
+                          "data": a.data_note or "track3d small train split (no ILSVRC-VID pre-training)"}}
+    pz, px = export_onnx(net, a.out, extra)
+    p = parity(net, pz, px)
+    print(f"wrote {pz} ({pz.stat().st_size / 1e6:.2f} MB), {px} ({px.stat().st_size / 1e6:.2f} MB)")
+    print("parity torch vs onnxruntime:", json.dumps(p))
+    if a.int8:
+        import numpy as np
+
+        from track3d.onnxmodel import OnnxModel
+
+        from .data import CropCache
+        cache = CropCache(a.int8)
+        rng = np.random.default_rng(0)
+        ids = rng.choice(len(cache), size=min(64, len(cache)), replace=False)
+        n, c0 = net.cfg.instance_size, (cache.crops.shape[1] - net.cfg.instance_size) // 2
+        calib = np.stack([cache.crops[i][c0:c0 + n, c0:c0 + n] for i in ids])
+        e0 = (cache.crops.shape[1] - net.cfg.exemplar_size) // 2
+        z = np.ascontiguousarray(cache.crops[ids[0]][e0:e0 + 127, e0:e0 + 127][None])
+        feat = OnnxModel(pz, 1).run({"exemplar": z})[0]
+        q = quantize_search(px, Path(str(a.out) + "_int8_search.onnx"), calib, feat)
+        import shutil
+        shutil.copy(pz, Path(str(a.out) + "_int8_exemplar.onnx"))
+        print(f"wrote {q} ({q.stat().st_size / 1e6:.2f} MB)")
+    return 0
+
+
+def _eval(a) -> int:
+    import numpy as np
+
+    from track3d.dataset import Dataset
+    from track3d.siamfc import create
+
+    from .evaluate import load_frames, run_sequence, summarise
+
+    over = {k: getattr(a, k) for k in ("instance_size", "scale_num", "window_influence", "scale_lr")
+            if getattr(a, k) is not None}
+    tr = create(model=a.model, threads=a.threads, **over)
+    seqs = Dataset(a.data).sequences(a.split)[: a.max_seqs or None]
+    res = []
+    for s in seqs:
+        res.append(run_sequence(tr, load_frames(s), s.gt2d, s.absent))
+    out = summarise(res)
+    out.pop("success_curve", None)
+    out.pop("precision_curve", None)
+    print(json.dumps(out, indent=1))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="track3d-train siamfc", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="cmd", required=True)
+
+    q = sub.add_parser("prepare", help="crop training pairs once into a cache (.npy memmap)")
+    q.add_argument("--data", help="dataset root (dataset.json)")
+    q.add_argument("--split", default="train")
+    q.add_argument("--out", required=True, help="cache folder")
+    q.add_argument("--stride", type=int, default=1, help="use every k-th frame")
+    q.add_argument("--max-frames", type=int, default=2000, help="bound on cached crops (~195 kB each)")
+    q.add_argument("--synthetic", type=int, default=0, help="N synthetic sequences instead of a dataset")
+    q.add_argument("--synthetic-frames", type=int, default=60)
+    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--quiet", action="store_true")
+    q.set_defaults(fn=_prepare)
+
+    for name, fn, hlp in (("train", _train, "train (resumes from <out>/ckpt.pt)"),):
+        t = sub.add_parser(name, help=hlp)
+        t.add_argument("--variant", choices=["faithful", "edge"], default="edge")
+        t.add_argument("--width", type=float, default=None, help="override the width multiplier")
+        t.add_argument("--train-instance-size", type=int, default=None, help="search crop size in training")
+        t.add_argument("--cache", required=True)
+        t.add_argument("--out", required=True, help="run folder: ckpt.pt, log.jsonl, loss.png")
+        t.add_argument("--steps", type=int, default=2000)
+        t.add_argument("--batch", type=int, default=16)
+        t.add_argument("--lr", type=float, default=1e-2)
+        t.add_argument("--lr-end", type=float, default=1e-4)
+        t.add_argument("--max-gap", type=int, default=50, help="max frame gap of a pair")
+        t.add_argument("--seed", type=int, default=0)
+        t.add_argument("--threads", type=int, default=1)
+        t.add_argument("--time-budget-min", type=float, default=None, help="stop (and checkpoint) after this")
+        t.add_argument("--init-from", help="start from another run's checkpoint (fine-tuning)")
+        t.add_argument("--no-resume", action="store_true")
+        t.add_argument("--quiet", action="store_true")
+        t.set_defaults(fn=fn)
+
+    e = sub.add_parser("export", help="write <out>_exemplar.onnx + <out>_search.onnx, check parity")
+    e.add_argument("--checkpoint", required=True)
+    e.add_argument("--out", required=True, help="path prefix")
+    e.add_argument("--data-note", default=None, help="what the model was trained on (metadata)")
+    e.add_argument("--int8", metavar="CACHE", help="also write an int8 search graph calibrated on CACHE")
+    for k, ty in (("instance-size", int), ("scale-num", int), ("window-influence", float),
+                  ("scale-lr", float), ("scale-step", float), ("scale-penalty", float)):
+        e.add_argument(f"--{k}", type=ty, default=None, help="tracking default stored in the metadata")
+    e.set_defaults(fn=_export)
+
+    v = sub.add_parser("eval", help="OPE on a dataset split with the ONNX runtime tracker")
+    v.add_argument("--model", required=True, help="prefix of <name>_exemplar/_search.onnx")
+    v.add_argument("--data", required=True)
+    v.add_argument("--split", default="test")
+    v.add_argument("--max-seqs", type=int, default=0)
+    v.add_argument("--threads", type=int, default=1)
+    for k, ty in (("instance-size", int), ("scale-num", int), ("window-influence", float), ("scale-lr", float)):
+        v.add_argument(f"--{k}", type=ty, default=None)
+    v.set_defaults(fn=_eval)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    return int(a.fn(a) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,146 @@
+"""SiamFC training loop: SGD, exponential LR decay, checkpoints + resume, log + loss curve."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .data import CropCache, PairSampler
+from .model import SiamFC, SiamFCConfig, balanced_bce
+
+__all__ = ["train", "load_checkpoint", "plot_log"]
+
+
+def load_checkpoint(path) -> tuple[SiamFC, dict]:
+    ck = torch.load(str(path), map_location="cpu", weights_only=False)
+    net = SiamFC(SiamFCConfig.from_dict(ck["config"]))
+    net.load_state_dict(ck["model"])
+    return net, ck
+
+
+def _save(path: Path, obj: dict):
+    tmp = path.with_suffix(".tmp")
+    torch.save(obj, str(tmp))
+    os.replace(tmp, path)
+
+
+def plot_log(log_path, png_path, title="SiamFC training") -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [json.loads(l) for l in Path(log_path).read_text().splitlines() if l.strip()]
+    if not rows:
+        return
+    st = np.array([r["step"] for r in rows])
+    loss = np.array([r["loss"] for r in rows])
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    ax.plot(st, loss, lw=0.6, alpha=0.5, label="loss (per log interval)")
+    if len(loss) > 10:
+        k = max(5, len(loss) // 30)
+        sm = np.convolve(loss, np.ones(k) / k, mode="valid")
+        ax.plot(st[k - 1:], sm, lw=1.5, label=f"moving mean ({k})")
+    ax.set_xlabel("step")
+    ax.set_ylabel("balanced logistic loss")
+    ax.set_title(f"{title} ({rows[-1]['elapsed_s'] / 60:.1f} min)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(str(png_path), dpi=110)
+    plt.close(fig)
+
+
+def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int = 16, lr: float = 1e-2,
+          lr_end: float = 1e-4, weight_decay: float = 5e-4, seed: int = 0, threads: int = 1,
+          time_budget_s: float | None = None, ckpt_every_s: float = 60.0, log_every: int = 10,
+          init_from: str | None = None, resume: bool = True, progress: bool = True,
+          max_gap: int = 50) -> dict:
+    """Train (or resume) into out_dir: ckpt.pt (latest), log.jsonl, loss.png. Returns a summary."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(int(threads))
+    torch.manual_seed(seed)
+    ck_path, log_path = out / "ckpt.pt", out / "log.jsonl"
+    net = SiamFC(cfg)
+    opt = torch.optim.SGD(net.parameters(), lr=lr, momentum=0.9, weight_decay=weight_decay)
+    gamma = (lr_end / lr) ** (1.0 / max(steps, 1))
+    step, elapsed0 = 0, 0.0
+    sampler = PairSampler(CropCache(cache_dir), cfg.exemplar_size, cfg.train_instance_size,
+                          max_gap=max_gap, seed=seed)
+    if resume and ck_path.is_file():
+        ck = torch.load(str(ck_path), map_location="cpu", weights_only=False)
+        net.load_state_dict(ck["model"])
+        opt.load_state_dict(ck["optim"])
+        step, elapsed0 = int(ck["step"]), float(ck.get("elapsed_s", 0.0))
+        sampler.rng = np.random.default_rng([seed, step])
+        torch.manual_seed(seed + step)
+        print(f"resumed from {ck_path} at step {step}")
+    elif init_from:
+        src = torch.load(str(init_from), map_location="cpu", weights_only=False)
+        net.load_state_dict(src["model"])
+        print(f"initialised from {init_from} (step {src.get('step')})")
+        if log_path.exists():
+            log_path.unlink()
+    elif log_path.exists():
+        log_path.unlink()
+    net.train()
+    r_pos_cells = cfg.r_pos / cfg.total_stride
+    t_start = time.perf_counter()
+    last_ck = t_start
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=steps, initial=step, desc=f"siamfc-{cfg.variant}", unit="step")
+    acc, nacc = 0.0, 0
+    stopped = "steps"
+    with open(log_path, "a") as log:
+        while step < steps:
+            for g in opt.param_groups:
+                g["lr"] = lr * gamma ** step
+            z, x = sampler.sample(batch)
+            zt, xt = net.normalise(torch.from_numpy(z)), net.normalise(torch.from_numpy(x))
+            logits = net(zt, xt)
+            loss = balanced_bce(logits, r_pos_cells)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            step += 1
+            acc += float(loss.detach())
+            nacc += 1
+            if bar:
+                bar.update(1)
+                bar.set_postfix(loss=f"{float(loss):.3f}")
+            now = time.perf_counter()
+            elapsed = elapsed0 + now - t_start
+            if step % log_every == 0 or step == steps:
+                log.write(json.dumps({"step": step, "loss": acc / nacc, "lr": opt.param_groups[0]["lr"],
+                                      "elapsed_s": round(elapsed, 2)}) + "\n")
+                log.flush()
+                acc, nacc = 0.0, 0
+            budget_hit = time_budget_s is not None and elapsed >= time_budget_s
+            if now - last_ck >= ckpt_every_s or step == steps or budget_hit:
+                _save(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
+                                "config": cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
+                                "batch": batch, "seed": seed})
+                last_ck = now
+            if budget_hit:
+                stopped = "time budget"
+                break
+    if bar:
+        bar.close()
+    _save(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step, "config": cfg.to_dict(),
+                    "elapsed_s": elapsed0 + time.perf_counter() - t_start, "steps_planned": steps,
+                    "batch": batch, "seed": seed})
+    try:
+        plot_log(log_path, out / "loss.png", f"SiamFC {cfg.variant}")
+    except Exception as e:  # plotting is a convenience
+        print(f"loss plot failed: {e}")
+    summary = {"step": step, "stopped": stopped, "elapsed_s": elapsed0 + time.perf_counter() - t_start,
+               "checkpoint": str(ck_path)}
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    return summary

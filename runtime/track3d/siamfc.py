@@ -1,0 +1,224 @@
+"""SiamFC 2D tracker on onnxruntime (no torch): the runtime half of paper §IV-A.
+
+Two ONNX graphs (written by `track3d-train siamfc export`):
+    <name>_exemplar.onnx  uint8 (1, 127, 127, 3) RGB crop -> exemplar feature (1, C, k, k), once per init
+    <name>_search.onnx    uint8 (S, N, N, 3) RGB crops + exemplar feature -> responses (S, R, R)
+
+Per frame: S crops of the search region around the last centre (one per scale, mean-colour
+padding, one cv2.warpAffine each), one ORT call, cubic upsampling of the responses, scale
+penalty, cosine window, scale damping (Bertinetto et al. 2016). Every size and
+hyper-parameter comes from the models' metadata (key 'track3d'), so a new model needs no code
+change; keyword overrides to `create` / `SiamFCTracker` win over the metadata.
+
+Shipped: `siamfc_edge_*` (default, quarter-width AlexNet, fast) and `siamfc_faithful_*`
+(full AlexNet of the paper).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .onnxmodel import ModelError, OnnxModel, shipped_model
+
+__all__ = ["SiamFCTracker", "create", "crop_square", "model_paths", "VARIANT_FILES", "TUNABLE"]
+
+VARIANT_FILES = {"edge": "siamfc_edge", "faithful": "siamfc_faithful"}
+TUNABLE = ("instance_size", "scale_num", "scale_step", "scale_penalty", "scale_lr", "window_influence",
+           "response_up", "context_amount")
+
+
+def crop_square(image: np.ndarray, center: np.ndarray, size: float, out_size: int,
+                border: tuple) -> np.ndarray:
+    """Square patch of side `size` image pixels centred at `center` (x, y, continuous pixel
+    coordinates: pixel i spans [i, i+1)), resized to out_size x out_size; outside the image the
+    patch is filled with `border` (the mean colour). One bilinear cv2.warpAffine."""
+    s = out_size / max(float(size), 1e-6)
+    tx = out_size / 2.0 - 0.5 - s * (center[0] - 0.5)
+    ty = out_size / 2.0 - 0.5 - s * (center[1] - 0.5)
+    m = np.array([[s, 0.0, tx], [0.0, s, ty]], dtype=np.float64)
+    interp = cv2.INTER_AREA if s < 0.5 else cv2.INTER_LINEAR
+    if interp == cv2.INTER_AREA:  # warpAffine has no area filter: crop, then resize
+        return _crop_resize(image, center, size, out_size, border)
+    return cv2.warpAffine(image, m, (out_size, out_size), flags=cv2.INTER_LINEAR,
+                          borderMode=cv2.BORDER_CONSTANT, borderValue=border)
+
+
+def _crop_resize(image, center, size, out_size, border):
+    h, w = image.shape[:2]
+    x0 = int(round(center[0] - size / 2.0))
+    y0 = int(round(center[1] - size / 2.0))
+    n = max(int(round(size)), 1)
+    x1, y1 = x0 + n, y0 + n
+    pl, pt, pr, pb = max(0, -x0), max(0, -y0), max(0, x1 - w), max(0, y1 - h)
+    patch = image[max(0, y0):min(h, y1), max(0, x0):min(w, x1)]
+    if patch.size == 0:
+        return np.full((out_size, out_size, 3), np.round(border[:3]), dtype=image.dtype)
+    if pl or pt or pr or pb:
+        patch = cv2.copyMakeBorder(patch, pt, pb, pl, pr, cv2.BORDER_CONSTANT, value=border)
+    return cv2.resize(patch, (out_size, out_size), interpolation=cv2.INTER_AREA)
+
+
+def model_paths(variant: str = "edge") -> tuple[Path, Path]:
+    """(exemplar, search) paths of a shipped variant."""
+    if variant not in VARIANT_FILES:
+        raise ValueError(f"unknown SiamFC variant {variant!r} (known: {', '.join(VARIANT_FILES)})")
+    stem = VARIANT_FILES[variant]
+    return shipped_model(f"{stem}_exemplar.onnx"), shipped_model(f"{stem}_search.onnx")
+
+
+class SiamFCTracker:
+    """SiamFC behind the Tracker2D seam: init(image, box), update(image) -> (ok, box), correct(box).
+
+    Images are (H, W, 3) uint8 RGB; boxes [x, y, w, h] pixels. After update, `score` holds the
+    peak of the raw response (a confidence the caller may use) and `timings_ms` the stage times.
+    """
+
+    def __init__(self, exemplar_model: str | Path, search_model: str | Path, threads: int = 1, **overrides):
+        self.exemplar = OnnxModel(exemplar_model, threads, "siamfc-exemplar")
+        self.search = OnnxModel(search_model, threads, "siamfc-search")
+        meta = self.search.meta
+        self.meta = meta
+        unknown = set(overrides) - set(TUNABLE)
+        if unknown:
+            raise TypeError(f"unknown SiamFC options: {', '.join(sorted(unknown))} (tunable: {', '.join(TUNABLE)})")
+        hp = dict(meta.get("tracking", {}))
+        hp["instance_size"] = meta["instance_size"]
+        hp.update({k: v for k, v in overrides.items() if v is not None})
+        self.exemplar_size = int(meta["exemplar_size"])
+        self.total_stride = int(meta["total_stride"])
+        self.instance_size = int(hp["instance_size"])
+        self.scale_num = int(hp["scale_num"])
+        self.scale_step = float(hp["scale_step"])
+        self.scale_penalty = float(hp["scale_penalty"])
+        self.scale_lr = float(hp["scale_lr"])
+        self.window_influence = float(hp["window_influence"])
+        self.response_up = int(hp["response_up"])
+        self.context_amount = float(hp["context_amount"])
+        if self.instance_size < self.exemplar_size or (self.instance_size - self.exemplar_size) % self.total_stride:
+            raise ValueError(f"instance_size {self.instance_size} must be exemplar_size {self.exemplar_size} "
+                             f"+ a multiple of the stride {self.total_stride}")
+        if self.scale_num < 1:
+            raise ValueError("scale_num must be >= 1")
+        self.response_size = (self.instance_size - self.exemplar_size) // self.total_stride + 1
+        self.upscale_size = self.response_up * (self.response_size - 1) + 1
+        hann = np.hanning(self.upscale_size)
+        win = np.outer(hann, hann)
+        self.window = (win / win.sum()).astype(np.float32)
+        half = (self.scale_num - 1) / 2.0
+        self.scale_factors = self.scale_step ** np.linspace(-half, half, self.scale_num)
+        self.penalties = np.where(np.arange(self.scale_num) == self.scale_num // 2, 1.0, self.scale_penalty)
+        if self.scale_num % 2 == 0:  # no exact centre scale: penalise none
+            self.penalties[:] = 1.0
+        self._kernel = None
+        self.score = float("nan")
+        self.timings_ms: dict[str, float] = {}
+
+    # -- state -------------------------------------------------------------------------------
+    def _set_box(self, box) -> None:
+        b = np.asarray(box, dtype=np.float64).reshape(4)
+        if not np.all(np.isfinite(b)) or b[2] <= 0 or b[3] <= 0:
+            raise ValueError(f"box must be finite with positive size, got {b.tolist()}")
+        self.center = b[:2] + b[2:] / 2.0
+        self.target_sz = b[2:].copy()
+        ctx = self.context_amount * self.target_sz.sum()
+        self.z_sz = math.sqrt(float(np.prod(self.target_sz + ctx)))
+        self.x_sz = self.z_sz * self.instance_size / self.exemplar_size
+        self._min_sz = max(2.0, 0.2 * float(self.target_sz.min()))
+
+    def init(self, image: np.ndarray, box) -> None:
+        image = _check_image(image)
+        self._set_box(box)
+        self._image_hw = image.shape[:2]
+        self.avg_color = tuple(float(c) for c in cv2.mean(image)[:3])
+        z = crop_square(image, self.center, self.z_sz, self.exemplar_size, self.avg_color)
+        self._kernel = self.exemplar.run({"exemplar": z[None]})[0]
+        self.base_target_sz = self.target_sz.copy()
+
+    def correct(self, box) -> None:
+        """Adopt a new state box (e.g. the 2D-3D fused box): centre and size, same appearance."""
+        if self._kernel is None:
+            raise RuntimeError("correct() before init()")
+        self._set_box(box)
+
+    @property
+    def box(self) -> np.ndarray:
+        return np.concatenate([self.center - self.target_sz / 2.0, self.target_sz])
+
+    def update(self, image: np.ndarray) -> tuple[bool, np.ndarray]:
+        if self._kernel is None:
+            raise RuntimeError("update() before init()")
+        image = _check_image(image)
+        t0 = _now()
+        crops = np.empty((self.scale_num, self.instance_size, self.instance_size, 3), np.uint8)
+        for i, f in enumerate(self.scale_factors):
+            crops[i] = crop_square(image, self.center, self.x_sz * f, self.instance_size, self.avg_color)
+        t1 = _now()
+        responses = self.search.run({"search": crops, "exemplar_feature": self._kernel})[0]
+        t2 = _now()
+        if not np.all(np.isfinite(responses)):
+            self.score = float("nan")
+            return False, self.box
+        n = self.upscale_size
+        if self.scale_num == 1:
+            best = 0
+            resp = cv2.resize(responses[0], (n, n), interpolation=cv2.INTER_CUBIC)
+        else:
+            peaks = responses.reshape(self.scale_num, -1).max(axis=1) * self.penalties
+            best = int(np.argmax(peaks))
+            resp = cv2.resize(responses[best], (n, n), interpolation=cv2.INTER_CUBIC)
+            resp *= self.penalties[best]
+        self.score = float(responses[best].max())
+        resp -= resp.min()
+        resp /= resp.sum() + 1e-16
+        resp = (1.0 - self.window_influence) * resp + self.window_influence * self.window
+        loc = np.unravel_index(int(np.argmax(resp)), resp.shape)
+        disp_resp = np.array([loc[1], loc[0]], dtype=np.float64) - (n - 1) / 2.0
+        disp_inst = disp_resp * self.total_stride / self.response_up
+        disp_img = disp_inst * self.x_sz * self.scale_factors[best] / self.instance_size
+        self.center = self.center + disp_img
+        scale = (1.0 - self.scale_lr) + self.scale_lr * self.scale_factors[best]
+        self.target_sz = np.maximum(self.target_sz * scale, self._min_sz)
+        self.z_sz *= scale
+        self.x_sz *= scale
+        h, w = image.shape[:2]
+        self.center = np.clip(self.center, 0.0, [w, h])
+        t3 = _now()
+        self.timings_ms = {"crop": 1e3 * (t1 - t0), "net": 1e3 * (t2 - t1), "post": 1e3 * (t3 - t2)}
+        return True, self.box
+
+
+def _now() -> float:
+    import time
+    return time.perf_counter()
+
+
+def _check_image(image) -> np.ndarray:
+    a = np.asarray(image)
+    if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8:
+        raise ValueError(f"image must be (H, W, 3) uint8 RGB, got {a.shape} {a.dtype}")
+    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
+
+
+def create(variant: str = "edge", threads: int = 1, exemplar_model: str | Path | None = None,
+           search_model: str | Path | None = None, model: str | Path | None = None,
+           **overrides) -> SiamFCTracker:
+    """A SiamFC tracker. `variant` picks the shipped models ("edge", the default, or "faithful");
+    `model` a prefix `<dir>/<name>` of a pair `<name>_exemplar.onnx` / `<name>_search.onnx`, or
+    `exemplar_model` + `search_model` explicit paths. Keyword overrides: see TUNABLE."""
+    if model is not None:
+        p = Path(model)
+        stem = p.name
+        for suffix in ("_exemplar.onnx", "_search.onnx", ".onnx"):
+            if stem.endswith(suffix):
+                stem = stem[: -len(suffix)]
+                break
+        exemplar_model = exemplar_model or p.parent / f"{stem}_exemplar.onnx"
+        search_model = search_model or p.parent / f"{stem}_search.onnx"
+    if (exemplar_model is None) != (search_model is None):
+        raise ValueError("give both exemplar_model and search_model, or neither")
+    if exemplar_model is None:
+        exemplar_model, search_model = model_paths(variant)
+    return SiamFCTracker(exemplar_model, search_model, threads=threads, **overrides)
