@@ -228,3 +228,29 @@ def test_runtime_never_imports_torch(hand_models):
         "print(bad); sys.exit(1 if bad else 0)\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+# -- the CLI on the tiny simulated dataset -----------------------------------------------------
+def test_cli_prepare_train_export_eval_on_tiny_data(tiny_dataset, tmp_path, capsys):
+    import json
+
+    from track3d_train.cli import main
+
+    cache, run, prefix = tmp_path / "cache", tmp_path / "run", tmp_path / "m" / "siamfc_edge"
+    assert main(["siamfc", "prepare", "--data", str(tiny_dataset), "--out", str(cache), "--max-frames", "40",
+                 "--quiet"]) == 0
+    args = ["siamfc", "train", "--variant", "edge", "--width", "0.125", "--train-instance-size", "159",
+            "--cache", str(cache), "--out", str(run), "--batch", "2", "--quiet"]
+    assert main(args + ["--steps", "3"]) == 0
+    assert (run / "ckpt.pt").is_file() and (run / "loss.png").is_file()
+    assert main(args + ["--steps", "5"]) == 0  # resumes at step 3
+    assert json.loads((run / "summary.json").read_text())["step"] == 5
+    assert "resumed from" in capsys.readouterr().out
+    assert main(["siamfc", "export", "--checkpoint", str(run / "ckpt.pt"), "--out", str(prefix)]) == 0
+    meta = OnnxModel(str(prefix) + "_search.onnx", 1, "siamfc-search").meta
+    assert meta["training"]["steps"] == 5 and meta["width"] == 0.125
+    capsys.readouterr()
+    assert main(["siamfc", "eval", "--model", str(prefix), "--data", str(tiny_dataset), "--split", "test",
+                 "--max-seqs", "1"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["sequences"] == 1 and 0.0 <= res["AO_2d"] <= 1.0
