@@ -1,0 +1,86 @@
+"""3D box estimators behind one protocol, and a registry of them by name.
+
+    box3d = estimator.estimate(points, category)   # points (n, 3) float32, n >= 1 -> (6,) float64
+
+Built-in names: ``"baseline"`` (the paper's 3D tracking baseline, section V-A: the minimum
+enclosing axis-aligned box of the frustum points, ``track3d.boxes.box3d_from_points``) and
+``"a3boxnet"`` (the shipped A3BoxNet ONNX model, ``track3d.boxnet``, loaded lazily).
+"""
+from __future__ import annotations
+
+import importlib
+from typing import Callable, Protocol, runtime_checkable
+
+import numpy as np
+
+from .boxes import box3d_from_points
+
+__all__ = ["BoxEstimator", "BaselineEstimator", "EstimatorUnavailable", "create_estimator",
+           "available_estimators", "register_estimator"]
+
+
+class EstimatorUnavailable(RuntimeError):
+    """A registered estimator cannot be built here (its model file or module is missing)."""
+
+
+@runtime_checkable
+class BoxEstimator(Protocol):
+    """Frustum points -> axis-aligned 3D box [cx, cy, cz, sx, sy, sz] in the camera frame."""
+
+    def estimate(self, points: np.ndarray, category: int) -> np.ndarray:
+        """points (n, 3) float32 with n >= 1; category: coarse category index -> (6,) float64."""
+
+
+class BaselineEstimator:
+    """Minimum enclosing box of the frustum points (paper V-A); ignores the category."""
+
+    name = "baseline"
+
+    def __init__(self, threads: int = 1):  # threads: accepted for a uniform factory signature
+        del threads
+
+    def __repr__(self) -> str:
+        return "BaselineEstimator()"
+
+    def estimate(self, points: np.ndarray, category: int = -1) -> np.ndarray:
+        return box3d_from_points(points)
+
+
+def _a3boxnet(**options) -> BoxEstimator:
+    try:
+        mod = importlib.import_module("track3d.boxnet")
+        create = getattr(mod, "create")
+    except (ImportError, AttributeError) as e:
+        raise EstimatorUnavailable(f"A3BoxNet model not available: track3d.boxnet cannot be loaded ({e})") from None
+    try:
+        return create(**options)
+    except (FileNotFoundError, OSError) as e:
+        raise EstimatorUnavailable(f"A3BoxNet model not available: {e}") from None
+    except Exception as e:  # onnxmodel.ModelError: no shipped model yet, or a bad file
+        if type(e).__name__ == "ModelError":
+            raise EstimatorUnavailable(f"A3BoxNet model not available: {e}") from None
+        raise
+
+
+_REGISTRY: dict[str, Callable[..., BoxEstimator]] = {"baseline": BaselineEstimator, "a3boxnet": _a3boxnet}
+
+
+def register_estimator(name: str, factory: Callable[..., BoxEstimator]) -> None:
+    """Add (or replace) an estimator: ``factory(**options)`` returns a :class:`BoxEstimator`."""
+    if not name or not isinstance(name, str):
+        raise ValueError("an estimator name is a non-empty string")
+    if not callable(factory):
+        raise TypeError("factory must be callable")
+    _REGISTRY[name.lower()] = factory
+
+
+def available_estimators() -> list[str]:
+    return sorted(_REGISTRY)
+
+
+def create_estimator(name: str, **options) -> BoxEstimator:
+    """Build the estimator registered as `name` (e.g. ``create_estimator("a3boxnet", threads=1)``)."""
+    factory = _REGISTRY.get(str(name).lower())
+    if factory is None:
+        raise ValueError(f"unknown 3D box estimator {name!r}; available: {', '.join(available_estimators())}")
+    return factory(**options)

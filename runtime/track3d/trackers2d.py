@@ -1,0 +1,296 @@
+"""2D trackers behind one small protocol (OpenCV style) and a registry of them by name.
+
+The protocol (:class:`Tracker2D`)::
+
+    tracker.init(image, box)            # image (H, W, 3) uint8 RGB, box (4,) [x, y, w, h]
+    ok, box = tracker.update(image)     # ok: bool, box: (4,) float64
+    tracker.correct(box)                # optional: adopt a new state box (e.g. the fused one)
+
+Built-in names (:func:`available_trackers`):
+
+- ``"oracle"``: replays the ground truth, ``create_tracker("oracle", gt=seq.gt2d)``; scores a
+  box estimator alone (the paper's A3BoxNet row). It knows its frame index: ``seek(i)`` before
+  ``init`` says which frame the init image is (the evaluation does this); without ``seek`` the
+  init box is looked up among the ground-truth rows. Each ``update`` advances one frame.
+- ``"kcf"``, ``"csrt"``, ``"mosse"``, ``"mil"``, ``"medianflow"``, ``"boosting"``, ``"tld"``:
+  OpenCV's classic trackers (opencv-contrib-python-headless, some under ``cv2.legacy``).
+- ``"nano"``: OpenCV's NanoTrack with ``backbone=`` / ``neckhead=`` ONNX paths (default: the
+  peer models in ``shared/peers/nanotrack-v2`` next to the repository; benchmarks only).
+- ``"siamfc"``, ``"siamfc-edge"``: this project's SiamFC (``track3d.siamfc``), loaded lazily.
+
+OpenCV trackers cannot take a new state box without relearning their appearance model, so
+their ``correct`` does nothing by default (the fused box is reported but the OpenCV tracker
+follows its own estimate); ``correct="reinit"`` re-initialises them on the current frame
+with the corrected box instead.
+"""
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+from typing import Callable, Protocol, runtime_checkable
+
+import cv2
+import numpy as np
+
+__all__ = [
+    "Tracker2D", "OpenCVTracker", "OracleTracker", "TrackerUnavailable",
+    "create_tracker", "available_trackers", "register_tracker", "NANOTRACK_DIR",
+]
+
+# runtime/track3d/trackers2d.py -> the repository root is two folders up from the package.
+NANOTRACK_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "peers" / "nanotrack-v2"
+
+
+class TrackerUnavailable(RuntimeError):
+    """A registered tracker cannot be built here (a missing model file or module)."""
+
+
+@runtime_checkable
+class Tracker2D(Protocol):
+    """What the Track3D loop needs from a 2D tracker (OpenCV's API, RGB images)."""
+
+    def init(self, image: np.ndarray, box: np.ndarray) -> None:
+        """Start tracking the target in `box` [x, y, w, h] of `image` (H, W, 3) uint8 RGB."""
+
+    def update(self, image: np.ndarray) -> tuple[bool, np.ndarray]:
+        """Track into the next frame: (found, box (4,) float64 [x, y, w, h])."""
+
+
+def _as_box(box) -> np.ndarray:
+    b = np.asarray(box, dtype=np.float64).reshape(-1)
+    if b.shape != (4,):
+        raise ValueError(f"a 2D box is [x, y, w, h], got shape {np.shape(box)}")
+    return b
+
+
+def _check_image(image: np.ndarray) -> np.ndarray:
+    im = np.asarray(image)
+    if im.ndim != 3 or im.shape[2] != 3 or im.dtype != np.uint8:
+        raise ValueError(f"images are (H, W, 3) uint8 RGB, got {im.shape} {im.dtype}")
+    return im
+
+
+# --- the oracle ---------------------------------------------------------------------------------
+
+class OracleTracker:
+    """Replays ground-truth boxes: gt (T, 4); absent (T,) bool frames report ok=False."""
+
+    def __init__(self, gt: np.ndarray, absent: np.ndarray | None = None):
+        self.gt = np.asarray(gt, dtype=np.float64).reshape(-1, 4)
+        self.absent = np.zeros(len(self.gt), bool) if absent is None else np.asarray(absent, bool)
+        if len(self.absent) != len(self.gt):
+            raise ValueError("oracle: absent flags and ground truth differ in length")
+        self.frame = -1           # index of the frame last seen
+        self._next_init: int | None = None
+
+    def seek(self, frame: int) -> None:
+        """Say which frame the next ``init`` image is (0-based)."""
+        if not 0 <= int(frame) < len(self.gt):
+            raise IndexError(f"oracle: frame {frame} outside 0..{len(self.gt) - 1}")
+        self._next_init = int(frame)
+
+    def init(self, image: np.ndarray, box: np.ndarray) -> None:
+        b = _as_box(box)
+        if self._next_init is not None:
+            self.frame, self._next_init = self._next_init, None
+            return
+        # No seek: find the frame whose label is this box, first from the current position on.
+        match = np.flatnonzero(np.all(np.isclose(self.gt, b, atol=1e-6), axis=1))
+        if len(match) == 0:
+            raise ValueError("oracle: the init box is no ground-truth row; call seek(frame) first")
+        later = match[match > self.frame]
+        self.frame = int(later[0] if len(later) else match[0])
+
+    def update(self, image: np.ndarray) -> tuple[bool, np.ndarray]:
+        self.frame += 1
+        if self.frame >= len(self.gt):
+            return False, np.full(4, np.nan)
+        b = self.gt[self.frame].copy()
+        ok = bool(not self.absent[self.frame] and np.all(np.isfinite(b)) and b[2] > 0 and b[3] > 0)
+        return ok, b
+
+    def correct(self, box: np.ndarray) -> None:
+        """The oracle follows the ground truth whatever the fused box is."""
+
+
+# --- OpenCV adapters ----------------------------------------------------------------------------
+
+def _cv_constructor(candidates) -> tuple[Callable[[], object], bool] | None:
+    """First existing constructor among (dotted name, legacy?) pairs, e.g. ('legacy.TrackerKCF_create', True)."""
+    for name, legacy in candidates:
+        obj = cv2
+        for part in name.split("."):
+            obj = getattr(obj, part, None)
+            if obj is None:
+                break
+        if obj is not None:
+            return obj, legacy
+    return None
+
+
+class OpenCVTracker:
+    """Adapter for a cv2 tracker: RGB in (converted to BGR as OpenCV expects), float64 boxes out.
+
+    Boxes given to OpenCV are clipped to the image and rounded to at least 1 pixel (OpenCV
+    asserts on empty boxes); a box wholly outside the image starts the tracker 'lost'.
+    OpenCV exceptions in ``update`` become ``ok=False`` (never a crash on odd frames).
+    """
+
+    def __init__(self, name: str, make: Callable[[], object], legacy: bool, correct: str = "none"):
+        if correct not in ("none", "reinit"):
+            raise ValueError(f"correct must be 'none' or 'reinit', got {correct!r}")
+        self.name = name
+        self._make = make
+        self._legacy = legacy     # legacy trackers take float Rect2d, the new API int Rect
+        self.correct_mode = correct
+        self._tracker = None
+        self._last_bgr: np.ndarray | None = None
+        self._box = np.full(4, np.nan)
+
+    def __repr__(self) -> str:
+        return f"OpenCVTracker({self.name!r}, correct={self.correct_mode!r})"
+
+    def _cv_box(self, box: np.ndarray, shape) -> tuple | None:
+        h_img, w_img = shape[:2]
+        x0 = np.clip(box[0], 0, w_img)
+        y0 = np.clip(box[1], 0, h_img)
+        x1 = np.clip(box[0] + box[2], 0, w_img)
+        y1 = np.clip(box[1] + box[3], 0, h_img)
+        if not np.all(np.isfinite([x0, y0, x1, y1])) or x1 - x0 < 1 or y1 - y0 < 1:
+            return None
+        if self._legacy:
+            return (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
+        xi, yi = int(np.floor(x0)), int(np.floor(y0))
+        return (xi, yi, max(1, int(np.ceil(x1)) - xi), max(1, int(np.ceil(y1)) - yi))
+
+    def _start(self, bgr: np.ndarray, box: np.ndarray) -> None:
+        self._box = box.copy()
+        cvbox = self._cv_box(box, bgr.shape)
+        self._tracker = None
+        if cvbox is None:
+            return
+        tracker = self._make()
+        try:
+            r = tracker.init(bgr, cvbox)
+        except cv2.error:
+            return
+        if r is False:  # legacy init returns a bool, the new API None
+            return
+        self._tracker = tracker
+
+    def init(self, image: np.ndarray, box: np.ndarray) -> None:
+        bgr = cv2.cvtColor(_check_image(image), cv2.COLOR_RGB2BGR)
+        self._last_bgr = bgr
+        self._start(bgr, _as_box(box))
+
+    def update(self, image: np.ndarray) -> tuple[bool, np.ndarray]:
+        bgr = cv2.cvtColor(_check_image(image), cv2.COLOR_RGB2BGR)
+        self._last_bgr = bgr
+        if self._tracker is None:
+            return False, self._box.copy()
+        try:
+            ok, box = self._tracker.update(bgr)
+        except cv2.error:
+            return False, self._box.copy()
+        b = np.asarray(box, dtype=np.float64).reshape(-1)
+        if not ok or b.shape != (4,) or not np.all(np.isfinite(b)) or b[2] <= 0 or b[3] <= 0:
+            return False, self._box.copy()
+        self._box = b
+        return True, b.copy()
+
+    def correct(self, box: np.ndarray) -> None:
+        """Adopt `box` as the state: re-init on the current frame when correct='reinit', else nothing."""
+        if self.correct_mode == "reinit" and self._last_bgr is not None:
+            self._start(self._last_bgr, _as_box(box))
+
+
+_OPENCV = {  # name -> constructors to try in order, with "is it the legacy API" (Rect2d boxes)
+    "kcf": (("TrackerKCF_create", False), ("legacy.TrackerKCF_create", True)),
+    "csrt": (("TrackerCSRT_create", False), ("legacy.TrackerCSRT_create", True)),
+    "mil": (("TrackerMIL_create", False), ("legacy.TrackerMIL_create", True)),
+    "mosse": (("legacy.TrackerMOSSE_create", True),),
+    "medianflow": (("legacy.TrackerMedianFlow_create", True),),
+    "boosting": (("legacy.TrackerBoosting_create", True),),
+    "tld": (("legacy.TrackerTLD_create", True),),
+}
+
+
+def _opencv(name: str) -> Callable[..., OpenCVTracker]:
+    def factory(correct: str = "none") -> OpenCVTracker:
+        found = _cv_constructor(_OPENCV[name])
+        if found is None:
+            raise TrackerUnavailable(f"this OpenCV build ({cv2.__version__}) has no {name} tracker "
+                                     "(install opencv-contrib-python-headless)")
+        return OpenCVTracker(name, found[0], found[1], correct)
+
+    return factory
+
+
+def _nano(backbone: str | Path | None = None, neckhead: str | Path | None = None,
+          correct: str = "none") -> OpenCVTracker:
+    """NanoTrack v2 through OpenCV (peer model, for benchmarks only: never shipped)."""
+    backbone = Path(backbone) if backbone else NANOTRACK_DIR / "nanotrack_backbone_sim.onnx"
+    neckhead = Path(neckhead) if neckhead else NANOTRACK_DIR / "nanotrack_head_sim.onnx"
+    for p in (backbone, neckhead):
+        if not p.is_file():
+            raise TrackerUnavailable(f"NanoTrack model file {p} not found (pass backbone= and neckhead=)")
+    if not hasattr(cv2, "TrackerNano_create"):
+        raise TrackerUnavailable(f"this OpenCV build ({cv2.__version__}) has no TrackerNano")
+
+    def make():
+        params = cv2.TrackerNano_Params()
+        params.backbone = str(backbone)
+        params.neckhead = str(neckhead)
+        return cv2.TrackerNano_create(params)
+
+    return OpenCVTracker("nano", make, False, correct)
+
+
+def _siamfc(variant: str) -> Callable[..., Tracker2D]:
+    def factory(**options) -> Tracker2D:
+        try:
+            mod = importlib.import_module("track3d.siamfc")
+            create = getattr(mod, "create")
+        except (ImportError, AttributeError) as e:
+            raise TrackerUnavailable(f"SiamFC model not available: track3d.siamfc cannot be loaded ({e})") from None
+        try:
+            return create(variant=variant, **options)
+        except (FileNotFoundError, OSError) as e:
+            raise TrackerUnavailable(f"SiamFC model not available: {e}") from None
+        except Exception as e:  # e.g. onnxmodel.ModelError: no shipped model yet
+            if type(e).__name__ == "ModelError":
+                raise TrackerUnavailable(f"SiamFC model not available: {e}") from None
+            raise
+
+    return factory
+
+
+_REGISTRY: dict[str, Callable[..., Tracker2D]] = {
+    "oracle": OracleTracker,
+    **{name: _opencv(name) for name in _OPENCV},
+    "nano": _nano,
+    "siamfc": _siamfc("faithful"),
+    "siamfc-edge": _siamfc("edge"),
+}
+
+
+def register_tracker(name: str, factory: Callable[..., Tracker2D]) -> None:
+    """Add (or replace) a tracker: ``factory(**options)`` returns a :class:`Tracker2D`."""
+    if not name or not isinstance(name, str):
+        raise ValueError("a tracker name is a non-empty string")
+    if not callable(factory):
+        raise TypeError("factory must be callable")
+    _REGISTRY[name.lower()] = factory
+
+
+def available_trackers() -> list[str]:
+    """Registered tracker names (some may still need model files to be built)."""
+    return sorted(_REGISTRY)
+
+
+def create_tracker(name: str, **options) -> Tracker2D:
+    """Build the tracker registered as `name` with its options (e.g. ``gt=`` for "oracle")."""
+    factory = _REGISTRY.get(str(name).lower())
+    if factory is None:
+        raise ValueError(f"unknown 2D tracker {name!r}; available: {', '.join(available_trackers())}")
+    return factory(**options)

@@ -1,0 +1,245 @@
+"""The Track3D loop on a small synthetic scene (an analytic sphere; no simulator needed).
+
+`make_synthetic_dataset` is shared with the evaluation tests (they import it from here).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from track3d import Camera
+from track3d.boxes import box3d_from_points, iou_3d
+from track3d.dataset import FORMAT, FORMAT_VERSION, frame_name, write_depth_png, write_rgb
+from track3d.estimators import create_estimator
+from track3d.frustum import extract_frustum
+from track3d.fusion import fuse
+from track3d.tracker import LOST, NO_POINTS, TRACKING, Track3D
+from track3d.trackers2d import OracleTracker, create_tracker
+
+CAM = Camera.from_fov(160, 120, 60.0)
+
+
+def render_sphere(cam: Camera, centre, radius: float):
+    """Image (H, W, 3) uint8, depth (H, W) float32 metres, tight 2D box, 3D box of a lit sphere."""
+    rays = cam.pixel_rays()                               # z = 1 rays through pixel centres
+    c = np.asarray(centre, np.float64)
+    a = np.sum(rays * rays, axis=-1)
+    b = -2.0 * rays @ c
+    cc = c @ c - radius ** 2
+    disc = b * b - 4 * a * cc
+    hit = disc >= 0
+    t = np.where(hit, (-b - np.sqrt(np.where(hit, disc, 0))) / (2 * a), 0.0)
+    depth = np.where(hit, t, 0.0).astype(np.float32)      # t is z because rays have z = 1
+    p = rays * t[..., None]
+    n = (p - c) / radius
+    shade = np.clip(n @ np.array([-0.5, -0.5, -0.7]), 0.05, 1.0)
+    u = np.arange(cam.width)[None, :]
+    v = np.arange(cam.height)[:, None]
+    checker = 0.75 + 0.25 * (((u // 6) + (v // 6)) % 2)  # texture for the trackers to hold on to
+    img = np.zeros((cam.height, cam.width, 3), np.uint8)
+    val = (255 * shade * checker).astype(np.uint8)
+    img[hit] = np.stack([val, (val * 0.9).astype(np.uint8), (val * 0.8).astype(np.uint8)], -1)[hit]
+    vv, uu = np.nonzero(hit)
+    box2d = np.array([uu.min(), vv.min(), uu.max() + 1 - uu.min(), vv.max() + 1 - vv.min()], np.float64) \
+        if len(uu) else np.zeros(4)
+    box3d = np.concatenate([c, [2 * radius] * 3])
+    return img, depth, box2d, box3d
+
+
+def sphere_path(n: int, start=(-1.0, 0.2, 12.0), step=(0.12, -0.02, 0.15)):
+    return [np.asarray(start) + k * np.asarray(step) for k in range(n)]
+
+
+def make_synthetic_dataset(root: Path, sequences: dict[str, int] | None = None, radius: float = 1.5,
+                           absent: dict[str, list[int]] | None = None, split: str = "test") -> Path:
+    """Write a tiny dataset in the DESIGN.md layout: one moving sphere per sequence.
+
+    absent: frames (0-based) of a sequence where the target is flagged absent (its image and
+    depth are then empty and the 2D label zero, as the simulator does).
+    """
+    sequences = sequences or {"s0001": 8, "s0002": 6}
+    absent = absent or {}
+    root = Path(root)
+    for k, (name, n) in enumerate(sequences.items()):
+        d = root / split / name
+        for sub in ("left", "right", "depth"):
+            (d / sub).mkdir(parents=True, exist_ok=True)
+        gt2d, gt3d, flags = [], [], []
+        for i, c in enumerate(sphere_path(n, start=(-1.0 + 0.5 * k, 0.2, 12.0 + k))):
+            img, depth, b2, b3 = render_sphere(CAM, c, radius)
+            gone = i in absent.get(name, [])
+            if gone:
+                img[:] = 0
+                depth[:] = 0
+                b2 = np.zeros(4)
+            write_rgb(d / "left" / frame_name(i), img)
+            write_rgb(d / "right" / frame_name(i), img)
+            write_depth_png(d / "depth" / frame_name(i), depth)
+            gt2d.append(b2)
+            gt3d.append(b3)
+            flags.append(int(gone))
+        np.savetxt(d / "groundtruth_2d.txt", np.array(gt2d), fmt="%.4f", delimiter=",")
+        np.savetxt(d / "groundtruth_3d.txt", np.array(gt3d), fmt="%.6f", delimiter=",")
+        np.savetxt(d / "absence.label", np.array(flags), fmt="%d")
+        np.savetxt(d / "cut_by_image.label", np.zeros(n), fmt="%d")
+        (d / "meta.json").write_text(json.dumps({"family_index": 0}))
+    info = {"format": FORMAT, "version": FORMAT_VERSION, "camera": CAM.to_dict(),
+            "splits": {split: list(sequences)}}
+    (root / "dataset.json").write_text(json.dumps(info))
+    return root
+
+
+# --- tests of the loop -------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def frames():
+    out = []
+    for c in sphere_path(6):
+        img, depth, b2, b3 = render_sphere(CAM, c, 1.5)
+        out.append((img, CAM.backproject_depth(depth), b2, b3))
+    return out
+
+
+def test_oracle_baseline_loop_matches_the_formulas(frames):
+    gt2d = np.array([f[2] for f in frames])
+    t = Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"))
+    t.init(frames[0][0], gt2d[0], category=0, points=frames[0][1])
+    assert np.all(np.isfinite(t.box3d))
+    for i in range(1, len(frames)):
+        img, pts, b2, b3 = frames[i]
+        out = t.update(img, pts)
+        assert out.status == TRACKING and out.ok
+        np.testing.assert_array_equal(out.box2d_raw, b2)          # the oracle replays the label
+        fr = extract_frustum(pts, b2, CAM.M)
+        assert out.num_points == len(fr) > 100
+        np.testing.assert_allclose(out.box3d, box3d_from_points(fr))
+        np.testing.assert_allclose(out.box2d, fuse(b2, out.box3d, CAM))  # 0.3 proj + 0.7 2D
+        assert iou_3d(out.box3d, b3) > 0.1                               # the visible cap of the sphere
+        assert set(out.ms) == {"track2d", "frustum", "box3d", "fusion", "total"}
+        assert all(v >= 0 for v in out.ms.values())
+
+
+def test_fusion_off_reports_the_raw_box(frames):
+    gt2d = np.array([f[2] for f in frames])
+    t = Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"), fusion=False)
+    t.init(frames[0][0], gt2d[0], 0)
+    out = t.update(frames[1][0], frames[1][1])
+    np.testing.assert_array_equal(out.box2d, out.box2d_raw)
+
+
+class _Scripted:
+    """A fake 2D tracker: returns scripted (ok, box) pairs and records corrections."""
+
+    def __init__(self, script):
+        self.script = list(script)
+        self.corrected = []
+
+    def init(self, image, box):
+        self.box = np.asarray(box, float)
+
+    def update(self, image):
+        return self.script.pop(0)
+
+    def correct(self, box):
+        self.corrected.append(np.array(box))
+
+
+def test_fused_box_becomes_the_trackers_state(frames):
+    img, pts, b2, _ = frames[1]
+    fake = _Scripted([(True, b2)])
+    t = Track3D(CAM, fake, create_estimator("baseline"))
+    t.init(frames[0][0], frames[0][2], 0)
+    out = t.update(img, pts)
+    assert len(fake.corrected) == 1
+    np.testing.assert_array_equal(fake.corrected[0], out.box2d)
+    assert not np.array_equal(out.box2d, out.box2d_raw)
+
+
+def test_empty_frustum_and_lost_target_are_statuses(frames):
+    img, pts, b2, _ = frames[1]
+    far_box = np.array([0.0, 0.0, 5.0, 5.0])    # the sphere is not in the image corner
+    fake = _Scripted([(True, b2), (True, far_box), (True, b2), (False, np.zeros(4)), (True, np.array([np.nan] * 4))])
+    t = Track3D(CAM, fake, create_estimator("baseline"))
+    t.init(frames[0][0], frames[0][2], 0)
+    first = t.update(img, pts)
+    assert first.status == TRACKING
+    out = t.update(img, pts)
+    assert out.status == NO_POINTS and out.num_points == 0
+    np.testing.assert_array_equal(out.box3d, first.box3d)                # keeps the last estimate
+    np.testing.assert_array_equal(out.box2d, far_box)                    # nothing to fuse with
+    out = t.update(img, np.zeros((0, 3), np.float32))                     # an empty cloud
+    assert out.status == NO_POINTS
+    out = t.update(img, pts)
+    assert out.status == LOST
+    np.testing.assert_array_equal(out.box3d, first.box3d)
+    out = t.update(img, pts)                                              # nan box from a tracker
+    assert out.status == LOST and np.all(np.isfinite(out.box2d))
+    assert len(fake.corrected) == 1                                       # only fused boxes are fed back
+
+
+def test_nan_points_in_the_cloud_do_not_crash(frames):
+    img, pts, b2, _ = frames[1]
+    bad = pts.copy()
+    bad[::7] = np.nan
+    t = Track3D(CAM, _Scripted([(True, b2)]), create_estimator("baseline"))
+    t.init(frames[0][0], frames[0][2], 0)
+    out = t.update(img, bad)
+    assert out.status == TRACKING and np.all(np.isfinite(out.box3d))
+
+
+def test_init_rejects_bad_boxes(frames):
+    t = Track3D(CAM, _Scripted([]), create_estimator("baseline"))
+    with pytest.raises(ValueError, match="init"):
+        t.init(frames[0][0], [0, 0, 0, 10], 0)
+    with pytest.raises(ValueError):
+        Track3D(CAM, _Scripted([]), create_estimator("baseline"), weight_3d=1.5)
+
+
+@pytest.mark.parametrize("name", ["kcf", "csrt", "mosse"])
+def test_opencv_trackers_run_in_the_loop(frames, name):
+    t = Track3D.create(CAM, tracker=name, estimator="baseline")
+    t.init(frames[0][0], frames[0][2], 0, points=frames[0][1])
+    for img, pts, b2, b3 in frames[1:]:
+        out = t.update(img, pts)
+        assert out.status in (TRACKING, NO_POINTS, LOST)
+        assert out.box2d.shape == (4,) and out.box3d.shape == (6,)
+
+
+def test_create_by_unknown_names_is_a_clear_error():
+    with pytest.raises(ValueError, match="unknown 2D tracker 'nope'.*kcf"):
+        Track3D.create(CAM, tracker="nope")
+    with pytest.raises(ValueError, match="unknown 3D box estimator"):
+        Track3D.create(CAM, estimator="nope")
+
+
+def test_from_default_needs_the_shipped_models():
+    from track3d.estimators import EstimatorUnavailable
+    from track3d.trackers2d import TrackerUnavailable
+
+    try:
+        t = Track3D.from_default(CAM, threads=1)
+    except (TrackerUnavailable, EstimatorUnavailable) as e:
+        assert "not available" in str(e)
+    else:
+        assert t.fusion
+
+
+def test_oracle_tracker_frame_index():
+    gt = np.array([[1, 1, 2, 2], [2, 2, 2, 2], [3, 3, 2, 2], [4, 4, 2, 2]], float)
+    o = create_tracker("oracle", gt=gt, absent=[0, 0, 1, 0])
+    im = np.zeros((8, 8, 3), np.uint8)
+    o.init(im, gt[1])                  # found by its label
+    ok, b = o.update(im)
+    assert not ok                      # frame 2 is absent
+    ok, b = o.update(im)
+    assert ok and np.array_equal(b, gt[3])
+    ok, b = o.update(im)               # past the end
+    assert not ok
+    o.seek(0)
+    o.init(im, [9, 9, 9, 9])           # seek wins over the box
+    assert o.update(im)[1].tolist() == gt[1].tolist()
+    with pytest.raises(ValueError, match="seek"):
+        create_tracker("oracle", gt=gt).init(im, [9, 9, 9, 9])
