@@ -1,0 +1,165 @@
+"""`track3d-train boxnet`: prepare the frustum caches, train, export and evaluate A3BoxNet.
+
+Typical run (the shipped model; see docs/a3boxnet.md):
+
+    track3d-train boxnet prepare --data /work/data/small --split train --jitters 5 --out runs/boxnet/cache
+    track3d-train boxnet prepare --data /work/data/small --split test --jitters 0 --out runs/boxnet/cache
+    track3d-train boxnet train --cache runs/boxnet/cache/boxnet_train_*.npz --out runs/boxnet/main
+    track3d-train boxnet export --ckpt runs/boxnet/main/best.pt --out runtime/track3d/models/a3boxnet.onnx
+    track3d-train boxnet eval --model runtime/track3d/models/a3boxnet.onnx --cache runs/boxnet/cache/boxnet_test_*.npz
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+
+def _log(msg: str) -> None:
+    print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
+
+
+def _prepare(a) -> int:
+    from .data import JitterSpec, prepare_split
+
+    spec = JitterSpec(a.center_sigma, a.scale_sigma, a.aspect_sigma, a.fail_prob)
+    t = time.time()
+    p = prepare_split(a.data, a.split, a.out, jitters=a.jitters, oracle=not a.no_oracle, max_points=a.max_points,
+                      min_points=a.min_points, spec=spec, seed=a.seed, max_sequences=a.max_sequences,
+                      frame_step=a.frame_step, progress=not a.quiet)
+    from .data import PointCache
+    c = PointCache(p)
+    _log(f"wrote {p}: {len(c)} frustums from {len(set(c.seq.tolist()))} sequences in {time.time() - t:.0f} s")
+    print(p)
+    return 0
+
+
+def _train(a) -> int:
+    from .train import TrainConfig, train
+
+    cfg = TrainConfig(train_cache=str(a.cache), out=str(a.out), num_points=a.num_points, width=a.width,
+                      use_category=not a.no_category, size_norm=a.size_norm, epochs=a.epochs,
+                      epoch_samples=a.epoch_samples, batch=a.batch, lr=a.lr, flip=not a.no_flip,
+                      val_every=a.val_every, seed=a.seed, threads=a.threads, max_minutes=a.max_minutes,
+                      max_steps=a.max_steps)
+    _log(f"training A3BoxNet into {a.out}: {cfg}")
+    h = train(cfg, resume=not a.no_resume, progress=not a.quiet, log=_log)
+    _log(f"done: {len(h['epochs'])} epochs, {h['seconds'] / 60:.1f} min; curve in {Path(a.out) / 'loss_curve.png'}")
+    return 0
+
+
+def _export(a) -> int:
+    from .export import export_checkpoint
+
+    meta = export_checkpoint(a.ckpt, a.out, check=not a.no_parity, log=_log)
+    if a.meta_json:
+        Path(a.meta_json).write_text(json.dumps(meta, indent=1))
+    return 0
+
+
+def _eval(a) -> int:
+    import numpy as np
+
+    from track3d.boxnet import A3BoxNetEstimator
+
+    from .data import PointCache
+    from .evaluate import onnx_runner, oracle_metrics, predict
+
+    cache = PointCache(a.cache)
+    if not a.all_boxes:
+        cache = cache.subset(np.nonzero(cache.jittered == 0)[0])
+    est = A3BoxNetEstimator(a.model, threads=a.threads)
+    n = a.num_points or est.num_points
+    t = time.time()
+    pred = predict(onnx_runner(est), cache, n, est.num_categories, seed=a.seed)
+    res = {"model": str(a.model), "num_points": n, "cache": str(a.cache),
+           "a3boxnet": oracle_metrics(pred, cache.field("gt3d"), cache.field("seq")),
+           "baseline": oracle_metrics(cache.field("baseline"), cache.field("gt3d"), cache.field("seq")),
+           "seconds": time.time() - t}
+    print(json.dumps(res, indent=1))
+    if a.json:
+        Path(a.json).write_text(json.dumps(res, indent=1))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="track3d-train boxnet", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="cmd", required=True)
+
+    q = sub.add_parser("prepare", help="cut the frustum proposals of a split once into a .npz cache",
+                       description="Frustum proposals (runtime frustum code) from ground-truth 2D boxes and "
+                                   "jittered copies (a 2D tracker's errors), subsampled, with labels.")
+    q.add_argument("--data", required=True, help="dataset root (with dataset.json)")
+    q.add_argument("--split", default="train", help="split name (train / test)")
+    q.add_argument("--out", default="runs/boxnet/cache", help="a folder (file named by the data hash) or a .npz")
+    q.add_argument("--jitters", type=int, default=5, help="jittered boxes per frame (0 for the oracle test set)")
+    q.add_argument("--no-oracle", action="store_true", help="do not also keep the exact ground-truth box")
+    q.add_argument("--max-points", type=int, default=4096, help="points stored per frustum (random subset)")
+    q.add_argument("--min-points", type=int, default=16, help="skip frustums with fewer points")
+    q.add_argument("--center-sigma", type=float, default=0.1, help="centre shift std, fraction of w / h")
+    q.add_argument("--scale-sigma", type=float, default=0.1, help="log-scale std (shared by w and h)")
+    q.add_argument("--aspect-sigma", type=float, default=0.05, help="log-aspect std")
+    q.add_argument("--fail-prob", type=float, default=0.1, help="probability of a 3x larger error")
+    q.add_argument("--frame-step", type=int, default=1, help="use every k-th frame")
+    q.add_argument("--max-sequences", type=int, default=None, help="only the first k sequences")
+    q.add_argument("--seed", type=int, default=0, help="jitter / subsampling seed")
+    q.add_argument("--quiet", action="store_true", help="no progress bar")
+    q.set_defaults(func=_prepare)
+
+    t = sub.add_parser("train", help="train (resumes from <out>/last.pt)",
+                       description="Adam, batch 32, cosine LR, checkpoints every epoch (last.pt, best.pt by "
+                                   "validation AO_3d on held-out train sequences), history.json, loss_curve.png.")
+    t.add_argument("--cache", required=True, help="training .npz from `prepare`")
+    t.add_argument("--out", default="runs/boxnet/main", help="run folder")
+    t.add_argument("--num-points", type=int, default=512, help="N input points (paper: 1024)")
+    t.add_argument("--width", type=float, default=1.0, help="channel multiplier (1 = Frustum PointNets v1)")
+    t.add_argument("--no-category", action="store_true", help="ablation: no one-hot category vector")
+    t.add_argument("--size-norm", choices=["points", "paper"], default="points",
+                   help="size-residual label normalised by L of the input points (ours) or by max(size) (paper)")
+    t.add_argument("--epochs", type=int, default=25, help="planned epochs (the LR schedule spans them)")
+    t.add_argument("--epoch-samples", type=int, default=0, help="items per epoch (0: the whole cache)")
+    t.add_argument("--batch", type=int, default=32, help="batch size")
+    t.add_argument("--lr", type=float, default=1e-3, help="initial learning rate")
+    t.add_argument("--no-flip", action="store_true", help="no random x-mirroring")
+    t.add_argument("--val-every", type=int, default=8, help="every k-th train sequence is validation (0: none)")
+    t.add_argument("--seed", type=int, default=0, help="seed")
+    t.add_argument("--threads", type=int, default=1, help="torch threads")
+    t.add_argument("--max-minutes", type=float, default=0.0, help="stop after the epoch passing this budget")
+    t.add_argument("--max-steps", type=int, default=0, help="stop after this many steps")
+    t.add_argument("--no-resume", action="store_true", help="start over even if <out>/last.pt exists")
+    t.add_argument("--quiet", action="store_true", help="no progress bar")
+    t.set_defaults(func=_train)
+
+    e = sub.add_parser("export", help="checkpoint -> ONNX (opset 17, dynamic batch, metadata) + parity check",
+                       description="Exports, writes the track3d metadata into the file, and checks torch vs "
+                                   "onnxruntime on random inputs (fails beyond float32 noise).")
+    e.add_argument("--ckpt", required=True, help="checkpoint (best.pt / last.pt)")
+    e.add_argument("--out", default="runtime/track3d/models/a3boxnet.onnx", help="ONNX file to write")
+    e.add_argument("--no-parity", action="store_true", help="skip the torch / onnxruntime parity check")
+    e.add_argument("--meta-json", default=None, help="also write the metadata to this JSON file")
+    e.set_defaults(func=_export)
+
+    v = sub.add_parser("eval", help="oracle row: the ONNX model on a frustum cache (+ the baseline)",
+                       description="AO_bev, AO_3d, ACE_3d per sequence then averaged; baseline = minimum "
+                                   "enclosing box of the whole frustum.")
+    v.add_argument("--model", required=True, help="ONNX model")
+    v.add_argument("--cache", required=True, help="test .npz from `prepare --jitters 0`")
+    v.add_argument("--all-boxes", action="store_true", help="also the jittered boxes of the cache")
+    v.add_argument("--num-points", type=int, default=None, help="override N")
+    v.add_argument("--threads", type=int, default=1, help="onnxruntime threads")
+    v.add_argument("--seed", type=int, default=0, help="sampling seed")
+    v.add_argument("--json", default=None, help="write the result here")
+    v.set_defaults(func=_eval)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,203 @@
+"""Training / evaluation data of A3BoxNet: frustum proposals cached once, sampled per epoch.
+
+`prepare_split` walks a split of a track3d dataset, and for every frame where the target is
+present cuts the frustum proposal out of the frame's point cloud with the RUNTIME frustum
+code (`track3d.frustum.extract_frustum`), from the ground-truth 2D box (``oracle``) and from
+``jitters`` copies of it perturbed the way a real 2D tracker errs (`jitter_box`). Each
+proposal is stored subsampled to at most ``max_points`` points (random, without
+replacement: sampling N <= max_points points from it later has the distribution of sampling
+from the whole proposal), with the minimum enclosing box of the WHOLE proposal (the paper's
+baseline) and the labels. The cache is one .npz named by the split's hash.
+
+`BoxNetSamples` is the torch Dataset over a cache: each item samples N points with the
+runtime sampler (`track3d.frustum.sample_points`), normalises them with the runtime
+(`track3d.boxnet.normalise`) and codes the size label with `track3d.boxnet.size_labels`,
+so train and run time share every formula.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from track3d.boxes import box3d_from_points, clip_box2d
+from track3d.boxnet import normalise, one_hot, size_labels
+from track3d.dataset import GT2D, GT3D, META, Dataset
+
+from ..onnx_meta import hash_files
+
+__all__ = ["JitterSpec", "jitter_box", "split_hash", "prepare_split", "PointCache", "BoxNetSamples"]
+
+CACHE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class JitterSpec:
+    """How a 2D tracker errs, as a random perturbation of the ground-truth box [x, y, w, h]:
+
+    - centre shift: N(0, center_sigma * w) in u and N(0, center_sigma * h) in v (drift);
+    - scale: w and h multiplied by exp(N(0, scale_sigma)) with a shared component
+      (the tracker's scale estimate) and an independent one of aspect_sigma (aspect error);
+    - with probability ``fail_prob`` a larger error (x3 sigmas), as when a tracker slips.
+    The box is then clipped to the image (trackers report boxes inside the image).
+    """
+
+    center_sigma: float = 0.1
+    scale_sigma: float = 0.1
+    aspect_sigma: float = 0.05
+    fail_prob: float = 0.1
+
+
+def jitter_box(box: np.ndarray, rng: np.random.Generator, spec: JitterSpec, width: int, height: int) -> np.ndarray:
+    b = np.asarray(box, dtype=np.float64)
+    k = 3.0 if rng.random() < spec.fail_prob else 1.0
+    cx, cy = b[0] + b[2] / 2, b[1] + b[3] / 2
+    cx += rng.normal(0.0, k * spec.center_sigma * b[2])
+    cy += rng.normal(0.0, k * spec.center_sigma * b[3])
+    s = rng.normal(0.0, k * spec.scale_sigma)
+    a = rng.normal(0.0, k * spec.aspect_sigma)
+    w, h = b[2] * math.exp(s + a), b[3] * math.exp(s - a)
+    return clip_box2d(np.array([cx - w / 2, cy - h / 2, w, h]), width, height)
+
+
+def split_files(ds: Dataset, split: str) -> list[Path]:
+    files = [ds.root / "dataset.json"]
+    for seq in ds.sequences(split):
+        files += [p for p in (seq.path / GT2D, seq.path / GT3D, seq.path / META) if p.is_file()]
+    return files
+
+
+def split_hash(ds: Dataset, split: str) -> str:
+    """sha256 over dataset.json and the split's label files (the generator is deterministic,
+    so its settings + labels identify the data)."""
+    return hash_files(split_files(ds, split))
+
+
+def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 3, oracle: bool = True,
+                  max_points: int = 4096, min_points: int = 16, spec: JitterSpec = JitterSpec(),
+                  seed: int = 0, max_sequences: int | None = None, frame_step: int = 1,
+                  progress: bool = True) -> Path:
+    """Build the frustum cache of one split; returns the .npz path (``out`` is a file or a folder)."""
+    from track3d.frustum import extract_frustum
+
+    ds = Dataset(root)
+    seqs = ds.sequences(split)[:max_sequences]
+    h = split_hash(ds, split)
+    out = Path(out)
+    if out.suffix != ".npz":
+        out = out / f"boxnet_{split}_{h[:12]}_j{jitters}{'o' if oracle else ''}_p{max_points}_s{seed}.npz"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    cam = ds.camera
+    M = cam.M
+    rng = np.random.default_rng(seed)
+    pts, offs = [], [0]
+    rec = {k: [] for k in ("gt3d", "baseline", "box2d", "category", "seq", "frame", "n_full", "jittered")}
+    frames = [(si, s, i) for si, s in enumerate(seqs) for i in range(0, len(s), frame_step) if not s.absent[i]]
+    it = frames
+    if progress:
+        from tqdm import tqdm
+        it = tqdm(frames, desc=f"frustums {split}", unit="frame")
+    for si, seq, i in it:
+        cloud = seq.points(i)
+        boxes = ([(seq.gt2d[i], 0)] if oracle else []) + \
+                [(jitter_box(seq.gt2d[i], rng, spec, cam.width, cam.height), 1) for _ in range(jitters)]
+        for box, jit in boxes:
+            if box[2] < 1 or box[3] < 1:
+                continue
+            fr = extract_frustum(cloud, box.astype(np.float32), M)
+            if len(fr) < min_points:
+                continue
+            keep = fr if len(fr) <= max_points else fr[rng.choice(len(fr), max_points, replace=False)]
+            pts.append(np.ascontiguousarray(keep, dtype=np.float32))
+            offs.append(offs[-1] + len(keep))
+            rec["gt3d"].append(seq.gt3d[i])
+            rec["baseline"].append(box3d_from_points(fr))
+            rec["box2d"].append(box)
+            rec["category"].append(seq.category)
+            rec["seq"].append(si)
+            rec["frame"].append(i)
+            rec["n_full"].append(len(fr))
+            rec["jittered"].append(jit)
+    if not pts:
+        raise ValueError(f"no frustum with >= {min_points} points in split {split!r} of {root}")
+    info = {"version": CACHE_VERSION, "root": str(ds.root), "split": split, "data_hash": h, "jitters": jitters,
+            "oracle": oracle, "max_points": max_points, "min_points": min_points, "seed": seed,
+            "jitter": spec.__dict__, "sequences": [s.name for s in seqs], "frame_step": frame_step,
+            "categories": list(ds.categories.get("shape_families", [])),
+            "num_categories": len(ds.categories.get("shape_families", [])) or 3}
+    np.savez(out, points=np.concatenate(pts), offsets=np.asarray(offs, np.int64),
+             gt3d=np.asarray(rec["gt3d"], np.float64), baseline=np.asarray(rec["baseline"], np.float64),
+             box2d=np.asarray(rec["box2d"], np.float64), category=np.asarray(rec["category"], np.int64),
+             seq=np.asarray(rec["seq"], np.int64), frame=np.asarray(rec["frame"], np.int64),
+             n_full=np.asarray(rec["n_full"], np.int64), jittered=np.asarray(rec["jittered"], np.int8),
+             info=np.frombuffer(json.dumps(info).encode(), dtype=np.uint8))
+    return out
+
+
+class PointCache:
+    """A frustum cache (.npz) in memory: ``cache.points(i)`` -> (n_i, 3) float32."""
+
+    def __init__(self, path: str | Path, indices: np.ndarray | None = None):
+        self.path = Path(path)
+        z = np.load(self.path)
+        self.info: dict = json.loads(bytes(z["info"]).decode())
+        self._points = z["points"]
+        self._offsets = z["offsets"]
+        for k in ("gt3d", "baseline", "box2d", "category", "seq", "frame", "n_full", "jittered"):
+            setattr(self, k, z[k])
+        self.index = np.arange(len(self.gt3d)) if indices is None else np.asarray(indices, np.int64)
+
+    def subset(self, mask_or_indices) -> "PointCache":
+        c = object.__new__(PointCache)
+        c.__dict__.update(self.__dict__)
+        sel = np.asarray(mask_or_indices)
+        c.index = self.index[sel] if sel.dtype != bool else self.index[sel]
+        return c
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def points(self, i: int) -> np.ndarray:
+        j = self.index[i]
+        return self._points[self._offsets[j]:self._offsets[j + 1]]
+
+    def field(self, name: str) -> np.ndarray:
+        return getattr(self, name)[self.index]
+
+
+class BoxNetSamples:
+    """torch-style Dataset over a PointCache: item -> (centred points (N,3) f32, one-hot (C,) f32,
+    centre label relative to the centroid (3,) f32, size class (), normalised residual (3,) f32,
+    residual scale () f32). ``epoch`` (set by the loop) changes the sampling seed;
+    ``flip`` mirrors x at random (a valid augmentation: the mirrored frustum of the mirrored box)."""
+
+    def __init__(self, cache: PointCache, num_points: int, num_categories: int = 3, size_norm: str = "points",
+                 seed: int = 0, flip: bool = False):
+        self.cache, self.num_points, self.num_categories = cache, int(num_points), int(num_categories)
+        self.size_norm, self.seed, self.flip, self.epoch = size_norm, int(seed), bool(flip), 0
+
+    def __len__(self) -> int:
+        return len(self.cache)
+
+    def item_seed(self, i: int) -> int:
+        return (self.seed * 1_000_003 + self.epoch * 7_919 + int(i) * 104_729) % (2 ** 31 - 1)
+
+    def sample(self, i: int) -> np.ndarray:
+        from track3d.frustum import sample_points
+
+        return sample_points(self.cache.points(i), self.num_points, self.item_seed(i))
+
+    def __getitem__(self, i: int):
+        pts = self.sample(i)
+        gt = self.cache.gt3d[self.cache.index[i]].copy()
+        if self.flip and (self.item_seed(i) % 2):
+            pts = pts * np.array([-1.0, 1.0, 1.0], np.float32)
+            gt[0] = -gt[0]
+        centred, centroid, length = normalise(pts)
+        cls, res, scale = size_labels(gt[3:], length, self.size_norm)
+        cat = one_hot(self.cache.category[self.cache.index[i]], self.num_categories)
+        return (centred, cat, (gt[:3] - centroid).astype(np.float32), np.int64(cls),
+                np.asarray(res, np.float32), np.float32(scale))

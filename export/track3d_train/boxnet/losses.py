@@ -1,0 +1,45 @@
+"""The training objective of the paper's Appendix B.
+
+L_joint = L_center-net + L_center_res + L_size_cls + L_size_res with
+
+- L_center-net: Huber (delta 1) of alpha = |C_gt - (C_bar + dC1)|_2 (the stage-1 centre);
+- L_center_res: Huber (delta 2) of beta = |C_gt - (C_bar + dC1 + dC2)|_2 (the final centre);
+- L_size_cls: softmax cross-entropy over the 14 size classes;
+- L_size_res: Huber (delta 1) of gamma = |R_gt - r * scale|_2, r the normalised residual the
+  net predicts for the ground-truth class (as Frustum PointNets) and scale the length that
+  makes it metres (max(S_gt) in the paper's coding, L of the points in ours).
+
+Huber is applied to the Euclidean norm of the 3-vector, as the appendix writes it:
+0.5 x^2 below delta, delta (x - delta / 2) above.
+"""
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+__all__ = ["huber_norm", "boxnet_loss"]
+
+
+def huber_norm(v: torch.Tensor, delta: float) -> torch.Tensor:
+    """Huber of the L2 norm of the last axis: (..., k) -> (...). The quadratic branch is written
+    with the squared norm so that the gradient at v = 0 is 0, not nan."""
+    sq = (v * v).sum(dim=-1)
+    n = torch.sqrt(sq + 1e-12)
+    return torch.where(n < delta, 0.5 * sq, delta * (n - 0.5 * delta))
+
+
+def boxnet_loss(outputs, center_rel: torch.Tensor, size_cls: torch.Tensor, size_res: torch.Tensor,
+                scale: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+    """outputs: (center1, center2, size_scores, size_residuals) of A3BoxNet;
+    center_rel (B, 3): ground-truth centre minus the centroid of the input points;
+    size_cls (B,) int64; size_res (B, 3) normalised residual label; scale (B,) metres.
+    Returns (batch-mean joint loss, {term: value})."""
+    center1, center2, scores, residuals = outputs
+    l_c1 = huber_norm(center_rel - center1, 1.0).mean()
+    l_c2 = huber_norm(center_rel - (center1 + center2), 2.0).mean()
+    l_cls = F.cross_entropy(scores, size_cls)
+    r = residuals[torch.arange(len(size_cls), device=residuals.device), size_cls]
+    l_res = huber_norm((size_res - r) * scale[:, None], 1.0).mean()
+    total = l_c1 + l_c2 + l_cls + l_res
+    return total, {"center1": l_c1.item(), "center2": l_c2.item(), "size_cls": l_cls.item(),
+                   "size_res": l_res.item(), "total": total.item()}

@@ -1,0 +1,256 @@
+"""The A3BoxNet training loop: Adam, batch 32, checkpoints every epoch, resume, a loss curve.
+
+An "epoch" is one pass over the training cache (or ``epoch_samples`` random items of it, so
+that a slow CPU still checkpoints often). Validation uses held-out TRAIN sequences (every
+``val_every``-th sequence), never the test split.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["TrainConfig", "train", "load_checkpoint", "plot_history"]
+
+
+@dataclass
+class TrainConfig:
+    train_cache: str = ""
+    out: str = "runs/boxnet"
+    num_points: int = 1024
+    width: float = 1.0
+    use_category: bool = True
+    size_norm: str = "points"
+    epochs: int = 25
+    epoch_samples: int = 0          # 0: the whole cache per epoch
+    batch: int = 32
+    lr: float = 1e-3
+    lr_min: float = 1e-5
+    weight_decay: float = 0.0
+    flip: bool = True
+    val_every: int = 8              # every k-th train sequence is held out for validation (0: none)
+    val_max: int = 600              # validation items per epoch (a fixed random subset)
+    seed: int = 0
+    threads: int = 1
+    max_minutes: float = 0.0        # stop after the epoch that passes this budget (0: no budget)
+    max_steps: int = 0              # stop after this many steps (tests; 0: no limit)
+    num_categories: int = 3
+    extra: dict = field(default_factory=dict)
+
+
+def _split_val(cache, every: int, seed: int):
+    seqs = np.unique(cache.seq)
+    if every <= 0 or len(seqs) < 2:
+        return cache, None
+    val_seqs = seqs[::every] if len(seqs) >= every else seqs[:1]
+    is_val = np.isin(cache.seq, val_seqs)
+    return cache.subset(np.nonzero(~is_val)[0]), cache.subset(np.nonzero(is_val)[0])
+
+
+def load_checkpoint(path: str | Path):
+    """-> (model in eval mode, checkpoint dict)."""
+    import torch
+
+    from .model import A3BoxNet, BoxNetConfig
+
+    ck = torch.load(str(path), map_location="cpu", weights_only=False)
+    model = A3BoxNet(BoxNetConfig(**ck["model_config"]))
+    model.load_state_dict(ck["model"])
+    model.eval()
+    return model, ck
+
+
+def _collate(items):
+    import torch
+
+    cols = list(zip(*items))
+    return [torch.from_numpy(np.stack(c)) for c in cols]
+
+
+def _batches(ds, order, batch):
+    for s in range(0, len(order) - batch + 1, batch):   # drop the last partial batch (BatchNorm)
+        yield _collate([ds[int(i)] for i in order[s:s + batch]])
+
+
+def plot_history(history: dict, path: str | Path, title: str = "A3BoxNet training") -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    steps = history.get("steps", [])
+    if steps:
+        s = np.array([x["step"] for x in steps])
+        l = np.array([x["total"] for x in steps])
+        ax[0].plot(s, l, lw=0.5, alpha=0.4, label="train (per logged step)")
+        k = max(1, len(l) // 50)
+        if len(l) > k:
+            ax[0].plot(s[k - 1:], np.convolve(l, np.ones(k) / k, mode="valid"), label=f"train (mean of {k})")
+    ep = history.get("epochs", [])
+    if ep:
+        es = [e["step"] for e in ep]
+        ax[0].plot(es, [e["train"]["total"] for e in ep], "o-", label="train (epoch mean)")
+        if ep[0].get("val"):
+            ax[0].plot(es, [e["val"]["loss"] for e in ep], "s-", label="val (held-out train seqs)")
+            ax[1].plot([e["epoch"] for e in ep], [e["val"]["AO_3d"] for e in ep], "o-", label="val AO_3d")
+            ax[1].plot([e["epoch"] for e in ep], [e["val"]["AO_bev"] for e in ep], "s-", label="val AO_bev")
+            ax2 = ax[1].twinx()
+            ax2.plot([e["epoch"] for e in ep], [e["val"]["ACE_3d"] for e in ep], "^--", color="gray",
+                     label="val ACE_3d (m)")
+            ax2.set_ylabel("ACE_3d (m)")
+            ax2.legend(loc="center right")
+    ax[0].set_yscale("log")
+    ax[0].set_xlabel("step (batch 32)")
+    ax[0].set_ylabel("joint loss")
+    ax[0].legend()
+    ax[0].grid(alpha=0.3)
+    ax[1].set_xlabel("epoch")
+    ax[1].set_ylabel("AO")
+    ax[1].legend(loc="lower right")
+    ax[1].grid(alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(str(path), dpi=110)
+    plt.close(fig)
+
+
+def _validate(model, val_ds, batch: int):
+    import torch
+
+    from track3d.boxnet import decode_batch
+
+    from .evaluate import oracle_metrics
+    from .losses import boxnet_loss
+
+    model.eval()
+    losses, boxes = [], []
+    order = np.arange(len(val_ds))
+    with torch.no_grad():
+        for s in range(0, len(order), batch):
+            items = [val_ds[int(i)] for i in order[s:s + batch]]
+            pts, cat, crel, cls, res, scale = _collate(items)
+            out = model(pts, cat)
+            loss, _ = boxnet_loss(out, crel, cls, res, scale)
+            losses.append(float(loss) * len(items))
+            # the decoding needs the centroid and L of the sampled points: recompute them
+            from track3d.boxnet import normalise
+            raw = [val_ds.sample(int(i)) for i in order[s:s + batch]]
+            _, centroid, length = normalise(np.stack(raw))
+            boxes.append(decode_batch(centroid, length, *[o.numpy() for o in out]))
+    c = val_ds.cache
+    m = oracle_metrics(np.concatenate(boxes), c.field("gt3d"), c.field("seq"))
+    m["loss"] = float(np.sum(losses) / len(order))
+    return m
+
+
+def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=print) -> dict:
+    """Train (or resume) into cfg.out: last.pt, best.pt, history.json, loss_curve.png."""
+    import torch
+
+    from .data import BoxNetSamples, PointCache
+    from .losses import boxnet_loss
+    from .model import A3BoxNet, BoxNetConfig
+
+    torch.set_num_threads(int(cfg.threads))
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cache = PointCache(cfg.train_cache)
+    tr_cache, va_cache = _split_val(cache, cfg.val_every, cfg.seed)
+    train_ds = BoxNetSamples(tr_cache, cfg.num_points, cfg.num_categories, cfg.size_norm, cfg.seed, cfg.flip)
+    val_ds = None
+    if va_cache is not None:
+        rng = np.random.default_rng(cfg.seed + 1)
+        if len(va_cache) > cfg.val_max:
+            va_cache = va_cache.subset(np.sort(rng.choice(len(va_cache), cfg.val_max, replace=False)))
+        val_ds = BoxNetSamples(va_cache, cfg.num_points, cfg.num_categories, cfg.size_norm, cfg.seed + 7, False)
+        val_ds.epoch = 0
+    mcfg = BoxNetConfig(num_points=cfg.num_points, num_categories=cfg.num_categories,
+                        use_category=cfg.use_category, width=cfg.width, size_norm=cfg.size_norm)
+    torch.manual_seed(cfg.seed)
+    model = A3BoxNet(mcfg)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    per_epoch = (min(cfg.epoch_samples, len(train_ds)) if cfg.epoch_samples else len(train_ds)) // cfg.batch
+    if per_epoch < 1:
+        raise ValueError(f"the training cache has {len(train_ds)} items, fewer than one batch of {cfg.batch}")
+    total_steps = per_epoch * cfg.epochs
+
+    def lr_at(step):  # cosine from lr to lr_min over the planned steps
+        t = min(step / max(total_steps, 1), 1.0)
+        return cfg.lr_min + 0.5 * (cfg.lr - cfg.lr_min) * (1 + math.cos(math.pi * t))
+
+    history = {"config": asdict(cfg), "steps": [], "epochs": [], "train_items": len(train_ds),
+               "val_items": len(val_ds) if val_ds else 0, "data_hash": cache.info.get("data_hash"),
+               "cache": cache.info, "seconds": 0.0}
+    start_epoch, step, best = 0, 0, -1.0
+    last = out / "last.pt"
+    if resume and last.is_file():
+        ck = torch.load(str(last), map_location="cpu", weights_only=False)
+        if ck["train_config"].get("train_cache") != cfg.train_cache or ck["model_config"] != mcfg.to_dict():
+            raise ValueError(f"{last} was trained with another cache or model; use a new --out or --no-resume")
+        model.load_state_dict(ck["model"])
+        opt.load_state_dict(ck["optim"])
+        start_epoch, step, best, history = ck["epoch"] + 1, ck["step"], ck["best"], ck["history"]
+        log(f"resumed from {last}: epoch {start_epoch}, step {step}")
+    t_session = time.time()
+    t_before = history["seconds"]
+    for epoch in range(start_epoch, cfg.epochs):
+        model.train()
+        train_ds.epoch = epoch
+        rng = np.random.default_rng(cfg.seed * 1000 + epoch)
+        order = rng.permutation(len(train_ds))[:per_epoch * cfg.batch]
+        sums, n = {}, 0
+        it = _batches(train_ds, order, cfg.batch)
+        if progress:
+            from tqdm import tqdm
+            it = tqdm(it, total=per_epoch, desc=f"epoch {epoch + 1}/{cfg.epochs}", unit="batch", mininterval=5)
+        t0 = time.time()
+        for pts, cat, crel, cls, res, scale in it:
+            for g in opt.param_groups:
+                g["lr"] = lr_at(step)
+            loss, terms = boxnet_loss(model(pts, cat), crel, cls, res, scale)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            step += 1
+            n += 1
+            for k, v in terms.items():
+                sums[k] = sums.get(k, 0.0) + v
+            if step % 10 == 0:
+                history["steps"].append({"step": step, **terms})
+            if cfg.max_steps and step >= cfg.max_steps:
+                break
+        rec = {"epoch": epoch + 1, "step": step, "lr": lr_at(step), "train": {k: v / max(n, 1) for k, v in sums.items()},
+               "train_seconds": time.time() - t0}
+        if val_ds is not None:
+            rec["val"] = _validate(model, val_ds, 64)
+        history["seconds"] = t_before + (time.time() - t_session)
+        history["epochs"].append(rec)
+        score = rec["val"]["AO_3d"] if "val" in rec else -rec["train"]["total"]
+        msg = f"epoch {epoch + 1}: train {rec['train']['total']:.4f}"
+        if "val" in rec:
+            v = rec["val"]
+            msg += f" | val loss {v['loss']:.4f} AO_3d {v['AO_3d']:.3f} AO_bev {v['AO_bev']:.3f} ACE {v['ACE_3d']:.3f} m"
+        log(msg + f" | {rec['train_seconds']:.0f} s")
+        ck = {"model": model.state_dict(), "optim": opt.state_dict(), "epoch": epoch, "step": step,
+              "best": max(best, score), "history": history, "model_config": mcfg.to_dict(),
+              "train_config": asdict(cfg)}
+        if score > best:
+            best = score
+            torch.save(ck, str(out / "best.pt"))
+        torch.save(ck, str(out / "last.tmp"))
+        (out / "last.tmp").replace(last)
+        (out / "history.json").write_text(json.dumps(history, indent=1))
+        try:
+            plot_history(history, out / "loss_curve.png")
+        except Exception as e:  # plotting must never kill a training run
+            log(f"(plot failed: {e})")
+        done = (cfg.max_steps and step >= cfg.max_steps) or \
+               (cfg.max_minutes and (time.time() - t_session) / 60.0 >= cfg.max_minutes)
+        if done:
+            log(f"stopping after epoch {epoch + 1} (budget reached)")
+            break
+    return history

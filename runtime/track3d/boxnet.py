@@ -1,0 +1,175 @@
+"""A3BoxNet at run time (paper section IV-B): sampling, the ONNX session, decoding. No torch.
+
+The network sees a fixed number N of points sampled from the frustum proposal (the C++
+extension's sampler), made translation invariant by subtracting their centroid, plus the
+one-hot coarse category. Its four heads are decoded here, the ONE implementation used by
+the runtime, by training (labels) and by evaluation::
+
+    centre = centroid + dC1 + dC2
+    size   = (template[cls] + residual[cls]) * L,   cls = argmax(size scores)
+
+L, the remapping length of the paper, is the largest extent of the enclosing box of the
+sampled points (``remap_length``). Two codings of the size-residual label exist
+(model metadata ``size_norm``):
+
+- ``"points"`` (default, ours): the label is ``size / L - template[cls]``, with L from the
+  same input points, so training and decoding use the same length;
+- ``"paper"`` (the paper's Appendix B): the label is ``size / max(size) - template[cls]``
+  while decoding multiplies by L from the points. When the points see only part of the
+  object (always: the far side is hidden), L < max(size) and the decoded size is biased.
+
+In both codings the size class is the template nearest to ``size / max(size)``
+(``track3d.boxes.size_class_of``).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .boxes import NUM_SIZE_CLASSES, SIZE_TEMPLATES, decode_size, size_class_of
+from .onnxmodel import ModelError, OnnxModel, shipped_model
+
+__all__ = [
+    "KIND", "DEFAULT_MODEL", "SIZE_NORMS", "INPUT_POINTS", "INPUT_CATEGORY", "OUTPUTS",
+    "remap_length", "normalise", "one_hot", "size_labels", "decode", "decode_batch",
+    "A3BoxNetEstimator", "create",
+]
+
+KIND = "a3boxnet"
+DEFAULT_MODEL = "a3boxnet.onnx"
+SIZE_NORMS = ("points", "paper")
+# ONNX interface: inputs and outputs by name (batch dimension dynamic).
+INPUT_POINTS = "points"        # (B, N, 3) float32, centroid-subtracted
+INPUT_CATEGORY = "category"    # (B, C) float32 one-hot coarse category (absent without category)
+OUTPUTS = ("center1", "center2", "size_scores", "size_residuals")  # (B,3) (B,3) (B,14) (B,14,3)
+_MIN_LENGTH = 1e-3             # metres: L of a degenerate point set (one point, a line)
+
+
+def remap_length(points: np.ndarray) -> np.ndarray:
+    """L: the largest extent of the axis-aligned enclosing box of the points.
+
+    points (..., N, 3) -> (...) float64, floored at 1 mm so a degenerate set cannot divide by 0."""
+    p = np.asarray(points, dtype=np.float64)
+    ext = p.max(axis=-2) - p.min(axis=-2)
+    return np.maximum(ext.max(axis=-1), _MIN_LENGTH)
+
+
+def normalise(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sampled points (..., N, 3) -> (centred float32 points, centroid (..., 3) float64, L (...))."""
+    p = np.asarray(points, dtype=np.float64)
+    centroid = p.mean(axis=-2)
+    return (p - centroid[..., None, :]).astype(np.float32), centroid, remap_length(p)
+
+
+def one_hot(category, num_categories: int) -> np.ndarray:
+    """Coarse category index (or indices) -> float32 one-hot; an unknown category (-1) gives zeros."""
+    c = np.asarray(category, dtype=np.int64)
+    if np.any((c < -1) | (c >= num_categories)):
+        raise ValueError(f"category must be in -1..{num_categories - 1}, got {category}")
+    flat = c.reshape(-1)
+    out = np.zeros((len(flat), num_categories), dtype=np.float32)
+    known = np.nonzero(flat >= 0)[0]
+    out[known, flat[known]] = 1.0
+    return out.reshape(c.shape + (num_categories,))
+
+
+def size_labels(size: np.ndarray, length: np.ndarray, size_norm: str = "points"):
+    """Training labels of the size head: (cls (...,) int64, residual (..., 3), scale (...)).
+
+    The residual is normalised: the net predicts it and ``decode`` multiplies by L. ``scale``
+    is the length that turns a normalised residual error into metres (the loss of Appendix B:
+    gamma = |R - r * max(S)|): max(size) for "paper", L for "points".
+    """
+    s = np.asarray(size, dtype=np.float64)
+    cls, res = size_class_of(s)
+    if size_norm == "paper":
+        return cls, res, s.max(axis=-1)
+    if size_norm == "points":
+        length = np.asarray(length, dtype=np.float64)
+        return cls, s / length[..., None] - SIZE_TEMPLATES[cls], length
+    raise ValueError(f"size_norm must be one of {SIZE_NORMS}, got {size_norm!r}")
+
+
+def decode_batch(centroid, length, center1, center2, size_scores, size_residuals) -> np.ndarray:
+    """Network outputs of a batch -> (B, 6) boxes [cx, cy, cz, sx, sy, sz] (float64)."""
+    scores = np.asarray(size_scores, dtype=np.float64)
+    res = np.asarray(size_residuals, dtype=np.float64).reshape(len(scores), NUM_SIZE_CLASSES, 3)
+    cls = scores.argmax(axis=-1)
+    r = res[np.arange(len(cls)), cls]
+    center = np.asarray(centroid, np.float64) + np.asarray(center1, np.float64) + np.asarray(center2, np.float64)
+    size = decode_size(cls, r, np.asarray(length, dtype=np.float64))
+    # a size can never be negative; a (rare) residual beyond the template is clamped to 1 mm
+    return np.concatenate([center, np.maximum(size, _MIN_LENGTH)], axis=-1)
+
+
+def decode(centroid, length, center1, center2, size_scores, size_residuals) -> np.ndarray:
+    """One sample's outputs (batch of 1 or unbatched) -> (6,) box."""
+    return decode_batch(np.reshape(centroid, (1, 3)), np.reshape(length, (1,)), np.reshape(center1, (1, 3)),
+                        np.reshape(center2, (1, 3)), np.reshape(size_scores, (1, -1)),
+                        np.reshape(size_residuals, (1, -1, 3)))[0]
+
+
+class A3BoxNetEstimator:
+    """The box estimator behind the loop's seam: ``estimate(points (n,3), category) -> (6,)``.
+
+    model: path of an exported A3BoxNet ONNX file (default: the shipped one);
+    threads: onnxruntime intra-op threads; num_points: override of the model's N (only for
+    models exported with a dynamic point axis, which ours are); seed: the sampling seed, fixed
+    per call so that the same points always give the same box (deterministic).
+    """
+
+    name = KIND
+
+    def __init__(self, model: str | Path | None = None, threads: int = 1, num_points: int | None = None,
+                 seed: int = 0):
+        path = Path(model) if model is not None else shipped_model(DEFAULT_MODEL)
+        self.model = OnnxModel(path, threads=threads, kind=KIND)
+        meta = self.model.meta
+        try:
+            self.num_points = int(num_points or meta["num_points"])
+            self.num_categories = int(meta["num_categories"])
+            self.use_category = bool(meta.get("use_category", True))
+            templates = np.asarray(meta["size_templates"], dtype=np.float64)
+        except (KeyError, TypeError, ValueError) as e:
+            raise ModelError(f"{path}: A3BoxNet metadata is incomplete ({e})") from None
+        if templates.shape != SIZE_TEMPLATES.shape or not np.allclose(templates, SIZE_TEMPLATES, atol=1e-6):
+            raise ModelError(f"{path}: its size-class table differs from track3d.boxes.SIZE_TEMPLATES")
+        if self.num_points < 1:
+            raise ValueError(f"num_points must be >= 1, got {self.num_points}")
+        self.seed = int(seed)
+        self.threads = int(threads)
+        self.meta = meta
+        names = set(self.model.input_names)
+        if INPUT_POINTS not in names or (self.use_category and INPUT_CATEGORY not in names):
+            raise ModelError(f"{path}: inputs {sorted(names)} are not an A3BoxNet's")
+        self._with_category = INPUT_CATEGORY in names
+
+    def __repr__(self) -> str:
+        return f"A3BoxNetEstimator({self.model.path.name}, N={self.num_points}, threads={self.threads})"
+
+    def sample(self, points: np.ndarray) -> np.ndarray:
+        from .frustum import sample_points
+
+        return sample_points(np.ascontiguousarray(points, dtype=np.float32), self.num_points, self.seed)
+
+    def infer(self, centred: np.ndarray, category) -> list[np.ndarray]:
+        """Raw network outputs for a batch of centred points (B, N, 3) and categories (B,)."""
+        feeds = {INPUT_POINTS: np.ascontiguousarray(centred, dtype=np.float32)}
+        if self._with_category:
+            feeds[INPUT_CATEGORY] = one_hot(np.reshape(category, (-1,)), self.num_categories)
+        return self.model.run(feeds, list(OUTPUTS))
+
+    def estimate(self, points: np.ndarray, category: int) -> np.ndarray:
+        """Frustum points (n, 3) float32, n >= 1, and the coarse category -> box (6,) float64."""
+        pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+        if len(pts) == 0:
+            raise ValueError("A3BoxNet needs at least one point")
+        centred, centroid, length = normalise(self.sample(pts))
+        out = self.infer(centred[None], [category])
+        return decode(centroid, length, *out)
+
+
+def create(**options) -> A3BoxNetEstimator:
+    """Factory of the estimator registry (`track3d.estimators`, name "a3boxnet")."""
+    return A3BoxNetEstimator(**options)
