@@ -1,0 +1,266 @@
+"""The evaluation experiment of a dataset split, in the manner of the GOT-10k toolkit.
+
+    exp = Experiment("data/small", split="test", result_dir="results", report_dir="reports")
+    exp.run(TrackerSpec("kcf", "baseline"))             # writes plain-text results per sequence
+    report = exp.report(["kcf+baseline"])               # -> dict (also report.json) + plots
+
+Restart protocol (paper III-C, VOT style): after a frame whose 3D IoU with the ground truth
+is zero, the tracker is re-initialised from the ground truth ``restart_skip`` frames later
+(default 1: on the next frame; VOT uses 5); frames in between have no output (IoU 0, no
+centre error). Every re-initialisation is a restart. Frames where the target is absent are
+never scored and never trigger a restart; an initialisation waits for a frame where the
+target is present. Initialisation frames report the ground truth and are not scored.
+"""
+from __future__ import annotations
+
+import json
+import math
+import platform
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..boxes import iou_3d
+from ..dataset import Dataset, DatasetError, Sequence
+from ..progress import Progress
+from ..tracker import STAGES, Track3D
+from .draw import OverlayWriter, draw_overlay
+from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, SequenceScore, average_scores,
+                      score_sequence)
+from .results import INIT, SKIPPED, SequenceResult, read_result, result_folder, write_result
+
+__all__ = ["TrackerSpec", "Experiment", "run_sequence", "cpu_name"]
+
+
+def cpu_name() -> str:
+    """The CPU model name (for benchmark records)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+@dataclass
+class TrackerSpec:
+    """A Track3D configuration by registry names; builds one Track3D per sequence.
+
+    The oracle 2D tracker gets the sequence's ground truth (``gt``, ``absent``) automatically.
+    """
+
+    tracker: str = "kcf"
+    estimator: str = "baseline"
+    fusion: bool = True
+    weight_3d: float = 0.3
+    threads: int = 1
+    tracker_options: dict = field(default_factory=dict)
+    estimator_options: dict = field(default_factory=dict)
+    name: str | None = None
+
+    @property
+    def label(self) -> str:
+        if self.name:
+            return self.name
+        return f"{self.tracker}+{self.estimator}" + ("" if self.fusion else "-nofusion")
+
+    def _options(self, kind: str, options: dict) -> dict:
+        o = dict(options)
+        if kind in ("siamfc", "siamfc-edge", "a3boxnet"):
+            o.setdefault("threads", self.threads)
+        return o
+
+    def build(self, seq: Sequence) -> Track3D:
+        topts = self._options(self.tracker, self.tracker_options)
+        if self.tracker == "oracle":
+            topts.update(gt=seq.gt2d, absent=seq.absent)
+        return Track3D.create(seq.camera, self.tracker, self.estimator, tracker_options=topts,
+                              estimator_options=self._options(self.estimator, self.estimator_options),
+                              fusion=self.fusion, weight_3d=self.weight_3d)
+
+
+def _gt_ok(seq: Sequence, i: int) -> bool:
+    b = seq.gt2d[i]
+    return bool(not seq.absent[i] and np.all(np.isfinite(b)) and b[2] > 0 and b[3] > 0)
+
+
+def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, max_frames: int | None = None,
+                 restart: bool = True, restart_skip: int = 1, overlay: OverlayWriter | None = None,
+                 bar: Progress | None = None) -> SequenceResult:
+    """Track one sequence under the restart protocol; returns its per-frame results."""
+    if restart_skip < 1:
+        raise ValueError(f"restart_skip must be >= 1, got {restart_skip}")
+    n = len(seq) if max_frames is None else min(len(seq), int(max_frames))
+    box2d = np.full((n, 4), np.nan)
+    raw = np.full((n, 4), np.nan)
+    box3d = np.full((n, 6), np.nan)
+    status = np.full(n, SKIPPED, dtype=object)
+    seconds = np.zeros(n)
+    e2e = np.zeros(n)
+    stage_ms = np.zeros((n, len(STAGES)))
+    track = track_factory(seq)
+    seek = getattr(track.tracker2d, "seek", None)
+    pending: int | None = 0          # frame index from which to (re-)initialise
+    for i in range(n):
+        t0 = time.perf_counter()
+        image = seq.image(i)
+        points = seq.points(i)
+        t1 = time.perf_counter()
+        if pending is not None:
+            if i < pending or not _gt_ok(seq, i):
+                e2e[i] = t1 - t0
+                if bar:
+                    bar.update()
+                continue
+            if seek is not None:
+                seek(i)
+            track.init(image, seq.gt2d[i], seq.category, points=points)
+            t2 = time.perf_counter()
+            box2d[i], raw[i], box3d[i], status[i] = seq.gt2d[i], seq.gt2d[i], seq.gt3d[i], INIT
+            seconds[i], e2e[i] = t2 - t1, t2 - t0
+            stage_ms[i, STAGES.index("total")] = (t2 - t1) * 1e3
+            pending = None
+        else:
+            out = track.update(image, points)
+            t2 = time.perf_counter()
+            box2d[i], raw[i], box3d[i], status[i] = out.box2d, out.box2d_raw, out.box3d, out.status
+            seconds[i], e2e[i] = out.ms["total"] / 1e3, t2 - t0
+            stage_ms[i] = [out.ms[k] for k in STAGES]
+            if restart and not seq.absent[i] and iou_3d(out.box3d, seq.gt3d[i]) <= 0.0:
+                pending = i + restart_skip
+        if overlay is not None:
+            overlay.add(draw_overlay(image, seq.camera, box2d[i], raw[i], box3d[i], seq.gt2d[i], seq.gt3d[i],
+                                     text=f"{seq.name} #{i + 1} {status[i]}"))
+        if bar:
+            bar.update(note=str(status[i]))
+    return SequenceResult(seq.name, box2d, raw, box3d, status, seconds, e2e, stage_ms)
+
+
+def _json_float(x):
+    if isinstance(x, (float, np.floating)):
+        return None if not math.isfinite(float(x)) else round(float(x), 6)
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, dict):
+        return {k: _json_float(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple, np.ndarray)):
+        return [_json_float(v) for v in (x.tolist() if isinstance(x, np.ndarray) else x)]
+    return x
+
+
+class Experiment:
+    """One benchmark: a dataset split, its result and report folders (GOT-10k's Experiment)."""
+
+    def __init__(self, root: str | Path, split: str = "test", result_dir: str | Path = "results",
+                 report_dir: str | Path = "reports", sequences: list[str] | None = None,
+                 max_frames: int | None = None, restart: bool = True, restart_skip: int = 1):
+        self.dataset = Dataset(root)
+        self.split = split
+        all_seqs = self.dataset.sequences(split)
+        if sequences:
+            by_name = {s.name: s for s in all_seqs}
+            missing = [s for s in sequences if s not in by_name]
+            if missing:
+                raise DatasetError(f"sequence(s) {', '.join(missing)} not in split {split!r} of {root} "
+                                   f"(has: {', '.join(by_name) or 'none'})")
+            all_seqs = [by_name[s] for s in sequences]
+        if not all_seqs:
+            raise DatasetError(f"split {split!r} of {root} has no sequences")
+        self.sequences = all_seqs
+        self.result_dir = Path(result_dir)
+        self.report_dir = Path(report_dir)
+        self.max_frames = max_frames
+        self.restart = restart
+        self.restart_skip = int(restart_skip)
+
+    def folder(self, name: str, seq: str) -> Path:
+        return result_folder(self.result_dir, self.split, name, seq)
+
+    def run(self, spec: TrackerSpec | Callable[[Sequence], Track3D], name: str | None = None,
+            overwrite: bool = True, overlay: str | None = None, overlay_sequences: int = 1,
+            quiet: bool = False) -> list[Path]:
+        """Track every sequence; writes result files, plus overlays (``overlay`` = "gif"/"mp4")
+        for the first `overlay_sequences` sequences. Returns the result folders."""
+        if isinstance(spec, TrackerSpec):
+            factory, name = spec.build, name or spec.label
+        elif name is None:
+            raise ValueError("name is required when spec is a factory function")
+        else:
+            factory = spec
+        folders = []
+        for k, seq in enumerate(self.sequences):
+            folder = self.folder(name, seq.name)
+            if not overwrite and (folder / f"{seq.name}_status.txt").is_file():
+                folders.append(folder)
+                continue
+            n = len(seq) if self.max_frames is None else min(len(seq), self.max_frames)
+            writer = None
+            if overlay and k < overlay_sequences:
+                writer = OverlayWriter(folder / f"{seq.name}_overlay.{overlay}")
+            with Progress(n, f"{name} {seq.name}", enabled=False if quiet else None) as bar:
+                res = run_sequence(factory, seq, self.max_frames, self.restart, self.restart_skip, writer, bar)
+            write_result(folder, res)
+            if writer is not None:
+                writer.close()
+            folders.append(folder)
+        return folders
+
+    # --- evaluation ----------------------------------------------------------------------------
+    def score(self, name: str) -> list[SequenceScore]:
+        """Scores of one tracker's results against the ground truth, per sequence."""
+        scores = []
+        for seq in self.sequences:
+            res = read_result(self.folder(name, seq.name), seq.name)
+            n = len(res)
+            if n > len(seq):
+                raise ValueError(f"{name}/{seq.name}: {n} result rows for a {len(seq)}-frame sequence")
+            scored = ~seq.absent[:n] & (res.status != INIT)
+            timed = res.tracked
+            scores.append(score_sequence(
+                seq.name, res.box2d, res.box3d, seq.gt2d[:n], seq.gt3d[:n], scored, res.restarts,
+                tracker_seconds=float(res.seconds[timed].sum()), e2e_seconds=float(res.e2e_seconds[timed].sum()),
+                timed_frames=int(timed.sum())))
+        return scores
+
+    def report(self, names: list[str], plots: bool = True, trajectories: int = 4) -> dict:
+        """Scores, report.json and plots (success/precision curves, 3D trajectories) in report_dir."""
+        self.report_dir.mkdir(parents=True, exist_ok=True)
+        report: dict = {
+            "dataset": str(self.dataset.root), "split": self.split, "sequences": [s.name for s in self.sequences],
+            "max_frames": self.max_frames, "restart": self.restart, "restart_skip": self.restart_skip,
+            "cpu": cpu_name(), "thresholds": {"iou": IOU_THRESHOLDS, "ce_2d_px": CE2D_THRESHOLDS,
+                                              "ce_3d_m": CE3D_THRESHOLDS},
+            "trackers": {},
+        }
+        overall = {}
+        for name in names:
+            scores = self.score(name)
+            ov = average_scores(scores)
+            overall[name] = ov
+            report["trackers"][name] = {
+                "overall": ov.summary(),
+                "curves": ov.curves,
+                "sequences": {s.name: s.summary() for s in scores},
+                "stage_ms_mean": self._stage_means(name),
+            }
+        if plots:
+            from . import plots as P
+
+            files = P.curve_plots(overall, self.report_dir)
+            seq_names = [s.name for s in self.sequences[:trajectories]]
+            files += P.trajectory_plots(self, names, seq_names, self.report_dir)
+            report["plots"] = [str(f) for f in files]
+        (self.report_dir / "report.json").write_text(json.dumps(_json_float(report), indent=1))
+        return report
+
+    def _stage_means(self, name: str) -> dict:
+        rows = []
+        for seq in self.sequences:
+            res = read_result(self.folder(name, seq.name), seq.name)
+            rows.append(res.stage_ms[res.tracked])
+        a = np.concatenate(rows) if rows else np.zeros((0, len(STAGES)))
+        return {k: float(a[:, j].mean()) if len(a) else float("nan") for j, k in enumerate(STAGES)}

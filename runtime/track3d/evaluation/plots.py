@@ -1,0 +1,126 @@
+"""Plots of an evaluation: success / precision curves and 3D trajectories (the paper's Fig. 10-12).
+
+matplotlib is optional (the `plot` extra): it is imported here, inside the functions, and a
+clear error says how to get it.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .metrics import CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, OverallScore
+from .results import INIT, read_result
+
+__all__ = ["pyplot", "curve_plots", "trajectory_plot", "trajectory_plots"]
+
+
+def pyplot():
+    """matplotlib.pyplot on the non-interactive Agg backend, or a clear error."""
+    try:
+        import matplotlib
+    except ImportError:
+        raise RuntimeError("plots need matplotlib: pip install 'track3d[plot]' (or pass --no-plots)") from None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+_SUCCESS = {"2d": ("success_2d", "ao_2d", "2D"), "bev": ("success_bev", "ao_bev", "BEV"),
+            "3d": ("success_3d", "ao_3d", "3D")}
+_PRECISION = {"2d": ("precision_2d", "ace_2d", CE2D_THRESHOLDS, "centre error (px)", "px"),
+              "3d": ("precision_3d", "ace_3d", CE3D_THRESHOLDS, "centre error (m)", "m")}
+
+
+def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path) -> list[Path]:
+    """success_{2d,bev,3d}.png (legend: AO) and precision_{2d,3d}.png (legend: ACE)."""
+    plt = pyplot()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    files = []
+    for kind, (curve, key, title) in _SUCCESS.items():
+        fig, ax = plt.subplots(figsize=(5, 4), dpi=100)
+        order = sorted(overall, key=lambda n: -np.nan_to_num(overall[n].values[key], nan=-1))
+        for name in order:
+            ov = overall[name]
+            if curve in ov.curves:
+                ax.plot(IOU_THRESHOLDS, ov.curves[curve], label=f"{name} [AO {ov.values[key]:.3f}]")
+        ax.set(xlabel="overlap threshold", ylabel="success rate", title=f"Success plot ({title})",
+               xlim=(0, 1), ylim=(0, 1.02))
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="lower left")
+        f = out_dir / f"success_{kind}.png"
+        fig.tight_layout()
+        fig.savefig(f)
+        plt.close(fig)
+        files.append(f)
+    for kind, (curve, key, thr, xlabel, unit) in _PRECISION.items():
+        fig, ax = plt.subplots(figsize=(5, 4), dpi=100)
+        for name, ov in overall.items():
+            if curve in ov.curves:
+                ax.plot(thr, ov.curves[curve], label=f"{name} [ACE {ov.values[key]:.3f} {unit}]")
+        ax.set(xlabel=xlabel, ylabel="precision", title=f"Precision plot ({kind.upper()})",
+               xlim=(thr[0], thr[-1]), ylim=(0, 1.02))
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="lower right")
+        f = out_dir / f"precision_{kind}.png"
+        fig.tight_layout()
+        fig.savefig(f)
+        plt.close(fig)
+        files.append(f)
+    return files
+
+
+def trajectory_plot(gt3d: np.ndarray, tracks: dict[str, np.ndarray], path: str | Path, title: str = "",
+                    absent: np.ndarray | None = None, restarts: dict[str, np.ndarray] | None = None) -> Path:
+    """3D trajectory of box centres (Fig. 12): ground truth vs each tracker's (T, 6) boxes.
+
+    Axes are the camera frame (x right, z forward, -y up for a natural view); frames with
+    no output are gaps; restart frames are marked with x.
+    """
+    plt = pyplot()
+    fig = plt.figure(figsize=(5.5, 4.5), dpi=100)
+    ax = fig.add_subplot(projection="3d")
+    g = np.asarray(gt3d, np.float64).copy()
+    if absent is not None:
+        g[np.asarray(absent, bool)] = np.nan
+    ax.plot(g[:, 0], g[:, 2], -g[:, 1], color="green", lw=2, label="ground truth")
+    for name, boxes in tracks.items():
+        b = np.asarray(boxes, np.float64)
+        line, = ax.plot(b[:, 0], b[:, 2], -b[:, 1], lw=1, label=name)
+        if restarts is not None and name in restarts and np.any(restarts[name]):
+            r = b[restarts[name]]
+            ax.scatter(r[:, 0], r[:, 2], -r[:, 1], marker="x", color=line.get_color(), s=25)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
+    ax.set_zlabel("-y (m)")
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=7, loc="upper left")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def trajectory_plots(exp, names: list[str], seq_names: list[str], out_dir: str | Path) -> list[Path]:
+    """One trajectory plot per sequence of the experiment `exp`, all trackers in `names`."""
+    files = []
+    by_name = {s.name: s for s in exp.sequences}
+    for sn in seq_names:
+        seq = by_name[sn]
+        tracks, restarts, n = {}, {}, len(seq)
+        for name in names:
+            res = read_result(exp.folder(name, sn), sn)
+            n = min(n, len(res))
+            tracks[name] = res.box3d
+            st = res.status
+            first = np.argmax(st == INIT)
+            restarts[name] = (st == INIT) & (np.arange(len(st)) > first)
+        tracks = {k: v[:n] for k, v in tracks.items()}
+        restarts = {k: v[:n] for k, v in restarts.items()}
+        files.append(trajectory_plot(seq.gt3d[:n], tracks, Path(out_dir) / f"trajectory_{sn}.png",
+                                     f"3D trajectory, sequence {sn}", seq.absent[:n], restarts))
+    return files

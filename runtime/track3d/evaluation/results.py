@@ -1,0 +1,107 @@
+"""Per-sequence result files, plain text in the GOT-10k toolkit's manner.
+
+One folder per tracker and sequence: ``<result_dir>/<split>/<tracker>/<sequence>/`` with
+
+    <seq>_001.txt       reported 2D boxes x,y,w,h per frame (fused when fusion is on)
+    <seq>_raw_001.txt   the 2D tracker's own boxes
+    <seq>_3d_001.txt    3D boxes cx,cy,cz,sx,sy,sz
+    <seq>_status.txt    one word per frame: init | tracking | no_points | lost | skipped
+    <seq>_time.txt      tracker seconds per frame (I/O excluded; init frames: the init call)
+    <seq>_e2e_time.txt  seconds per frame end to end (reading image + depth, back-projection, tracker)
+    <seq>_stages.txt    per-stage milliseconds, a commented header names the columns
+
+Frames without output (skipped after a restart, before the first init) are rows of nan.
+Initialisation frames hold the ground truth (as GOT-10k writes the first frame) and are
+never scored; the number of restarts is the number of init frames after the first.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..tracker import STAGES
+
+__all__ = ["SequenceResult", "INIT", "SKIPPED", "write_result", "read_result", "result_folder"]
+
+INIT, SKIPPED = "init", "skipped"
+
+
+@dataclass
+class SequenceResult:
+    """Arrays for T frames: box2d/box2d_raw (T, 4), box3d (T, 6), status (T,) str,
+    seconds / e2e_seconds (T,), stage_ms (T, len(STAGES))."""
+
+    name: str
+    box2d: np.ndarray
+    box2d_raw: np.ndarray
+    box3d: np.ndarray
+    status: np.ndarray
+    seconds: np.ndarray
+    e2e_seconds: np.ndarray
+    stage_ms: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.status)
+
+    @property
+    def restarts(self) -> int:
+        return max(int(np.sum(self.status == INIT)) - 1, 0)
+
+    @property
+    def tracked(self) -> np.ndarray:
+        """(T,) bool: frames with a tracker update (not init, not skipped): the timed frames."""
+        return (self.status != INIT) & (self.status != SKIPPED)
+
+
+def result_folder(result_dir: str | Path, split: str, tracker: str, sequence: str) -> Path:
+    return Path(result_dir) / split / tracker / sequence
+
+
+def _save(path: Path, a: np.ndarray, fmt: str, header: str = "") -> None:
+    np.savetxt(path, a, fmt=fmt, delimiter=",", header=header)
+
+
+def write_result(folder: str | Path, r: SequenceResult) -> None:
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    n = r.name
+    _save(folder / f"{n}_001.txt", r.box2d, "%.4f")
+    _save(folder / f"{n}_raw_001.txt", r.box2d_raw, "%.4f")
+    _save(folder / f"{n}_3d_001.txt", r.box3d, "%.6f")
+    (folder / f"{n}_status.txt").write_text("".join(f"{s}\n" for s in r.status))
+    _save(folder / f"{n}_time.txt", r.seconds.reshape(-1, 1), "%.8f")
+    _save(folder / f"{n}_e2e_time.txt", r.e2e_seconds.reshape(-1, 1), "%.8f")
+    _save(folder / f"{n}_stages.txt", r.stage_ms, "%.4f", header=",".join(STAGES))
+
+
+def _load(path: Path, cols: int) -> np.ndarray:
+    if not path.is_file():
+        raise FileNotFoundError(f"missing result file {path}")
+    a = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
+    if a.size == 0:
+        return a.reshape(0, cols)
+    if a.shape[1] != cols:
+        raise ValueError(f"{path} has {a.shape[1]} columns, expected {cols}")
+    return a
+
+
+def read_result(folder: str | Path, name: str | None = None) -> SequenceResult:
+    """Read the files written by :func:`write_result` (the sequence name defaults to the folder's)."""
+    folder = Path(folder)
+    n = name or folder.name
+    status_file = folder / f"{n}_status.txt"
+    if not status_file.is_file():
+        raise FileNotFoundError(f"no results for sequence {n} in {folder}")
+    status = np.array(status_file.read_text().split(), dtype=object)
+    r = SequenceResult(
+        n, _load(folder / f"{n}_001.txt", 4), _load(folder / f"{n}_raw_001.txt", 4),
+        _load(folder / f"{n}_3d_001.txt", 6), status,
+        _load(folder / f"{n}_time.txt", 1)[:, 0], _load(folder / f"{n}_e2e_time.txt", 1)[:, 0],
+        _load(folder / f"{n}_stages.txt", len(STAGES)))
+    lengths = {len(r.box2d), len(r.box2d_raw), len(r.box3d), len(r.status), len(r.seconds),
+               len(r.e2e_seconds), len(r.stage_ms)}
+    if len(lengths) != 1:
+        raise ValueError(f"result files of {n} in {folder} differ in length")
+    return r

@@ -1,0 +1,101 @@
+"""Every metric against a hand-computed case, edge cases included."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from track3d.evaluation.metrics import (CE2D_THRESHOLDS, IOU_THRESHOLDS, average_scores, precision_curve,
+                                        score_sequence, success_curve)
+
+
+def test_success_curve_hand_case():
+    got = success_curve([0.0, 0.5, 1.0], np.array([0.0, 0.5, 0.99]))
+    np.testing.assert_allclose(got, [2 / 3, 1 / 3, 1 / 3])   # strictly greater than the threshold
+    assert success_curve([], IOU_THRESHOLDS).shape == IOU_THRESHOLDS.shape
+    assert np.all(success_curve([], IOU_THRESHOLDS) == 0)
+    # The area under the success curve approximates AO (GOT-10k's identity).
+    ious = np.random.default_rng(0).uniform(size=500)
+    assert abs(success_curve(ious).mean() - ious.mean()) < 0.01
+
+
+def test_precision_curve_hand_case():
+    got = precision_curve([1.0, 5.0, np.nan], np.array([0.0, 1.0, 5.0, 10.0]))
+    np.testing.assert_allclose(got, [0, 1 / 3, 2 / 3, 2 / 3])  # <= threshold; nan never counts
+
+
+def _seq():
+    # frame 0: init (not scored); 1: partial overlap; 2: identical 2D / disjoint 3D; 3: absent.
+    pred2d = np.array([[0, 0, 10, 10], [0, 0, 10, 10], [20, 20, 4, 4], [0, 0, 1, 1]], float)
+    gt2d = np.array([[0, 0, 10, 10], [5, 0, 10, 10], [20, 20, 4, 4], [50, 50, 3, 3]], float)
+    pred3d = np.array([[0, 0, 10, 2, 2, 2], [0, 0, 10, 2, 2, 2], [10, 0, 10, 2, 2, 2], [0, 0, 10, 2, 2, 2]], float)
+    gt3d = np.array([[0, 0, 10, 2, 2, 2], [1, 0, 10, 2, 2, 2], [0, 0, 10, 2, 2, 2], [9, 9, 9, 1, 1, 1]], float)
+    scored = np.array([False, True, True, False])
+    return pred2d, pred3d, gt2d, gt3d, scored
+
+
+def test_score_sequence_hand_case():
+    s = score_sequence("a", *_seq(), restarts=2, tracker_seconds=0.5, e2e_seconds=1.0, timed_frames=3)
+    assert s.frames == 2 and s.restarts == 2
+    # frame 1: 2D IoU = 50 / 150, centre error 5 px; frame 2: IoU 1, error 0.
+    assert s.ao_2d == pytest.approx((1 / 3 + 1) / 2)
+    assert s.sr50_2d == pytest.approx(0.5) and s.sr75_2d == pytest.approx(0.5)
+    assert s.ace_2d == pytest.approx(2.5)
+    # frame 1: 3D IoU = 4 / 12, BEV IoU = 2 / 6, centre error 1 m; frame 2: no overlap, 10 m.
+    assert s.ao_3d == pytest.approx(1 / 6) and s.ao_bev == pytest.approx(1 / 6)
+    assert s.sr50_3d == 0.0 and s.sr50_bev == 0.0
+    assert s.ace_3d == pytest.approx(5.5)
+    assert s.fps == pytest.approx(6.0) and s.fps_e2e == pytest.approx(3.0)
+    np.testing.assert_allclose(s.curves["success_2d"][[0, 50, 100]], [1.0, 0.5, 0.0])
+    np.testing.assert_allclose(s.curves["precision_2d"][[0, 4, 5]], [0.5, 0.5, 1.0])  # 0 px, 4 px, 5 px
+    assert s.curves["precision_3d"][-1] == pytest.approx(0.5)  # 10 m is beyond the 2 m axis
+
+
+def test_identical_boxes_score_perfectly():
+    b2 = np.array([[3, 4, 5, 6]] * 3, float)
+    b3 = np.array([[1, 2, 10, 1, 2, 3]] * 3, float)
+    s = score_sequence("same", b2, b3, b2, b3, np.ones(3, bool))
+    assert (s.ao_2d, s.ao_bev, s.ao_3d, s.sr75_3d, s.ace_2d, s.ace_3d) == (1.0, 1.0, 1.0, 1.0, 0.0, 0.0)
+    assert np.all(s.curves["success_3d"][:-1] == 1.0) and s.curves["success_3d"][-1] == 0.0
+
+
+def test_no_output_frames_score_zero_and_skip_the_centre_error():
+    b2 = np.array([[0, 0, 10, 10], [np.nan] * 4], float)
+    b3 = np.array([[0, 0, 10, 2, 2, 2], [np.nan] * 6], float)
+    s = score_sequence("gap", b2, b3, np.array([[0, 0, 10, 10]] * 2, float),
+                       np.array([[0, 0, 10, 2, 2, 2]] * 2, float), np.ones(2, bool))
+    assert s.ao_2d == pytest.approx(0.5) and s.ao_3d == pytest.approx(0.5)
+    assert s.ace_2d == 0.0 and s.ace_3d == 0.0          # over the frame that has an output
+    assert s.curves["precision_2d"][0] == pytest.approx(0.5)
+
+
+def test_all_frames_absent_gives_nan_and_is_left_out_of_the_average():
+    p2, p3, g2, g3, _ = _seq()
+    empty = score_sequence("absent", p2, p3, g2, g3, np.zeros(4, bool))
+    assert empty.frames == 0 and np.isnan(empty.ao_3d) and np.isnan(empty.ace_3d)
+    full = score_sequence("a", p2, p3, g2, g3, np.array([False, True, True, False]))
+    ov = average_scores([full, empty])
+    assert ov.sequences == 1 and ov.values["ao_2d"] == pytest.approx(full.ao_2d)
+
+
+def test_average_weighs_sequences_equally():
+    b2 = np.array([[0, 0, 10, 10]] * 4, float)
+    b3 = np.array([[0, 0, 10, 2, 2, 2]] * 4, float)
+    off = b3.copy()
+    off[:, 0] = 10                                       # disjoint: IoU 0
+    one = score_sequence("one", b2, b3, b2, b3, np.array([True, False, False, False]), restarts=1,
+                         tracker_seconds=0.1, timed_frames=1)          # AO 1 over 1 frame
+    two = score_sequence("two", b2, off, b2, b3, np.ones(4, bool), restarts=2,
+                         tracker_seconds=0.3, timed_frames=3)          # AO 0 over 4 frames
+    ov = average_scores([one, two])
+    assert ov.values["ao_3d"] == pytest.approx(0.5)      # not 1/5: per sequence, then over sequences
+    assert ov.values["ace_3d"] == pytest.approx(5.0)     # (0 + 10) / 2
+    assert ov.restarts == 3 and ov.frames == 5
+    assert ov.fps == pytest.approx(10.0)                 # 4 frames in 0.4 s
+    np.testing.assert_allclose(ov.curves["success_3d"][0], 0.5)
+    assert len(ov.curves["precision_2d"]) == len(CE2D_THRESHOLDS)
+
+
+def test_length_mismatch_is_an_error():
+    p2, p3, g2, g3, sc = _seq()
+    with pytest.raises(ValueError, match="differ in length"):
+        score_sequence("bad", p2[:3], p3, g2, g3, sc)
