@@ -27,6 +27,13 @@ def pyplot():
     return plt
 
 
+def _colours(names) -> dict[str, tuple]:
+    """One colour per tracker name, the same in every plot of a report (sorted names, tab10)."""
+    plt = pyplot()
+    cmap = plt.get_cmap("tab10")
+    return {n: cmap(k % 10) for k, n in enumerate(sorted(names))}
+
+
 _SUCCESS = {"2d": ("success_2d", "ao_2d", "2D"), "bev": ("success_bev", "ao_bev", "BEV"),
             "3d": ("success_3d", "ao_3d", "3D")}
 _PRECISION = {"2d": ("precision_2d", "ace_2d", CE2D_THRESHOLDS, "centre error (px)", "px"),
@@ -39,13 +46,15 @@ def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path) -> list[P
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = []
+    colour = _colours(overall)
     for kind, (curve, key, title) in _SUCCESS.items():
         fig, ax = plt.subplots(figsize=(5, 4), dpi=100)
         order = sorted(overall, key=lambda n: -np.nan_to_num(overall[n].values[key], nan=-1))
         for name in order:
             ov = overall[name]
             if curve in ov.curves:
-                ax.plot(IOU_THRESHOLDS, ov.curves[curve], label=f"{name} [AO {ov.values[key]:.3f}]")
+                ax.plot(IOU_THRESHOLDS, ov.curves[curve], color=colour[name],
+                        label=f"{name} [AO {ov.values[key]:.3f}]")
         ax.set(xlabel="overlap threshold", ylabel="success rate", title=f"Success plot ({title})",
                xlim=(0, 1), ylim=(0, 1.02))
         ax.grid(alpha=0.3)
@@ -59,7 +68,7 @@ def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path) -> list[P
         fig, ax = plt.subplots(figsize=(5, 4), dpi=100)
         for name, ov in overall.items():
             if curve in ov.curves:
-                ax.plot(thr, ov.curves[curve], label=f"{name} [ACE {ov.values[key]:.3f} {unit}]")
+                ax.plot(thr, ov.curves[curve], color=colour[name], label=f"{name} [ACE {ov.values[key]:.3f} {unit}]")
         ax.set(xlabel=xlabel, ylabel="precision", title=f"Precision plot ({kind.upper()})",
                xlim=(thr[0], thr[-1]), ylim=(0, 1.02))
         ax.grid(alpha=0.3)
@@ -85,10 +94,11 @@ def trajectory_plot(gt3d: np.ndarray, tracks: dict[str, np.ndarray], path: str |
     g = np.asarray(gt3d, np.float64).copy()
     if absent is not None:
         g[np.asarray(absent, bool)] = np.nan
-    ax.plot(g[:, 0], g[:, 2], -g[:, 1], color="green", lw=2, label="ground truth")
+    ax.plot(g[:, 0], g[:, 2], -g[:, 1], color="black", lw=2, label="ground truth")
+    colour = _colours(tracks)
     for name, boxes in tracks.items():
         b = np.asarray(boxes, np.float64)
-        line, = ax.plot(b[:, 0], b[:, 2], -b[:, 1], lw=1, label=name)
+        line, = ax.plot(b[:, 0], b[:, 2], -b[:, 1], lw=1, color=colour[name], label=name)
         if restarts is not None and name in restarts and np.any(restarts[name]):
             r = b[restarts[name]]
             ax.scatter(r[:, 0], r[:, 2], -r[:, 1], marker="x", color=line.get_color(), s=25)

@@ -1,0 +1,192 @@
+"""The `track3d` command: track, eval, demo, trackers.
+
+    track3d track --data data/small --split test --tracker kcf --estimator baseline
+    track3d eval  --data data/small --split test --results results --out reports
+    track3d demo  --out track3d-demo
+    track3d trackers                       # the registered 2D trackers and box estimators
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+__all__ = ["main", "summary_table", "TABLE_COLUMNS"]
+
+TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
+                 ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
+                 ("restarts", "restarts", "{:d}"), ("FPS", "fps", "{:.1f}"), ("FPS_e2e", "fps_e2e", "{:.1f}"))
+
+
+def summary_table(report: dict) -> str:
+    """A Table-2-style text table of a report's overall scores (one row per tracker)."""
+    rows = [["name"] + [c[0] for c in TABLE_COLUMNS]]
+    for name, t in report["trackers"].items():
+        ov = t["overall"]
+        row = [name]
+        for _, key, fmt in TABLE_COLUMNS:
+            v = ov.get(key)
+            row.append("-" if v is None or (isinstance(v, float) and v != v) else fmt.format(v))
+        rows.append(row)
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
+                     for r in rows)
+
+
+def _options(pairs: list[str] | None) -> dict:
+    """key=value pairs -> dict, values parsed as int / float / bool when they look like one."""
+    out = {}
+    for p in pairs or []:
+        if "=" not in p:
+            raise ValueError(f"option {p!r} is not key=value")
+        k, v = p.split("=", 1)
+        for conv in (int, float):
+            try:
+                out[k] = conv(v)
+                break
+            except ValueError:
+                continue
+        else:
+            out[k] = {"true": True, "false": False}.get(v.lower(), v)
+    return out
+
+
+def _add_data_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", required=True, help="dataset root (the folder with dataset.json)")
+    p.add_argument("--split", default="test", help="dataset split (default: test)")
+    p.add_argument("--sequence", "--sequences", dest="sequences", nargs="+", metavar="NAME",
+                   help="only these sequences of the split")
+    p.add_argument("--frames", type=int, help="only the first N frames of each sequence")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="track3d", description="Track3D: 3D asteroid tracking runtime "
+                                 "(2D tracker -> frustum -> 3D box estimator -> 2D-3D fusion).")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    t = sub.add_parser("track", help="run a 2D tracker x box estimator on a split or sequences; "
+                                     "writes GOT-10k style results and an overlay video")
+    _add_data_args(t)
+    t.add_argument("--tracker", default="kcf", help="2D tracker name (see `track3d trackers`; default kcf)")
+    t.add_argument("--estimator", default="baseline", help="3D box estimator name (default baseline)")
+    t.add_argument("--tracker-option", action="append", metavar="KEY=VALUE", help="option of the 2D tracker")
+    t.add_argument("--estimator-option", action="append", metavar="KEY=VALUE", help="option of the estimator")
+    t.add_argument("--no-fusion", action="store_true", help="report the 2D tracker's box, no 2D-3D fusion")
+    t.add_argument("--weight-3d", type=float, default=0.3, help="fusion weight of the projected 3D box (0.3)")
+    t.add_argument("--threads", type=int, default=1, help="CPU threads of the ONNX models (default 1)")
+    t.add_argument("--results", default="results", help="result folder (default ./results)")
+    t.add_argument("--name", help="result name (default <tracker>+<estimator>)")
+    t.add_argument("--restart-skip", type=int, default=1,
+                   help="re-initialise this many frames after a zero-3D-IoU frame (default 1: the next)")
+    t.add_argument("--no-restart", action="store_true", help="never re-initialise from the ground truth")
+    t.add_argument("--video", choices=("gif", "mp4", "none"), default="gif", help="overlay format (gif)")
+    t.add_argument("--video-sequences", type=int, default=1, help="how many sequences get an overlay (1)")
+
+    e = sub.add_parser("eval", help="results vs ground truth -> report.json, table and plots")
+    _add_data_args(e)
+    e.add_argument("--results", default="results", help="result folder of `track3d track` (default ./results)")
+    e.add_argument("--trackers", nargs="+", help="result names to compare (default: all in the folder)")
+    e.add_argument("--out", default="reports", help="report folder (default ./reports)")
+    e.add_argument("--no-plots", action="store_true", help="skip the plots (no matplotlib needed)")
+    e.add_argument("--trajectories", type=int, default=4, help="sequences with a 3D trajectory plot (4)")
+
+    d = sub.add_parser("demo", help="simulate a small test set, track, evaluate, write plots and an overlay")
+    from .demo import add_arguments
+
+    add_arguments(d)
+
+    sub.add_parser("trackers", help="list the registered 2D trackers and 3D box estimators")
+    return ap
+
+
+def _cmd_track(a) -> int:
+    from .evaluation import Experiment, TrackerSpec
+
+    if a.threads < 1:
+        raise ValueError("--threads must be >= 1")
+    spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=a.weight_3d, threads=a.threads,
+                       tracker_options=_options(a.tracker_option), estimator_options=_options(a.estimator_option),
+                       name=a.name)
+    exp = Experiment(a.data, a.split, a.results, sequences=a.sequences, max_frames=a.frames,
+                     restart=not a.no_restart, restart_skip=a.restart_skip)
+    # Build once up front so that an unknown name or a missing model fails before any work.
+    spec.build(exp.sequences[0])
+    folders = exp.run(spec, overlay=None if a.video == "none" else a.video,
+                      overlay_sequences=a.video_sequences, quiet=a.quiet)
+    root = Path(a.results) / a.split / spec.label
+    print(f"results of {spec.label} on {len(folders)} sequence(s) of {a.data}/{a.split}: {root}")
+    for f in folders[:a.video_sequences]:
+        for v in sorted(f.glob("*_overlay.*")):
+            print(f"overlay: {v}")
+    return 0
+
+
+def _cmd_eval(a) -> int:
+    from .evaluation import Experiment
+    from .evaluation.results import result_folder
+
+    split_dir = Path(a.results) / a.split
+    if a.trackers:
+        names = list(a.trackers)
+    elif split_dir.is_dir():
+        names = sorted(p.name for p in split_dir.iterdir() if p.is_dir())
+    else:
+        names = []
+    if not names:
+        raise FileNotFoundError(f"no results in {split_dir} (run `track3d track` first)")
+    exp = Experiment(a.data, a.split, a.results, a.out, sequences=a.sequences, max_frames=a.frames)
+    if not a.sequences:
+        # Default: the sequences every named tracker has results for.
+        have = [s for s in exp.sequences
+                if all((result_folder(a.results, a.split, n, s.name) / f"{s.name}_status.txt").is_file()
+                       for n in names)]
+        if not have:
+            raise FileNotFoundError(f"no sequence of {a.data}/{a.split} has results of {', '.join(names)} "
+                                    f"in {a.results}")
+        exp.sequences = have
+    report = exp.report(names, plots=not a.no_plots, trajectories=a.trajectories)
+    print(summary_table(report))
+    print(f"report: {Path(a.out) / 'report.json'}")
+    for f in report.get("plots", []):
+        print(f"plot: {f}")
+    return 0
+
+
+def _cmd_trackers(a) -> int:
+    from .estimators import available_estimators
+    from .trackers2d import available_trackers
+
+    print("2D trackers:   " + ", ".join(available_trackers()))
+    print("3D estimators: " + ", ".join(available_estimators()))
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    from .dataset import DatasetError
+    from .estimators import EstimatorUnavailable
+    from .onnxmodel import ModelError
+    from .trackers2d import TrackerUnavailable
+
+    try:
+        if args.command == "track":
+            return _cmd_track(args)
+        if args.command == "eval":
+            return _cmd_eval(args)
+        if args.command == "demo":
+            from .demo import run_demo
+
+            return run_demo(args)
+        return _cmd_trackers(args)
+    except (DatasetError, TrackerUnavailable, EstimatorUnavailable, ModelError, FileNotFoundError,
+            ValueError, RuntimeError) as e:
+        print(f"track3d {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

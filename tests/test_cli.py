@@ -1,0 +1,68 @@
+"""The `track3d` command: track, eval, trackers, demo; clear errors for bad input."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from test_loop import make_synthetic_dataset
+from track3d.cli import main
+
+
+@pytest.fixture(scope="module")
+def synth(tmp_path_factory):
+    return make_synthetic_dataset(tmp_path_factory.mktemp("cli") / "ds", {"a": 5, "b": 4})
+
+
+def test_track_then_eval(synth, tmp_path, capsys):
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert main(["track", "--data", str(synth), "--tracker", "oracle", "--results", str(res), "--quiet"]) == 0
+    assert main(["track", "--data", str(synth), "--tracker", "mosse", "--sequence", "a", "--no-fusion",
+                 "--results", str(res), "--video", "none", "--quiet"]) == 0
+    assert (res / "test" / "oracle+baseline" / "a" / "a_overlay.gif").is_file()
+    assert (res / "test" / "mosse+baseline-nofusion" / "a" / "a_001.txt").is_file()
+    assert not (res / "test" / "mosse+baseline-nofusion" / "b").exists()
+    capsys.readouterr()
+    # Default: every tracker in the folder, on the sequences all of them have (only "a").
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "oracle+baseline" in out and "mosse+baseline-nofusion" in out and "AO_3d" in out
+    report = json.loads((rep / "report.json").read_text())
+    assert report["sequences"] == ["a"]
+    assert (rep / "success_3d.png").is_file() and (rep / "trajectory_a.png").is_file()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["track", "--data", "{missing}"], "no dataset"),
+    (["track", "--data", "{synth}", "--sequence", "zzz"], "zzz"),
+    (["track", "--data", "{synth}", "--tracker", "nope"], "unknown 2D tracker 'nope'"),
+    (["track", "--data", "{synth}", "--estimator", "nope"], "unknown 3D box estimator"),
+    (["track", "--data", "{synth}", "--split", "train"], "split 'train'"),
+    (["track", "--data", "{synth}", "--tracker-option", "oops"], "key=value"),
+    (["eval", "--data", "{synth}", "--results", "{missing}"], "no results"),
+])
+def test_clear_errors(synth, tmp_path, capsys, argv, message):
+    argv = [a.format(synth=synth, missing=tmp_path / "missing") for a in argv]
+    assert main(argv + ["--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "error:" in err and message in err and "Traceback" not in err
+
+
+def test_trackers_lists_names(capsys):
+    assert main(["trackers"]) == 0
+    out = capsys.readouterr().out
+    assert "kcf" in out and "oracle" in out and "baseline" in out
+
+
+def test_demo_on_a_tiny_simulation(tmp_path, capsys):
+    pytest.importorskip("track3d_sim")
+    out = tmp_path / "demo"
+    rc = main(["demo", "--out", str(out), "--preset", "tiny", "--sequences", "1", "--frames", "4",
+               "--tracker", "kcf", "--estimator", "baseline", "--quiet"])
+    assert rc == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["tracker"] == "kcf" and summary["frames"] >= 1
+    text = capsys.readouterr().out
+    assert "AO_2d" in text and "overlay:" in text
+    assert list((out / "results").rglob("*_overlay.gif"))
+    assert (out / "report" / "success_3d.png").is_file()
