@@ -61,8 +61,10 @@ def make_motion(rng: np.random.Generator, n_frames: int, radius: float, tan_half
     zmin = Z_NEAR + radius + 0.5
     zmax = max(Z_FAR - radius - 0.5, zmin + 1.0)
     # base depth: log-uniform, the body spans a sensible part of the image on average
-    zlo = max(zmin, radius / (0.9 * tan_half[1]) * 0.7)
-    zhi = min(zmax, max(zlo * 1.2, radius / (0.05 * tan_half[0])))
+    # (mostly the body spans at most ~3/4 of the image height; 20% of sequences are close-ups)
+    close = bool(rng.random() < 0.2)
+    zlo = min(max(zmin, radius / ((1.3 if close else 0.75) * tan_half[1])), zmax)
+    zhi = min(zmax, max(zlo * 1.2, radius / (0.06 * tan_half[0])))
     z0 = math.exp(rng.uniform(math.log(zlo), math.log(zhi)))
     lz = math.log(z0) + _sines(rng, t, 3, 0.35 * speed ** 0.5, fmin, fmax)
     lz += rng.normal(0, 0.25) * (t / dur)  # approach / recede trend (scale change)
@@ -80,7 +82,7 @@ def make_motion(rng: np.random.Generator, n_frames: int, radius: float, tan_half
     events = []
     if exits and N >= 12:
         for _ in range(int(rng.integers(1, 3))):
-            length = int(rng.integers(max(6, N // 15), max(7, N // 5)))
+            length = int(rng.integers(max(10, N // 12), max(11, N // 5)))
             length = min(length, N - 2)
             start = int(rng.integers(0, max(1, N - length)))
             axis = int(rng.integers(2))
@@ -108,7 +110,7 @@ def make_motion(rng: np.random.Generator, n_frames: int, radius: float, tan_half
     Rp = rotvec_to_matrix(a_prec[None] * (w_prec * t)[:, None])
     R = Rp @ R0 @ Rs
     v = np.diff(T, axis=0) * FPS
-    info = {"fps": FPS, "fast": fast, "speed_scale": float(speed), "z0_m": float(z0),
+    info = {"fps": FPS, "fast": fast, "speed_scale": float(speed), "z0_m": float(z0), "close_up": close,
             "z_range_m": [float(zmin), float(zmax)], "spin_axis_body": a_spin.tolist(),
             "spin_deg_s": math.degrees(w_spin), "precession_axis": a_prec.tolist(),
             "precession_deg_s": math.degrees(w_prec), "excursions": events,

@@ -87,7 +87,7 @@ def _sun(rng: np.random.Generator) -> dict:
 
 def make_shape(spec: SeqSpec, rng: np.random.Generator, subdivisions: int, user_mesh: dict | None) -> Shape:
     lo, hi = VOLUME_RANGE
-    volume = math.exp(rng.uniform(math.log(lo * 1.5), math.log(hi / 1.5)))
+    volume = math.exp(rng.uniform(math.log(lo * 1.25), math.log(hi / 1.25)))
     if user_mesh is not None:
         shape = load_user_mesh(user_mesh["path"], user_mesh.get("size_m") or 1.0)
         if not user_mesh.get("size_m"):

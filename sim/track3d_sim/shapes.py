@@ -146,7 +146,7 @@ def _radial(family: int, rng: np.random.Generator, d: np.ndarray) -> tuple[np.nd
         coslat = np.sqrt(np.maximum(1 - sinlat ** 2, 0))
         r_cone = 1.0 / (coslat / a + np.abs(sinlat) / c)
         r_sph = np.full_like(r_cone, 0.85)
-        mix = rng.uniform(0.45, 0.7)
+        mix = rng.uniform(0.25, 0.5)
         ridge = rng.uniform(0.03, 0.07) * np.exp(-(np.arcsin(np.clip(sinlat, -1, 1)) / 0.15) ** 2)
         r = mix * r_cone + (1 - mix) * r_sph + ridge
         r *= 1.0 + 0.04 * _sphere_noise(rng, d, 32, 3.5, 3.0) + 0.015 * _sphere_noise(rng, d, 64, 2.0, 10.0)
