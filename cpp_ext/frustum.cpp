@@ -13,6 +13,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <algorithm>
 #include <cstring>
 #include <numeric>
 #include <stdexcept>
@@ -26,28 +27,44 @@ using FloatArray = py::array_t<float, py::array::c_style | py::array::forcecast>
 using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
 
 // Selection rule of the paper (IV-A); see frustum_mask_numpy for the reference.
-std::vector<int64_t> frustum_indices(const float* pts, int64_t n, const double* b, const double* m,
-                                     double z_min, double z_max) {
-  std::vector<int64_t> keep;
+// Branch-free per block: a mask pass the compiler vectorises (no early exits; (x - x) == 0
+// is the IEEE test for finite x), then a compaction pass. On real clouds branches would be
+// predictable, but a random-looking cloud (noise, NaN holes) costs ~4x with branches.
+// target_clones builds an AVX2 variant picked at load time on CPUs that have it; both
+// variants compute the same IEEE results (no FMA contraction, no fast-math).
+constexpr int64_t kBlock = 1024;
+
+__attribute__((target_clones("avx2", "default")))
+void block_mask(const float* pts, int64_t n, const double* b, const double* m, double z_min, double z_max,
+                uint8_t* mask) {
   const double x0 = b[0], y0 = b[1];
   const double x1 = b[0] + b[2], y1 = b[1] + b[3];
-  if (!(std::isfinite(x0) && std::isfinite(y0) && std::isfinite(b[2]) && std::isfinite(b[3])) ||
-      !(b[2] > 0.0) || !(b[3] > 0.0))
-    return keep;
-  keep.reserve(static_cast<size_t>(n / 16 + 16));
   for (int64_t i = 0; i < n; ++i) {
     const double x = pts[3 * i], y = pts[3 * i + 1], z = pts[3 * i + 2];
-    if (!(std::isfinite(x) && std::isfinite(y) && std::isfinite(z))) continue;
-    if (!(z >= z_min && z <= z_max)) continue;
     const double p2 = m[8] * x + m[9] * y + m[10] * z + m[11];
-    if (!(p2 > 0.0)) continue;
     const double u = (m[0] * x + m[1] * y + m[2] * z + m[3]) / p2;
-    if (!(u >= x0 && u < x1)) continue;
     const double v = (m[4] * x + m[5] * y + m[6] * z + m[7]) / p2;
-    if (!(v >= y0 && v < y1)) continue;
-    keep.push_back(i);
+    const bool finite = ((x - x) == 0.0) & ((y - y) == 0.0) & ((z - z) == 0.0);
+    mask[i] = static_cast<uint8_t>(finite & (z >= z_min) & (z <= z_max) & (p2 > 0.0) & (u >= x0) & (u < x1) &
+                                   (v >= y0) & (v < y1));
   }
-  return keep;
+}
+
+// Mask of the whole cloud (one byte per point), returns the number of kept points.
+int64_t frustum_mask(const float* pts, int64_t n, const double* b, const double* m, double z_min, double z_max,
+                     uint8_t* mask) {
+  if (!(std::isfinite(b[0]) && std::isfinite(b[1]) && std::isfinite(b[2]) && std::isfinite(b[3])) ||
+      !(b[2] > 0.0) || !(b[3] > 0.0)) {
+    std::memset(mask, 0, static_cast<size_t>(n));
+    return 0;
+  }
+  int64_t k = 0;
+  for (int64_t start = 0; start < n; start += kBlock) {
+    const int64_t len = std::min(kBlock, n - start);
+    block_mask(pts + 3 * start, len, b, m, z_min, z_max, mask + start);
+    for (int64_t i = 0; i < len; ++i) k += mask[start + i];
+  }
+  return k;
 }
 
 py::array_t<float> extract_frustum(FloatArray points, DoubleArray box2d, DoubleArray M, double z_min,
@@ -61,17 +78,22 @@ py::array_t<float> extract_frustum(FloatArray points, DoubleArray box2d, DoubleA
   const float* pts = points.data();
   const double* b = box2d.data();
   const double* m = M.data();
-  std::vector<int64_t> keep;
+  std::vector<uint8_t> mask(static_cast<size_t>(n));
+  int64_t k;
   {
     py::gil_scoped_release release;
-    keep = frustum_indices(pts, n, b, m, z_min, z_max);
+    k = frustum_mask(pts, n, b, m, z_min, z_max, mask.data());
   }
-  const auto k = static_cast<py::ssize_t>(keep.size());
-  py::array_t<float> out({k, static_cast<py::ssize_t>(3)});
+  py::array_t<float> out({static_cast<py::ssize_t>(k), static_cast<py::ssize_t>(3)});
   float* o = out.mutable_data();
   {
     py::gil_scoped_release release;
-    for (py::ssize_t j = 0; j < k; ++j) std::memcpy(o + 3 * j, pts + 3 * keep[j], 3 * sizeof(float));
+    for (int64_t i = 0; i < n; ++i) {
+      if (mask[static_cast<size_t>(i)]) {
+        std::memcpy(o, pts + 3 * i, 3 * sizeof(float));
+        o += 3;
+      }
+    }
   }
   return out;
 }
