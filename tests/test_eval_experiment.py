@@ -105,3 +105,22 @@ def test_max_frames_and_clear_errors(synth, tmp_path):
         Experiment(synth, "train")
     with pytest.raises(FileNotFoundError, match="no results"):
         exp.report(["never-ran"], plots=False)
+
+
+def test_oracle_baseline_on_the_tiny_simulated_dataset(tiny_dataset, tmp_path):
+    """The whole chain on the simulator's output: finite scores, consistent files, no crash."""
+    exp = Experiment(tiny_dataset, "test", tmp_path / "res", tmp_path / "rep")
+    exp.run(TrackerSpec("oracle", "baseline"), quiet=True)
+    exp.run(TrackerSpec("kcf", "baseline"), quiet=True)
+    rep = exp.report(["oracle+baseline", "kcf+baseline"], plots=False)
+    for name in ("oracle+baseline", "kcf+baseline"):
+        ov = rep["trackers"][name]["overall"]
+        assert ov["frames"] > 0
+        for k in ("ao_2d", "ao_bev", "ao_3d"):
+            assert 0.0 <= ov[k] <= 1.0
+        assert ov["ace_3d"] >= 0.0 and ov["restarts"] >= 0
+    # The oracle's raw 2D output is the label itself on every tracked frame where the target is present.
+    seq = exp.sequences[0]
+    r = read_result(exp.folder("oracle+baseline", seq.name))
+    present = r.tracked & ~seq.absent[:len(r)]
+    np.testing.assert_allclose(r.box2d_raw[present], seq.gt2d[:len(r)][present], atol=1e-4)
