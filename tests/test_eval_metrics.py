@@ -47,7 +47,7 @@ def test_score_sequence_hand_case():
     assert s.fps == pytest.approx(6.0) and s.fps_e2e == pytest.approx(3.0)
     np.testing.assert_allclose(s.curves["success_2d"][[0, 50, 100]], [1.0, 0.5, 0.0])
     np.testing.assert_allclose(s.curves["precision_2d"][[0, 4, 5]], [0.5, 0.5, 1.0])  # 0 px, 4 px, 5 px
-    assert s.curves["precision_3d"][-1] == pytest.approx(0.5)  # 10 m is beyond the 2 m axis
+    assert s.curves["precision_3d"][-1] == pytest.approx(0.5)  # 10 m is beyond the 4 m axis
 
 
 def test_identical_boxes_score_perfectly():

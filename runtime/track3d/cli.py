@@ -11,7 +11,7 @@ import argparse
 import sys
 from pathlib import Path
 
-__all__ = ["main", "summary_table", "TABLE_COLUMNS"]
+__all__ = ["main", "summary_table", "set_threads", "TABLE_COLUMNS"]
 
 TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
                  ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
@@ -31,6 +31,13 @@ def summary_table(report: dict) -> str:
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     return "\n".join("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
                      for r in rows)
+
+
+def set_threads(threads: int) -> None:
+    """OpenCV's own thread pool follows --threads too, so that FPS at 1 thread means one thread."""
+    import cv2
+
+    cv2.setNumThreads(int(threads))
 
 
 def _options(pairs: list[str] | None) -> dict:
@@ -105,6 +112,7 @@ def _cmd_track(a) -> int:
 
     if a.threads < 1:
         raise ValueError("--threads must be >= 1")
+    set_threads(a.threads)
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=a.weight_3d, threads=a.threads,
                        tracker_options=_options(a.tracker_option), estimator_options=_options(a.estimator_option),
                        name=a.name)

@@ -76,13 +76,14 @@ def _simulate(data: Path, a) -> None:
 
 
 def run_demo(a) -> int:
-    from .cli import summary_table
+    from .cli import set_threads, summary_table
     from .evaluation import Experiment, TrackerSpec
 
     if a.sequences < 1 or a.frames < 2:
         raise ValueError("--sequences must be >= 1 and --frames >= 2")
     if a.threads < 1:
         raise ValueError("--threads must be >= 1")
+    set_threads(a.threads)
     out = Path(a.out)
     data = out / "data"
     t0 = time.perf_counter()

@@ -29,7 +29,7 @@ __all__ = [
 
 IOU_THRESHOLDS = np.linspace(0.0, 1.0, 101)
 CE2D_THRESHOLDS = np.linspace(0.0, 50.0, 51)     # pixels, as OTB's precision plot
-CE3D_THRESHOLDS = np.linspace(0.0, 2.0, 41)      # metres, 5 cm steps
+CE3D_THRESHOLDS = np.linspace(0.0, 4.0, 81)      # metres, 5 cm steps
 KINDS = ("2d", "bev", "3d")
 
 
