@@ -8,5 +8,5 @@ Command line: ``track3d-sim generate | stats | preview`` (see ``track3d-sim --he
 """
 from .errors import SimError
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 __all__ = ["SimError", "__version__"]

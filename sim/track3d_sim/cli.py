@@ -32,7 +32,7 @@ def _mesh(text: str):
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="track3d-sim", description="3D asteroid tracking dataset simulator "
                                 "(headless CPU ray casting; writes the layout of DESIGN.md).")
-    sub = p.add_subparsers(dest="cmd", required=True, metavar="{generate,stats,preview}")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="{generate,stats,preview,ply}")
     g = sub.add_parser("generate", help="render a dataset (resumable, deterministic for a seed)",
                        description="Render a dataset into --out. A killed run continues where it stopped "
                        "when started again with the same arguments; dataset.json is written last.")
@@ -66,6 +66,10 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--frames", type=int, default=12, help="frames in the contact sheet (default 12)")
     v.add_argument("--gain", type=float, default=1.0, help="brightness gain for viewing dark images (default 1)")
     v.add_argument("--right", action="store_true", help="add the right image beside the left")
+    e = sub.add_parser("ply", help="export a frame's back-projected point cloud (with colours) as PLY")
+    e.add_argument("sequence", help="sequence folder, e.g. DATA/train/0001")
+    e.add_argument("--frame", type=int, default=1, help="1-based frame number (default 1)")
+    e.add_argument("--out", required=True, help="output .ply")
     return p
 
 
@@ -87,6 +91,9 @@ def main(argv=None) -> int:
         elif args.cmd == "preview":
             from .preview import preview
             preview(args.sequence, args.out, n=args.frames, gain=args.gain, right=args.right)
+        elif args.cmd == "ply":
+            from .preview import export_ply
+            export_ply(args.sequence, args.frame, args.out)
     except SimError as e:
         print(f"track3d-sim: error: {e}", file=sys.stderr)
         return 2

@@ -66,7 +66,7 @@ def make_motion(rng: np.random.Generator, n_frames: int, radius: float, tan_half
     zlo = min(max(zmin, radius / ((1.3 if close else 0.75) * tan_half[1])), zmax)
     zhi = min(zmax, max(zlo * 1.2, radius / (0.06 * tan_half[0])))
     z0 = math.exp(rng.uniform(math.log(zlo), math.log(zhi)))
-    lz = math.log(z0) + _sines(rng, t, 3, 0.35 * speed ** 0.5, fmin, fmax)
+    lz = math.log(z0) + _sines(rng, t, 3, 0.2 * speed ** 0.5, fmin, fmax)
     lz += rng.normal(0, 0.25) * (t / dur)  # approach / recede trend (scale change)
     # soft clamp into [log zmin, log zmax]
     a, b = math.log(zmin), math.log(zmax)

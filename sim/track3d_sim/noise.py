@@ -33,6 +33,8 @@ def trilinear(grid: np.ndarray, coords: np.ndarray, wrap: bool = True) -> np.nda
 
     wrap=True: periodic; else coordinates are clamped to the grid."""
     n = np.array(grid.shape[:3])
+    C = grid.shape[3] if grid.ndim == 4 else 1
+    flat = grid.reshape(-1, C)
     c = np.asarray(coords, dtype=np.float64)
     if not wrap:
         c = np.clip(c, 0.0, n - 1.000001)
@@ -43,18 +45,22 @@ def trilinear(grid: np.ndarray, coords: np.ndarray, wrap: bool = True) -> np.nda
         i1 = (i0 + 1) % n
     else:
         i1 = np.minimum(i0 + 1, n - 1)
-    out = None
+    sx, sy = n[1] * n[2], n[2]
+    ax = (i0[:, 0] * sx, i1[:, 0] * sx)
+    ay = (i0[:, 1] * sy, i1[:, 1] * sy)
+    az = (i0[:, 2], i1[:, 2])
+    wx = (1.0 - f[:, 0], f[:, 0])
+    wy = (1.0 - f[:, 1], f[:, 1])
+    wz = (1.0 - f[:, 2], f[:, 2])
+    chans = [np.ascontiguousarray(flat[:, k]) for k in range(C)]  # 1D gathers are much faster
+    out = np.zeros((C, len(c)), np.float32)
     for dx in (0, 1):
-        ix = i1[:, 0] if dx else i0[:, 0]
-        wx = f[:, 0] if dx else 1.0 - f[:, 0]
         for dy in (0, 1):
-            iy = i1[:, 1] if dy else i0[:, 1]
-            wy = f[:, 1] if dy else 1.0 - f[:, 1]
+            base = ax[dx] + ay[dy]
+            wxy = wx[dx] * wy[dy]
             for dz in (0, 1):
-                iz = i1[:, 2] if dz else i0[:, 2]
-                wz = f[:, 2] if dz else 1.0 - f[:, 2]
-                w = wx * wy * wz
-                v = grid[ix, iy, iz]
-                term = v * (w[:, None] if v.ndim == 2 else w)
-                out = term if out is None else out + term
-    return out
+                idx = base + az[dz]
+                w = wxy * wz[dz]
+                for k in range(C):
+                    out[k] += chans[k].take(idx) * w
+    return out.T if grid.ndim == 4 else out[0]

@@ -83,3 +83,28 @@ def preview(sequence: str | Path, out: str | Path, n: int = 12, gain: float = 1.
                                fill=(255, 255, 255))
     sheet.save(out)
     return out
+
+
+def export_ply(sequence: str | Path, frame: int, out: str | Path) -> Path:
+    """Write the back-projected point cloud of a frame (left frame, metres) with the left image's
+    colours as a binary little-endian PLY, for viewing in MeshLab / CloudCompare / Open3D."""
+    seq = _open_sequence(Path(sequence))
+    if not 1 <= frame <= len(seq):
+        raise SimError(f"frame {frame} out of range 1..{len(seq)} of {sequence}")
+    fr = seq.frame(frame - 1)
+    vv, uu = np.nonzero(fr.depth_m > 0)
+    pts = fr.points
+    rgb = fr.image[vv, uu]
+    rec = np.zeros(len(pts), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
+                                    ("red", "u1"), ("green", "u1"), ("blue", "u1")])
+    rec["x"], rec["y"], rec["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
+    rec["red"], rec["green"], rec["blue"] = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+    header = ("ply\nformat binary_little_endian 1.0\n"
+              f"comment track3d {seq.split}/{seq.name} frame {frame}, left camera frame, metres\n"
+              f"element vertex {len(rec)}\nproperty float x\nproperty float y\nproperty float z\n"
+              "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n")
+    out = Path(out)
+    with open(out, "wb") as fh:
+        fh.write(header.encode("ascii"))
+        fh.write(rec.tobytes())
+    return out

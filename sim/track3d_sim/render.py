@@ -80,7 +80,7 @@ class BodyRenderer:
         d = self.rays[v0:v1, u0:u1].reshape(-1, 3)
         Rt = R.T
         ob = Rt @ (np.asarray(eye, np.float64) - T)
-        db = d @ R  # = (Rt @ d.T).T
+        db = np.einsum("ij,jk->ik", d, R)  # = (Rt @ d.T).T
         org = np.broadcast_to(ob.astype(np.float32), db.shape).copy()
         res = self.scene.run(org, db.astype(np.float32), output=1)
         hit = res["geomID"] >= 0
@@ -88,15 +88,17 @@ class BodyRenderer:
         sub_z = np.where(hit, t, 0.0)
         z[v0:v1, u0:u1] = sub_z.reshape(v1 - v0, u1 - u0)
         mask[v0:v1, u0:u1] = hit.reshape(v1 - v0, u1 - u0)
-        prim = res["primID"][hit]
-        bu, bv = res["u"][hit][:, None], res["v"][hit][:, None]
-        f = self.F[prim]
-        n = (1 - bu - bv) * self.VN[f[:, 0]] + bu * self.VN[f[:, 1]] + bv * self.VN[f[:, 2]]
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-        dh = db[hit]
-        p = ob + t[hit, None] * dh
-        view = -dh / np.linalg.norm(dh, axis=1, keepdims=True)
-        out.update(p=p, n=n, fn=self.FN[prim], view=view)
+        hi = np.flatnonzero(hit)
+        prim = res["primID"].take(hi)
+        bu, bv = res["u"].take(hi)[:, None], res["v"].take(hi)[:, None]
+        f = self.F.take(prim, axis=0)
+        n = ((1 - bu - bv) * self.VN.take(f[:, 0], axis=0) + bu * self.VN.take(f[:, 1], axis=0)
+             + bv * self.VN.take(f[:, 2], axis=0))
+        n /= np.maximum(np.sqrt((n * n).sum(1, keepdims=True)), 1e-12)
+        dh = db.take(hi, axis=0)
+        p = ob + t.take(hi)[:, None] * dh
+        view = -dh / np.sqrt((dh * dh).sum(1, keepdims=True))
+        out.update(p=p, n=n, fn=self.FN.take(prim, axis=0), view=view)
         return out
 
     def shade(self, c, R, sun_dir_cam, irradiance, ambient):

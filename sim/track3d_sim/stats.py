@@ -19,13 +19,15 @@ def collect(root: str | Path, split: str = "all") -> dict:
         raise SimError(str(e)) from None
     if not seqs:
         raise SimError(f"no sequences in {root} ({split})")
-    sizes, speeds, irr, dn = [], [], [], []
+    sizes, speeds, vel, irr, dn = [], [], [], [], []
     for s in seqs:
         b = s.gt3d
         sizes.append(b[:, 3:])
         fps = float(s.meta.get("fps", 10.0))
         if len(b) > 1:
-            speeds.append(np.linalg.norm(np.diff(b[:, :3], axis=0), axis=1) * fps)
+            v = np.diff(b[:, :3], axis=0) * fps
+            speeds.append(np.linalg.norm(v, axis=1))
+            vel.append(v)
         irr.append(float(s.meta.get("sun", {}).get("irradiance", np.nan)))
         m = s.meta.get("frame_data", {}).get("mean_object_dn", [])
         dn.extend(x for x in m if x is not None)
@@ -33,6 +35,7 @@ def collect(root: str | Path, split: str = "all") -> dict:
     cls, _ = boxes.size_class_of(sizes)
     return {"size_class": cls, "volume": np.prod(sizes, axis=1),
             "speed": np.concatenate(speeds) if speeds else np.zeros(0),
+            "velocity": np.concatenate(vel) if vel else np.zeros((0, 3)),
             "irradiance": np.array(irr), "object_dn": np.array(dn), "n_seq": len(seqs),
             "n_frames": len(sizes)}
 
@@ -54,9 +57,16 @@ def plot_stats(root: str | Path, out: str | Path, split: str = "all") -> dict:
     ax[0, 1].axvline(1600, color="k", ls="--", lw=0.8)
     ax[0, 1].set(title=f"(b) box volumes, m^3 ({v.min():.0f} .. {v.max():.0f})", xlabel="axis-aligned box volume (m^3)",
                  ylabel="frames")
-    ax[1, 0].hist(st["speed"], bins=40, color="tab:green")
-    ax[1, 0].set(title=f"(c) translation speed (mean {st['speed'].mean():.2f} m/s)", xlabel="speed (m/s)",
-                 ylabel="frame pairs")
+    vel = st["velocity"]
+    if len(vel):
+        lim = np.percentile(np.abs(vel), 99.5) + 1e-6
+        bins = np.linspace(-lim, lim, 41)
+        for k, (name, col) in enumerate(zip("xyz", ("tab:green", "tab:olive", "tab:cyan"))):
+            ax[1, 0].hist(vel[:, k], bins=bins, histtype="step", lw=1.5, color=col,
+                          label=f"v{name}: sd {vel[:, k].std():.2f} m/s")
+        ax[1, 0].legend(fontsize=7)
+    ax[1, 0].set(title=f"(c) translation velocity (mean speed {st['speed'].mean():.2f} m/s)",
+                 xlabel="velocity component (m/s)", ylabel="frame pairs")
     ax[1, 1].hist(st["object_dn"], bins=np.arange(0, 256, 4), color="tab:gray", label="mean object value / frame")
     ax[1, 1].set(title="(d) illumination: mean object pixel value (0..255)", xlabel="DN", ylabel="frames")
     ax2 = ax[1, 1].twinx()

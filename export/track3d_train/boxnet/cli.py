@@ -39,9 +39,10 @@ def _prepare(a) -> int:
 def _train(a) -> int:
     from .train import TrainConfig, train
 
-    cfg = TrainConfig(train_cache=str(a.cache), out=str(a.out), num_points=a.num_points, width=a.width,
+    cfg = TrainConfig(train_cache=[str(c) for c in a.cache], out=str(a.out), num_points=a.num_points, width=a.width,
                       use_category=not a.no_category, size_norm=a.size_norm, epochs=a.epochs,
                       epoch_samples=a.epoch_samples, batch=a.batch, lr=a.lr, flip=not a.no_flip,
+                      cat_dropout=a.cat_dropout,
                       val_every=a.val_every, seed=a.seed, threads=a.threads, max_minutes=a.max_minutes,
                       max_steps=a.max_steps)
     _log(f"training A3BoxNet into {a.out}: {cfg}")
@@ -112,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     t = sub.add_parser("train", help="train (resumes from <out>/last.pt)",
                        description="Adam, batch 32, cosine LR, checkpoints every epoch (last.pt, best.pt by "
                                    "validation AO_3d on held-out train sequences), history.json, loss_curve.png.")
-    t.add_argument("--cache", required=True, help="training .npz from `prepare`")
+    t.add_argument("--cache", required=True, nargs="+", help="training .npz file(s) from `prepare` (several are concatenated)")
     t.add_argument("--out", default="runs/boxnet/main", help="run folder")
     t.add_argument("--num-points", type=int, default=512, help="N input points (paper: 1024)")
     t.add_argument("--width", type=float, default=1.0, help="channel multiplier (1 = Frustum PointNets v1)")
@@ -124,10 +125,12 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--batch", type=int, default=32, help="batch size")
     t.add_argument("--lr", type=float, default=1e-3, help="initial learning rate")
     t.add_argument("--no-flip", action="store_true", help="no random x-mirroring")
+    t.add_argument("--cat-dropout", type=float, default=0.1,
+                   help="probability of an all-zero (unknown, -1) category vector in training")
     t.add_argument("--val-every", type=int, default=8, help="every k-th train sequence is validation (0: none)")
     t.add_argument("--seed", type=int, default=0, help="seed")
     t.add_argument("--threads", type=int, default=1, help="torch threads")
-    t.add_argument("--max-minutes", type=float, default=0.0, help="stop after the epoch passing this budget")
+    t.add_argument("--max-minutes", type=float, default=0.0, help="time budget: the cosine LR spans it and training stops when it is spent (resume-aware)")
     t.add_argument("--max-steps", type=int, default=0, help="stop after this many steps")
     t.add_argument("--no-resume", action="store_true", help="start over even if <out>/last.pt exists")
     t.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -16,6 +16,7 @@ so train and run time share every formula.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import dataclass
@@ -150,6 +151,35 @@ class PointCache:
             setattr(self, k, z[k])
         self.index = np.arange(len(self.gt3d)) if indices is None else np.asarray(indices, np.int64)
 
+    @classmethod
+    def concat(cls, paths) -> "PointCache":
+        """Several caches as one (e.g. two datasets' train splits); sequence ids are made unique."""
+        paths = [Path(p) for p in ([paths] if isinstance(paths, (str, Path)) else paths)]
+        caches = [cls(p) for p in paths]
+        if len(caches) == 1:
+            return caches[0]
+        c = object.__new__(cls)
+        c.path = paths[0]
+        c.info = dict(caches[0].info)
+        c.info["parts"] = [x.info for x in caches]
+        c.info["data_hash"] = hashlib.sha256("".join(x.info["data_hash"] for x in caches).encode()).hexdigest()
+        c._points = np.concatenate([x._points for x in caches])
+        offs, base = [np.zeros(1, np.int64)], 0
+        for x in caches:
+            offs.append(x._offsets[1:] + base)
+            base += x._offsets[-1]
+        c._offsets = np.concatenate(offs)
+        seq_base = 0
+        seqs = []
+        for x in caches:
+            seqs.append(x.seq + seq_base)
+            seq_base += int(x.seq.max()) + 1
+        c.seq = np.concatenate(seqs)
+        for k in ("gt3d", "baseline", "box2d", "category", "frame", "n_full", "jittered"):
+            setattr(c, k, np.concatenate([getattr(x, k) for x in caches]))
+        c.index = np.arange(len(c.gt3d))
+        return c
+
     def subset(self, mask_or_indices) -> "PointCache":
         c = object.__new__(PointCache)
         c.__dict__.update(self.__dict__)
@@ -172,12 +202,15 @@ class BoxNetSamples:
     """torch-style Dataset over a PointCache: item -> (centred points (N,3) f32, one-hot (C,) f32,
     centre label relative to the centroid (3,) f32, size class (), normalised residual (3,) f32,
     residual scale () f32). ``epoch`` (set by the loop) changes the sampling seed;
-    ``flip`` mirrors x at random (a valid augmentation: the mirrored frustum of the mirrored box)."""
+    ``flip`` mirrors x at random (a valid augmentation: the mirrored frustum of the mirrored box);
+    ``cat_dropout``: probability of an all-zero category vector, the runtime's "unknown category"
+    (-1, the loop's default), so the net also works without it."""
 
     def __init__(self, cache: PointCache, num_points: int, num_categories: int = 3, size_norm: str = "points",
-                 seed: int = 0, flip: bool = False):
+                 seed: int = 0, flip: bool = False, cat_dropout: float = 0.0):
         self.cache, self.num_points, self.num_categories = cache, int(num_points), int(num_categories)
         self.size_norm, self.seed, self.flip, self.epoch = size_norm, int(seed), bool(flip), 0
+        self.cat_dropout = float(cat_dropout)
 
     def __len__(self) -> int:
         return len(self.cache)
@@ -199,5 +232,7 @@ class BoxNetSamples:
         centred, centroid, length = normalise(pts)
         cls, res, scale = size_labels(gt[3:], length, self.size_norm)
         cat = one_hot(self.cache.category[self.cache.index[i]], self.num_categories)
+        if self.cat_dropout > 0 and (self.item_seed(i) // 2 % 1000) < 1000 * self.cat_dropout:
+            cat[:] = 0.0
         return (centred, cat, (gt[:3] - centroid).astype(np.float32), np.int64(cls),
                 np.asarray(res, np.float32), np.float32(scale))

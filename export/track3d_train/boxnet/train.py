@@ -19,7 +19,7 @@ __all__ = ["TrainConfig", "train", "load_checkpoint", "plot_history"]
 
 @dataclass
 class TrainConfig:
-    train_cache: str = ""
+    train_cache: str | list = ""     # one .npz or a list of them (concatenated)
     out: str = "runs/boxnet"
     num_points: int = 1024
     width: float = 1.0
@@ -32,11 +32,12 @@ class TrainConfig:
     lr_min: float = 1e-5
     weight_decay: float = 0.0
     flip: bool = True
+    cat_dropout: float = 0.1        # probability of an all-zero ("unknown") category vector
     val_every: int = 8              # every k-th train sequence is held out for validation (0: none)
     val_max: int = 600              # validation items per epoch (a fixed random subset)
     seed: int = 0
     threads: int = 1
-    max_minutes: float = 0.0        # stop after the epoch that passes this budget (0: no budget)
+    max_minutes: float = 0.0        # time budget: the cosine LR spans it, training stops there (0: none)
     max_steps: int = 0              # stop after this many steps (tests; 0: no limit)
     num_categories: int = 3
     extra: dict = field(default_factory=dict)
@@ -158,9 +159,10 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
     torch.set_num_threads(int(cfg.threads))
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
-    cache = PointCache(cfg.train_cache)
+    cache = PointCache.concat(cfg.train_cache)
     tr_cache, va_cache = _split_val(cache, cfg.val_every, cfg.seed)
-    train_ds = BoxNetSamples(tr_cache, cfg.num_points, cfg.num_categories, cfg.size_norm, cfg.seed, cfg.flip)
+    train_ds = BoxNetSamples(tr_cache, cfg.num_points, cfg.num_categories, cfg.size_norm, cfg.seed, cfg.flip,
+                             cfg.cat_dropout if cfg.use_category else 0.0)
     val_ds = None
     if va_cache is not None:
         rng = np.random.default_rng(cfg.seed + 1)
@@ -178,8 +180,16 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
         raise ValueError(f"the training cache has {len(train_ds)} items, fewer than one batch of {cfg.batch}")
     total_steps = per_epoch * cfg.epochs
 
-    def lr_at(step):  # cosine from lr to lr_min over the planned steps
-        t = min(step / max(total_steps, 1), 1.0)
+    budget_s = 60.0 * cfg.max_minutes
+
+    def progress_at(step, seconds):
+        """Fraction of the plan done: steps, or the time budget if that comes first."""
+        t = step / max(total_steps, 1)
+        if budget_s > 0:
+            t = max(t, seconds / budget_s)
+        return min(t, 1.0)
+
+    def lr_at(t):  # cosine from lr to lr_min over the plan (steps or time budget)
         return cfg.lr_min + 0.5 * (cfg.lr - cfg.lr_min) * (1 + math.cos(math.pi * t))
 
     history = {"config": asdict(cfg), "steps": [], "epochs": [], "train_items": len(train_ds),
@@ -197,6 +207,9 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
         log(f"resumed from {last}: epoch {start_epoch}, step {step}")
     t_session = time.time()
     t_before = history["seconds"]
+    if budget_s > 0 and progress_at(step, t_before) >= 1.0:
+        log(f"the time budget of {cfg.max_minutes} min is already spent ({t_before / 60:.1f} min)")
+        return history
     for epoch in range(start_epoch, cfg.epochs):
         model.train()
         train_ds.epoch = epoch
@@ -208,9 +221,14 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
             from tqdm import tqdm
             it = tqdm(it, total=per_epoch, desc=f"epoch {epoch + 1}/{cfg.epochs}", unit="batch", mininterval=5)
         t0 = time.time()
+        stop = False
         for pts, cat, crel, cls, res, scale in it:
+            frac = progress_at(step, t_before + time.time() - t_session)
+            if budget_s > 0 and frac >= 1.0:
+                stop = True
+                break
             for g in opt.param_groups:
-                g["lr"] = lr_at(step)
+                g["lr"] = lr_at(frac)
             loss, terms = boxnet_loss(model(pts, cat), crel, cls, res, scale)
             opt.zero_grad(set_to_none=True)
             loss.backward()
@@ -222,8 +240,11 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
             if step % 10 == 0:
                 history["steps"].append({"step": step, **terms})
             if cfg.max_steps and step >= cfg.max_steps:
+                stop = True
                 break
-        rec = {"epoch": epoch + 1, "step": step, "lr": lr_at(step), "train": {k: v / max(n, 1) for k, v in sums.items()},
+        if n == 0:
+            break
+        rec = {"epoch": epoch + 1, "step": step, "lr": lr_at(progress_at(step, t_before + time.time() - t_session)), "train": {k: v / max(n, 1) for k, v in sums.items()},
                "train_seconds": time.time() - t0}
         if val_ds is not None:
             rec["val"] = _validate(model, val_ds, 64)
@@ -248,9 +269,7 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
             plot_history(history, out / "loss_curve.png")
         except Exception as e:  # plotting must never kill a training run
             log(f"(plot failed: {e})")
-        done = (cfg.max_steps and step >= cfg.max_steps) or \
-               (cfg.max_minutes and (time.time() - t_session) / 60.0 >= cfg.max_minutes)
-        if done:
+        if stop:
             log(f"stopping after epoch {epoch + 1} (budget reached)")
             break
     return history

@@ -1,0 +1,274 @@
+"""A3BoxNet benchmark (issue #4 section 4): the paper's "A3BoxNet" row, ablations, speed.
+
+1. Oracle row (paper Table 2, "A3BoxNet"): the box net alone on the frustum of the
+   ground-truth 2D box of every test frame where the target is present, next to the
+   baseline estimator (minimum enclosing box of the whole frustum) on the SAME frustums:
+   AO_bev, AO_3d, ACE_3d (per sequence, averaged over sequences; track3d.evaluation).
+2. Speed: the estimator behind the loop's seam (sampling in the C++ ext + normalise + ONNX +
+   decode) on real full-size frustums, onnxruntime at 1 thread (process pinned to one core)
+   and 2 threads; the network alone; the frustum crop; the baseline estimator.
+3. onnxruntime vs torch eager on the same inputs (batch 1, 1 thread): the speed ratio.
+4. Ablations (paper Fig. 13 / Table 3): any number of `name=model.onnx` models evaluated on the
+   same oracle frustums (points 512..4096, with / without category, paper / points size
+   coding, width), plus a test-time sweep of N for the shipped model: a table and a plot.
+
+    python benchmarks/bench_boxnet.py --data /work/data/small --cache runs/boxnet/cache/boxnet_test_*.npz \
+        --ckpt runs/boxnet/main/best.pt --ablation p512=runs/boxnet/abl/p512.onnx ...
+
+Writes <out>/boxnet.json, boxnet.md (tables) and boxnet_ablation.png.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = Path(__file__).resolve().parent / "results"
+PAPER = {"AO_bev": 0.798, "AO_3d": 0.721, "ACE_3d": 0.345, "FPS": 281.5,
+         "baseline_AO_bev": 0.309, "baseline_AO_3d": 0.165, "baseline_ACE_3d": 0.876,
+         "no_category": {"AO_3d": 0.715, "AO_bev": 0.792, "ACE_3d": 0.316}}
+
+
+def _pin(one_core: bool) -> None:
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {0} if one_core else set(range(os.cpu_count() or 1)))
+
+
+def _timeit(fn, items, repeat: int = 1, warmup: int = 10):
+    for x in items[:warmup]:
+        fn(x)
+    t = []
+    for _ in range(repeat):
+        for x in items:
+            t0 = time.perf_counter()
+            fn(x)
+            t.append(time.perf_counter() - t0)
+    t = np.array(t) * 1e3
+    return {"median_ms": float(np.median(t)), "mean_ms": float(t.mean()), "p99_ms": float(np.percentile(t, 99)),
+            "fps_median": float(1e3 / np.median(t)), "n": int(len(t))}
+
+
+def oracle_row(model: str, cache, num_points: int | None = None, seed: int = 0) -> dict:
+    from track3d.boxnet import A3BoxNetEstimator
+    from track3d_train.boxnet.evaluate import onnx_runner, oracle_metrics, predict
+
+    est = A3BoxNetEstimator(model, threads=2)
+    n = num_points or est.num_points
+    pred = predict(onnx_runner(est), cache, n, est.num_categories, seed=seed)
+    m = oracle_metrics(pred, cache.field("gt3d"), cache.field("seq"))
+    m["num_points"] = n
+    m["model_meta"] = {k: est.meta.get(k) for k in ("num_points", "width", "use_category", "size_norm", "version",
+                                                   "train_data_hash", "trained")}
+    return m
+
+
+def full_frustums(data: str, split: str, cache, count: int, seed: int = 0):
+    """(points, category) of `count` oracle test frames re-cut from their depth maps, full size."""
+    from track3d.dataset import Dataset
+    from track3d.frustum import extract_frustum
+
+    ds = Dataset(data)
+    seqs = ds.sequences(split)
+    rng = np.random.default_rng(seed)
+    idx = np.sort(rng.choice(len(cache), min(count, len(cache)), replace=False))
+    out, clouds = [], []
+    for i in idx:
+        j = cache.index[i]
+        seq = seqs[int(cache.seq[j])]
+        f = int(cache.frame[j])
+        cloud = seq.points(f)
+        fr = extract_frustum(cloud, seq.gt2d[f], ds.camera.M)
+        out.append((fr, int(cache.category[j])))
+        clouds.append((cloud, seq.gt2d[f].astype(np.float64)))
+    return out, clouds, ds.camera.M
+
+
+def speed(model: str, frustums, clouds, M, threads: int) -> dict:
+    from track3d.boxnet import A3BoxNetEstimator, normalise
+    from track3d.estimators import create_estimator
+    from track3d.frustum import extract_frustum
+
+    est = A3BoxNetEstimator(model, threads=threads)
+    base = create_estimator("baseline")
+    samp = [normalise(est.sample(p))[0][None] for p, _ in frustums]
+    cats = [c for _, c in frustums]
+    r = {"threads": threads, "mean_frustum_points": float(np.mean([len(p) for p, _ in frustums])),
+         "estimator": _timeit(lambda x: est.estimate(*x), frustums, repeat=2),
+         "network": _timeit(lambda i: est.infer(samp[i], [cats[i]]), list(range(len(samp))), repeat=2),
+         "sampling": _timeit(lambda x: est.sample(x[0]), frustums),
+         "baseline_estimator": _timeit(lambda x: base.estimate(*x), frustums),
+         "frustum_crop": _timeit(lambda x: extract_frustum(x[0], x[1], M), clouds)}
+    return r
+
+
+def torch_ratio(ckpt: str, model: str, num_points: int, reps: int = 200) -> dict:
+    import torch
+
+    from track3d.boxnet import A3BoxNetEstimator, one_hot
+    from track3d_train.boxnet.train import load_checkpoint
+
+    torch.set_num_threads(1)
+    tm, _ = load_checkpoint(ckpt)
+    est = A3BoxNetEstimator(model, threads=1)
+    rng = np.random.default_rng(0)
+    xs = [rng.normal(size=(1, num_points, 3)).astype(np.float32) for _ in range(reps)]
+    cat = one_hot([0], 3)
+    with torch.inference_mode():
+        t_torch = _timeit(lambda x: tm(torch.from_numpy(x), torch.from_numpy(cat)), xs)
+    t_ort = _timeit(lambda x: est.infer(x, [0]), xs)
+    return {"torch_eager_ms": t_torch["median_ms"], "onnxruntime_ms": t_ort["median_ms"],
+            "ratio_torch_over_ort": t_torch["median_ms"] / t_ort["median_ms"], "threads": 1,
+            "torch": torch.__version__}
+
+
+def plot(res: dict, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    pts = res.get("ablation_points_trained", [])
+    if pts:
+        n = [r["num_points"] for r in pts]
+        ax[0].plot(n, [r["AO_3d"] for r in pts], "o-", label="AO_3d (retrained per N)")
+        ax[0].plot(n, [r["AO_bev"] for r in pts], "s-", label="AO_bev (retrained per N)")
+        a2 = ax[0].twinx()
+        a2.plot(n, [r["ACE_3d"] for r in pts], "^--", color="gray", label="ACE_3d m (retrained)")
+        a2.set_ylabel("ACE_3d (m)")
+        a2.legend(loc="lower right")
+    tt = res.get("test_time_points", [])
+    if tt:
+        n = [r["num_points"] for r in tt]
+        ax[0].plot(n, [r["AO_3d"] for r in tt], "o:", alpha=0.6, label="AO_3d (shipped, N at test only)")
+    ax[0].set_xlabel("input points N")
+    ax[0].set_ylabel("AO")
+    ax[0].set_title("Input points (paper Fig. 13)")
+    ax[0].legend(loc="upper left", fontsize=8)
+    ax[0].grid(alpha=0.3)
+    rows = res.get("ablation_other", [])
+    if rows:
+        names = [r["name"] for r in rows]
+        x = np.arange(len(names))
+        ax[1].bar(x - 0.2, [r["AO_3d"] for r in rows], 0.4, label="AO_3d")
+        ax[1].bar(x + 0.2, [r["AO_bev"] for r in rows], 0.4, label="AO_bev")
+        ax[1].set_xticks(x, names, rotation=20, fontsize=8)
+        ax[1].set_ylim(0, 1)
+        ax[1].legend()
+        ax[1].set_title("Category vector / size coding (Table 3)")
+    fig.tight_layout()
+    fig.savefig(str(path), dpi=110)
+    plt.close(fig)
+
+
+def markdown(res: dict) -> str:
+    o, b, p = res["oracle"]["a3boxnet"], res["oracle"]["baseline"], PAPER
+    lines = [f"# A3BoxNet benchmark ({res['machine']})", "",
+             f"Test split `{res['data']}` ({o['sequences']} sequences, {o['frames']} frames, oracle 2D boxes).", "",
+             "| estimator | AO_bev | AO_3d | ACE_3d (m) | SR@0.5 3d | FPS 1 thr | FPS 2 thr |", "|---|---|---|---|---|---|---|"]
+    s = {t["threads"]: t for t in res.get("speed", [])}
+    f1 = s.get(1, {}).get("estimator", {}).get("fps_median", float("nan"))
+    f2 = s.get(2, {}).get("estimator", {}).get("fps_median", float("nan"))
+    g1 = s.get(1, {}).get("baseline_estimator", {}).get("fps_median", float("nan"))
+    lines.append(f"| A3BoxNet (ours, shipped) | {o['AO_bev']:.3f} | {o['AO_3d']:.3f} | {o['ACE_3d']:.3f} | "
+                 f"{o['SR50_3d']:.3f} | {f1:.0f} | {f2:.0f} |")
+    lines.append(f"| baseline (enclosing box) | {b['AO_bev']:.3f} | {b['AO_3d']:.3f} | {b['ACE_3d']:.3f} | "
+                 f"{b['SR50_3d']:.3f} | {g1:.0f} | |")
+    lines.append(f"| paper A3BoxNet (GPU) | {p['AO_bev']} | {p['AO_3d']} | {p['ACE_3d']} | | {p['FPS']} | |")
+    lines.append(f"| paper baseline (in the loop) | {p['baseline_AO_bev']} | {p['baseline_AO_3d']} | "
+                 f"{p['baseline_ACE_3d']} | | | |")
+    for key, title in (("ablation_points_trained", "Input points, retrained per N"),
+                       ("test_time_points", "Input points at test time only (shipped model)"),
+                       ("ablation_other", "Category vector, size coding, width")):
+        rows = res.get(key) or []
+        if not rows:
+            continue
+        lines += ["", f"## {title}", "", "| model | N | AO_bev | AO_3d | ACE_3d (m) | net ms (1 thr) |",
+                  "|---|---|---|---|---|---|"]
+        for r in rows:
+            ms = r.get("net_ms_1thread")
+            lines.append(f"| {r.get('name', '')} | {r['num_points']} | {r['AO_bev']:.3f} | {r['AO_3d']:.3f} | "
+                         f"{r['ACE_3d']:.3f} | {'' if ms is None else f'{ms:.2f}'} |")
+    if "torch_ratio" in res:
+        t = res["torch_ratio"]
+        lines += ["", f"onnxruntime {t['onnxruntime_ms']:.2f} ms vs torch eager {t['torch_eager_ms']:.2f} ms "
+                      f"(1 thread, batch 1): torch / ORT = {t['ratio_torch_over_ort']:.2f}x"]
+    return "\n".join(lines) + "\n"
+
+
+def net_ms(model: str, n: int, reps: int = 100) -> float:
+    from track3d.boxnet import A3BoxNetEstimator
+
+    est = A3BoxNetEstimator(model, threads=1)
+    x = [np.random.default_rng(i).normal(size=(1, n, 3)).astype(np.float32) for i in range(reps)]
+    return _timeit(lambda v: est.infer(v, [0]), x)["median_ms"]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", default="/work/data/small", help="dataset root")
+    ap.add_argument("--split", default="test")
+    ap.add_argument("--cache", required=True, help="oracle frustum cache of the split (`boxnet prepare --jitters 0`)")
+    ap.add_argument("--model", default=str(ROOT / "runtime/track3d/models/a3boxnet.onnx"), help="shipped model")
+    ap.add_argument("--ckpt", default=None, help="its torch checkpoint (for the ORT vs torch ratio)")
+    ap.add_argument("--ablation", nargs="*", default=[], metavar="NAME=MODEL.onnx",
+                    help="retrained models; names starting with 'p' + digits go to the points table")
+    ap.add_argument("--test-time-points", nargs="*", type=int, default=[256, 512, 1024, 2048],
+                    help="N sweep of the shipped model at test time")
+    ap.add_argument("--speed-frames", type=int, default=300, help="frames for the timing runs")
+    ap.add_argument("--out", default=str(RESULTS), help="output folder")
+    ap.add_argument("--name", default="boxnet", help="output file stem")
+    ap.add_argument("--no-speed", action="store_true")
+    a = ap.parse_args(argv)
+
+    from track3d.evaluation.experiment import cpu_name
+    from track3d_train.boxnet.data import PointCache
+    from track3d_train.boxnet.evaluate import oracle_metrics
+
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cache = PointCache(a.cache)
+    cache = cache.subset(np.nonzero(cache.jittered == 0)[0])
+    res = {"machine": cpu_name(), "cpus": os.cpu_count(), "data": a.data, "split": a.split, "cache": a.cache,
+           "data_hash": cache.info.get("data_hash"), "model": a.model, "paper": PAPER,
+           "when": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    t0 = time.time()
+    res["oracle"] = {"a3boxnet": oracle_row(a.model, cache),
+                     "baseline": oracle_metrics(cache.field("baseline"), cache.field("gt3d"), cache.field("seq"))}
+    print(json.dumps(res["oracle"], indent=1), flush=True)
+    res["test_time_points"] = [{"name": "shipped", **oracle_row(a.model, cache, n)} for n in a.test_time_points]
+    pts, other = [], []
+    for spec in a.ablation:
+        name, path = spec.split("=", 1)
+        r = {"name": name, **oracle_row(path, cache)}
+        r["net_ms_1thread"] = net_ms(path, r["num_points"]) if not a.no_speed else None
+        (pts if name[:1] == "p" and name[1:].isdigit() else other).append(r)
+        print(name, {k: r[k] for k in ("AO_bev", "AO_3d", "ACE_3d")}, flush=True)
+    res["ablation_points_trained"] = sorted(pts, key=lambda r: r["num_points"])
+    res["ablation_other"] = other
+    res["eval_seconds"] = time.time() - t0
+    if not a.no_speed:
+        frustums, clouds, M = full_frustums(a.data, a.split, cache, a.speed_frames)
+        res["speed"] = []
+        for threads in (1, 2):
+            _pin(threads == 1)
+            res["speed"].append(speed(a.model, frustums, clouds, M, threads))
+            print(json.dumps(res["speed"][-1]), flush=True)
+        _pin(True)
+        if a.ckpt:
+            res["torch_ratio"] = torch_ratio(a.ckpt, a.model, res["oracle"]["a3boxnet"]["num_points"])
+        _pin(False)
+    (out / f"{a.name}.json").write_text(json.dumps(res, indent=1))
+    (out / f"{a.name}.md").write_text(markdown(res))
+    plot(res, out / f"{a.name}_ablation.png")
+    print(markdown(res))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
