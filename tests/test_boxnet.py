@@ -171,6 +171,40 @@ def test_prepare_cache(tiny_cache, tiny_dataset):
     assert np.all(test.jittered == 0) and len(test) > 0
 
 
+def test_concat_caches_keeps_items_and_makes_sequences_unique(tiny_cache):
+    from track3d_train.boxnet.data import PointCache
+
+    a, b = PointCache(tiny_cache[0]), PointCache(tiny_cache[1])
+    c = PointCache.concat([tiny_cache[0], tiny_cache[1]])
+    assert len(c) == len(a) + len(b)
+    np.testing.assert_array_equal(c.gt3d, np.concatenate([a.gt3d, b.gt3d]))
+    # the second cache's sequence ids follow the first's: no two caches share a sequence id
+    assert set(c.seq[: len(a)].tolist()).isdisjoint(c.seq[len(a):].tolist())
+    assert len(set(c.seq.tolist())) == len(set(a.seq.tolist())) + len(set(b.seq.tolist()))
+    # every item's points are the same array as in its source cache
+    for src, off in ((a, 0), (b, len(a))):
+        for i in (0, len(src) - 1):
+            np.testing.assert_array_equal(c.points(off + i), src.points(i))
+    assert c.info["data_hash"] not in (a.info["data_hash"], b.info["data_hash"])
+    assert PointCache.concat([tiny_cache[0]]).info["data_hash"] == a.info["data_hash"]
+
+
+def test_category_dropout_zeroes_some_vectors(tiny_cache):
+    from track3d_train.boxnet.data import BoxNetSamples, PointCache
+
+    cache = PointCache(tiny_cache[0])
+    never = BoxNetSamples(cache, 64, cat_dropout=0.0)
+    always = BoxNetSamples(cache, 64, cat_dropout=1.0)
+    half = BoxNetSamples(cache, 64, cat_dropout=0.5)
+    n = len(cache)
+    assert all(never[i][1].sum() == 1.0 for i in range(n))
+    assert all(always[i][1].sum() == 0.0 for i in range(n))
+    zeros = sum(half[i][1].sum() == 0.0 for i in range(n))
+    assert 0.2 * n < zeros < 0.8 * n
+    # the points and labels do not depend on the dropout
+    np.testing.assert_array_equal(never[3][0], always[3][0])
+
+
 def test_jitter_box_stays_in_image():
     from track3d_train.boxnet.data import JitterSpec, jitter_box
 
