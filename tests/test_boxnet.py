@@ -205,6 +205,35 @@ def test_category_dropout_zeroes_some_vectors(tiny_cache):
     np.testing.assert_array_equal(never[3][0], always[3][0])
 
 
+def test_augmentations_keep_points_inside_their_box(tiny_cache):
+    """x / y mirroring and the scale about the camera centre move points and labels together:
+    every point of an oracle frustum stays inside its (transformed) ground-truth box."""
+    from track3d.boxes import decode_size
+    from track3d_train.boxnet.data import BoxNetSamples, PointCache
+
+    cache = PointCache(tiny_cache[0])
+    cache = cache.subset(np.nonzero(cache.jittered == 0)[0])
+    plain = BoxNetSamples(cache, 64)
+    aug = BoxNetSamples(cache, 64, flip=True, flip_y=True, scale_sigma=0.2)
+    signs, scales = set(), []
+    for i in range(len(cache)):
+        pts, _, crel, cls, res, scale = aug[i]
+        size = decode_size(cls, res, scale)
+        assert np.all(np.abs(pts - crel) <= size / 2 + 2e-3), i      # 1 mm depth quantisation
+        p0, _, c0, k0, r0, s0 = plain[i]
+        size0 = decode_size(k0, r0, s0)
+        k = size.max() / size0.max()
+        scales.append(k)
+        assert 0.7 - 1e-6 <= k <= 1.4 + 1e-6
+        np.testing.assert_allclose(size, size0 * k, rtol=1e-5)
+        # the same sampled points, mirrored and scaled: p = p0 * (+-1, +-1, 1) * k
+        m = np.sign(np.sum(pts * p0, axis=0))
+        np.testing.assert_allclose(pts, p0 * m * k, rtol=1e-4, atol=1e-4)
+        signs.add(float(m[1]))
+    assert signs == {-1.0, 1.0}                                        # y is mirrored, sometimes
+    assert np.std(scales) > 0.05                                       # the scale does vary
+
+
 def test_jitter_box_stays_in_image():
     from track3d_train.boxnet.data import JitterSpec, jitter_box
 

@@ -42,7 +42,7 @@ def _train(a) -> int:
     cfg = TrainConfig(train_cache=[str(c) for c in a.cache], out=str(a.out), num_points=a.num_points, width=a.width,
                       use_category=not a.no_category, size_norm=a.size_norm, epochs=a.epochs,
                       epoch_samples=a.epoch_samples, batch=a.batch, lr=a.lr, flip=not a.no_flip,
-                      cat_dropout=a.cat_dropout,
+                      cat_dropout=a.cat_dropout, flip_y=a.flip_y, scale_aug=a.scale_aug,
                       val_every=a.val_every, seed=a.seed, threads=a.threads, max_minutes=a.max_minutes,
                       max_steps=a.max_steps)
     _log(f"training A3BoxNet into {a.out}: {cfg}")
@@ -127,6 +127,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--no-flip", action="store_true", help="no random x-mirroring")
     t.add_argument("--cat-dropout", type=float, default=0.1,
                    help="probability of an all-zero (unknown, -1) category vector in training")
+    t.add_argument("--flip-y", action="store_true", help="also mirror y at random")
+    t.add_argument("--scale-aug", type=float, default=0.0,
+                   help="sigma of a random log scale of points and box about the camera centre (e.g. 0.15)")
     t.add_argument("--val-every", type=int, default=8, help="every k-th train sequence is validation (0: none)")
     t.add_argument("--seed", type=int, default=0, help="seed")
     t.add_argument("--threads", type=int, default=1, help="torch threads")

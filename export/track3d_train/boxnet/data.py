@@ -204,13 +204,20 @@ class BoxNetSamples:
     residual scale () f32). ``epoch`` (set by the loop) changes the sampling seed;
     ``flip`` mirrors x at random (a valid augmentation: the mirrored frustum of the mirrored box);
     ``cat_dropout``: probability of an all-zero category vector, the runtime's "unknown category"
-    (-1, the loop's default), so the net also works without it."""
+    (-1, the loop's default), so the net also works without it;
+    ``flip_y`` mirrors y at random (valid for the same reason: the principal point is the image
+    centre, so the mirrored box cuts the mirrored frustum);
+    ``scale_sigma``: points and box scaled about the camera centre by exp(N(0, scale_sigma)),
+    clipped to [0.7, 1.4] (projection is scale invariant, so the same 2D box still cuts the scaled
+    scene: a bigger body farther away, or a smaller one nearer)."""
 
     def __init__(self, cache: PointCache, num_points: int, num_categories: int = 3, size_norm: str = "points",
-                 seed: int = 0, flip: bool = False, cat_dropout: float = 0.0):
+                 seed: int = 0, flip: bool = False, cat_dropout: float = 0.0, flip_y: bool = False,
+                 scale_sigma: float = 0.0):
         self.cache, self.num_points, self.num_categories = cache, int(num_points), int(num_categories)
         self.size_norm, self.seed, self.flip, self.epoch = size_norm, int(seed), bool(flip), 0
         self.cat_dropout = float(cat_dropout)
+        self.flip_y, self.scale_sigma = bool(flip_y), float(scale_sigma)
 
     def __len__(self) -> int:
         return len(self.cache)
@@ -229,6 +236,15 @@ class BoxNetSamples:
         if self.flip and (self.item_seed(i) % 2):
             pts = pts * np.array([-1.0, 1.0, 1.0], np.float32)
             gt[0] = -gt[0]
+        if self.flip_y or self.scale_sigma > 0:
+            rng = np.random.default_rng([self.item_seed(i), 17])
+            if self.flip_y and rng.random() < 0.5:
+                pts = pts * np.array([1.0, -1.0, 1.0], np.float32)
+                gt[1] = -gt[1]
+            if self.scale_sigma > 0:
+                k = float(np.clip(np.exp(rng.normal(0.0, self.scale_sigma)), 0.7, 1.4))
+                pts = pts * np.float32(k)
+                gt = gt * k
         centred, centroid, length = normalise(pts)
         cls, res, scale = size_labels(gt[3:], length, self.size_norm)
         cat = one_hot(self.cache.category[self.cache.index[i]], self.num_categories)

@@ -33,6 +33,8 @@ class TrainConfig:
     weight_decay: float = 0.0
     flip: bool = True
     cat_dropout: float = 0.1        # probability of an all-zero ("unknown") category vector
+    flip_y: bool = False            # random y-mirroring too
+    scale_aug: float = 0.0          # sigma of the log scale about the camera centre (0: none)
     val_every: int = 8              # every k-th train sequence is held out for validation (0: none)
     val_max: int = 600              # validation items per epoch (a fixed random subset)
     seed: int = 0
@@ -162,7 +164,7 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
     cache = PointCache.concat(cfg.train_cache)
     tr_cache, va_cache = _split_val(cache, cfg.val_every, cfg.seed)
     train_ds = BoxNetSamples(tr_cache, cfg.num_points, cfg.num_categories, cfg.size_norm, cfg.seed, cfg.flip,
-                             cfg.cat_dropout if cfg.use_category else 0.0)
+                             cfg.cat_dropout if cfg.use_category else 0.0, cfg.flip_y, cfg.scale_aug)
     val_ds = None
     if va_cache is not None:
         rng = np.random.default_rng(cfg.seed + 1)
