@@ -386,3 +386,14 @@ def test_cli_eval(exported, tiny_cache, tmp_path):
     assert main(["eval", "--model", str(exported[0]), "--cache", str(tiny_cache[1]), "--json", str(out)]) == 0
     r = json.loads(out.read_text())
     assert set(r) >= {"a3boxnet", "baseline"} and r["a3boxnet"]["frames"] == r["baseline"]["frames"]
+
+
+@pytest.mark.parametrize("cmd", [["boxnet", "prepare", "--data", "{x}/none", "--out", "{x}/c.npz"],
+                                 ["siamfc", "prepare", "--data", "{x}/none", "--out", "{x}/c"],
+                                 ["boxnet", "export", "--ckpt", "{x}/none.pt", "--out", "{x}/m.onnx"]])
+def test_cli_missing_inputs_are_one_line_errors(cmd, tmp_path, capsys):
+    from track3d_train.cli import main
+
+    assert main([c.format(x=tmp_path) for c in cmd]) == 2
+    err = capsys.readouterr().err
+    assert "error:" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1

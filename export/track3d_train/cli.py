@@ -25,7 +25,14 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         return 0 if argv else 2
     module = importlib.import_module(COMMANDS[argv[0]][0])
-    return int(module.main(argv[1:]) or 0)
+    from track3d.dataset import DatasetError
+    from track3d.onnxmodel import ModelError
+
+    try:
+        return int(module.main(argv[1:]) or 0)
+    except (DatasetError, ModelError, FileNotFoundError) as e:  # a user's mistake: one line, no traceback
+        print(f"track3d-train {argv[0]}: error: {e}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
