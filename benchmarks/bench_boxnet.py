@@ -60,7 +60,7 @@ def oracle_row(model: str, cache, num_points: int | None = None, seed: int = 0) 
 
     est = A3BoxNetEstimator(model, threads=2)
     n = num_points or est.num_points
-    pred = predict(onnx_runner(est), cache, n, est.num_categories, seed=seed)
+    pred = predict(onnx_runner(est), cache, n, est.num_categories, seed=seed, size_norm=est.size_norm)
     m = oracle_metrics(pred, cache.field("gt3d"), cache.field("seq"))
     m["num_points"] = n
     m["model_meta"] = {k: est.meta.get(k) for k in ("num_points", "width", "use_category", "size_norm", "version",

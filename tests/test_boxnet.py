@@ -40,6 +40,35 @@ def test_decode_batch_and_clamp():
     assert boxes[1, 3] == pytest.approx(1e-3) and boxes[1, 4] == pytest.approx(3.0)
 
 
+def test_extent_coding_hand_case():
+    from track3d.boxnet import remap_extent
+
+    p = np.array([[0, 0, 10], [2, 0, 10], [0, 1, 10.5], [2, 1, 10]], np.float64)
+    e = remap_extent(p)
+    np.testing.assert_allclose(e, [2.0, 1.0, 0.5])
+    np.testing.assert_allclose(remap_extent(p * [1, 1, 0] + [0, 0, 10]), [2.0, 1.0, 0.2])  # flat: 10% of 2 m
+    centred, centroid, scale = normalise(p, "extent")
+    np.testing.assert_allclose(scale, e)
+    # labels: size / E - 1 per axis; decoding E * (1 + r) of the predicted class gives the size back
+    cls, res, sc = size_labels(np.array([2.2, 1.0, 1.5]), e, "extent")
+    np.testing.assert_allclose(res, [0.1, 0.0, 2.0])
+    np.testing.assert_allclose(sc, e)
+    scores = np.zeros(14)
+    scores[cls] = 3.0
+    r = np.full((14, 3), 9.0)                          # other classes' residuals are ignored
+    r[cls] = res
+    box = decode(centroid, scale, np.zeros(3), np.array([0.0, 0.0, 0.5]), scores, r, size_norm="extent")
+    np.testing.assert_allclose(box, [1.0, 0.5, 10.625, 2.2, 1.0, 1.5], atol=1e-12)
+
+
+def test_loss_with_per_axis_scale():
+    z3 = torch.zeros(1, 3)
+    res_label = torch.tensor([[0.1, 0.0, 0.5]])
+    _, terms = boxnet_loss((z3, z3, torch.zeros(1, 14), torch.zeros(1, 14, 3)), z3, torch.tensor([0]),
+                           res_label, torch.tensor([[2.0, 1.0, 0.8]]))
+    assert terms["size_res"] == pytest.approx(0.5 * (0.2 ** 2 + 0.4 ** 2))   # |(0.2, 0, 0.4)| m < 1
+
+
 @pytest.mark.parametrize("size_norm", ["points", "paper"])
 def test_size_labels_round_trip(size_norm):
     rng = np.random.default_rng(0)
@@ -323,6 +352,25 @@ def test_export_without_category(tmp_path):
     assert est.model.input_names == ["points"] and not est.use_category
     assert max(parity_check(m, path).values()) < 1e-4
     assert est.estimate(np.random.default_rng(0).normal(size=(50, 3)).astype(np.float32) + 10, 1).shape == (6,)
+
+
+def test_extent_model_trains_exports_and_decodes(tiny_cache, tmp_path):
+    from track3d.boxnet import A3BoxNetEstimator
+    from track3d_train.boxnet.export import export_checkpoint
+    from track3d_train.boxnet.train import TrainConfig, train
+
+    cfg = TrainConfig(train_cache=str(tiny_cache[0]), out=str(tmp_path / "run"), num_points=64, width=0.25,
+                      epochs=1, batch=8, val_every=2, size_norm="extent", max_steps=3)
+    hist = train(cfg, progress=False, log=lambda *_: None)
+    assert np.isfinite(hist["epochs"][-1]["val"]["AO_3d"])
+    export_checkpoint(tmp_path / "run" / "last.pt", tmp_path / "ext.onnx", log=lambda *_: None)
+    est = A3BoxNetEstimator(tmp_path / "ext.onnx")
+    assert est.size_norm == "extent"
+    pts = np.random.default_rng(0).uniform([-1, -2, 9], [1, 2, 10], size=(300, 3)).astype(np.float32)
+    box = est.estimate(pts, 0)
+    # a barely trained net: residuals ~0, so the size is about the points' extents (2, 4, 1)
+    assert box.shape == (6,) and np.all(np.isfinite(box))
+    np.testing.assert_allclose(box[3:], [2, 4, 1], rtol=0.5)
 
 
 def test_estimator_on_tiny_frustums(exported, tiny_cache):

@@ -215,16 +215,11 @@ def test_create_by_unknown_names_is_a_clear_error():
         Track3D.create(CAM, estimator="nope")
 
 
-def test_from_default_needs_the_shipped_models():
-    from track3d.estimators import EstimatorUnavailable
-    from track3d.trackers2d import TrackerUnavailable
-
-    try:
-        t = Track3D.from_default(CAM, threads=1)
-    except (TrackerUnavailable, EstimatorUnavailable) as e:
-        assert "not available" in str(e)
-    else:
-        assert t.fusion
+def test_from_default_uses_the_shipped_models():
+    t = Track3D.from_default(CAM, threads=1)
+    assert t.fusion
+    assert type(t.tracker2d).__name__ == "SiamFCTracker" and t.tracker2d.meta["variant"] == "edge"
+    assert type(t.estimator).__name__ == "A3BoxNetEstimator"
 
 
 def test_oracle_tracker_frame_index():

@@ -13,22 +13,27 @@ BIN=$(dirname "$PY")
 DATA=${DATA:-/work/data/med}
 RUNS=${RUNS:-runs}
 MODELS=runtime/track3d/models
-BOXNET_MIN=${BOXNET_MIN:-35}
+BOXNET_MIN=${BOXNET_MIN:-30}
 EDGE_MIN=${EDGE_MIN:-36}
 FAITHFUL_MIN=${FAITHFUL_MIN:-40}
 mkdir -p "$RUNS" "$MODELS"
 
-# 1. data: 36 train / 18 test sequences x 100 frames, 640x480 (the `small` preset, doubled)
+# 1. data: 36 train / 18 test sequences x 100 frames, 640x480 (the `small` preset, doubled), and
+#    for A3BoxNet 120 more train-only sequences x 25 frames (seed 1): more shapes beat more frames
+DIV=${DIV:-${DATA}_div}
 "$BIN/track3d-sim" generate --preset small --train 36 --test 18 --out "$DATA" --workers 2 --no-progress
+"$BIN/track3d-sim" generate --preset small --seed 1 --train 120 --test 0 --frames 25 --out "$DIV" --workers 2 --no-progress
 
 # 2. caches (the runtime's own frustum and crop code)
 "$BIN/track3d-train" boxnet prepare --data "$DATA" --split train --jitters 5 --out "$RUNS/boxnet/cache/train.npz" --quiet
 "$BIN/track3d-train" boxnet prepare --data "$DATA" --split test --jitters 0 --out "$RUNS/boxnet/cache/test.npz" --quiet
+"$BIN/track3d-train" boxnet prepare --data "$DIV" --split train --jitters 3 --out "$RUNS/boxnet/cache/div_train.npz" --quiet
 "$BIN/track3d-train" siamfc prepare --data "$DATA" --split train --max-frames 3600 --out "$RUNS/siamfc/cache" --quiet
 
 # 3. training, one thread each, A3BoxNet and SiamFC-edge side by side, then SiamFC-faithful on both cores
-"$BIN/track3d-train" boxnet train --cache "$RUNS/boxnet/cache/train.npz" --out "$RUNS/boxnet/main" \
-    --num-points 512 --epochs 100 --max-minutes "$BOXNET_MIN" --threads 1 --quiet > "$RUNS/boxnet_train.log" 2>&1 &
+"$BIN/track3d-train" boxnet train --cache "$RUNS/boxnet/cache/train.npz" "$RUNS/boxnet/cache/div_train.npz" \
+    --out "$RUNS/boxnet/main" --num-points 512 --epochs 100 --max-minutes "$BOXNET_MIN" --flip-y --scale-aug 0.15 \
+    --size-norm extent --threads 1 --quiet > "$RUNS/boxnet_train.log" 2>&1 &
 "$BIN/track3d-train" siamfc train --variant edge --cache "$RUNS/siamfc/cache" --out "$RUNS/siamfc_edge" \
     --steps "${EDGE_STEPS:-4800}" --batch 16 --time-budget-min "$EDGE_MIN" --threads 1 --quiet > "$RUNS/siamfc_edge_train.log" 2>&1 &
 wait

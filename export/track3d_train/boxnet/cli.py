@@ -74,7 +74,7 @@ def _eval(a) -> int:
     est = A3BoxNetEstimator(a.model, threads=a.threads)
     n = a.num_points or est.num_points
     t = time.time()
-    pred = predict(onnx_runner(est), cache, n, est.num_categories, seed=a.seed)
+    pred = predict(onnx_runner(est), cache, n, est.num_categories, seed=a.seed, size_norm=est.size_norm)
     res = {"model": str(a.model), "num_points": n, "cache": str(a.cache),
            "a3boxnet": oracle_metrics(pred, cache.field("gt3d"), cache.field("seq")),
            "baseline": oracle_metrics(cache.field("baseline"), cache.field("gt3d"), cache.field("seq")),
@@ -118,8 +118,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--num-points", type=int, default=512, help="N input points (paper: 1024)")
     t.add_argument("--width", type=float, default=1.0, help="channel multiplier (1 = Frustum PointNets v1)")
     t.add_argument("--no-category", action="store_true", help="ablation: no one-hot category vector")
-    t.add_argument("--size-norm", choices=["points", "paper"], default="points",
-                   help="size-residual label normalised by L of the input points (ours) or by max(size) (paper)")
+    t.add_argument("--size-norm", choices=["points", "paper", "extent"], default="points",
+                   help="size coding: (template + r) * L of the input points (ours), the same with the label "
+                        "normalised by max(size) (paper), or E * (1 + r) with E the points' per-axis extents "
+                        "(ours, see track3d.boxnet)")
     t.add_argument("--epochs", type=int, default=25, help="planned epochs (the LR schedule spans them)")
     t.add_argument("--epoch-samples", type=int, default=0, help="items per epoch (0: the whole cache)")
     t.add_argument("--batch", type=int, default=32, help="batch size")

@@ -245,10 +245,10 @@ class BoxNetSamples:
                 k = float(np.clip(np.exp(rng.normal(0.0, self.scale_sigma)), 0.7, 1.4))
                 pts = pts * np.float32(k)
                 gt = gt * k
-        centred, centroid, length = normalise(pts)
+        centred, centroid, length = normalise(pts, self.size_norm)
         cls, res, scale = size_labels(gt[3:], length, self.size_norm)
         cat = one_hot(self.cache.category[self.cache.index[i]], self.num_categories)
         if self.cat_dropout > 0 and (self.item_seed(i) // 2 % 1000) < 1000 * self.cat_dropout:
             cat[:] = 0.0
         return (centred, cat, (gt[:3] - centroid).astype(np.float32), np.int64(cls),
-                np.asarray(res, np.float32), np.float32(scale))
+                np.asarray(res, np.float32), np.asarray(scale, np.float32))

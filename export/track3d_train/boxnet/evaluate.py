@@ -39,7 +39,7 @@ def onnx_runner(est):
 
 
 def predict(run, cache: PointCache, num_points: int, num_categories: int = 3, batch: int = 64,
-            seed: int = 12345, zero_category: bool = False) -> np.ndarray:
+            seed: int = 12345, zero_category: bool = False, size_norm: str = "points") -> np.ndarray:
     """(len(cache), 6) boxes. Sampling: the runtime sampler with seed `seed` for every item
     (what the runtime estimator does)."""
     from track3d.frustum import sample_points
@@ -48,10 +48,10 @@ def predict(run, cache: PointCache, num_points: int, num_categories: int = 3, ba
     for s in range(0, len(cache), batch):
         idx = range(s, min(s + batch, len(cache)))
         pts = np.stack([sample_points(cache.points(i), num_points, seed) for i in idx])
-        centred, centroid, length = normalise(pts)
+        centred, centroid, length = normalise(pts, size_norm)
         cats = cache.category[cache.index[list(idx)]]
         cat = one_hot(np.full_like(cats, -1) if zero_category else cats, num_categories)
-        out[s:s + len(idx)] = decode_batch(centroid, length, *run(centred, cat))
+        out[s:s + len(idx)] = decode_batch(centroid, length, *run(centred, cat), size_norm=size_norm)
     return out
 
 

@@ -32,14 +32,15 @@ def boxnet_loss(outputs, center_rel: torch.Tensor, size_cls: torch.Tensor, size_
                 scale: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
     """outputs: (center1, center2, size_scores, size_residuals) of A3BoxNet;
     center_rel (B, 3): ground-truth centre minus the centroid of the input points;
-    size_cls (B,) int64; size_res (B, 3) normalised residual label; scale (B,) metres.
+    size_cls (B,) int64; size_res (B, 3) normalised residual label; scale (B,) metres, or (B, 3)
+    per axis (the "extent" coding).
     Returns (batch-mean joint loss, {term: value})."""
     center1, center2, scores, residuals = outputs
     l_c1 = huber_norm(center_rel - center1, 1.0).mean()
     l_c2 = huber_norm(center_rel - (center1 + center2), 2.0).mean()
     l_cls = F.cross_entropy(scores, size_cls)
     r = residuals[torch.arange(len(size_cls), device=residuals.device), size_cls]
-    l_res = huber_norm((size_res - r) * scale[:, None], 1.0).mean()
+    l_res = huber_norm((size_res - r) * (scale if scale.dim() == 2 else scale[:, None]), 1.0).mean()
     total = l_c1 + l_c2 + l_cls + l_res
     return total, {"center1": l_c1.item(), "center2": l_c2.item(), "size_cls": l_cls.item(),
                    "size_res": l_res.item(), "total": total.item()}

@@ -142,8 +142,8 @@ def _validate(model, val_ds, batch: int):
             # the decoding needs the centroid and L of the sampled points: recompute them
             from track3d.boxnet import normalise
             raw = [val_ds.sample(int(i)) for i in order[s:s + batch]]
-            _, centroid, length = normalise(np.stack(raw))
-            boxes.append(decode_batch(centroid, length, *[o.numpy() for o in out]))
+            _, centroid, length = normalise(np.stack(raw), val_ds.size_norm)
+            boxes.append(decode_batch(centroid, length, *[o.numpy() for o in out], size_norm=val_ds.size_norm))
     c = val_ds.cache
     m = oracle_metrics(np.concatenate(boxes), c.field("gt3d"), c.field("seq"))
     m["loss"] = float(np.sum(losses) / len(order))
