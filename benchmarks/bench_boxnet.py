@@ -35,9 +35,13 @@ PAPER = {"AO_bev": 0.798, "AO_3d": 0.721, "ACE_3d": 0.345, "FPS": 281.5,
          "no_category": {"AO_3d": 0.715, "AO_bev": 0.792, "ACE_3d": 0.316}}
 
 
+_START_CPUS = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+
+
 def _pin(one_core: bool) -> None:
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {0} if one_core else set(range(os.cpu_count() or 1)))
+    """One core: the first of the cores this process was started on (so `taskset` chooses it)."""
+    if _START_CPUS:
+        os.sched_setaffinity(0, {_START_CPUS[0]} if one_core else set(_START_CPUS))
 
 
 def _timeit(fn, items, repeat: int = 1, warmup: int = 10):

@@ -94,7 +94,11 @@ def main(argv=None) -> int:
 
         ds = Dataset(a.data)
         seq = ds.sequences(a.split)[0]
-        i = len(seq) // 2
+        # the present frame nearest the middle (an absent target has an empty frustum)
+        present = [k for k in range(len(seq)) if not seq.absent[k] and seq.gt2d[k][2] > 0 and seq.gt2d[k][3] > 0]
+        if not present:
+            raise SystemExit(f"{seq.path}: the target is absent in every frame")
+        i = min(present, key=lambda k: abs(k - len(seq) // 2))
         out["clouds"]["frame"] = bench_cloud("frame", seq.points(i), seq.gt2d[i], ds.camera.M, a.repeat)
         out["clouds"]["frame"]["source"] = f"{a.data}/{a.split}/{seq.name} frame {i + 1}"
     out["load_average_after"] = list(os.getloadavg())
