@@ -2,8 +2,8 @@
 
 Steps: (1) render a test-only dataset with the simulator (the `sim` extra; the demo is the
 one part of the runtime that uses it, imported lazily); (2) run Track3D with the shipped
-models (SiamFC edge + A3BoxNet), or, while none is shipped, the OpenCV CSRT tracker with the
-baseline box estimator (a warning says so); (3) evaluate under the restart protocol and
+models (SiamFC edge + A3BoxNet), or, if a model cannot be loaded (a broken install), the
+OpenCV CSRT tracker / the baseline box estimator in its place, with a warning that says so; (3) evaluate under the restart protocol and
 print a Table-2-style summary; (4) write report.json, summary.json, success / precision
 plots, 3D trajectory plots and an overlay GIF of the first sequence.
 """
@@ -41,7 +41,7 @@ def pick_models(tracker: str | None, estimator: str | None, threads: int) -> tup
         try:
             create_tracker("siamfc-edge", threads=threads)
             tracker = "siamfc-edge"
-        except Exception as e:  # no shipped model yet: fall back, loudly
+        except Exception as e:  # a missing or unreadable shipped model: fall back, loudly
             tracker = "csrt"
             warnings.append(f"no shipped SiamFC ({e}); using OpenCV's CSRT as the 2D tracker")
     if estimator is None:
