@@ -41,14 +41,7 @@ CE_T = np.linspace(0.0, 50.0, 51)
 PAPER = {"SiamFC (paper, RTX 2080Ti)": {"AO_2d": 0.513, "ACE_2d": 29.986, "fps": 101.3}}
 
 
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
+from track3d.evaluation.experiment import cpu_name as cpu_model  # noqa: E402  (one implementation)
 
 
 def pin(threads: int) -> None:

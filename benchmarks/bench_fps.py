@@ -47,14 +47,7 @@ EQUIV_RTOL = 1e-3
 UNAVAILABLE = ("TrackerUnavailable", "EstimatorUnavailable", "ModelError")  # a missing model: skipped, not failed
 
 
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
+from track3d.evaluation.experiment import cpu_name as cpu_model  # noqa: E402  (one implementation)
 
 
 def pin(cpus) -> None:
