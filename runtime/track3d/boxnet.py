@@ -130,8 +130,8 @@ def decode_batch(centroid, length, center1, center2, size_scores, size_residuals
 
 def decode(centroid, length, center1, center2, size_scores, size_residuals, size_norm: str = "points") -> np.ndarray:
     """One sample's outputs (batch of 1 or unbatched) -> (6,) box."""
-    return decode_batch(np.reshape(centroid, (1, 3)), np.reshape(length, (1, -1))[:, 0] if size_norm != "extent"
-                        else np.reshape(length, (1, 3)), np.reshape(center1, (1, 3)),
+    scale = np.reshape(length, (1, 3) if size_norm == "extent" else (1,))
+    return decode_batch(np.reshape(centroid, (1, 3)), scale, np.reshape(center1, (1, 3)),
                         np.reshape(center2, (1, 3)), np.reshape(size_scores, (1, -1)),
                         np.reshape(size_residuals, (1, -1, 3)), size_norm)[0]
 
