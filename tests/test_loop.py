@@ -198,6 +198,65 @@ def test_init_rejects_bad_boxes(frames):
         Track3D(CAM, _Scripted([]), create_estimator("baseline"), weight_3d=1.5)
 
 
+def test_frames_that_break_the_contract_are_refused(frames):
+    img, pts, b2, _ = frames[1]
+    t = Track3D(CAM, _Scripted([(True, b2)] * 3), create_estimator("baseline"))
+    with pytest.raises(ValueError, match="camera is 160x120"):
+        t.init(np.zeros((120, 100, 3), np.uint8), frames[0][2], 0)     # another size: wrong frustum
+    t.init(frames[0][0], frames[0][2], 0)
+    with pytest.raises(ValueError, match="camera is 160x120"):
+        t.update(np.zeros((240, 320, 3), np.uint8), pts)
+    for bad in (np.zeros((0, 0, 3), np.uint8), img.astype(np.float32), img[..., 0], None):
+        with pytest.raises(ValueError, match="uint8 RGB"):
+            t.update(bad, pts)
+    with pytest.raises(ValueError, match=r"\(N, 3\)"):
+        t.update(img, pts.reshape(-1))
+    assert t.update(img[:, ::-1], pts).status == TRACKING               # a strided view is fine
+
+
+def test_thin_or_degenerate_frustums_are_no_points(frames):
+    """A handful of points, or a stuck / quantised cloud with every point at one place, holds no
+    shape: the estimator's answer (a zero-size box) would be a silent wrong answer."""
+    img, pts, b2, _ = frames[1]
+    fr = extract_frustum(pts, b2, CAM.M)
+    assert len(fr) > 100
+    few = fr[:15]
+    stuck = np.repeat(fr[:1], 500, axis=0)
+    t = Track3D(CAM, _Scripted([(True, b2)] * 4), create_estimator("baseline"))
+    t.init(frames[0][0], frames[0][2], 0)
+    first = t.update(img, pts)
+    assert first.status == TRACKING
+    for cloud in (few, stuck):
+        out = t.update(img, cloud)
+        assert out.status == NO_POINTS and out.num_points == len(cloud)
+        np.testing.assert_array_equal(out.box3d, first.box3d)          # keeps the last estimate
+    t.min_points = 10
+    assert t.update(img, few).status == TRACKING
+    with pytest.raises(ValueError, match="min_points"):
+        Track3D(CAM, _Scripted([]), create_estimator("baseline"), min_points=0)
+
+
+class _ThreeCategories:
+    num_categories = 3
+
+    def estimate(self, points, category):
+        return box3d_from_points(points)
+
+
+@pytest.mark.parametrize("category", [1.5, "1", True, 3, -2])
+def test_init_refuses_a_category_that_is_not_an_integer_in_range(frames, category):
+    t = Track3D(CAM, _Scripted([]), _ThreeCategories())
+    with pytest.raises(ValueError, match="category"):
+        t.init(frames[0][0], frames[0][2], category)
+
+
+@pytest.mark.parametrize("category", [-1, 0, 2, np.int64(1), 2.0])
+def test_init_takes_integer_categories(frames, category):
+    t = Track3D(CAM, _Scripted([]), _ThreeCategories())
+    t.init(frames[0][0], frames[0][2], category, points=frames[0][1])
+    assert t.category == int(category) and np.all(np.isfinite(t.box3d))
+
+
 @pytest.mark.parametrize("name", ["kcf", "csrt", "mosse"])
 def test_opencv_trackers_run_in_the_loop(frames, name):
     t = Track3D.create(CAM, tracker=name, estimator="baseline")

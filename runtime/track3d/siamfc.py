@@ -21,6 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .frames import check_image
 from .onnxmodel import ModelError, OnnxModel, shipped_model
 
 __all__ = ["SiamFCTracker", "create", "crop_square", "model_paths", "VARIANT_FILES", "TUNABLE"]
@@ -142,7 +143,7 @@ class SiamFCTracker:
         self._min_sz = max(2.0, 0.2 * float(self.target_sz.min()))
 
     def init(self, image: np.ndarray, box) -> None:
-        image = _check_image(image)
+        image = check_image(image)
         self._set_box(box)
         self._image_hw = image.shape[:2]
         self.avg_color = tuple(float(c) for c in cv2.mean(image)[:3])
@@ -163,7 +164,7 @@ class SiamFCTracker:
     def update(self, image: np.ndarray) -> tuple[bool, np.ndarray]:
         if self._kernel is None:
             raise RuntimeError("update() before init()")
-        image = _check_image(image)
+        image = check_image(image)
         t0 = _now()
         crops = np.empty((self.scale_num, self.instance_size, self.instance_size, 3), np.uint8)
         for i, f in enumerate(self.scale_factors):
@@ -206,13 +207,6 @@ class SiamFCTracker:
 def _now() -> float:
     import time
     return time.perf_counter()
-
-
-def _check_image(image) -> np.ndarray:
-    a = np.asarray(image)
-    if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8:
-        raise ValueError(f"image must be (H, W, 3) uint8 RGB, got {a.shape} {a.dtype}")
-    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
 
 
 def create(variant: str = "edge", threads: int = 1, exemplar_model: str | Path | None = None,

@@ -10,9 +10,12 @@ reports A = 0.3 A_proj + 0.7 A_2d and hands it back to the 2D tracker as its sta
 next frame (``correct(box)`` when the tracker has it: SiamFC moves its search centre and
 size, OpenCV trackers ignore it by default, see trackers2d).
 
-Nothing in the loop raises on bad data: a lost 2D target is status "lost", an empty frustum
-(or an estimate that is not finite) is status "no_points"; the 3D box then keeps the last
-estimate (nan before the first one).
+Nothing in the loop raises on bad sensor data: a lost 2D target is status "lost"; a frustum
+too thin to estimate from (fewer than `min_points` points, or all of them within 1 cm of each
+other, e.g. a quantised or stuck cloud) or an estimate that is not a finite box of positive size
+is status "no_points"; the 3D box then keeps the last estimate (nan before the first one).
+Caller errors raise ValueError: an image that is not (H, W, 3) uint8 or not the camera's size,
+a cloud that is not (N, 3), a category that is not an integer.
 """
 from __future__ import annotations
 
@@ -23,15 +26,18 @@ import numpy as np
 
 from .camera import Camera
 from .estimators import BoxEstimator, create_estimator
+from .frames import check_image
 from .frustum import Z_MAX, Z_MIN, extract_frustum
 from .fusion import WEIGHT_3D, fuse
 from .trackers2d import Tracker2D, create_tracker
 
-__all__ = ["Track3D", "TrackResult", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES"]
+__all__ = ["Track3D", "TrackResult", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES", "MIN_POINTS"]
 
 TRACKING, NO_POINTS, LOST = "tracking", "no_points", "lost"
 STATUSES = (TRACKING, NO_POINTS, LOST)
 STAGES = ("track2d", "frustum", "box3d", "fusion", "total")
+MIN_POINTS = 16          # the fewest frustum points A3BoxNet was trained on
+MIN_SPREAD_M = 0.01      # a frustum whose points all lie within 1 cm holds no shape
 
 
 @dataclass
@@ -56,11 +62,20 @@ def _valid_box2d(b: np.ndarray) -> bool:
     return bool(np.all(np.isfinite(b)) and b[2] > 0 and b[3] > 0)
 
 
+def _is_integer(v) -> bool:
+    if isinstance(v, (bool, np.bool_)):
+        return False
+    if isinstance(v, (int, np.integer)):
+        return True
+    return isinstance(v, (float, np.floating)) and float(v).is_integer()
+
+
 class Track3D:
     """The 3D tracker: one 2D tracker, one 3D box estimator, the camera of the point clouds."""
 
     def __init__(self, camera: Camera, tracker2d: Tracker2D, estimator: BoxEstimator, fusion: bool = True,
-                 weight_3d: float = WEIGHT_3D, z_range: tuple[float, float] = (Z_MIN, Z_MAX)):
+                 weight_3d: float = WEIGHT_3D, z_range: tuple[float, float] = (Z_MIN, Z_MAX),
+                 min_points: int = MIN_POINTS):
         if not isinstance(camera, Camera):
             raise TypeError(f"camera must be a track3d.Camera, got {type(camera).__name__}")
         if not 0.0 <= float(weight_3d) <= 1.0:
@@ -68,12 +83,16 @@ class Track3D:
         z0, z1 = (float(z) for z in z_range)
         if not (0.0 <= z0 < z1):
             raise ValueError(f"z_range must be (near, far) with 0 <= near < far, got {z_range}")
+        if int(min_points) < 1:
+            raise ValueError(f"min_points must be >= 1, got {min_points}")
         self.camera = camera
         self.tracker2d = tracker2d
         self.estimator = estimator
         self.fusion = bool(fusion)
         self.weight_3d = float(weight_3d)
         self.z_range = (z0, z1)
+        self.min_points = int(min_points)
+        self._size = (camera.width, camera.height)
         self._M = camera.M
         self._correct = getattr(tracker2d, "correct", None)
         self.category = -1
@@ -107,10 +126,10 @@ class Track3D:
         return extract_frustum(points, box2d, self._M, *self.z_range)
 
     def _estimate(self, pts: np.ndarray) -> np.ndarray | None:
-        if len(pts) == 0:
+        if len(pts) < self.min_points or np.ptp(pts, axis=0).max() < MIN_SPREAD_M:
             return None
         b = np.asarray(self.estimator.estimate(pts, self.category), dtype=np.float64).reshape(-1)
-        if b.shape != (6,) or not np.all(np.isfinite(b)):
+        if b.shape != (6,) or not np.all(np.isfinite(b)) or np.any(b[3:] <= 0.0):
             return None
         return b
 
@@ -124,6 +143,12 @@ class Track3D:
         b = np.asarray(box2d, dtype=np.float64).reshape(-1)
         if b.shape != (4,) or not _valid_box2d(b):
             raise ValueError(f"init needs a finite [x, y, w, h] box with positive size, got {box2d}")
+        if not _is_integer(category):
+            raise ValueError(f"category must be an integer (-1: unknown), got {category!r}")
+        n_cat = getattr(self.estimator, "num_categories", None)
+        if n_cat is not None and not -1 <= int(category) < int(n_cat):
+            raise ValueError(f"category must be in -1..{int(n_cat) - 1} for {self.estimator!r}, got {category}")
+        image = check_image(image, self._size)
         self.category = int(category)
         self.tracker2d.init(image, b)
         self.box2d = b.copy()
@@ -137,6 +162,7 @@ class Track3D:
         """Track into the next frame: image (H, W, 3) uint8 RGB, points (N, 3) float32 cloud."""
         ms: dict[str, float] = dict.fromkeys(STAGES, 0.0)
         t0 = time.perf_counter()
+        image = check_image(image, self._size)
         ok, raw = self.tracker2d.update(image)
         raw = np.asarray(raw, dtype=np.float64).reshape(-1)
         t1 = time.perf_counter()

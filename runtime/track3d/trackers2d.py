@@ -32,6 +32,8 @@ from typing import Callable, Protocol, runtime_checkable
 import cv2
 import numpy as np
 
+from .frames import check_image
+
 __all__ = [
     "Tracker2D", "OpenCVTracker", "OracleTracker", "TrackerUnavailable",
     "create_tracker", "available_trackers", "register_tracker", "NANOTRACK_DIR",
@@ -61,13 +63,6 @@ def _as_box(box) -> np.ndarray:
     if b.shape != (4,):
         raise ValueError(f"a 2D box is [x, y, w, h], got shape {np.shape(box)}")
     return b
-
-
-def _check_image(image: np.ndarray) -> np.ndarray:
-    im = np.asarray(image)
-    if im.ndim != 3 or im.shape[2] != 3 or im.dtype != np.uint8:
-        raise ValueError(f"images are (H, W, 3) uint8 RGB, got {im.shape} {im.dtype}")
-    return im
 
 
 # --- the oracle ---------------------------------------------------------------------------------
@@ -179,12 +174,12 @@ class OpenCVTracker:
         self._tracker = tracker
 
     def init(self, image: np.ndarray, box: np.ndarray) -> None:
-        bgr = cv2.cvtColor(_check_image(image), cv2.COLOR_RGB2BGR)
+        bgr = cv2.cvtColor(check_image(image), cv2.COLOR_RGB2BGR)
         self._last_bgr = bgr
         self._start(bgr, _as_box(box))
 
     def update(self, image: np.ndarray) -> tuple[bool, np.ndarray]:
-        bgr = cv2.cvtColor(_check_image(image), cv2.COLOR_RGB2BGR)
+        bgr = cv2.cvtColor(check_image(image), cv2.COLOR_RGB2BGR)
         self._last_bgr = bgr
         if self._tracker is None:
             return False, self._box.copy()
