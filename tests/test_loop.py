@@ -236,6 +236,22 @@ def test_thin_or_degenerate_frustums_are_no_points(frames):
         Track3D(CAM, _Scripted([]), create_estimator("baseline"), min_points=0)
 
 
+@pytest.mark.parametrize("name", ["baseline", "a3boxnet"])
+@pytest.mark.parametrize("bad, match", [
+    (np.zeros((0, 3), np.float32), "at least one point"),
+    (np.full((20, 3), np.nan, np.float32), "finite"),
+    (np.r_[np.ones((19, 3)), [[0.0, np.inf, 10.0]]], "finite"),
+    (np.zeros((5, 4), np.float32), r"shape \(n, 3\)"),
+    (np.zeros(30, np.float32), r"shape \(n, 3\)"),
+])
+def test_estimators_refuse_points_that_would_give_a_nan_box(name, bad, match):
+    est = create_estimator(name)
+    with pytest.raises(ValueError, match=match):
+        est.estimate(bad, 0)
+    box = est.estimate([[0.0, 0.0, 10.0], [1.0, 1.0, 11.0]] * 10, 0)      # lists of points are fine
+    assert box.shape == (6,) and np.all(np.isfinite(box))
+
+
 class _ThreeCategories:
     num_categories = 3
 

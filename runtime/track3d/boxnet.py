@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from .boxes import NUM_SIZE_CLASSES, SIZE_TEMPLATES, decode_size, size_class_of
+from .frames import check_estimator_points
 from .onnxmodel import ModelError, OnnxModel, shipped_model
 
 __all__ = [
@@ -191,9 +192,7 @@ class A3BoxNetEstimator:
 
     def estimate(self, points: np.ndarray, category: int) -> np.ndarray:
         """Frustum points (n, 3) float32, n >= 1, and the coarse category -> box (6,) float64."""
-        pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
-        if len(pts) == 0:
-            raise ValueError("A3BoxNet needs at least one point")
+        pts = check_estimator_points(points)
         centred, centroid, scale = normalise(self.sample(pts), self.size_norm)
         out = self.infer(centred[None], [category])
         return decode(centroid, scale, *out, size_norm=self.size_norm)

@@ -14,6 +14,7 @@ from typing import Callable, Protocol, runtime_checkable
 import numpy as np
 
 from .boxes import box3d_from_points
+from .frames import check_estimator_points
 
 __all__ = ["BoxEstimator", "BaselineEstimator", "EstimatorUnavailable", "create_estimator",
            "available_estimators", "register_estimator"]
@@ -43,7 +44,7 @@ class BaselineEstimator:
         return "BaselineEstimator()"
 
     def estimate(self, points: np.ndarray, category: int = -1) -> np.ndarray:
-        return box3d_from_points(points)
+        return box3d_from_points(check_estimator_points(points, np.float64))
 
 
 def _a3boxnet(**options) -> BoxEstimator:
