@@ -198,11 +198,35 @@ def markdown(res: dict) -> str:
             ms = r.get("net_ms_1thread")
             lines.append(f"| {r.get('name', '')} | {r['num_points']} | {r['AO_bev']:.3f} | {r['AO_3d']:.3f} | "
                          f"{r['ACE_3d']:.3f} | {'' if ms is None else f'{ms:.2f}'} |")
+    table3 = _category_table(res)
+    if table3:
+        lines += ["", "## Category vector (paper Table 3), same training budget and N", "",
+                  "| model | N | AO_3d | AO_bev | ACE_3d (m) |", "|---|---|---|---|---|"] + table3
     if "torch_ratio" in res:
         t = res["torch_ratio"]
         lines += ["", f"onnxruntime {t['onnxruntime_ms']:.2f} ms vs torch eager {t['torch_eager_ms']:.2f} ms "
                       f"(1 thread, batch 1): torch / ORT = {t['ratio_torch_over_ort']:.2f}x"]
     return "\n".join(lines) + "\n"
+
+
+def _category_table(res: dict) -> list[str]:
+    """Rows of the with / without category comparison: every retrained model without the
+    category vector next to the retrained model with it at the same N, then the paper's rows."""
+    withcat = {r["num_points"]: r for r in res.get("ablation_points_trained", [])
+               if (r.get("model_meta") or {}).get("use_category", True)}
+    rows = []
+    for r in res.get("ablation_other", []):
+        if (r.get("model_meta") or {}).get("use_category", True) is not False:
+            continue
+        for m, label in ((withcat.get(r["num_points"]), "with category"), (r, "without category")):
+            if m is not None:
+                rows.append(f"| {m['name']} ({label}) | {m['num_points']} | {m['AO_3d']:.3f} | {m['AO_bev']:.3f} | "
+                            f"{m['ACE_3d']:.3f} |")
+    if rows:
+        p, q = PAPER, PAPER["no_category"]
+        rows.append(f"| paper A3BoxNet (with category) | 1024 | {p['AO_3d']} | {p['AO_bev']} | {p['ACE_3d']} |")
+        rows.append(f"| paper, without category | 1024 | {q['AO_3d']} | {q['AO_bev']} | {q['ACE_3d']} |")
+    return rows
 
 
 def net_ms(model: str, n: int, reps: int = 100) -> float:
@@ -250,9 +274,11 @@ def main(argv=None) -> int:
     for spec in a.ablation:
         name, path = spec.split("=", 1)
         r = {"name": name, **oracle_row(path, cache)}
-        r["net_ms_1thread"] = net_ms(path, r["num_points"]) if not a.no_speed else None
+        _pin(True)   # the network alone at the model's N: cheap, and what N costs is half the ablation
+        r["net_ms_1thread"] = net_ms(path, r["num_points"])
+        _pin(False)
         (pts if name[:1] == "p" and name[1:].isdigit() else other).append(r)
-        print(name, {k: r[k] for k in ("AO_bev", "AO_3d", "ACE_3d")}, flush=True)
+        print(name, {k: r[k] for k in ("AO_bev", "AO_3d", "ACE_3d", "net_ms_1thread")}, flush=True)
     res["ablation_points_trained"] = sorted(pts, key=lambda r: r["num_points"])
     res["ablation_other"] = other
     res["eval_seconds"] = time.time() - t0

@@ -1,0 +1,45 @@
+"""The A3BoxNet benchmark's report: the category ablation pairs each model trained without the
+category vector with the one trained with it at the same N (paper Table 3)."""
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+spec = importlib.util.spec_from_file_location(
+    "bench_boxnet", Path(__file__).resolve().parents[1] / "benchmarks" / "bench_boxnet.py")
+bench = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(bench)
+
+
+def _row(name, n, ao3d, use_category=True):
+    return {"name": name, "num_points": n, "AO_3d": ao3d, "AO_bev": ao3d + 0.1, "ACE_3d": 0.5 - ao3d / 10,
+            "net_ms_1thread": n / 100, "model_meta": {"use_category": use_category}}
+
+
+def _res():
+    oracle = {"AO_bev": 0.85, "AO_3d": 0.79, "ACE_3d": 0.35, "SR50_3d": 0.98, "sequences": 2, "frames": 10}
+    return {"machine": "test cpu", "data": "d", "oracle": {"a3boxnet": oracle, "baseline": dict(oracle)},
+            "ablation_points_trained": [_row("p512", 512, 0.70), _row("p1024", 1024, 0.72)],
+            "ablation_other": [_row("nocat512", 512, 0.69, use_category=False), _row("w05", 512, 0.6)],
+            "test_time_points": []}
+
+
+def test_category_table_pairs_models_at_the_same_n():
+    rows = bench._category_table(_res())
+    assert rows[0] == "| p512 (with category) | 512 | 0.700 | 0.800 | 0.430 |"
+    assert rows[1] == "| nocat512 (without category) | 512 | 0.690 | 0.790 | 0.431 |"
+    assert "0.721" in rows[2] and "0.715" in rows[3]        # the paper's two rows close the table
+    assert len(rows) == 4                                  # w05 keeps its category: not in this table
+
+
+def test_category_table_is_absent_without_such_a_model():
+    res = _res()
+    res["ablation_other"] = res["ablation_other"][1:]
+    assert bench._category_table(res) == []
+    assert "Table 3" not in bench.markdown(res)
+
+
+def test_markdown_lists_the_points_ablation_with_its_cost():
+    md = bench.markdown(_res())
+    assert "| p1024 | 1024 | 0.820 | 0.720 | 0.428 | 10.24 |" in md
+    assert "## Category vector (paper Table 3)" in md
