@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -131,40 +132,62 @@ def torch_ratio(ckpt: str, model: str, num_points: int, reps: int = 200) -> dict
             "torch": torch.__version__}
 
 
+def _group(rows: list[dict], key) -> list[tuple]:
+    """(key, mean AO_3d, AO_bev, ACE_3d, min AO_3d, max AO_3d, count) per key, in key order:
+    models retrained with other seeds (names `p512_s1`, ...) make one point with a spread."""
+    out = []
+    for k in sorted({key(r) for r in rows}):
+        g = [r for r in rows if key(r) == k]
+        a = np.array([[r["AO_3d"], r["AO_bev"], r["ACE_3d"]] for r in g])
+        out.append((k, *a.mean(axis=0), a[:, 0].min(), a[:, 0].max(), len(g)))
+    return out
+
+
 def plot(res: dict, path: Path) -> None:
+    """2 x 2: accuracy against N, ACE against N, the network's cost against N, the category."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
-    pts = res.get("ablation_points_trained", [])
-    if pts:
-        n = [r["num_points"] for r in pts]
-        ax[0].plot(n, [r["AO_3d"] for r in pts], "o-", label="AO_3d (retrained per N)")
-        ax[0].plot(n, [r["AO_bev"] for r in pts], "s-", label="AO_bev (retrained per N)")
-        a2 = ax[0].twinx()
-        a2.plot(n, [r["ACE_3d"] for r in pts], "^--", color="gray", label="ACE_3d m (retrained)")
-        a2.set_ylabel("ACE_3d (m)")
-        a2.legend(loc="lower right")
+    fig, ax = plt.subplots(2, 2, figsize=(11, 7.5))
+    pts = _group(res.get("ablation_points_trained", []), lambda r: r["num_points"])
     tt = res.get("test_time_points", [])
+    if pts:
+        n = [g[0] for g in pts]
+        err = [[g[1] - g[4] for g in pts], [g[5] - g[1] for g in pts]]
+        ax[0, 0].errorbar(n, [g[1] for g in pts], yerr=err, fmt="o-", capsize=3, label="AO_3d, retrained per N")
+        ax[0, 0].plot(n, [g[2] for g in pts], "s-", label="AO_bev, retrained per N")
+        ax[0, 1].plot(n, [g[3] for g in pts], "o-", label="retrained per N")
+        cost = {r["num_points"]: r["net_ms_1thread"] for r in res.get("ablation_points_trained", [])
+                if r.get("net_ms_1thread")}
+        if cost:
+            ax[1, 0].plot(sorted(cost), [cost[k] for k in sorted(cost)], "o-")
     if tt:
         n = [r["num_points"] for r in tt]
-        ax[0].plot(n, [r["AO_3d"] for r in tt], "o:", alpha=0.6, label="AO_3d (shipped, N at test only)")
-    ax[0].set_xlabel("input points N")
-    ax[0].set_ylabel("AO")
-    ax[0].set_title("Input points (paper Fig. 13)")
-    ax[0].legend(loc="upper left", fontsize=8)
-    ax[0].grid(alpha=0.3)
-    rows = res.get("ablation_other", [])
-    if rows:
-        names = [r["name"] for r in rows]
-        x = np.arange(len(names))
-        ax[1].bar(x - 0.2, [r["AO_3d"] for r in rows], 0.4, label="AO_3d")
-        ax[1].bar(x + 0.2, [r["AO_bev"] for r in rows], 0.4, label="AO_bev")
-        ax[1].set_xticks(x, names, rotation=20, fontsize=8)
-        ax[1].set_ylim(0, 1)
-        ax[1].legend()
-        ax[1].set_title("Category vector / size coding (Table 3)")
+        ax[0, 0].plot(n, [r["AO_3d"] for r in tt], "o:", alpha=0.6, label="AO_3d, shipped model (full budget), N at test only")
+        ax[0, 1].plot(n, [r["ACE_3d"] for r in tt], "o:", alpha=0.6, label="shipped model (full budget), N at test only")
+    for a, title, ylabel in ((ax[0, 0], "Accuracy against input points (paper Fig. 13)", "AO"),
+                             (ax[0, 1], "Centre error against input points", "ACE_3d (m)"),
+                             (ax[1, 0], "Cost: the box network alone, 1 thread", "ms per frustum")):
+        a.set_xscale("log", base=2)
+        a.set_xlabel("input points N")
+        a.set_ylabel(ylabel)
+        a.set_title(title, fontsize=10)
+        a.grid(alpha=0.3)
+        if a.get_legend_handles_labels()[0]:
+            a.legend(fontsize=8)
+    cat = _category_groups(res)
+    if cat:
+        labels = [c[0] for c in cat]
+        x = np.arange(len(labels))
+        ax[1, 1].bar(x - 0.2, [c[1] for c in cat], 0.4, label="AO_3d")
+        ax[1, 1].bar(x + 0.2, [c[2] for c in cat], 0.4, label="AO_bev")
+        for xi, c in zip(x, cat):
+            ax[1, 1].text(xi, 0.05, f"ACE {c[3]:.3f} m", ha="center", fontsize=7, rotation=90, color="white")
+        ax[1, 1].set_xticks(x, labels, rotation=15, fontsize=8)
+        ax[1, 1].set_ylim(0, 1)
+        ax[1, 1].legend(fontsize=8, loc="upper right")
+    ax[1, 1].set_title("Category vector (paper Table 3)", fontsize=10)
     fig.tight_layout()
     fig.savefig(str(path), dpi=110)
     plt.close(fig)
@@ -179,10 +202,13 @@ def markdown(res: dict) -> str:
     f1 = s.get(1, {}).get("estimator", {}).get("fps_median", float("nan"))
     f2 = s.get(2, {}).get("estimator", {}).get("fps_median", float("nan"))
     g1 = s.get(1, {}).get("baseline_estimator", {}).get("fps_median", float("nan"))
+    def fps(v: float) -> str:   # "-": not measured in this run (--no-speed)
+        return "-" if not np.isfinite(v) else f"{v:.0f}"
+
     lines.append(f"| A3BoxNet (ours, shipped) | {o['AO_bev']:.3f} | {o['AO_3d']:.3f} | {o['ACE_3d']:.3f} | "
-                 f"{o['SR50_3d']:.3f} | {f1:.0f} | {f2:.0f} |")
+                 f"{o['SR50_3d']:.3f} | {fps(f1)} | {fps(f2)} |")
     lines.append(f"| baseline (enclosing box) | {b['AO_bev']:.3f} | {b['AO_3d']:.3f} | {b['ACE_3d']:.3f} | "
-                 f"{b['SR50_3d']:.3f} | {g1:.0f} | |")
+                 f"{b['SR50_3d']:.3f} | {fps(g1)} | |")
     lines.append(f"| paper A3BoxNet (GPU) | {p['AO_bev']} | {p['AO_3d']} | {p['ACE_3d']} | | {p['FPS']} | |")
     lines.append(f"| paper baseline (in the loop) | {p['baseline_AO_bev']} | {p['baseline_AO_3d']} | "
                  f"{p['baseline_ACE_3d']} | | | |")
@@ -200,8 +226,8 @@ def markdown(res: dict) -> str:
                          f"{r['ACE_3d']:.3f} | {'' if ms is None else f'{ms:.2f}'} |")
     table3 = _category_table(res)
     if table3:
-        lines += ["", "## Category vector (paper Table 3), same training budget and N", "",
-                  "| model | N | AO_3d | AO_bev | ACE_3d (m) |", "|---|---|---|---|---|"] + table3
+        lines += ["", "## Category vector (paper Table 3), same training budget and N (mean over seeds)", "",
+                  "| model | trained models | AO_3d | AO_bev | ACE_3d (m) |", "|---|---|---|---|---|"] + table3
     if "torch_ratio" in res:
         t = res["torch_ratio"]
         lines += ["", f"onnxruntime {t['onnxruntime_ms']:.2f} ms vs torch eager {t['torch_eager_ms']:.2f} ms "
@@ -209,24 +235,31 @@ def markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _category_groups(res: dict) -> list[tuple]:
+    """(label, AO_3d, AO_bev, ACE_3d, models) for: ours with the category at the N of the
+    models trained without it, ours without (each the mean over its seeds), then the paper's."""
+    nocat = [r for r in res.get("ablation_other", []) if (r.get("model_meta") or {}).get("use_category", True) is False]
+    if not nocat:
+        return []
+    out = []
+    for n in sorted({r["num_points"] for r in nocat}):
+        withcat = [r for r in res.get("ablation_points_trained", [])
+                   if r["num_points"] == n and (r.get("model_meta") or {}).get("use_category", True)]
+        without = [r for r in nocat if r["num_points"] == n]
+        for rows, label in ((withcat, f"ours N={n}, with"), (without, f"ours N={n}, without")):
+            if rows:
+                g = _group(rows, lambda r: 0)[0]
+                out.append((label, g[1], g[2], g[3], ", ".join(r["name"] for r in rows)))
+    p, q = PAPER, PAPER["no_category"]
+    out.append(("paper N=1024, with", p["AO_3d"], p["AO_bev"], p["ACE_3d"], "paper Table 3"))
+    out.append(("paper N=1024, without", q["AO_3d"], q["AO_bev"], q["ACE_3d"], "paper Table 3"))
+    return out
+
+
 def _category_table(res: dict) -> list[str]:
-    """Rows of the with / without category comparison: every retrained model without the
-    category vector next to the retrained model with it at the same N, then the paper's rows."""
-    withcat = {r["num_points"]: r for r in res.get("ablation_points_trained", [])
-               if (r.get("model_meta") or {}).get("use_category", True)}
-    rows = []
-    for r in res.get("ablation_other", []):
-        if (r.get("model_meta") or {}).get("use_category", True) is not False:
-            continue
-        for m, label in ((withcat.get(r["num_points"]), "with category"), (r, "without category")):
-            if m is not None:
-                rows.append(f"| {m['name']} ({label}) | {m['num_points']} | {m['AO_3d']:.3f} | {m['AO_bev']:.3f} | "
-                            f"{m['ACE_3d']:.3f} |")
-    if rows:
-        p, q = PAPER, PAPER["no_category"]
-        rows.append(f"| paper A3BoxNet (with category) | 1024 | {p['AO_3d']} | {p['AO_bev']} | {p['ACE_3d']} |")
-        rows.append(f"| paper, without category | 1024 | {q['AO_3d']} | {q['AO_bev']} | {q['ACE_3d']} |")
-    return rows
+    """Markdown rows of the with / without category comparison (see _category_groups)."""
+    return [f"| {label} | {models} | {a3:.3f} | {ab:.3f} | {ace:.3f} |"
+            for label, a3, ab, ace, models in _category_groups(res)]
 
 
 def net_ms(model: str, n: int, reps: int = 100) -> float:
@@ -245,7 +278,9 @@ def main(argv=None) -> int:
     ap.add_argument("--model", default=str(ROOT / "runtime/track3d/models/a3boxnet.onnx"), help="shipped model")
     ap.add_argument("--ckpt", default=None, help="its torch checkpoint (for the ORT vs torch ratio)")
     ap.add_argument("--ablation", nargs="*", default=[], metavar="NAME=MODEL.onnx",
-                    help="retrained models; names starting with 'p' + digits go to the points table")
+                    help="retrained models; names p<N> (or p<N>_s<seed> for another seed of the same "
+                         "recipe) go to the points table, models without the category vector to "
+                         "the category table")
     ap.add_argument("--test-time-points", nargs="*", type=int, default=[256, 512, 1024, 2048],
                     help="N sweep of the shipped model at test time")
     ap.add_argument("--speed-frames", type=int, default=300, help="frames for the timing runs")
@@ -277,7 +312,7 @@ def main(argv=None) -> int:
         _pin(True)   # the network alone at the model's N: cheap, and what N costs is half the ablation
         r["net_ms_1thread"] = net_ms(path, r["num_points"])
         _pin(False)
-        (pts if name[:1] == "p" and name[1:].isdigit() else other).append(r)
+        (pts if re.fullmatch(r"p\d+(_s\d+)?", name) else other).append(r)
         print(name, {k: r[k] for k in ("AO_bev", "AO_3d", "ACE_3d", "net_ms_1thread")}, flush=True)
     res["ablation_points_trained"] = sorted(pts, key=lambda r: r["num_points"])
     res["ablation_other"] = other

@@ -26,10 +26,29 @@ def _res():
 
 def test_category_table_pairs_models_at_the_same_n():
     rows = bench._category_table(_res())
-    assert rows[0] == "| p512 (with category) | 512 | 0.700 | 0.800 | 0.430 |"
-    assert rows[1] == "| nocat512 (without category) | 512 | 0.690 | 0.790 | 0.431 |"
+    assert rows[0] == "| ours N=512, with | p512 | 0.700 | 0.800 | 0.430 |"
+    assert rows[1] == "| ours N=512, without | nocat512 | 0.690 | 0.790 | 0.431 |"
     assert "0.721" in rows[2] and "0.715" in rows[3]        # the paper's two rows close the table
     assert len(rows) == 4                                  # w05 keeps its category: not in this table
+
+
+def test_other_seeds_are_averaged_with_their_spread():
+    res = _res()
+    res["ablation_points_trained"].append(_row("p512_s1", 512, 0.74))
+    res["ablation_other"].append(_row("nocat512_s1", 512, 0.71, use_category=False))
+    g = bench._group(res["ablation_points_trained"], lambda r: r["num_points"])
+    assert [x[0] for x in g] == [512, 1024] and g[0][-1] == 2
+    assert abs(g[0][1] - 0.72) < 1e-12 and g[0][4] == 0.70 and g[0][5] == 0.74   # mean, min, max AO_3d
+    rows = bench._category_table(res)
+    assert rows[0] == "| ours N=512, with | p512, p512_s1 | 0.720 | 0.820 | 0.428 |"
+    assert rows[1] == "| ours N=512, without | nocat512, nocat512_s1 | 0.700 | 0.800 | 0.430 |"
+
+
+def test_plot_writes_a_png(tmp_path):
+    res = _res()
+    res["test_time_points"] = [_row("shipped", 256, 0.7), _row("shipped", 512, 0.75)]
+    bench.plot(res, tmp_path / "a.png")
+    assert (tmp_path / "a.png").stat().st_size > 10_000
 
 
 def test_category_table_is_absent_without_such_a_model():
