@@ -1,0 +1,84 @@
+"""Body generators: the one registry of every way the simulator makes an asteroid shape.
+
+A generator turns (rng, target box volume, detail level) into a closed `Shape` in the body
+frame (origin at the box centre). Each has continuous parameters drawn from its rng, so no two
+bodies are alike; `Shape.family` is the generator's name and `Shape.params` records the drawn
+parameters. `coarse` maps a generator to one of the paper's three coarse categories
+(`shapes.FAMILIES`): the category stays in the data for the paper's comparison only, nothing
+may need it.
+
+    from track3d_sim.generators import GENERATORS, make_body
+    shape = make_body("contact_binary", rng, volume_m3=300.0, detail=6)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .errors import SimError
+from .shapes import FAMILIES, Shape, procedural_shape
+
+__all__ = ["Generator", "GENERATORS", "register", "make_body", "generator_names", "coarse_index"]
+
+
+@dataclass(frozen=True)
+class Generator:
+    """name: registry key (also `Shape.family` and the first half of the fine category);
+    make(rng, volume_m3, detail) -> Shape; coarse: index into shapes.FAMILIES;
+    star_shaped: whether every ray from the centre meets the surface once;
+    description: one line for `--help` and the docs."""
+
+    name: str
+    make: Callable[[np.random.Generator, float, int], Shape]
+    coarse: int
+    star_shaped: bool
+    description: str
+
+
+GENERATORS: dict[str, Generator] = {}
+
+
+def register(gen: Generator) -> Generator:
+    if gen.name in GENERATORS:
+        raise ValueError(f"generator {gen.name!r} is registered twice")
+    if not 0 <= gen.coarse < len(FAMILIES):
+        raise ValueError(f"generator {gen.name!r}: coarse category {gen.coarse} not in 0..{len(FAMILIES) - 1}")
+    GENERATORS[gen.name] = gen
+    return gen
+
+
+def generator_names() -> tuple[str, ...]:
+    return tuple(GENERATORS)
+
+
+def coarse_index(name: str) -> int:
+    """The paper's coarse category of a generator (-1 for user meshes and unknown names)."""
+    g = GENERATORS.get(name)
+    return g.coarse if g is not None else -1
+
+
+def make_body(name: str, rng: np.random.Generator, volume_m3: float, detail: int = 6) -> Shape:
+    """A body from generator `name` whose mean rotated box volume is ~`volume_m3`.
+
+    detail: 1..8, the icosphere subdivisions of star-shaped generators; non-radial generators
+    map it to a comparable mesh resolution. Raises SimError for an unknown name."""
+    g = GENERATORS.get(name)
+    if g is None:
+        raise SimError(f"unknown shape generator {name!r} (choose from {', '.join(GENERATORS)})")
+    shape = g.make(rng, float(volume_m3), int(detail))
+    shape.family = g.name
+    return shape
+
+
+def _legacy(family: int):
+    def make(rng: np.random.Generator, volume: float, detail: int) -> Shape:
+        return procedural_shape(family, rng, volume, detail)
+    return make
+
+
+# The three star-shaped procedural families of the first release (shapes.py).
+register(Generator("contact_binary", _legacy(0), 0, True, "two ellipsoidal lobes, radial p-norm union (star-shaped)"))
+register(Generator("spinning_top", _legacy(1), 1, True, "double cone with an equatorial ridge (star-shaped)"))
+register(Generator("irregular", _legacy(2), 2, True, "elongated, bent, saddle-dented, cratered (star-shaped)"))
