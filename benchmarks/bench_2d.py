@@ -1,4 +1,4 @@
-"""2D tracker benchmark (issue #5 section 4, paper Fig. 14): accuracy and speed in one run.
+"""2D tracker benchmark (paper Fig. 14): accuracy and speed in one run.
 
 On a dataset split (default: the test split of data/small), one-pass evaluation (init on the
 first frame with the target present, no restart, absent frames not scored) of
@@ -11,7 +11,7 @@ preloaded) at 1 thread (process pinned to one core) and 2 threads (on the first
   --sweep      the edge design sweep: width x search size x scales x int8 -> AO vs ms plot
   --ratio      onnxruntime vs torch eager speed of the SiamFC search graph (needs torch)
 
-    python benchmarks/bench_2d.py --data /work/data/small --sweep --ratio
+    python benchmarks/bench_2d.py --data data/small --sweep --ratio
 
 Writes <out>/bench_2d.json, bench_2d_success.png, bench_2d_precision.png, bench_2d_tradeoff.png
 and bench_2d.md (the table). Default out: benchmarks/results/siamfc/.

@@ -1,4 +1,4 @@
-"""A3BoxNet benchmark (issue #4 section 4): the paper's "A3BoxNet" row, ablations, speed.
+"""A3BoxNet benchmark: the paper's "A3BoxNet" row, ablations, speed.
 
 1. Oracle row (paper Table 2, "A3BoxNet"): the box net alone on the frustum of the
    ground-truth 2D box of every test frame where the target is present, next to the
@@ -12,7 +12,7 @@
    same oracle frustums (points 512..4096, with / without category, paper / points size
    coding, width), plus a test-time sweep of N for the shipped model: a table and a plot.
 
-    python benchmarks/bench_boxnet.py --data /work/data/small --cache runs/boxnet/cache/boxnet_test_*.npz \
+    python benchmarks/bench_boxnet.py --data data/small --cache runs/boxnet/cache/boxnet_test_*.npz \
         --ckpt runs/boxnet/main/best.pt --ablation p512=runs/boxnet/abl/p512.onnx ...
 
 Writes <out>/boxnet.json, boxnet.md (tables) and boxnet_ablation.png.
@@ -272,7 +272,7 @@ def net_ms(model: str, n: int, reps: int = 100) -> float:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", default="/work/data/small", help="dataset root")
+    ap.add_argument("--data", default="data/small", help="dataset root")
     ap.add_argument("--split", default="test")
     ap.add_argument("--cache", required=True, help="oracle frustum cache of the split (`boxnet prepare --jitters 0`)")
     ap.add_argument("--model", default=str(ROOT / "runtime/track3d/models/a3boxnet.onnx"), help="shipped model")

@@ -1,4 +1,4 @@
-"""Edge FPS benchmark of the full Track3D loop (issue #6 section 3).
+"""Edge FPS benchmark of the full Track3D loop.
 
 Runs the loop over preloaded frames of a dataset split (I/O excluded), re-initialising from the
 ground truth at each sequence start, for at least --frames frames per configuration, and reports

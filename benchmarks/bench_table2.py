@@ -23,7 +23,7 @@ a second Experiment without restarts (one-pass evaluation, as the 2D toolkits an
 paper's SiamFC row): SiamFC-<v> + baseline without fusion (the 2D tracker alone, exactly)
 and with fusion, and + a3boxnet with fusion: the clean fusion on / off comparison.
 
-    nice python benchmarks/bench_table2.py --data /work/data/small --split test
+    nice python benchmarks/bench_table2.py --data data/small --split test
 
 Writes <out>/table2.json (CPU model, dataset size, every row's metrics), <out>/table2.md
 (the tables, also printed), <out>/fig15_sweep.png, <out>/fig16_3d_vs_2d.png, the

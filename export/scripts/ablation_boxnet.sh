@@ -17,7 +17,7 @@ cd "$(dirname "$0")/../.."
 PY=${PY:-.venv/bin/python}
 BIN=$(dirname "$PY")
 RUNS=${RUNS:-runs}
-DATA=${DATA:-/work/data/med}
+DATA=${DATA:-data/med}
 OUT=${OUT:-$RUNS/boxnet/ablation}
 STEPS=${STEPS:-400}
 CACHES=("$RUNS/boxnet/cache/train.npz" "$RUNS/boxnet/cache/div_train.npz")

@@ -3,14 +3,14 @@
 # simulate the training data, cut the caches, train SiamFC (edge, faithful) and A3BoxNet, export.
 # Every step resumes: run it again after an interruption. Logs go to $RUNS/*.log.
 #
-#   bash export/scripts/reproduce_models.sh            # DATA=/work/data/med RUNS=runs by default
+#   bash export/scripts/reproduce_models.sh            # DATA=data/med RUNS=runs by default
 #
 # Budgets (minutes of wall time per model) can be changed with BOXNET_MIN, EDGE_MIN, FAITHFUL_MIN.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 PY=${PY:-.venv/bin/python}
 BIN=$(dirname "$PY")
-DATA=${DATA:-/work/data/med}
+DATA=${DATA:-data/med}
 RUNS=${RUNS:-runs}
 MODELS=runtime/track3d/models
 BOXNET_MIN=${BOXNET_MIN:-30}

@@ -2,8 +2,8 @@
 
 Typical run (the shipped model; see docs/a3boxnet.md):
 
-    track3d-train boxnet prepare --data /work/data/small --split train --jitters 5 --out runs/boxnet/cache
-    track3d-train boxnet prepare --data /work/data/small --split test --jitters 0 --out runs/boxnet/cache
+    track3d-train boxnet prepare --data data/small --split train --jitters 5 --out runs/boxnet/cache
+    track3d-train boxnet prepare --data data/small --split test --jitters 0 --out runs/boxnet/cache
     track3d-train boxnet train --cache runs/boxnet/cache/boxnet_train_*.npz --out runs/boxnet/main
     track3d-train boxnet export --ckpt runs/boxnet/main/best.pt --out runtime/track3d/models/a3boxnet.onnx
     track3d-train boxnet eval --model runtime/track3d/models/a3boxnet.onnx --cache runs/boxnet/cache/boxnet_test_*.npz

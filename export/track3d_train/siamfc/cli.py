@@ -1,9 +1,9 @@
 """`track3d-train siamfc prepare|train|export|eval`: the SiamFC pipeline.
 
-    track3d-train siamfc prepare --data /work/data/small --out /work/data/cache/siamfc
-    track3d-train siamfc train   --variant edge --cache /work/data/cache/siamfc --out runs/siamfc_edge
+    track3d-train siamfc prepare --data data/small --out data/cache/siamfc
+    track3d-train siamfc train   --variant edge --cache data/cache/siamfc --out runs/siamfc_edge
     track3d-train siamfc export  --checkpoint runs/siamfc_edge/ckpt.pt --out runtime/track3d/models/siamfc_edge
-    track3d-train siamfc eval    --model runtime/track3d/models/siamfc_edge --data /work/data/small --split test
+    track3d-train siamfc eval    --model runtime/track3d/models/siamfc_edge --data data/small --split test
 """
 from __future__ import annotations
 
