@@ -55,7 +55,7 @@ def sphere_path(n: int, start=(-1.0, 0.2, 12.0), step=(0.12, -0.02, 0.15)):
 
 def make_synthetic_dataset(root: Path, sequences: dict[str, int] | None = None, radius: float = 1.5,
                            absent: dict[str, list[int]] | None = None, split: str = "test") -> Path:
-    """Write a tiny dataset in the DESIGN.md layout: one moving sphere per sequence.
+    """Write a tiny dataset in the docs/dataset.md layout: one moving sphere per sequence.
 
     absent: frames (0-based) of a sequence where the target is flagged absent (its image and
     depth are then empty and the 2D label zero, as the simulator does).

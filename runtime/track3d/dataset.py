@@ -1,4 +1,4 @@
-"""The dataset on disk: file-format constants and the reader (DESIGN.md, "Dataset on disk").
+"""The dataset on disk: file-format constants and the reader (docs/dataset.md).
 
 The simulator (track3d_sim) writes this layout; training and evaluation read it here::
 

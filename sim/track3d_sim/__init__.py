@@ -2,7 +2,7 @@
 
 Headless, CPU-only ray casting (Embree through `embreex`) of procedural asteroids in
 procedural space scenes, seen by two identical pinhole cameras 0.4 m apart. Writes
-the dataset layout of DESIGN.md ("Dataset on disk"), read back by `track3d.dataset`.
+the dataset layout of docs/dataset.md, read back by `track3d.dataset`.
 
 Command line: ``track3d-sim generate | stats | preview`` (see ``track3d-sim --help``).
 """

@@ -31,7 +31,7 @@ def _mesh(text: str):
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="track3d-sim", description="3D asteroid tracking dataset simulator "
-                                "(headless CPU ray casting; writes the layout of DESIGN.md).")
+                                "(headless CPU ray casting; writes the layout of docs/dataset.md).")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="{generate,stats,preview,ply}")
     g = sub.add_parser("generate", help="render a dataset (resumable, deterministic for a seed)",
                        description="Render a dataset into --out. A killed run continues where it stopped "
