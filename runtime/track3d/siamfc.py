@@ -86,8 +86,12 @@ def model_paths(variant: str = "edge") -> tuple[Path, Path]:
 class SiamFCTracker:
     """SiamFC behind the Tracker2D seam: init(image, box), update(image) -> (ok, box), correct(box).
 
-    Images are (H, W, 3) uint8 RGB; boxes [x, y, w, h] pixels. After update, `score` holds the
-    peak of the raw response (a confidence the caller may use) and `timings_ms` the stage times.
+    Images are (H, W, 3) uint8 RGB; boxes [x, y, w, h] pixels. After update, `peak` holds the
+    peak of the raw response of the chosen scale (a logit: the network is trained with a
+    logistic loss), `score` its sigmoid 1 / (1 + exp(-peak)) in 0..1 (the network's probability
+    that the peak is the target; None before the first update) and `timings_ms` the stage times.
+    `get_state()` / `set_state(state)` save and restore everything the next update depends on
+    (exemplar feature, centre, sizes, mean colour), so a restored tracker continues bit-identically.
     """
 
     def __init__(self, exemplar_model: str | Path, search_model: str | Path, threads: int = 1, **overrides):
@@ -127,7 +131,8 @@ class SiamFCTracker:
         if self.scale_num % 2 == 0:  # no exact centre scale: penalise none
             self.penalties[:] = 1.0
         self._kernel = None
-        self.score = float("nan")
+        self.peak = float("nan")
+        self.score: float | None = None
         self.timings_ms: dict[str, float] = {}
 
     # -- state -------------------------------------------------------------------------------
@@ -173,7 +178,7 @@ class SiamFCTracker:
         responses = self.search.run({"search": crops, "exemplar_feature": self._kernel})[0]
         t2 = _now()
         if not np.all(np.isfinite(responses)):
-            self.score = float("nan")
+            self.peak, self.score = float("nan"), 0.0
             return False, self.box
         n = self.upscale_size
         if self.scale_num == 1:
@@ -184,7 +189,8 @@ class SiamFCTracker:
             best = int(np.argmax(peaks))
             resp = cv2.resize(responses[best], (n, n), interpolation=cv2.INTER_CUBIC)
             resp *= self.penalties[best]
-        self.score = float(responses[best].max())
+        self.peak = float(responses[best].max())
+        self.score = _sigmoid(self.peak)
         resp -= resp.min()
         resp /= resp.sum() + 1e-16
         resp = (1.0 - self.window_influence) * resp + self.window_influence * self.window
@@ -202,6 +208,44 @@ class SiamFCTracker:
         t3 = _now()
         self.timings_ms = {"crop": 1e3 * (t1 - t0), "net": 1e3 * (t2 - t1), "post": 1e3 * (t3 - t2)}
         return True, self.box
+
+
+    # -- checkpoint ----------------------------------------------------------------------------
+    _STATE_FIELDS = ("center", "target_sz", "z_sz", "x_sz", "_min_sz", "base_target_sz", "avg_color",
+                     "_image_hw", "peak", "score")
+
+    def get_state(self) -> dict:
+        """Everything the next update depends on, as numpy arrays and builtins (no ORT objects)."""
+        if self._kernel is None:
+            return {"initialised": False}
+        st = {k: getattr(self, k) for k in self._STATE_FIELDS}
+        st = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in st.items()}
+        st.update(initialised=True, kernel=self._kernel.copy(), avg_color=list(self.avg_color),
+                  _image_hw=list(self._image_hw))
+        return st
+
+    def set_state(self, state: dict) -> None:
+        """Restore a `get_state()` of a tracker with the same models and hyper-parameters."""
+        if not state.get("initialised"):
+            self._kernel = None
+            return
+        kernel = np.asarray(state["kernel"], dtype=np.float32)
+        shape = next(i.shape for i in self.search.session.get_inputs() if i.name == "exemplar_feature")
+        want = tuple(d if isinstance(d, int) else -1 for d in shape)
+        if kernel.ndim != len(want) or any(w > 0 and w != k for w, k in zip(want, kernel.shape)):
+            raise ValueError(f"SiamFC state: exemplar feature of shape {kernel.shape} does not fit this model")
+        self._kernel = kernel.copy()
+        for k in ("center", "target_sz", "base_target_sz"):
+            setattr(self, k, np.asarray(state[k], dtype=np.float64).reshape(2).copy())
+        for k in ("z_sz", "x_sz", "_min_sz", "peak"):
+            setattr(self, k, float(state[k]))
+        self.score = None if state.get("score") is None else float(state["score"])
+        self.avg_color = tuple(float(c) for c in state["avg_color"])
+        self._image_hw = tuple(int(v) for v in state["_image_hw"])
+
+
+def _sigmoid(x: float) -> float:
+    return float(1.0 / (1.0 + math.exp(-x))) if x > -700 else 0.0
 
 
 def _now() -> float:

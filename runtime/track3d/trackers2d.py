@@ -107,6 +107,13 @@ class OracleTracker:
     def correct(self, box: np.ndarray) -> None:
         """The oracle follows the ground truth whatever the fused box is."""
 
+    def get_state(self) -> dict:
+        """The frame position (the ground truth itself is configuration, given at construction)."""
+        return {"frame": int(self.frame)}
+
+    def set_state(self, state: dict) -> None:
+        self.frame, self._next_init = int(state["frame"]), None
+
 
 # --- OpenCV adapters ----------------------------------------------------------------------------
 
@@ -197,6 +204,26 @@ class OpenCVTracker:
         """Adopt `box` as the state: re-init on the current frame when correct='reinit', else nothing."""
         if self.correct_mode == "reinit" and self._last_bgr is not None:
             self._start(self._last_bgr, _as_box(box))
+
+    def get_state(self) -> dict:
+        """OpenCV keeps its learned model private: the state is the last frame and box, and
+        ``set_state`` re-initialises a fresh tracker on them (the appearance model restarts
+        from that frame; two restorations of one state continue identically)."""
+        if self._last_bgr is None:
+            return {"initialised": False}
+        return {"initialised": True, "restore": "reinit", "image_bgr": self._last_bgr.copy(),
+                "box": self._box.copy(), "running": self._tracker is not None}
+
+    def set_state(self, state: dict) -> None:
+        self._tracker, self._last_bgr = None, None
+        if not state.get("initialised"):
+            return
+        bgr = np.ascontiguousarray(state["image_bgr"], dtype=np.uint8)
+        box = _as_box(state["box"])
+        self._last_bgr = bgr
+        if state.get("running", True):
+            self._start(bgr, box)
+        self._box = box.copy()
 
 
 _OPENCV = {  # name -> constructors to try in order, with "is it the legacy API" (Rect2d boxes)
