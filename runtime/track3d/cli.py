@@ -4,6 +4,7 @@
     track3d eval  --data data/small --split test --results results --out reports
     track3d demo  --out track3d-demo
     track3d trackers                       # the registered 2D trackers and box estimators
+    track3d bench                          # FPS of the shipped models on this CPU (no dataset needed)
 """
 from __future__ import annotations
 
@@ -104,7 +105,43 @@ def _parser() -> argparse.ArgumentParser:
     add_arguments(d)
 
     sub.add_parser("trackers", help="list the registered 2D trackers and 3D box estimators")
+
+    b = sub.add_parser("bench", help="time the loop (or each network) on this CPU: per-stage median, p99, "
+                                     "p99.9, max ms and FPS at 1 and 2 threads, pinned; no dataset needed",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    b.add_argument("--tracker", default="siamfc-edge", help="2D tracker name")
+    b.add_argument("--estimator", default="a3boxnet", help="3D box estimator name")
+    b.add_argument("--tracker-model", metavar="PREFIX",
+                   help="<dir>/<name> of a SiamFC pair <name>_exemplar.onnx / <name>_search.onnx (default: shipped)")
+    b.add_argument("--boxnet-model", metavar="ONNX", help="an A3BoxNet ONNX file (default: shipped)")
+    b.add_argument("--frames", type=int, default=1000, help="timed frames per thread count (after 20 warm-up)")
+    b.add_argument("--threads", type=int, nargs="+", default=[1, 2], help="thread counts to time")
+    b.add_argument("--data", help="time on this dataset's first sequences instead of synthetic frames")
+    b.add_argument("--split", default="test", help="dataset split with --data")
+    b.add_argument("--models-only", action="store_true",
+                   help="time each network alone on the inputs it gets in the loop (onnxruntime_perf_test style)")
+    b.add_argument("--out", metavar="JSON", help="also write the report as JSON here")
+    b.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
+    b.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
     return ap
+
+
+def _cmd_bench(a) -> int:
+    import json
+
+    from .bench import BenchConfig, format_table, run_bench, write_json
+
+    cfg = BenchConfig(tracker=a.tracker, estimator=a.estimator, tracker_model=a.tracker_model,
+                      boxnet_model=a.boxnet_model, frames=a.frames, threads=tuple(a.threads), data=a.data,
+                      split=a.split, models_only=a.models_only)
+    for p in (a.tracker_model and Path(a.tracker_model).parent, a.boxnet_model):
+        if p and not Path(p).exists():
+            raise FileNotFoundError(f"no such model path: {p}")
+    report = run_bench(cfg, log=None if a.quiet else (lambda s: print(f"[bench] {s}", file=sys.stderr)))
+    print(json.dumps(report, indent=1) if a.json else format_table(report))
+    if a.out:
+        print(f"report: {write_json(report, a.out)}", file=sys.stderr)
+    return 0
 
 
 def _cmd_track(a) -> int:
@@ -182,6 +219,8 @@ def main(argv: list[str] | None = None) -> int:
             return _cmd_track(args)
         if args.command == "eval":
             return _cmd_eval(args)
+        if args.command == "bench":
+            return _cmd_bench(args)
         if args.command == "demo":
             from .demo import run_demo
 

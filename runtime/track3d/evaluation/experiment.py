@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import math
-import platform
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +24,7 @@ import numpy as np
 
 from ..boxes import iou_3d
 from ..dataset import Dataset, DatasetError, Sequence
+from ..machine import cpu_name
 from ..progress import Progress
 from ..tracker import STAGES, Track3D
 from .draw import OverlayWriter, draw_overlay
@@ -33,17 +33,6 @@ from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, Sequence
 from .results import INIT, SKIPPED, SequenceResult, read_result, result_folder, write_result
 
 __all__ = ["TrackerSpec", "Experiment", "run_sequence", "cpu_name"]
-
-
-def cpu_name() -> str:
-    """The CPU model name (for benchmark records)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 @dataclass
