@@ -186,7 +186,7 @@ class Track3D:
         n_cat = getattr(self.estimator, "num_categories", None)
         if n_cat is not None and not -1 <= int(category) < int(n_cat):
             raise ValueError(f"category must be in -1..{int(n_cat) - 1} for {self.estimator!r}, got {category}")
-        image = check_image(image, self._size)
+        image = self.camera.undistort_image(check_image(image, self._size))
         self.category = int(category)
         self.tracker2d.init(image, b)
         self.box2d = b.copy()
@@ -225,7 +225,7 @@ class Track3D:
             return self.skip()
         ms: dict[str, float] = dict.fromkeys(STAGES, 0.0)
         t0 = time.perf_counter()
-        image = check_image(image, self._size)
+        image = self.camera.undistort_image(check_image(image, self._size))
         ok, raw = self.tracker2d.update(image)
         raw = np.asarray(raw, dtype=np.float64).reshape(-1)
         t1 = time.perf_counter()
