@@ -68,9 +68,29 @@ def _add_data_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("track3d")
+    except Exception:  # a bare checkout without installed metadata
+        return "unknown"
+
+
+def _add_plugin_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--plugin", action="append", dest="plugins", metavar="MODULE", default=[],
+                   help="import this module (dotted name or .py file) first: it registers its trackers "
+                        "or estimators (repeatable; entry points of the groups track3d.trackers / "
+                        "track3d.estimators load by themselves)")
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="track3d", description="Track3D: 3D asteroid tracking runtime "
                                  "(2D tracker -> frustum -> 3D box estimator -> 2D-3D fusion).")
+    ap.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    ap.add_argument("--plugin", action="append", dest="plugins_top", metavar="MODULE", default=[],
+                    help="import this module (dotted name or .py file) first: it registers its trackers or "
+                         "estimators (repeatable; also accepted after the command)")
     sub = ap.add_subparsers(dest="command", required=True)
 
     t = sub.add_parser("track", help="run a 2D tracker x box estimator on a split or sequences; "
@@ -104,7 +124,10 @@ def _parser() -> argparse.ArgumentParser:
 
     add_arguments(d)
 
-    sub.add_parser("trackers", help="list the registered 2D trackers and 3D box estimators")
+    tr = sub.add_parser("trackers", help="list the registered 2D trackers and 3D box estimators (plug-ins included)")
+    _add_plugin_arg(tr)
+    _add_plugin_arg(t)
+    _add_plugin_arg(e)
 
     b = sub.add_parser("bench", help="time the loop (or each network) on this CPU: per-stage median, p99, "
                                      "p99.9, max ms and FPS at 1 and 2 threads, pinned; no dataset needed",
@@ -123,6 +146,7 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--out", metavar="JSON", help="also write the report as JSON here")
     b.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
     b.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
+    _add_plugin_arg(b)
     return ap
 
 
@@ -215,6 +239,10 @@ def main(argv: list[str] | None = None) -> int:
     from .trackers2d import TrackerUnavailable
 
     try:
+        from .plugins import import_plugin
+
+        for mod in list(getattr(args, "plugins_top", []) or []) + list(getattr(args, "plugins", []) or []):
+            import_plugin(mod)
         if args.command == "track":
             return _cmd_track(args)
         if args.command == "eval":

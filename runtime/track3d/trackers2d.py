@@ -305,8 +305,15 @@ def register_tracker(name: str, factory: Callable[..., Tracker2D]) -> None:
     _REGISTRY[name.lower()] = factory
 
 
+def _load_plugins() -> None:
+    from .plugins import TRACKER_GROUP, load_entry_points
+
+    load_entry_points(TRACKER_GROUP, register_tracker)
+
+
 def available_trackers() -> list[str]:
-    """Registered tracker names (some may still need model files to be built)."""
+    """Registered tracker names, plug-ins included (some may still need model files to be built)."""
+    _load_plugins()
     return sorted(_REGISTRY)
 
 
@@ -314,5 +321,11 @@ def create_tracker(name: str, **options) -> Tracker2D:
     """Build the tracker registered as `name` with its options (e.g. ``gt=`` for "oracle")."""
     factory = _REGISTRY.get(str(name).lower())
     if factory is None:
-        raise ValueError(f"unknown 2D tracker {name!r}; available: {', '.join(available_trackers())}")
-    return factory(**options)
+        _load_plugins()
+        factory = _REGISTRY.get(str(name).lower())
+    if factory is None:
+        raise ValueError(f"unknown 2D tracker {name!r}; available: {', '.join(available_trackers())} "
+                         "(a plug-in: --plugin MODULE or an entry point in the track3d.trackers group)")
+    from .plugins import call_factory
+
+    return call_factory("2D tracker", name, factory, options)
