@@ -16,7 +16,8 @@ __all__ = ["main", "summary_table", "set_threads", "TABLE_COLUMNS"]
 
 TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
                  ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
-                 ("restarts", "restarts", "{:d}"), ("FPS", "fps", "{:.1f}"), ("FPS_e2e", "fps_e2e", "{:.1f}"))
+                 ("restarts", "restarts", "{:d}"), ("frames", "frames", "{:d}"), ("FPS", "fps", "{:.1f}"),
+                 ("FPS_e2e", "fps_e2e", "{:.1f}"))
 
 
 def summary_table(report: dict) -> str:
@@ -104,7 +105,10 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--weight-3d", type=float, default=0.3, help="fusion weight of the projected 3D box (0.3)")
     t.add_argument("--threads", type=int, default=1, help="CPU threads of the ONNX models (default 1)")
     t.add_argument("--results", default="results", help="result folder (default ./results)")
-    t.add_argument("--name", help="result name (default <tracker>+<estimator>)")
+    t.add_argument("--name", help="result name (default <tracker>+<estimator>, tagged @<model>-<hash> for "
+                                  "non-shipped model files)")
+    t.add_argument("--replace", action="store_true",
+                   help="replace results of another configuration under the same name (default: refuse)")
     t.add_argument("--restart-skip", type=int, default=1,
                    help="re-initialise this many frames after a zero-3D-IoU frame (default 1: the next)")
     t.add_argument("--no-restart", action="store_true", help="never re-initialise from the ground truth")
@@ -182,7 +186,7 @@ def _cmd_track(a) -> int:
     # Build once up front so that an unknown name or a missing model fails before any work.
     spec.build(exp.sequences[0])
     folders = exp.run(spec, overlay=None if a.video == "none" else a.video,
-                      overlay_sequences=a.video_sequences, quiet=a.quiet)
+                      overlay_sequences=a.video_sequences, quiet=a.quiet, replace=a.replace)
     root = Path(a.results) / a.split / spec.label
     print(f"results of {spec.label} on {len(folders)} sequence(s) of {a.data}/{a.split}: {root}")
     for f in folders[:a.video_sequences]:
@@ -216,6 +220,8 @@ def _cmd_eval(a) -> int:
         exp.sequences = have
     report = exp.report(names, plots=not a.no_plots, trajectories=a.trajectories)
     print(summary_table(report))
+    for w in report.get("warnings", []):
+        print(f"track3d eval: WARNING: {w}", file=sys.stderr)
     print(f"report: {Path(a.out) / 'report.json'}")
     for f in report.get("plots", []):
         print(f"plot: {f}")
