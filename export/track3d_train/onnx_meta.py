@@ -7,7 +7,7 @@ from pathlib import Path
 
 from track3d.onnxmodel import META_KEY
 
-__all__ = ["attach_metadata", "file_hash", "hash_files"]
+__all__ = ["attach_metadata", "file_hash", "hash_files", "refuse_shipped"]
 
 
 def attach_metadata(onnx_path: str | Path, meta: dict) -> None:
@@ -35,3 +35,13 @@ def hash_files(paths) -> str:
         h.update(p.name.encode())
         h.update(p.read_bytes())
     return h.hexdigest()
+
+
+def refuse_shipped(paths, force: bool = False) -> None:
+    """ValueError when an export would overwrite a model shipped in track3d/models (unless force)."""
+    from track3d.onnxmodel import MODELS_DIR
+
+    shipped = MODELS_DIR.resolve()
+    hit = [Path(p) for p in paths if Path(p).exists() and Path(p).resolve().parent == shipped]
+    if hit and not force:
+        raise ValueError(f"{hit[0]} is a shipped model: write elsewhere with --out, or pass --force to replace it")

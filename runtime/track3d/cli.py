@@ -12,6 +12,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from .argparsing import apply_formatter, hidden_alias
+
 __all__ = ["main", "summary_table", "set_threads", "TABLE_COLUMNS"]
 
 TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
@@ -67,6 +69,7 @@ def _add_data_args(p: argparse.ArgumentParser) -> None:
                    help="only these sequences of the split")
     p.add_argument("--frames", type=int, help="only the first N frames of each sequence")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    hidden_alias(p, "--no-progress", "quiet", action="store_true")
 
 
 def _version() -> str:
@@ -102,7 +105,7 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--tracker-option", action="append", metavar="KEY=VALUE", help="option of the 2D tracker")
     t.add_argument("--estimator-option", action="append", metavar="KEY=VALUE", help="option of the estimator")
     t.add_argument("--no-fusion", action="store_true", help="report the 2D tracker's box, no 2D-3D fusion")
-    t.add_argument("--weight-3d", type=float, default=0.3, help="fusion weight of the projected 3D box (0.3)")
+    t.add_argument("--weight-3d", type=float, default=0.3, help="fusion weight of the projected 3D box")
     t.add_argument("--threads", type=int, default=1, help="CPU threads of the ONNX models (default 1)")
     t.add_argument("--results", default="results", help="result folder (default ./results)")
     t.add_argument("--name", help="result name (default <tracker>+<estimator>, tagged @<model>-<hash> for "
@@ -112,8 +115,9 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--restart-skip", type=int, default=1,
                    help="re-initialise this many frames after a zero-3D-IoU frame (default 1: the next)")
     t.add_argument("--no-restart", action="store_true", help="never re-initialise from the ground truth")
-    t.add_argument("--video", choices=("gif", "mp4", "none"), default="gif", help="overlay format (gif)")
-    t.add_argument("--video-sequences", type=int, default=1, help="how many sequences get an overlay (1)")
+    t.add_argument("--video", choices=("auto", "gif", "mp4", "none"), default="auto",
+                   help="overlay format (default auto: gif when pillow is installed, else mp4; gif needs pillow)")
+    t.add_argument("--video-sequences", type=int, default=1, help="how many sequences get an overlay")
 
     e = sub.add_parser("eval", help="results vs ground truth -> report.json, table and plots")
     _add_data_args(e)
@@ -121,7 +125,7 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--trackers", nargs="+", help="result names to compare (default: all in the folder)")
     e.add_argument("--out", default="reports", help="report folder (default ./reports)")
     e.add_argument("--no-plots", action="store_true", help="skip the plots (no matplotlib needed)")
-    e.add_argument("--trajectories", type=int, default=4, help="sequences with a 3D trajectory plot (4)")
+    e.add_argument("--trajectories", type=int, default=4, help="sequences with a 3D trajectory plot")
 
     d = sub.add_parser("demo", help="simulate a small test set, track, evaluate, write plots and an overlay")
     from .demo import add_arguments
@@ -150,8 +154,9 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--out", metavar="JSON", help="also write the report as JSON here")
     b.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
     b.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
+    hidden_alias(b, "--no-progress", "quiet", action="store_true")
     _add_plugin_arg(b)
-    return ap
+    return apply_formatter(ap)
 
 
 def _cmd_bench(a) -> int:
@@ -178,6 +183,7 @@ def _cmd_track(a) -> int:
     if a.threads < 1:
         raise ValueError("--threads must be >= 1")
     set_threads(a.threads)
+    video = _video_format(a.video)
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=a.weight_3d, threads=a.threads,
                        tracker_options=_options(a.tracker_option), estimator_options=_options(a.estimator_option),
                        name=a.name)
@@ -185,7 +191,7 @@ def _cmd_track(a) -> int:
                      restart=not a.no_restart, restart_skip=a.restart_skip)
     # Build once up front so that an unknown name or a missing model fails before any work.
     spec.build(exp.sequences[0])
-    folders = exp.run(spec, overlay=None if a.video == "none" else a.video,
+    folders = exp.run(spec, overlay=video,
                       overlay_sequences=a.video_sequences, quiet=a.quiet, replace=a.replace)
     root = Path(a.results) / a.split / spec.label
     print(f"results of {spec.label} on {len(folders)} sequence(s) of {a.data}/{a.split}: {root}")
@@ -193,6 +199,20 @@ def _cmd_track(a) -> int:
         for v in sorted(f.glob("*_overlay.*")):
             print(f"overlay: {v}")
     return 0
+
+
+def _video_format(choice: str) -> str | None:
+    """--video -> "gif" / "mp4" / None; gif needs pillow (say so instead of writing an mp4)."""
+    import importlib.util
+
+    has_pil = importlib.util.find_spec("PIL") is not None
+    if choice == "none":
+        return None
+    if choice == "auto":
+        return "gif" if has_pil else "mp4"
+    if choice == "gif" and not has_pil:
+        raise ValueError("--video gif needs pillow: pip install 'track3d[plot]' (or use --video mp4)")
+    return choice
 
 
 def _cmd_eval(a) -> int:

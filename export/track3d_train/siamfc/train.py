@@ -17,7 +17,9 @@ __all__ = ["train", "load_checkpoint", "plot_log"]
 
 
 def load_checkpoint(path) -> tuple[SiamFC, dict]:
-    ck = torch.load(str(path), map_location="cpu", weights_only=False)
+    from ..checkpoint import load_checkpoint_dict
+
+    ck = load_checkpoint_dict(path, "SiamFC")
     net = SiamFC(SiamFCConfig.from_dict(ck["config"]))
     net.load_state_dict(ck["model"])
     return net, ck
