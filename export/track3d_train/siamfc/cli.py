@@ -26,8 +26,18 @@ def _prepare(a) -> int:
             print("error: give --data ROOT (a dataset) or --synthetic N", file=sys.stderr)
             return 2
         seqs = sequences_from_dataset(a.data, a.split, stride=a.stride)
+    if a.synthetic:
+        import hashlib
+
+        ident = {"data_hash": hashlib.sha256(f"synthetic:{a.synthetic}:{a.synthetic_frames}:{a.seed}".encode())
+                 .hexdigest(), "data_name": f"synthetic x{a.synthetic} (seed {a.seed})"}
+    else:
+        from track3d.dataset import Dataset
+
+        from ..boxnet.data import split_hash
+        ident = {"data_hash": split_hash(Dataset(a.data), a.split), "data_name": f"{Path(a.data).name}/{a.split}"}
     t0 = time.perf_counter()
-    out = build_cache(seqs, a.out, max_frames=a.max_frames, progress=not a.quiet)
+    out = build_cache(seqs, a.out, max_frames=a.max_frames, progress=not a.quiet, **ident)
     info = json.loads((out / "index.json").read_text())
     print(f"cache {out}: {len(info['seq'])} crops from {len(info['sequences'])} sequences "
           f"in {time.perf_counter() - t0:.0f} s")
@@ -72,7 +82,8 @@ def _export(a) -> int:
         net.cfg = dataclasses.replace(net.cfg, **over)
     extra = {"training": {"steps": ck.get("step"), "batch": ck.get("batch"), "seed": ck.get("seed"),
                           "elapsed_s": round(float(ck.get("elapsed_s", 0)), 1),
-                          "data": a.data_note or "track3d small train split (no ILSVRC-VID pre-training)"}}
+                          "data": a.data_note or "track3d small train split (no ILSVRC-VID pre-training)"},
+             "train_data_hash": ck.get("train_data_hash"), "train_data": ck.get("train_data")}
     pz, px = export_onnx(net, a.out, extra)
     p = parity(net, pz, px)
     print(f"wrote {pz} ({pz.stat().st_size / 1e6:.2f} MB), {px} ({px.stat().st_size / 1e6:.2f} MB)")

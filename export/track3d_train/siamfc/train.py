@@ -74,6 +74,9 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
     step, elapsed0 = 0, 0.0
     sampler = PairSampler(CropCache(cache_dir), cfg.exemplar_size, cfg.train_instance_size,
                           max_gap=max_gap, seed=seed)
+    from .data import cache_data_info
+
+    data_info = cache_data_info(cache_dir)
     if resume and ck_path.is_file():
         ck = torch.load(str(ck_path), map_location="cpu", weights_only=False)
         net.load_state_dict(ck["model"])
@@ -128,7 +131,7 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
             if now - last_ck >= ckpt_every_s or step == steps or budget_hit:
                 _save(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
                                 "config": cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
-                                "batch": batch, "seed": seed})
+                                "batch": batch, "seed": seed, **data_info})
                 last_ck = now
             if budget_hit:
                 stopped = "time budget"
