@@ -123,14 +123,16 @@ def test_low_score_counts_as_bad():
     assert a.score == pytest.approx(0.1) and a.status == TRACKING and b.status == LOST
 
 
-def test_siamfc_score_is_the_sigmoid_of_the_peak():
+def test_siamfc_score_is_the_peak_relative_to_the_init_frame():
     t = _make("siamfc-edge", "baseline")
     img, pts, box = _frame(0)
     t.init(img, box, 0)
     out = t.update(*_frame(1)[:2])
-    peak = t.tracker2d.peak
-    assert out.score == pytest.approx(1.0 / (1.0 + np.exp(-peak)))
-    assert 0.0 <= out.score <= 1.0
+    tr = t.tracker2d
+    assert tr.ref_peak > 0 and out.score == pytest.approx(min(tr.peak / tr.ref_peak, 1.0))
+    assert out.score > 0.5
+    black = t.update(np.zeros_like(img), pts)
+    assert black.score < 0.2                      # nothing to match: low confidence
 
 
 def test_describe_lists_models_with_hashes():
