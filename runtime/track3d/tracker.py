@@ -14,6 +14,11 @@ Nothing in the loop raises on bad sensor data: a lost 2D target is status "lost"
 too thin to estimate from (fewer than `min_points` points, or all of them within 1 cm of each
 other, e.g. a quantised or stuck cloud) or an estimate that is not a finite box of positive size
 is status "no_points"; the 3D box then keeps the last estimate (nan before the first one).
+Each result also carries the 2D tracker's confidence (`score`, 0..1 or None), how many frames
+the 3D box has been held (`held_frames`); after `lost_after` consecutive frames without a usable
+estimate (or with a score below `min_score`) the status is "lost". `skip()` / `update(None,
+points)` coasts over a dropped frame. `get_state()` / `set_state()` checkpoint the tracker as
+plain data; `describe()` says what it runs (names, options, model files with sha256).
 Caller errors raise ValueError: an image that is not (H, W, 3) uint8 or not the camera's size,
 a cloud that is not (N, 3), a category that is not an integer.
 """
