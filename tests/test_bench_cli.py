@@ -87,3 +87,15 @@ def test_synthetic_frames_have_the_target():
     img, pts, box = fr[0]
     assert img.shape == (120, 160, 3) and img.dtype == np.uint8 and len(pts) > 100
     assert box[2] > 5 and box[3] > 5
+
+
+def test_bench_on_a_dataset(tmp_path, capsys):
+    from test_loop import make_synthetic_dataset
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 5})
+    assert main(["bench", "--tracker", "kcf", "--estimator", "baseline", "--data", str(root), "--frames", "6",
+                 "--threads", "1", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["source"]["kind"] == "dataset" and rep["results"][0]["frames"] == 6
+    assert main(["bench", "--data", str(tmp_path / "none"), "--frames", "2"]) == 2
+    assert "no dataset" in capsys.readouterr().err
