@@ -321,4 +321,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from track3d.argparsing import run_main
+
+    sys.exit(run_main(main, "bench_2d.py"))

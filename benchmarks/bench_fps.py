@@ -47,29 +47,8 @@ EQUIV_RTOL = 1e-3
 UNAVAILABLE = ("TrackerUnavailable", "EstimatorUnavailable", "ModelError")  # a missing model: skipped, not failed
 
 
-from track3d.evaluation.experiment import cpu_name as cpu_model  # noqa: E402  (one implementation)
-
-
-def pin(cpus) -> None:
-    """Affinity of EVERY thread of the process (os.sched_setaffinity(0) only sets the calling
-    thread's: pools started earlier, e.g. torch's OpenMP workers, would keep the old set)."""
-    cpus = set(cpus)
-    for tid in os.listdir("/proc/self/task"):
-        try:
-            os.sched_setaffinity(int(tid), cpus)
-        except OSError:  # a thread that just exited
-            pass
-
-
-def affinity_of_all_threads() -> list[int]:
-    """Union of the CPUs any thread of the process may run on."""
-    cpus: set[int] = set()
-    for tid in os.listdir("/proc/self/task"):
-        try:
-            cpus |= os.sched_getaffinity(int(tid))
-        except OSError:
-            pass
-    return sorted(cpus)
+from track3d.machine import affinity_of_all_threads, pin  # noqa: E402  (one implementation)
+from track3d.machine import cpu_name as cpu_model  # noqa: E402
 
 
 class EquivalenceError(RuntimeError):
@@ -507,4 +486,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from track3d.argparsing import run_main
+
+    sys.exit(run_main(main, "bench_fps.py"))

@@ -115,4 +115,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from track3d.argparsing import run_main
+
+    raise SystemExit(run_main(main, "bench_frustum.py"))

@@ -654,4 +654,6 @@ def _spec_dict(spec) -> dict:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from track3d.argparsing import run_main
+
+    sys.exit(run_main(main, "bench_table2.py"))

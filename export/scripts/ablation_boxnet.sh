@@ -32,7 +32,7 @@ train() {  # name, extra args...
         --epochs 4 --epoch-samples $((STEPS * 8)) --max-steps "$STEPS" \
         --size-norm extent --flip-y --scale-aug 0.15 --threads 1 --seed 0 --quiet "$@" \
         > "$OUT/$name.log" 2>&1
-    "$BIN/track3d-train" boxnet export --ckpt "$OUT/$name/last.pt" --out "$OUT/$name.onnx" >> "$OUT/$name.log" 2>&1
+    "$BIN/track3d-train" boxnet export --checkpoint "$OUT/$name/last.pt" --out "$OUT/$name.onnx" >> "$OUT/$name.log" 2>&1
 }
 
 # two chains of about equal cost, one per core; the N = 512 pair once more with another seed,

@@ -36,16 +36,16 @@ DIV=${DIV:-${DATA}_div}
     --out "$RUNS/boxnet/main" --num-points 512 --epochs 100 --max-minutes "$BOXNET_MIN" --flip-y --scale-aug 0.15 \
     --size-norm extent --threads 1 --quiet > "$RUNS/boxnet_train.log" 2>&1 &
 "$BIN/track3d-train" siamfc train --variant edge --cache "$RUNS/siamfc/cache" --out "$RUNS/siamfc_edge" \
-    --steps "${EDGE_STEPS:-4800}" --batch 16 --time-budget-min "$EDGE_MIN" --threads 1 --quiet > "$RUNS/siamfc_edge_train.log" 2>&1 &
+    --max-steps "${EDGE_STEPS:-4800}" --batch 16 --time-budget-min "$EDGE_MIN" --threads 1 --quiet > "$RUNS/siamfc_edge_train.log" 2>&1 &
 wait
 "$BIN/track3d-train" siamfc train --variant faithful --cache "$RUNS/siamfc/cache" --out "$RUNS/siamfc_faithful" \
-    --steps "${FAITHFUL_STEPS:-900}" --batch 8 --time-budget-min "$FAITHFUL_MIN" --threads 2 --quiet > "$RUNS/siamfc_faithful_train.log" 2>&1
+    --max-steps "${FAITHFUL_STEPS:-900}" --batch 8 --time-budget-min "$FAITHFUL_MIN" --threads 2 --quiet > "$RUNS/siamfc_faithful_train.log" 2>&1
 
 "$BIN/track3d-train" boxnet train --cache "$RUNS/boxnet/cache/train.npz" "$RUNS/boxnet/cache/div_train.npz" \
     --out "$RUNS/boxnet/main" --num-points 512 --epochs 100 --max-minutes "$BOXNET_MIN2" --flip-y --scale-aug 0.15 \
     --size-norm extent --threads 2 --quiet >> "$RUNS/boxnet_train.log" 2>&1
 
 # 4. export with parity checks into the package
-"$BIN/track3d-train" boxnet export --ckpt "$RUNS/boxnet/main/best.pt" --out "$MODELS/a3boxnet.onnx"
-"$BIN/track3d-train" siamfc export --checkpoint "$RUNS/siamfc_edge/ckpt.pt" --out "$MODELS/siamfc_edge"
-"$BIN/track3d-train" siamfc export --checkpoint "$RUNS/siamfc_faithful/ckpt.pt" --out "$MODELS/siamfc_faithful"
+"$BIN/track3d-train" boxnet export --checkpoint "$RUNS/boxnet/main/best.pt" --out "$MODELS/a3boxnet.onnx" --force
+"$BIN/track3d-train" siamfc export --checkpoint "$RUNS/siamfc_edge/ckpt.pt" --out "$MODELS/siamfc_edge" --force
+"$BIN/track3d-train" siamfc export --checkpoint "$RUNS/siamfc_faithful/ckpt.pt" --out "$MODELS/siamfc_faithful" --force

@@ -2,6 +2,7 @@
 
     track3d-train boxnet  ...   A3BoxNet (see `track3d-train boxnet --help`)
     track3d-train siamfc  ...   SiamFC, faithful and edge variants
+    track3d-train --version
 """
 from __future__ import annotations
 
@@ -16,6 +17,14 @@ COMMANDS = {
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "--version":
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            print(f"track3d-train {version('track3d')}")
+        except PackageNotFoundError:
+            print("track3d-train unknown")
+        return 0
     if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
         print(__doc__.strip())
         for name, (_, text) in COMMANDS.items():
@@ -30,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         return int(module.main(argv[1:]) or 0)
-    except (DatasetError, ModelError, FileNotFoundError) as e:  # a user's mistake: one line, no traceback
+    except (DatasetError, ModelError, FileNotFoundError, ValueError) as e:  # a user's mistake: one line
         print(f"track3d-train {argv[0]}: error: {e}", file=sys.stderr)
         return 2
 

@@ -7,21 +7,87 @@ from pathlib import Path
 
 from track3d.onnxmodel import META_KEY
 
-__all__ = ["attach_metadata", "file_hash", "hash_files"]
+__all__ = ["attach_metadata", "set_fields", "rewrite_metadata", "doc_string", "file_hash", "hash_files",
+           "refuse_shipped", "PRODUCER", "check_portable"]
+
+PRODUCER = "track3d-train"
 
 
-def attach_metadata(onnx_path: str | Path, meta: dict) -> None:
-    """Store `meta` (JSON-serialisable, must hold 'kind' and 'version') in the ONNX file."""
-    import onnx
+def _producer_version() -> str:
+    try:
+        from importlib.metadata import version
 
+        return version("track3d")
+    except Exception:  # a bare checkout
+        return "unknown"
+
+
+def doc_string(meta: dict) -> str:
+    """One paragraph for ONNX's doc_string: what the model is and where its metadata lives."""
+    kind = meta.get("kind", "?")
+    what = {"a3boxnet": "A3BoxNet 3D box estimator (Track3D, paper IV-B): centred frustum points "
+                        "(+ one-hot category) -> centre corrections, size class scores and residuals",
+            "siamfc-exemplar": "SiamFC exemplar branch: uint8 RGB exemplar crop -> exemplar feature",
+            "siamfc-search": "SiamFC search branch: uint8 RGB search crops + exemplar feature -> response maps "
+                             "(logits)"}.get(kind, kind)
+    variant = f", variant {meta['variant']}" if meta.get("variant") else ""
+    return (f"{what}{variant}. Made by {PRODUCER} (track3d project); the runtime reads its settings from "
+            f"the JSON metadata under the key '{META_KEY}' (version {meta.get('version')}).")
+
+
+def set_fields(model, meta: dict) -> None:
+    """Write `meta` under META_KEY and fill ONNX's standard fields (producer, model_version,
+    doc_string) of an onnx.ModelProto in memory."""
     if "kind" not in meta or "version" not in meta:
         raise ValueError("model metadata needs 'kind' and 'version'")
-    model = onnx.load(str(onnx_path))
+    check_portable(meta)
     del model.metadata_props[:]
     entry = model.metadata_props.add()
     entry.key = META_KEY
     entry.value = json.dumps(meta, sort_keys=True)
+    model.producer_name = PRODUCER
+    model.producer_version = _producer_version()
+    model.model_version = int(float(meta["version"]))
+    model.doc_string = doc_string(meta)
+
+
+def attach_metadata(onnx_path: str | Path, meta: dict) -> None:
+    """Store `meta` (JSON-serialisable, must hold 'kind' and 'version') in the ONNX file, with
+    the standard ONNX fields filled."""
+    import onnx
+
+    model = onnx.load(str(onnx_path))
+    set_fields(model, meta)
     onnx.save(model, str(onnx_path))
+
+
+def rewrite_metadata(onnx_path: str | Path, meta: dict) -> None:
+    """Replace the metadata of an existing file, weights untouched: raises AssertionError if
+    the graph's serialised bytes would change."""
+    import onnx
+
+    model = onnx.load(str(onnx_path))
+    before = model.graph.SerializeToString()
+    set_fields(model, meta)
+    if model.graph.SerializeToString() != before:
+        raise AssertionError(f"{onnx_path}: the graph changed while rewriting metadata")
+    onnx.save(model, str(onnx_path))
+    if onnx.load(str(onnx_path)).graph.SerializeToString() != before:
+        raise AssertionError(f"{onnx_path}: the graph bytes changed on disk")
+
+
+def check_portable(meta) -> None:
+    """No absolute path of the exporting machine in metadata (a user has only the package)."""
+    def walk(v):
+        if isinstance(v, dict):
+            for x in v.values():
+                walk(x)
+        elif isinstance(v, list):
+            for x in v:
+                walk(x)
+        elif isinstance(v, str) and (v.startswith("/") or (len(v) > 2 and v[1:3] in (":\\", ":/"))):
+            raise ValueError(f"model metadata holds an absolute path {v!r}: store a name or a hash instead")
+    walk(meta)
 
 
 def file_hash(path: str | Path) -> str:
@@ -35,3 +101,13 @@ def hash_files(paths) -> str:
         h.update(p.name.encode())
         h.update(p.read_bytes())
     return h.hexdigest()
+
+
+def refuse_shipped(paths, force: bool = False) -> None:
+    """ValueError when an export would overwrite a model shipped in track3d/models (unless force)."""
+    from track3d.onnxmodel import MODELS_DIR
+
+    shipped = MODELS_DIR.resolve()
+    hit = [Path(p) for p in paths if Path(p).exists() and Path(p).resolve().parent == shipped]
+    if hit and not force:
+        raise ValueError(f"{hit[0]} is a shipped model: write elsewhere with --out, or pass --force to replace it")

@@ -36,7 +36,9 @@ def _iou_from(inter, va, vb):
     union = va + vb - inter
     with np.errstate(divide="ignore", invalid="ignore"):
         iou = np.where((va > 0) & (vb > 0) & (union > 0), inter / union, 0.0)
-    return np.nan_to_num(iou, nan=0.0)
+    # inter / union of a box with itself can round to 1 + 4e-16: clamp, so that IoU = 1 exactly
+    # and never counts above the success threshold 1.0
+    return np.clip(np.nan_to_num(iou, nan=0.0), 0.0, 1.0)
 
 
 def _valid_sizes(*sizes):

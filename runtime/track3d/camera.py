@@ -2,8 +2,12 @@
 
 Frame: the left camera, OpenCV style (x right, y down, z forward, metres).
 Pixel coordinates are continuous: pixel (i, j) covers u in [i, i+1), v in [j, j+1),
-so its centre is (i + 0.5, j + 0.5). Intrinsics follow the paper's eq. (1):
-fx = W / (2 tan(ax/2)), fy = H / (2 tan(ay/2)), cx = W/2, cy = H/2.
+so its centre is (i + 0.5, j + 0.5). By default the intrinsics follow the paper's eq. (1):
+fx = W / (2 tan(ax/2)), fy = H / (2 tan(ay/2)), cx = W/2, cy = H/2 (the simulator's cameras).
+A calibrated camera (``Camera.from_intrinsics``) carries its own fx, fy, cx, cy (the angles
+are then derived from them, for information) and optionally OpenCV distortion coefficients
+``dist`` (k1, k2, p1, p2[, k3...]): its images are undistorted to the pinhole K
+(``undistort_image``; Track3D does it on every frame), everything else uses K.
 """
 from __future__ import annotations
 
@@ -25,6 +29,8 @@ class Camera:
     fov_x_deg: float
     fov_y_deg: float
     baseline_m: float = 0.4
+    intrinsics: tuple[float, float, float, float] | None = None   # (fx, fy, cx, cy) pixels; None: eq. (1)
+    dist: tuple[float, ...] | None = None                          # OpenCV distortion coefficients
 
     def __post_init__(self) -> None:
         if int(self.width) <= 0 or int(self.height) <= 0:
@@ -33,6 +39,69 @@ class Camera:
             v = float(getattr(self, name))
             if not (0.0 < v < 180.0) or not math.isfinite(v):
                 raise ValueError(f"camera {name} must be in (0, 180) degrees, got {v}")
+        if self.intrinsics is not None:
+            k = tuple(float(v) for v in self.intrinsics)
+            if len(k) != 4 or not all(math.isfinite(v) for v in k) or k[0] <= 0 or k[1] <= 0:
+                raise ValueError(f"camera intrinsics are (fx, fy, cx, cy) with fx, fy > 0, got {self.intrinsics}")
+            object.__setattr__(self, "intrinsics", k)
+        if self.dist is not None:
+            d = tuple(float(v) for v in self.dist)
+            if len(d) not in (4, 5, 8, 12, 14) or not all(math.isfinite(v) for v in d):
+                raise ValueError(f"distortion coefficients are 4, 5, 8, 12 or 14 finite numbers "
+                                 f"(OpenCV order k1, k2, p1, p2, k3, ...), got {self.dist}")
+            object.__setattr__(self, "dist", d if any(d) else None)
+
+    @classmethod
+    def from_intrinsics(cls, width: int, height: int, fx: float, fy: float, cx: float, cy: float,
+                        dist=None, baseline_m: float = 0.4) -> "Camera":
+        """A calibrated camera: focal lengths and principal point in pixels (continuous pixel
+        coordinates, pixel i spans [i, i+1): OpenCV's calibration gives cx for pixel centres at
+        integers, add 0.5 to it), `dist` OpenCV's distortion coefficients or None."""
+        w, h = int(width), int(height)
+        if fx <= 0 or fy <= 0:
+            raise ValueError(f"focal lengths must be positive, got fx={fx}, fy={fy}")
+        ax = math.degrees(2.0 * math.atan(w / (2.0 * fx)))
+        ay = math.degrees(2.0 * math.atan(h / (2.0 * fy)))
+        return cls(w, h, ax, ay, float(baseline_m), (float(fx), float(fy), float(cx), float(cy)),
+                   None if dist is None else tuple(np.asarray(dist, dtype=np.float64).reshape(-1).tolist()))
+
+    @classmethod
+    def from_K(cls, width: int, height: int, K, dist=None, baseline_m: float = 0.4) -> "Camera":
+        """A calibrated camera from its (3, 3) intrinsic matrix (no skew)."""
+        k = np.asarray(K, dtype=np.float64)
+        if k.shape != (3, 3) or not np.all(np.isfinite(k)):
+            raise ValueError(f"K must be a finite 3x3 matrix, got shape {k.shape}")
+        if abs(k[0, 1]) > 1e-9 or np.any(np.abs(k[2] - [0, 0, 1]) > 1e-9) or abs(k[1, 0]) > 1e-9:
+            raise ValueError("K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)")
+        return cls.from_intrinsics(width, height, k[0, 0], k[1, 1], k[0, 2], k[1, 2], dist, baseline_m)
+
+    @property
+    def calibrated(self) -> bool:
+        """True when K was given (from_intrinsics / from_K), False for an eq.-(1) camera."""
+        return self.intrinsics is not None
+
+    @property
+    def tan_half(self) -> tuple[float, float]:
+        """(tan(ax/2), tan(ay/2)): half the image over the focal length, per axis."""
+        if self.intrinsics is None:
+            return (math.tan(math.radians(self.fov_x_deg) / 2), math.tan(math.radians(self.fov_y_deg) / 2))
+        return (self.width / (2.0 * self.fx), self.height / (2.0 * self.fy))
+
+    @cached_property
+    def _undistort_maps(self):
+        import cv2
+
+        return cv2.initUndistortRectifyMap(self.K, np.asarray(self.dist), None, self.K,
+                                           (self.width, self.height), cv2.CV_16SC2)
+
+    def undistort_image(self, image: np.ndarray) -> np.ndarray:
+        """The image as the pinhole K would see it (bilinear remap); unchanged without `dist`."""
+        if self.dist is None:
+            return image
+        import cv2
+
+        m1, m2 = self._undistort_maps
+        return cv2.remap(image, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
 
     @classmethod
     def from_fov(cls, width: int, height: int, fov_x_deg: float, baseline_m: float = 0.4) -> "Camera":
@@ -43,18 +112,26 @@ class Camera:
     # --- intrinsics (paper eq. 1) ---
     @property
     def fx(self) -> float:
+        if self.intrinsics is not None:
+            return self.intrinsics[0]
         return self.width / (2.0 * math.tan(math.radians(self.fov_x_deg) / 2.0))
 
     @property
     def fy(self) -> float:
+        if self.intrinsics is not None:
+            return self.intrinsics[1]
         return self.height / (2.0 * math.tan(math.radians(self.fov_y_deg) / 2.0))
 
     @property
     def cx(self) -> float:
+        if self.intrinsics is not None:
+            return self.intrinsics[2]
         return self.width / 2.0
 
     @property
     def cy(self) -> float:
+        if self.intrinsics is not None:
+            return self.intrinsics[3]
         return self.height / 2.0
 
     @cached_property
@@ -133,7 +210,9 @@ class Camera:
 
     # --- serialisation ---
     def to_dict(self) -> dict:
-        return {
+        """Plain dict; a calibrated camera adds "calibrated": true (its K is authoritative,
+        the angles informational) and "dist" when it has distortion."""
+        d = {
             "width": int(self.width),
             "height": int(self.height),
             "fov_x_deg": float(self.fov_x_deg),
@@ -141,14 +220,29 @@ class Camera:
             "baseline_m": float(self.baseline_m),
             "K": self.K.tolist(),
         }
+        if self.calibrated:
+            d["calibrated"] = True
+        if self.dist is not None:
+            d["dist"] = list(self.dist)
+        return d
 
     @classmethod
     def from_dict(cls, d: dict) -> "Camera":
+        """Inverse of to_dict. A dict with a K and "calibrated": true, or with a K and no
+        perspective angles, is a calibrated camera (any fx, fy, cx, cy, optional "dist");
+        otherwise the angles define K (eq. 1) and a K given next to them must agree."""
+        if "K" in d and (d.get("calibrated") or "fov_x_deg" not in d or d.get("dist")):
+            try:
+                return cls.from_K(int(d["width"]), int(d["height"]), d["K"], d.get("dist"),
+                                  float(d.get("baseline_m", 0.4)))
+            except KeyError as e:
+                raise ValueError(f"camera description lacks the key {e.args[0]!r}") from None
         try:
             cam = cls(int(d["width"]), int(d["height"]), float(d["fov_x_deg"]), float(d["fov_y_deg"]),
                       float(d.get("baseline_m", 0.4)))
         except KeyError as e:
             raise ValueError(f"camera description lacks the key {e.args[0]!r}") from None
         if "K" in d and not np.allclose(np.asarray(d["K"], dtype=np.float64), cam.K, rtol=1e-9, atol=1e-6):
-            raise ValueError("camera K in the file disagrees with its perspective angles and resolution")
+            raise ValueError("camera K in the file disagrees with its perspective angles and resolution "
+                             "(a calibrated K needs \"calibrated\": true)")
         return cam

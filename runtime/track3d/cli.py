@@ -4,6 +4,7 @@
     track3d eval  --data data/small --split test --results results --out reports
     track3d demo  --out track3d-demo
     track3d trackers                       # the registered 2D trackers and box estimators
+    track3d bench                          # FPS of the shipped models on this CPU (no dataset needed)
 """
 from __future__ import annotations
 
@@ -11,11 +12,14 @@ import argparse
 import sys
 from pathlib import Path
 
+from .argparsing import apply_formatter, hidden_alias
+
 __all__ = ["main", "summary_table", "set_threads", "TABLE_COLUMNS"]
 
 TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
                  ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
-                 ("restarts", "restarts", "{:d}"), ("FPS", "fps", "{:.1f}"), ("FPS_e2e", "fps_e2e", "{:.1f}"))
+                 ("restarts", "restarts", "{:d}"), ("frames", "frames", "{:d}"), ("FPS", "fps", "{:.1f}"),
+                 ("FPS_e2e", "fps_e2e", "{:.1f}"))
 
 
 def summary_table(report: dict) -> str:
@@ -65,11 +69,32 @@ def _add_data_args(p: argparse.ArgumentParser) -> None:
                    help="only these sequences of the split")
     p.add_argument("--frames", type=int, help="only the first N frames of each sequence")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    hidden_alias(p, "--no-progress", "quiet", action="store_true")
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("track3d")
+    except Exception:  # a bare checkout without installed metadata
+        return "unknown"
+
+
+def _add_plugin_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--plugin", action="append", dest="plugins", metavar="MODULE", default=[],
+                   help="import this module (dotted name or .py file) first: it registers its trackers "
+                        "or estimators (repeatable; entry points of the groups track3d.trackers / "
+                        "track3d.estimators load by themselves)")
 
 
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="track3d", description="Track3D: 3D asteroid tracking runtime "
                                  "(2D tracker -> frustum -> 3D box estimator -> 2D-3D fusion).")
+    ap.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    ap.add_argument("--plugin", action="append", dest="plugins_top", metavar="MODULE", default=[],
+                    help="import this module (dotted name or .py file) first: it registers its trackers or "
+                         "estimators (repeatable; also accepted after the command)")
     sub = ap.add_subparsers(dest="command", required=True)
 
     t = sub.add_parser("track", help="run a 2D tracker x box estimator on a split or sequences; "
@@ -80,15 +105,19 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--tracker-option", action="append", metavar="KEY=VALUE", help="option of the 2D tracker")
     t.add_argument("--estimator-option", action="append", metavar="KEY=VALUE", help="option of the estimator")
     t.add_argument("--no-fusion", action="store_true", help="report the 2D tracker's box, no 2D-3D fusion")
-    t.add_argument("--weight-3d", type=float, default=0.3, help="fusion weight of the projected 3D box (0.3)")
+    t.add_argument("--weight-3d", type=float, default=0.3, help="fusion weight of the projected 3D box")
     t.add_argument("--threads", type=int, default=1, help="CPU threads of the ONNX models (default 1)")
     t.add_argument("--results", default="results", help="result folder (default ./results)")
-    t.add_argument("--name", help="result name (default <tracker>+<estimator>)")
+    t.add_argument("--name", help="result name (default <tracker>+<estimator>, tagged @<model>-<hash> for "
+                                  "non-shipped model files)")
+    t.add_argument("--replace", action="store_true",
+                   help="replace results of another configuration under the same name (default: refuse)")
     t.add_argument("--restart-skip", type=int, default=1,
                    help="re-initialise this many frames after a zero-3D-IoU frame (default 1: the next)")
     t.add_argument("--no-restart", action="store_true", help="never re-initialise from the ground truth")
-    t.add_argument("--video", choices=("gif", "mp4", "none"), default="gif", help="overlay format (gif)")
-    t.add_argument("--video-sequences", type=int, default=1, help="how many sequences get an overlay (1)")
+    t.add_argument("--video", choices=("auto", "gif", "mp4", "none"), default="auto",
+                   help="overlay format (default auto: gif when pillow is installed, else mp4; gif needs pillow)")
+    t.add_argument("--video-sequences", type=int, default=1, help="how many sequences get an overlay")
 
     e = sub.add_parser("eval", help="results vs ground truth -> report.json, table and plots")
     _add_data_args(e)
@@ -96,15 +125,56 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--trackers", nargs="+", help="result names to compare (default: all in the folder)")
     e.add_argument("--out", default="reports", help="report folder (default ./reports)")
     e.add_argument("--no-plots", action="store_true", help="skip the plots (no matplotlib needed)")
-    e.add_argument("--trajectories", type=int, default=4, help="sequences with a 3D trajectory plot (4)")
+    e.add_argument("--trajectories", type=int, default=4, help="sequences with a 3D trajectory plot")
 
     d = sub.add_parser("demo", help="simulate a small test set, track, evaluate, write plots and an overlay")
     from .demo import add_arguments
 
     add_arguments(d)
 
-    sub.add_parser("trackers", help="list the registered 2D trackers and 3D box estimators")
-    return ap
+    tr = sub.add_parser("trackers", help="list the registered 2D trackers and 3D box estimators (plug-ins included)")
+    _add_plugin_arg(tr)
+    _add_plugin_arg(t)
+    _add_plugin_arg(e)
+
+    b = sub.add_parser("bench", help="time the loop (or each network) on this CPU: per-stage median, p99, "
+                                     "p99.9, max ms and FPS at 1 and 2 threads, pinned; no dataset needed",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    b.add_argument("--tracker", default="siamfc-edge", help="2D tracker name")
+    b.add_argument("--estimator", default="a3boxnet", help="3D box estimator name")
+    b.add_argument("--tracker-model", metavar="PREFIX",
+                   help="<dir>/<name> of a SiamFC pair <name>_exemplar.onnx / <name>_search.onnx (default: shipped)")
+    b.add_argument("--boxnet-model", metavar="ONNX", help="an A3BoxNet ONNX file (default: shipped)")
+    b.add_argument("--frames", type=int, default=1000, help="timed frames per thread count (after 20 warm-up)")
+    b.add_argument("--threads", type=int, nargs="+", default=[1, 2], help="thread counts to time")
+    b.add_argument("--data", help="time on this dataset's first sequences instead of synthetic frames")
+    b.add_argument("--split", default="test", help="dataset split with --data")
+    b.add_argument("--models-only", action="store_true",
+                   help="time each network alone on the inputs it gets in the loop (onnxruntime_perf_test style)")
+    b.add_argument("--out", metavar="JSON", help="also write the report as JSON here")
+    b.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
+    b.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
+    hidden_alias(b, "--no-progress", "quiet", action="store_true")
+    _add_plugin_arg(b)
+    return apply_formatter(ap)
+
+
+def _cmd_bench(a) -> int:
+    import json
+
+    from .bench import BenchConfig, format_table, run_bench, write_json
+
+    cfg = BenchConfig(tracker=a.tracker, estimator=a.estimator, tracker_model=a.tracker_model,
+                      boxnet_model=a.boxnet_model, frames=a.frames, threads=tuple(a.threads), data=a.data,
+                      split=a.split, models_only=a.models_only)
+    for p in (a.tracker_model and Path(a.tracker_model).parent, a.boxnet_model):
+        if p and not Path(p).exists():
+            raise FileNotFoundError(f"no such model path: {p}")
+    report = run_bench(cfg, log=None if a.quiet else (lambda s: print(f"[bench] {s}", file=sys.stderr)))
+    print(json.dumps(report, indent=1) if a.json else format_table(report))
+    if a.out:
+        print(f"report: {write_json(report, a.out)}", file=sys.stderr)
+    return 0
 
 
 def _cmd_track(a) -> int:
@@ -113,6 +183,7 @@ def _cmd_track(a) -> int:
     if a.threads < 1:
         raise ValueError("--threads must be >= 1")
     set_threads(a.threads)
+    video = _video_format(a.video)
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=a.weight_3d, threads=a.threads,
                        tracker_options=_options(a.tracker_option), estimator_options=_options(a.estimator_option),
                        name=a.name)
@@ -120,14 +191,28 @@ def _cmd_track(a) -> int:
                      restart=not a.no_restart, restart_skip=a.restart_skip)
     # Build once up front so that an unknown name or a missing model fails before any work.
     spec.build(exp.sequences[0])
-    folders = exp.run(spec, overlay=None if a.video == "none" else a.video,
-                      overlay_sequences=a.video_sequences, quiet=a.quiet)
+    folders = exp.run(spec, overlay=video,
+                      overlay_sequences=a.video_sequences, quiet=a.quiet, replace=a.replace)
     root = Path(a.results) / a.split / spec.label
     print(f"results of {spec.label} on {len(folders)} sequence(s) of {a.data}/{a.split}: {root}")
     for f in folders[:a.video_sequences]:
         for v in sorted(f.glob("*_overlay.*")):
             print(f"overlay: {v}")
     return 0
+
+
+def _video_format(choice: str) -> str | None:
+    """--video -> "gif" / "mp4" / None; gif needs pillow (say so instead of writing an mp4)."""
+    import importlib.util
+
+    has_pil = importlib.util.find_spec("PIL") is not None
+    if choice == "none":
+        return None
+    if choice == "auto":
+        return "gif" if has_pil else "mp4"
+    if choice == "gif" and not has_pil:
+        raise ValueError("--video gif needs pillow: pip install 'track3d[plot]' (or use --video mp4)")
+    return choice
 
 
 def _cmd_eval(a) -> int:
@@ -155,6 +240,8 @@ def _cmd_eval(a) -> int:
         exp.sequences = have
     report = exp.report(names, plots=not a.no_plots, trajectories=a.trajectories)
     print(summary_table(report))
+    for w in report.get("warnings", []):
+        print(f"track3d eval: WARNING: {w}", file=sys.stderr)
     print(f"report: {Path(a.out) / 'report.json'}")
     for f in report.get("plots", []):
         print(f"plot: {f}")
@@ -178,10 +265,16 @@ def main(argv: list[str] | None = None) -> int:
     from .trackers2d import TrackerUnavailable
 
     try:
+        from .plugins import import_plugin
+
+        for mod in list(getattr(args, "plugins_top", []) or []) + list(getattr(args, "plugins", []) or []):
+            import_plugin(mod)
         if args.command == "track":
             return _cmd_track(args)
         if args.command == "eval":
             return _cmd_eval(args)
+        if args.command == "bench":
+            return _cmd_bench(args)
         if args.command == "demo":
             from .demo import run_demo
 

@@ -183,6 +183,31 @@ class Sequence:
             yield self.frame(i)
 
 
+def _not_a_root(root: Path) -> str:
+    """Why `root` is no dataset root, naming what it is when it is something else."""
+    if not root.exists():
+        return (f"no dataset at {root}: the folder does not exist "
+                f"(generate one with `track3d-sim generate --out {root}`)")
+    if (root / GT2D).is_file() or (root / LEFT_DIR).is_dir():
+        up = root.parent.parent
+        return (f"{root} is a sequence folder, not a dataset root: pass the folder holding {DATASET_JSON}"
+                + (f" ({up}) with --sequence {root.name}" if (up / DATASET_JSON).is_file() else ""))
+    if (root.parent / DATASET_JSON).is_file():
+        return f"{root} is a split folder of a dataset: pass its parent {root.parent} and --split {root.name}"
+    try:
+        subs = [d for d in root.iterdir() if d.is_dir()]
+    except OSError:
+        subs = []
+    if (root / "list.txt").is_file() or any((d / "groundtruth.txt").is_file() for d in subs[:50]) or \
+            any((d / "list.txt").is_file() for d in subs[:10]):
+        return (f"{root} looks like a GOT-10k style 2D dataset (list.txt / groundtruth.txt): track3d needs "
+                f"a track3d dataset with depth and 3D labels ({DATASET_JSON}; see docs/simulator.md)")
+    if any((d / GT2D).is_file() for d in subs[:50]):
+        return f"{root} holds sequence folders but no {DATASET_JSON}: it is a split folder, pass the dataset root"
+    return (f"no dataset at {root}: {DATASET_JSON} is missing "
+            f"(generate one with `track3d-sim generate --out {root}`)")
+
+
 class Dataset:
     """A dataset root written by the simulator."""
 
@@ -190,8 +215,7 @@ class Dataset:
         self.root = Path(root)
         meta = self.root / DATASET_JSON
         if not meta.is_file():
-            raise DatasetError(f"no dataset at {self.root}: {DATASET_JSON} is missing "
-                               f"(generate one with `track3d-sim generate --out {self.root}`)")
+            raise DatasetError(_not_a_root(self.root))
         try:
             self.info: dict = json.loads(meta.read_text())
         except json.JSONDecodeError as e:

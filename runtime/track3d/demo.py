@@ -29,6 +29,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--estimator", help="3D box estimator (default: the shipped A3BoxNet, else baseline)")
     p.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    from .argparsing import hidden_alias
+
+    hidden_alias(p, "--no-progress", "quiet", action="store_true")
+
+
+# What `track3d demo` imports beyond the runtime (module -> the extra that installs it).
+DEMO_NEEDS = {"trimesh": "sim", "PIL": "sim", "scipy": "sim", "tqdm": "sim", "matplotlib": "plot"}
+
+
+def missing_demo_modules() -> list[str]:
+    """The modules the demo needs that are not installed."""
+    import importlib.util
+
+    return [m for m in DEMO_NEEDS if importlib.util.find_spec(m) is None]
 
 
 def pick_models(tracker: str | None, estimator: str | None, threads: int) -> tuple[str, str, list[str]]:
@@ -60,6 +74,10 @@ def _simulate(data: Path, a) -> None:
         gen = info.get("generator", {}).get("settings", info.get("generator", {}))
         print(f"[demo] reusing the simulated data in {data} ({gen.get('preset', '?')} preset)", file=sys.stderr)
         return
+    missing = missing_demo_modules()
+    if missing:
+        raise RuntimeError(f"the demo simulates its data and needs the sim extra: pip install 'track3d[sim]' "
+                           f"(missing: {', '.join(missing)})")
     try:
         sim_cli = importlib.import_module("track3d_sim.cli")
     except ImportError as e:

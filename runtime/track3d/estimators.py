@@ -75,13 +75,27 @@ def register_estimator(name: str, factory: Callable[..., BoxEstimator]) -> None:
     _REGISTRY[name.lower()] = factory
 
 
+def _load_plugins() -> None:
+    from .plugins import ESTIMATOR_GROUP, load_entry_points
+
+    load_entry_points(ESTIMATOR_GROUP, register_estimator)
+
+
 def available_estimators() -> list[str]:
+    """Registered estimator names, plug-ins included."""
+    _load_plugins()
     return sorted(_REGISTRY)
 
 
 def create_estimator(name: str, **options) -> BoxEstimator:
     """Build the estimator registered as `name` (e.g. ``create_estimator("a3boxnet", threads=1)``)."""
+    from .plugins import call_factory
+
     factory = _REGISTRY.get(str(name).lower())
     if factory is None:
-        raise ValueError(f"unknown 3D box estimator {name!r}; available: {', '.join(available_estimators())}")
-    return factory(**options)
+        _load_plugins()
+        factory = _REGISTRY.get(str(name).lower())
+    if factory is None:
+        raise ValueError(f"unknown 3D box estimator {name!r}; available: {', '.join(available_estimators())} "
+                         "(a plug-in: --plugin MODULE or an entry point in the track3d.estimators group)")
+    return call_factory("3D box estimator", name, factory, options)

@@ -86,8 +86,15 @@ def model_paths(variant: str = "edge") -> tuple[Path, Path]:
 class SiamFCTracker:
     """SiamFC behind the Tracker2D seam: init(image, box), update(image) -> (ok, box), correct(box).
 
-    Images are (H, W, 3) uint8 RGB; boxes [x, y, w, h] pixels. After update, `score` holds the
-    peak of the raw response (a confidence the caller may use) and `timings_ms` the stage times.
+    Images are (H, W, 3) uint8 RGB; boxes [x, y, w, h] pixels. After update, `peak` holds the
+    peak of the raw response of the chosen scale (a logit) and `score` the confidence in 0..1:
+    peak / ref_peak clipped to [0, 1], ref_peak being the peak of the exemplar on its own init
+    frame (one extra search-branch call in `init`): 1 = as good a match as the target on the
+    frame it was taken from. The sigmoid of the logit saturates (measured: 12.5 on the target,
+    9 on pure noise, both > 0.999), the ratio keeps them apart (~0.9 vs ~0.6). None before the
+    first update; `timings_ms` holds the stage times.
+    `get_state()` / `set_state(state)` save and restore everything the next update depends on
+    (exemplar feature, centre, sizes, mean colour), so a restored tracker continues bit-identically.
     """
 
     def __init__(self, exemplar_model: str | Path, search_model: str | Path, threads: int = 1, **overrides):
@@ -127,7 +134,9 @@ class SiamFCTracker:
         if self.scale_num % 2 == 0:  # no exact centre scale: penalise none
             self.penalties[:] = 1.0
         self._kernel = None
-        self.score = float("nan")
+        self.peak = float("nan")
+        self.ref_peak = float("nan")
+        self.score: float | None = None
         self.timings_ms: dict[str, float] = {}
 
     # -- state -------------------------------------------------------------------------------
@@ -150,6 +159,13 @@ class SiamFCTracker:
         z = crop_square(image, self.center, self.z_sz, self.exemplar_size, self.avg_color)
         self._kernel = self.exemplar.run({"exemplar": z[None]})[0]
         self.base_target_sz = self.target_sz.copy()
+        # The reference for `score`: the exemplar against its own frame (centre scale, all S crops
+        # so that the search graph sees its usual batch).
+        crops = np.stack([crop_square(image, self.center, self.x_sz * f, self.instance_size, self.avg_color)
+                          for f in self.scale_factors])
+        ref = self.search.run({"search": crops, "exemplar_feature": self._kernel})[0]
+        self.ref_peak = float(np.max(ref[self.scale_num // 2])) if np.all(np.isfinite(ref)) else float("nan")
+        self.peak, self.score = float("nan"), None
 
     def correct(self, box) -> None:
         """Adopt a new state box (e.g. the 2D-3D fused box): centre and size, same appearance."""
@@ -173,7 +189,7 @@ class SiamFCTracker:
         responses = self.search.run({"search": crops, "exemplar_feature": self._kernel})[0]
         t2 = _now()
         if not np.all(np.isfinite(responses)):
-            self.score = float("nan")
+            self.peak, self.score = float("nan"), 0.0
             return False, self.box
         n = self.upscale_size
         if self.scale_num == 1:
@@ -184,7 +200,8 @@ class SiamFCTracker:
             best = int(np.argmax(peaks))
             resp = cv2.resize(responses[best], (n, n), interpolation=cv2.INTER_CUBIC)
             resp *= self.penalties[best]
-        self.score = float(responses[best].max())
+        self.peak = float(responses[best].max())
+        self.score = self._confidence(self.peak)
         resp -= resp.min()
         resp /= resp.sum() + 1e-16
         resp = (1.0 - self.window_influence) * resp + self.window_influence * self.window
@@ -202,6 +219,50 @@ class SiamFCTracker:
         t3 = _now()
         self.timings_ms = {"crop": 1e3 * (t1 - t0), "net": 1e3 * (t2 - t1), "post": 1e3 * (t3 - t2)}
         return True, self.box
+
+
+    def _confidence(self, peak: float) -> float:
+        """peak / ref_peak in [0, 1]; the logit's sigmoid when the reference is not positive."""
+        if math.isfinite(self.ref_peak) and self.ref_peak > 0:
+            return float(min(max(peak / self.ref_peak, 0.0), 1.0))
+        return _sigmoid(peak)
+
+    # -- checkpoint ----------------------------------------------------------------------------
+    _STATE_FIELDS = ("center", "target_sz", "z_sz", "x_sz", "_min_sz", "base_target_sz", "avg_color",
+                     "_image_hw", "peak", "score", "ref_peak")
+
+    def get_state(self) -> dict:
+        """Everything the next update depends on, as numpy arrays and builtins (no ORT objects)."""
+        if self._kernel is None:
+            return {"initialised": False}
+        st = {k: getattr(self, k) for k in self._STATE_FIELDS}
+        st = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in st.items()}
+        st.update(initialised=True, kernel=self._kernel.copy(), avg_color=list(self.avg_color),
+                  _image_hw=list(self._image_hw))
+        return st
+
+    def set_state(self, state: dict) -> None:
+        """Restore a `get_state()` of a tracker with the same models and hyper-parameters."""
+        if not state.get("initialised"):
+            self._kernel = None
+            return
+        kernel = np.asarray(state["kernel"], dtype=np.float32)
+        shape = next(i.shape for i in self.search.session.get_inputs() if i.name == "exemplar_feature")
+        want = tuple(d if isinstance(d, int) else -1 for d in shape)
+        if kernel.ndim != len(want) or any(w > 0 and w != k for w, k in zip(want, kernel.shape)):
+            raise ValueError(f"SiamFC state: exemplar feature of shape {kernel.shape} does not fit this model")
+        self._kernel = kernel.copy()
+        for k in ("center", "target_sz", "base_target_sz"):
+            setattr(self, k, np.asarray(state[k], dtype=np.float64).reshape(2).copy())
+        for k in ("z_sz", "x_sz", "_min_sz", "peak", "ref_peak"):
+            setattr(self, k, float(state[k]))
+        self.score = None if state.get("score") is None else float(state["score"])
+        self.avg_color = tuple(float(c) for c in state["avg_color"])
+        self._image_hw = tuple(int(v) for v in state["_image_hw"])
+
+
+def _sigmoid(x: float) -> float:
+    return float(1.0 / (1.0 + math.exp(-x))) if x > -700 else 0.0
 
 
 def _now() -> float:

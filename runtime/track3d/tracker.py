@@ -14,6 +14,11 @@ Nothing in the loop raises on bad sensor data: a lost 2D target is status "lost"
 too thin to estimate from (fewer than `min_points` points, or all of them within 1 cm of each
 other, e.g. a quantised or stuck cloud) or an estimate that is not a finite box of positive size
 is status "no_points"; the 3D box then keeps the last estimate (nan before the first one).
+Each result also carries the 2D tracker's confidence (`score`, 0..1 or None), how many frames
+the 3D box has been held (`held_frames`); after `lost_after` consecutive frames without a usable
+estimate (or with a score below `min_score`) the status is "lost". `skip()` / `update(None,
+points)` coasts over a dropped frame. `get_state()` / `set_state()` checkpoint the tracker as
+plain data; `describe()` says what it runs (names, options, model files with sha256).
 Caller errors raise ValueError: an image that is not (H, W, 3) uint8 or not the camera's size,
 a cloud that is not (N, 3), a category that is not an integer.
 """
@@ -38,13 +43,30 @@ STATUSES = (TRACKING, NO_POINTS, LOST)
 STAGES = ("track2d", "frustum", "box3d", "fusion", "total")
 MIN_POINTS = 16          # the fewest frustum points A3BoxNet was trained on
 MIN_SPREAD_M = 0.01      # a frustum whose points all lie within 1 cm holds no shape
+LOST_AFTER = 10          # consecutive frames without a usable estimate (or below min_score) -> lost
+STATE_VERSION = 1
+
+
+def _tracker_score(tracker2d) -> float | None:
+    """The 2D tracker's optional `score` attribute as a float in 0..1, or None."""
+    s = getattr(tracker2d, "score", None)
+    if s is None or isinstance(s, bool):
+        return None
+    try:
+        s = float(s)
+    except (TypeError, ValueError):
+        return None
+    return min(max(s, 0.0), 1.0) if np.isfinite(s) else None
 
 
 @dataclass
 class TrackResult:
     """One frame's output. box2d (4,) float64 is the reported box (fused when fusion is on);
     box2d_raw (4,) the 2D tracker's own box; box3d (6,) float64 [cx, cy, cz, sx, sy, sz];
-    status one of STATUSES; num_points the frustum size; ms per-stage milliseconds (STAGES)."""
+    status one of STATUSES; num_points the frustum size; ms per-stage milliseconds (STAGES);
+    score the 2D tracker's confidence in 0..1 for this frame (None when it has none);
+    held_frames how many frames the 3D box has been held without a new estimate (0: estimated
+    on this frame); ``lost`` is True once the tracker has decided the target is lost."""
 
     box2d: np.ndarray
     box2d_raw: np.ndarray
@@ -52,10 +74,16 @@ class TrackResult:
     status: str
     num_points: int
     ms: dict[str, float] = field(default_factory=dict)
+    score: float | None = None
+    held_frames: int = 0
 
     @property
     def ok(self) -> bool:
         return self.status == TRACKING
+
+    @property
+    def lost(self) -> bool:
+        return self.status == LOST
 
 
 def _valid_box2d(b: np.ndarray) -> bool:
@@ -75,7 +103,7 @@ class Track3D:
 
     def __init__(self, camera: Camera, tracker2d: Tracker2D, estimator: BoxEstimator, fusion: bool = True,
                  weight_3d: float = WEIGHT_3D, z_range: tuple[float, float] = (Z_MIN, Z_MAX),
-                 min_points: int = MIN_POINTS):
+                 min_points: int = MIN_POINTS, lost_after: int = LOST_AFTER, min_score: float = 0.0):
         if not isinstance(camera, Camera):
             raise TypeError(f"camera must be a track3d.Camera, got {type(camera).__name__}")
         if not 0.0 <= float(weight_3d) <= 1.0:
@@ -92,6 +120,18 @@ class Track3D:
         self.weight_3d = float(weight_3d)
         self.z_range = (z0, z1)
         self.min_points = int(min_points)
+        if int(lost_after) < 1:
+            raise ValueError(f"lost_after must be >= 1, got {lost_after}")
+        if not 0.0 <= float(min_score) <= 1.0:
+            raise ValueError(f"min_score must be in [0, 1], got {min_score}")
+        self.lost_after = int(lost_after)
+        self.min_score = float(min_score)
+        self.bad_frames = 0       # consecutive frames without a usable estimate or with a low score
+        self.held_frames = 0      # frames since the 3D box was last estimated
+        self.tracker_name: str | None = None      # registry names when built by `create`
+        self.estimator_name: str | None = None
+        self.tracker_options: dict = {}
+        self.estimator_options: dict = {}
         self._size = (camera.width, camera.height)
         self._M = camera.M
         self._correct = getattr(tracker2d, "correct", None)
@@ -108,9 +148,13 @@ class Track3D:
     def create(cls, camera: Camera, tracker: str = "kcf", estimator: str = "baseline",
                tracker_options: dict | None = None, estimator_options: dict | None = None,
                **options) -> "Track3D":
-        """Build from registry names; `options` go to Track3D (fusion, weight_3d, z_range)."""
-        return cls(camera, create_tracker(tracker, **(tracker_options or {})),
-                   create_estimator(estimator, **(estimator_options or {})), **options)
+        """Build from registry names; `options` go to Track3D (fusion, weight_3d, z_range,
+        min_points, lost_after, min_score)."""
+        t = cls(camera, create_tracker(tracker, **(tracker_options or {})),
+                create_estimator(estimator, **(estimator_options or {})), **options)
+        t.tracker_name, t.estimator_name = str(tracker).lower(), str(estimator).lower()
+        t.tracker_options, t.estimator_options = dict(tracker_options or {}), dict(estimator_options or {})
+        return t
 
     @classmethod
     def from_default(cls, camera: Camera, threads: int = 1, **options) -> "Track3D":
@@ -118,8 +162,7 @@ class Track3D:
 
         Raises TrackerUnavailable / EstimatorUnavailable when the models are not shipped.
         """
-        return cls(camera, create_tracker("siamfc-edge", threads=threads),
-                   create_estimator("a3boxnet", threads=threads), **options)
+        return cls.create(camera, "siamfc-edge", "a3boxnet", {"threads": threads}, {"threads": threads}, **options)
 
     # --- the loop --------------------------------------------------------------------------------
     def _frustum(self, points: np.ndarray, box2d: np.ndarray) -> np.ndarray:
@@ -148,21 +191,46 @@ class Track3D:
         n_cat = getattr(self.estimator, "num_categories", None)
         if n_cat is not None and not -1 <= int(category) < int(n_cat):
             raise ValueError(f"category must be in -1..{int(n_cat) - 1} for {self.estimator!r}, got {category}")
-        image = check_image(image, self._size)
+        image = self.camera.undistort_image(check_image(image, self._size))
         self.category = int(category)
         self.tracker2d.init(image, b)
         self.box2d = b.copy()
         self.box3d = np.full(6, np.nan)
+        self.bad_frames = 0
+        self.held_frames = 0
         if points is not None:
             est = self._estimate(self._frustum(points, b))
             if est is not None:
                 self.box3d = est
 
-    def update(self, image: np.ndarray, points: np.ndarray) -> TrackResult:
-        """Track into the next frame: image (H, W, 3) uint8 RGB, points (N, 3) float32 cloud."""
+    def _judge(self, r: TrackResult, estimated: bool) -> TrackResult:
+        """Count held and bad frames; after `lost_after` bad frames in a row the target is lost."""
+        self.held_frames = 0 if estimated else self.held_frames + 1
+        low = r.score is not None and r.score < self.min_score
+        self.bad_frames = 0 if (r.status == TRACKING and not low) else self.bad_frames + 1
+        r.held_frames = self.held_frames
+        if self.bad_frames >= self.lost_after:
+            r.status = LOST
+        return r
+
+    def skip(self) -> TrackResult:
+        """A dropped frame: no image, no update of the 2D tracker; the last boxes coast.
+
+        Status "no_points" (no new estimate; counts towards `lost_after`), or "lost" once
+        `lost_after` bad frames have passed. ``update(None, points)`` does the same."""
+        r = TrackResult(self.box2d.copy(), self.box2d.copy(), self.box3d.copy(), NO_POINTS, 0,
+                        dict.fromkeys(STAGES, 0.0), None)
+        return self._judge(r, estimated=False)
+
+    def update(self, image: np.ndarray | None, points: np.ndarray) -> TrackResult:
+        """Track into the next frame: image (H, W, 3) uint8 RGB, points (N, 3) float32 cloud.
+
+        image None: a dropped frame, see :meth:`skip`."""
+        if image is None:
+            return self.skip()
         ms: dict[str, float] = dict.fromkeys(STAGES, 0.0)
         t0 = time.perf_counter()
-        image = check_image(image, self._size)
+        image = self.camera.undistort_image(check_image(image, self._size))
         ok, raw = self.tracker2d.update(image)
         raw = np.asarray(raw, dtype=np.float64).reshape(-1)
         t1 = time.perf_counter()
@@ -171,7 +239,8 @@ class Track3D:
             # Lost in 2D: report the last box, keep the last 3D estimate.
             raw = raw if raw.shape == (4,) and _valid_box2d(raw) else self.box2d.copy()
             ms["total"] = (time.perf_counter() - t0) * 1e3
-            return TrackResult(self.box2d.copy(), raw, self.box3d.copy(), LOST, 0, ms)
+            r = TrackResult(self.box2d.copy(), raw, self.box3d.copy(), LOST, 0, ms, _tracker_score(self.tracker2d))
+            return self._judge(r, estimated=False)
 
         pts = self._frustum(points, raw)
         t2 = time.perf_counter()
@@ -193,4 +262,101 @@ class Track3D:
         t4 = time.perf_counter()
         ms["fusion"] = (t4 - t3) * 1e3
         ms["total"] = (t4 - t0) * 1e3
-        return TrackResult(box.copy(), raw.copy(), self.box3d.copy(), status, int(len(pts)), ms)
+        r = TrackResult(box.copy(), raw.copy(), self.box3d.copy(), status, int(len(pts)), ms,
+                        _tracker_score(self.tracker2d))
+        return self._judge(r, estimated=est is not None)
+
+    # --- checkpoints and self-description ------------------------------------------------------
+    def get_state(self) -> dict:
+        """The tracker's state as plain data (dicts, lists, str, numbers; arrays base64-coded by
+        ``track3d.state.to_plain``): picklable and JSON-able, no onnxruntime objects.
+
+        ``set_state`` on a fresh Track3D of the same configuration restores it. What the 2D
+        tracker restores depends on it: SiamFC and the oracle their full state (bit-identical
+        continuation); OpenCV trackers their last frame and box (a re-initialisation there).
+        A tracker or estimator without ``get_state`` cannot be checkpointed (ValueError) unless
+        it is stateless (an estimator without the method is taken as stateless).
+        """
+        from .state import to_plain
+
+        get2d = getattr(self.tracker2d, "get_state", None)
+        if get2d is None:
+            raise ValueError(f"the 2D tracker {self.tracker2d!r} has no get_state(): it cannot be checkpointed")
+        get3d = getattr(self.estimator, "get_state", None)
+        return to_plain({
+            "version": STATE_VERSION, "tracker": self.tracker_name or type(self.tracker2d).__name__,
+            "estimator": self.estimator_name or type(self.estimator).__name__,
+            "category": self.category, "box2d": self.box2d, "box3d": self.box3d,
+            "bad_frames": self.bad_frames, "held_frames": self.held_frames,
+            "tracker2d": get2d(), "estimator_state": get3d() if get3d is not None else None,
+        })
+
+    def set_state(self, state: dict) -> None:
+        """Restore a :meth:`get_state` (of a Track3D built with the same names and models)."""
+        from .state import from_plain
+
+        st = from_plain(state)
+        if not isinstance(st, dict) or st.get("version") != STATE_VERSION:
+            raise ValueError(f"not a Track3D state of version {STATE_VERSION}")
+        mine = (self.tracker_name or type(self.tracker2d).__name__, self.estimator_name or type(self.estimator).__name__)
+        if (st["tracker"], st["estimator"]) != mine:
+            raise ValueError(f"state of {st['tracker']}+{st['estimator']} cannot restore a {mine[0]}+{mine[1]} tracker")
+        set2d = getattr(self.tracker2d, "set_state", None)
+        if set2d is None:
+            raise ValueError(f"the 2D tracker {self.tracker2d!r} has no set_state()")
+        set2d(st["tracker2d"])
+        if st.get("estimator_state") is not None:
+            self.estimator.set_state(st["estimator_state"])
+        self.category = int(st["category"])
+        self.box2d = np.asarray(st["box2d"], dtype=np.float64).reshape(4).copy()
+        self.box3d = np.asarray(st["box3d"], dtype=np.float64).reshape(6).copy()
+        self.bad_frames, self.held_frames = int(st["bad_frames"]), int(st["held_frames"])
+
+    def describe(self) -> dict:
+        """What this tracker is, as a plain dict: names, options, and every ONNX model file it
+        runs (path name, sha256, kind, metadata version). Result folders record it."""
+        models = []
+        for part in (self.tracker2d, self.estimator):
+            models += _models_of(part)
+        return {
+            "tracker": self.tracker_name or type(self.tracker2d).__name__,
+            "estimator": self.estimator_name or type(self.estimator).__name__,
+            "tracker_options": _plain_options(self.tracker_options),
+            "estimator_options": _plain_options(self.estimator_options),
+            "options": {"fusion": self.fusion, "weight_3d": self.weight_3d, "z_range": list(self.z_range),
+                        "min_points": self.min_points, "lost_after": self.lost_after, "min_score": self.min_score},
+            "models": models,
+        }
+
+
+def _plain_options(o: dict) -> dict:
+    """Options as JSON-able values; arrays (e.g. the oracle's ground truth) become a short note."""
+    out = {}
+    for k, v in o.items():
+        if isinstance(v, np.ndarray):
+            out[k] = f"<array {v.shape}>"
+        elif isinstance(v, (str, int, float, bool)) or v is None:
+            out[k] = v
+        else:
+            out[k] = str(v)
+    return out
+
+
+_SHA: dict = {}
+
+
+def _models_of(part) -> list[dict]:
+    """The OnnxModel attributes of a tracker or estimator, described (sha256 cached per file)."""
+    from .onnxmodel import OnnxModel
+
+    out = []
+    for attr, v in sorted(vars(part).items()) if hasattr(part, "__dict__") else []:
+        if isinstance(v, OnnxModel):
+            import hashlib
+
+            key = (str(v.path), v.path.stat().st_mtime_ns)
+            if key not in _SHA:
+                _SHA[key] = hashlib.sha256(v.path.read_bytes()).hexdigest()
+            out.append({"role": attr, "file": v.path.name, "sha256": _SHA[key], "kind": v.meta.get("kind"),
+                        "version": v.meta.get("version")})
+    return out

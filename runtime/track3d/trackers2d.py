@@ -107,6 +107,13 @@ class OracleTracker:
     def correct(self, box: np.ndarray) -> None:
         """The oracle follows the ground truth whatever the fused box is."""
 
+    def get_state(self) -> dict:
+        """The frame position (the ground truth itself is configuration, given at construction)."""
+        return {"frame": int(self.frame)}
+
+    def set_state(self, state: dict) -> None:
+        self.frame, self._next_init = int(state["frame"]), None
+
 
 # --- OpenCV adapters ----------------------------------------------------------------------------
 
@@ -198,6 +205,26 @@ class OpenCVTracker:
         if self.correct_mode == "reinit" and self._last_bgr is not None:
             self._start(self._last_bgr, _as_box(box))
 
+    def get_state(self) -> dict:
+        """OpenCV keeps its learned model private: the state is the last frame and box, and
+        ``set_state`` re-initialises a fresh tracker on them (the appearance model restarts
+        from that frame; two restorations of one state continue identically)."""
+        if self._last_bgr is None:
+            return {"initialised": False}
+        return {"initialised": True, "restore": "reinit", "image_bgr": self._last_bgr.copy(),
+                "box": self._box.copy(), "running": self._tracker is not None}
+
+    def set_state(self, state: dict) -> None:
+        self._tracker, self._last_bgr = None, None
+        if not state.get("initialised"):
+            return
+        bgr = np.ascontiguousarray(state["image_bgr"], dtype=np.uint8)
+        box = _as_box(state["box"])
+        self._last_bgr = bgr
+        if state.get("running", True):
+            self._start(bgr, box)
+        self._box = box.copy()
+
 
 _OPENCV = {  # name -> constructors to try in order, with "is it the legacy API" (Rect2d boxes)
     "kcf": (("TrackerKCF_create", False), ("legacy.TrackerKCF_create", True)),
@@ -278,8 +305,15 @@ def register_tracker(name: str, factory: Callable[..., Tracker2D]) -> None:
     _REGISTRY[name.lower()] = factory
 
 
+def _load_plugins() -> None:
+    from .plugins import TRACKER_GROUP, load_entry_points
+
+    load_entry_points(TRACKER_GROUP, register_tracker)
+
+
 def available_trackers() -> list[str]:
-    """Registered tracker names (some may still need model files to be built)."""
+    """Registered tracker names, plug-ins included (some may still need model files to be built)."""
+    _load_plugins()
     return sorted(_REGISTRY)
 
 
@@ -287,5 +321,11 @@ def create_tracker(name: str, **options) -> Tracker2D:
     """Build the tracker registered as `name` with its options (e.g. ``gt=`` for "oracle")."""
     factory = _REGISTRY.get(str(name).lower())
     if factory is None:
-        raise ValueError(f"unknown 2D tracker {name!r}; available: {', '.join(available_trackers())}")
-    return factory(**options)
+        _load_plugins()
+        factory = _REGISTRY.get(str(name).lower())
+    if factory is None:
+        raise ValueError(f"unknown 2D tracker {name!r}; available: {', '.join(available_trackers())} "
+                         "(a plug-in: --plugin MODULE or an entry point in the track3d.trackers group)")
+    from .plugins import call_factory
+
+    return call_factory("2D tracker", name, factory, options)

@@ -54,6 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "through several); SIZE_M = largest extent in metres (default: the sampled box volume)")
     g.add_argument("--overwrite", action="store_true", help="delete an existing track3d-sim output folder first")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
+    g.add_argument("--quiet", dest="no_progress", action="store_true", help=argparse.SUPPRESS)  # the other CLIs' name
 
     s = sub.add_parser("stats", help="the paper's Fig. 4 plots (size classes, box volumes, speeds, illumination)")
     s.add_argument("root", help="dataset folder (with dataset.json)")

@@ -110,7 +110,7 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
     texture = SolidTexture(spec.texture, rng["texture"], shape.vertices)
     renderer = BodyRenderer(shape, texture, camera)
     H, W, N = camera.height, camera.width, int(settings["frames"])
-    tan_half = (math.tan(math.radians(camera.fov_x_deg) / 2), math.tan(math.radians(camera.fov_y_deg) / 2))
+    tan_half = camera.tan_half
     motion = make_motion(rng["motion"], N, shape.radius, tan_half)
     sun = _sun(rng["sun"])
     sun_dir = np.asarray(sun["direction"])

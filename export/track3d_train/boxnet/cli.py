@@ -5,7 +5,7 @@ Typical run (the shipped model; see docs/a3boxnet.md):
     track3d-train boxnet prepare --data data/small --split train --jitters 5 --out runs/boxnet/cache
     track3d-train boxnet prepare --data data/small --split test --jitters 0 --out runs/boxnet/cache
     track3d-train boxnet train --cache runs/boxnet/cache/boxnet_train_*.npz --out runs/boxnet/main
-    track3d-train boxnet export --ckpt runs/boxnet/main/best.pt --out runtime/track3d/models/a3boxnet.onnx
+    track3d-train boxnet export --checkpoint runs/boxnet/main/best.pt --out runtime/track3d/models/a3boxnet.onnx
     track3d-train boxnet eval --model runtime/track3d/models/a3boxnet.onnx --cache runs/boxnet/cache/boxnet_test_*.npz
 """
 from __future__ import annotations
@@ -15,6 +15,8 @@ import json
 import sys
 import time
 from pathlib import Path
+
+from track3d.argparsing import apply_formatter, hidden_alias
 
 
 def _log(msg: str) -> None:
@@ -54,6 +56,11 @@ def _train(a) -> int:
 def _export(a) -> int:
     from .export import export_checkpoint
 
+    from ..onnx_meta import refuse_shipped
+
+    if not a.ckpt:
+        raise ValueError("give --checkpoint CKPT (an A3BoxNet best.pt / last.pt)")
+    refuse_shipped([Path(a.out)], a.force)
     meta = export_checkpoint(a.ckpt, a.out, check=not a.no_parity, log=_log)
     if a.meta_json:
         Path(a.meta_json).write_text(json.dumps(meta, indent=1))
@@ -108,6 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--max-sequences", type=int, default=None, help="only the first k sequences")
     q.add_argument("--seed", type=int, default=0, help="jitter / subsampling seed")
     q.add_argument("--quiet", action="store_true", help="no progress bar")
+    hidden_alias(q, "--no-progress", "quiet", action="store_true")
     q.set_defaults(func=_prepare)
 
     t = sub.add_parser("train", help="train (resumes from <out>/last.pt)",
@@ -139,13 +147,16 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--max-steps", type=int, default=0, help="stop after this many steps")
     t.add_argument("--no-resume", action="store_true", help="start over even if <out>/last.pt exists")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
+    hidden_alias(t, "--no-progress", "quiet", action="store_true")
     t.set_defaults(func=_train)
 
     e = sub.add_parser("export", help="checkpoint -> ONNX (opset 17, dynamic batch, metadata) + parity check",
                        description="Exports, writes the track3d metadata into the file, and checks torch vs "
                                    "onnxruntime on random inputs (fails beyond float32 noise).")
-    e.add_argument("--ckpt", required=True, help="checkpoint (best.pt / last.pt)")
+    e.add_argument("--checkpoint", dest="ckpt", help="A3BoxNet checkpoint (best.pt / last.pt); required")
+    hidden_alias(e, "--ckpt", "ckpt")
     e.add_argument("--out", default="runtime/track3d/models/a3boxnet.onnx", help="ONNX file to write")
+    e.add_argument("--force", action="store_true", help="overwrite a shipped model in track3d/models")
     e.add_argument("--no-parity", action="store_true", help="skip the torch / onnxruntime parity check")
     e.add_argument("--meta-json", default=None, help="also write the metadata to this JSON file")
     e.set_defaults(func=_export)
@@ -161,7 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--seed", type=int, default=0, help="sampling seed")
     v.add_argument("--json", default=None, help="write the result here")
     v.set_defaults(func=_eval)
-    return p
+    return apply_formatter(p)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -25,6 +25,18 @@ OPSET = 17
 FAMILIES = ["contact_binary", "spinning_top", "irregular"]
 
 
+# The decoding each size coding implies (track3d.boxnet is the implementation), for the metadata.
+_CENTRE = "points minus their centroid (float32); centre = centroid + center1 + center2; "
+NORMALISATION = {
+    "points": _CENTRE + "L = largest extent of the enclosing box of the sampled points; "
+                        "size = (template[argmax scores] + residual[argmax]) * L",
+    "paper": _CENTRE + "L = largest extent of the enclosing box of the sampled points; "
+                       "size = (template[argmax scores] + residual[argmax]) * L (labels normalised by max(size))",
+    "extent": _CENTRE + "E = per-axis extents of the enclosing box of the sampled points, each floored at 10% "
+                        "of the largest; size = E * (1 + residual[argmax scores])",
+}
+
+
 def model_metadata(model, extra: dict | None = None) -> dict:
     cfg = model.config
     meta = {
@@ -32,9 +44,7 @@ def model_metadata(model, extra: dict | None = None) -> dict:
         "num_points": int(cfg.num_points), "num_categories": int(cfg.num_categories),
         "use_category": bool(cfg.use_category), "categories": FAMILIES[:cfg.num_categories],
         "width": float(cfg.width), "size_templates": SIZE_TEMPLATES.tolist(), "size_norm": cfg.size_norm,
-        "normalisation": "points minus their centroid (float32); L = largest extent of the enclosing box "
-                         "of the sampled points; centre = centroid + center1 + center2; "
-                         "size = (template[argmax scores] + residual[argmax]) * L",
+        "normalisation": NORMALISATION[cfg.size_norm],
         "inputs": {INPUT_POINTS: "B x N x 3 float32 centred"} |
                   ({INPUT_CATEGORY: f"B x {cfg.num_categories} float32 one-hot"} if cfg.use_category else {}),
         "outputs": list(OUTPUTS), "opset": OPSET,
@@ -108,7 +118,8 @@ def export_checkpoint(ckpt: str | Path, out: str | Path, check: bool = True, log
     model, ck = load_checkpoint(ckpt)
     hist = ck.get("history", {})
     last = hist.get("epochs", [{}])[-1] if hist.get("epochs") else {}
-    extra = {"train_data_hash": hist.get("data_hash"), "train_data": (hist.get("cache") or {}).get("root"),
+    root = (hist.get("cache") or {}).get("root")
+    extra = {"train_data_hash": hist.get("data_hash"), "train_data": Path(root).name if root else None,
              "trained": {"epochs": ck.get("epoch", -1) + 1, "steps": ck.get("step"), "seconds": hist.get("seconds"),
                          "items": hist.get("train_items"), "batch": ck["train_config"].get("batch"),
                          "jitter": (hist.get("cache") or {}).get("jitter"),

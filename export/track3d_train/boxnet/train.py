@@ -60,7 +60,9 @@ def load_checkpoint(path: str | Path):
 
     from .model import A3BoxNet, BoxNetConfig
 
-    ck = torch.load(str(path), map_location="cpu", weights_only=False)
+    from ..checkpoint import load_checkpoint_dict
+
+    ck = load_checkpoint_dict(path, "A3BoxNet")
     model = A3BoxNet(BoxNetConfig(**ck["model_config"]))
     model.load_state_dict(ck["model"])
     model.eval()

@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+from track3d.argparsing import apply_formatter, hidden_alias
+
 
 def _prepare(a) -> int:
     from .data import build_cache, sequences_from_dataset, synthetic_sequences
@@ -24,8 +26,18 @@ def _prepare(a) -> int:
             print("error: give --data ROOT (a dataset) or --synthetic N", file=sys.stderr)
             return 2
         seqs = sequences_from_dataset(a.data, a.split, stride=a.stride)
+    if a.synthetic:
+        import hashlib
+
+        ident = {"data_hash": hashlib.sha256(f"synthetic:{a.synthetic}:{a.synthetic_frames}:{a.seed}".encode())
+                 .hexdigest(), "data_name": f"synthetic x{a.synthetic} (seed {a.seed})"}
+    else:
+        from track3d.dataset import Dataset
+
+        from ..boxnet.data import split_hash
+        ident = {"data_hash": split_hash(Dataset(a.data), a.split), "data_name": f"{Path(a.data).name}/{a.split}"}
     t0 = time.perf_counter()
-    out = build_cache(seqs, a.out, max_frames=a.max_frames, progress=not a.quiet)
+    out = build_cache(seqs, a.out, max_frames=a.max_frames, progress=not a.quiet, **ident)
     info = json.loads((out / "index.json").read_text())
     print(f"cache {out}: {len(info['seq'])} crops from {len(info['sequences'])} sequences "
           f"in {time.perf_counter() - t0:.0f} s")
@@ -57,6 +69,12 @@ def _export(a) -> int:
     from .export import export_onnx, parity, quantize_search
     from .train import load_checkpoint
 
+    from ..onnx_meta import refuse_shipped
+
+    if not a.checkpoint:
+        raise ValueError("give --checkpoint CKPT (a SiamFC ckpt.pt)")
+    refuse_shipped([Path(str(a.out) + "_exemplar.onnx"), Path(str(a.out) + "_search.onnx")]
+                   + ([Path(str(a.out) + "_int8_search.onnx")] if a.int8 else []), a.force)
     net, ck = load_checkpoint(a.checkpoint)
     over = {k: getattr(a, k) for k in ("instance_size", "scale_num", "window_influence", "scale_lr",
                                        "scale_step", "scale_penalty") if getattr(a, k) is not None}
@@ -64,7 +82,8 @@ def _export(a) -> int:
         net.cfg = dataclasses.replace(net.cfg, **over)
     extra = {"training": {"steps": ck.get("step"), "batch": ck.get("batch"), "seed": ck.get("seed"),
                           "elapsed_s": round(float(ck.get("elapsed_s", 0)), 1),
-                          "data": a.data_note or "track3d small train split (no ILSVRC-VID pre-training)"}}
+                          "data": a.data_note or "track3d small train split (no ILSVRC-VID pre-training)"},
+             "train_data_hash": ck.get("train_data_hash"), "train_data": ck.get("train_data")}
     pz, px = export_onnx(net, a.out, extra)
     p = parity(net, pz, px)
     print(f"wrote {pz} ({pz.stat().st_size / 1e6:.2f} MB), {px} ({px.stat().st_size / 1e6:.2f} MB)")
@@ -119,39 +138,45 @@ def build_parser() -> argparse.ArgumentParser:
 
     q = sub.add_parser("prepare", help="crop training pairs once into a cache (.npy memmap)")
     q.add_argument("--data", help="dataset root (dataset.json)")
-    q.add_argument("--split", default="train")
+    q.add_argument("--split", default="train", help="split name")
     q.add_argument("--out", required=True, help="cache folder")
     q.add_argument("--stride", type=int, default=1, help="use every k-th frame")
     q.add_argument("--max-frames", type=int, default=2000, help="bound on cached crops (~195 kB each)")
     q.add_argument("--synthetic", type=int, default=0, help="N synthetic sequences instead of a dataset")
-    q.add_argument("--synthetic-frames", type=int, default=60)
-    q.add_argument("--seed", type=int, default=0)
-    q.add_argument("--quiet", action="store_true")
+    q.add_argument("--synthetic-frames", type=int, default=60, help="frames per synthetic sequence")
+    q.add_argument("--seed", type=int, default=0, help="seed")
+    q.add_argument("--quiet", action="store_true", help="no progress bar")
+    hidden_alias(q, "--no-progress", "quiet", action="store_true")
     q.set_defaults(fn=_prepare)
 
     for name, fn, hlp in (("train", _train, "train (resumes from <out>/ckpt.pt)"),):
         t = sub.add_parser(name, help=hlp)
-        t.add_argument("--variant", choices=["faithful", "edge"], default="edge")
+        t.add_argument("--variant", choices=["faithful", "edge"], default="edge", help="network variant")
         t.add_argument("--width", type=float, default=None, help="override the width multiplier")
         t.add_argument("--train-instance-size", type=int, default=None, help="search crop size in training")
-        t.add_argument("--cache", required=True)
+        t.add_argument("--cache", required=True, help="cache folder from `prepare`")
         t.add_argument("--out", required=True, help="run folder: ckpt.pt, log.jsonl, loss.png")
-        t.add_argument("--steps", type=int, default=2000)
-        t.add_argument("--batch", type=int, default=16)
-        t.add_argument("--lr", type=float, default=1e-2)
-        t.add_argument("--lr-end", type=float, default=1e-4)
+        t.add_argument("--max-steps", dest="steps", type=int, default=2000,
+                       help="training steps (the LR schedule spans them)")
+        hidden_alias(t, "--steps", "steps", type=int)
+        t.add_argument("--batch", type=int, default=16, help="batch size (pairs)")
+        t.add_argument("--lr", type=float, default=1e-2, help="initial learning rate")
+        t.add_argument("--lr-end", type=float, default=1e-4, help="final learning rate (geometric decay)")
         t.add_argument("--max-gap", type=int, default=50, help="max frame gap of a pair")
-        t.add_argument("--seed", type=int, default=0)
-        t.add_argument("--threads", type=int, default=1)
+        t.add_argument("--seed", type=int, default=0, help="seed")
+        t.add_argument("--threads", type=int, default=1, help="torch threads")
         t.add_argument("--time-budget-min", type=float, default=None, help="stop (and checkpoint) after this")
         t.add_argument("--init-from", help="start from another run's checkpoint (fine-tuning)")
-        t.add_argument("--no-resume", action="store_true")
-        t.add_argument("--quiet", action="store_true")
+        t.add_argument("--no-resume", action="store_true", help="start over even if <out>/ckpt.pt exists")
+        t.add_argument("--quiet", action="store_true", help="no progress bar")
+        hidden_alias(t, "--no-progress", "quiet", action="store_true")
         t.set_defaults(fn=fn)
 
     e = sub.add_parser("export", help="write <out>_exemplar.onnx + <out>_search.onnx, check parity")
-    e.add_argument("--checkpoint", required=True)
+    e.add_argument("--checkpoint", dest="checkpoint", help="SiamFC checkpoint (ckpt.pt); required")
+    hidden_alias(e, "--ckpt", "checkpoint")
     e.add_argument("--out", required=True, help="path prefix")
+    e.add_argument("--force", action="store_true", help="overwrite the shipped models in track3d/models")
     e.add_argument("--data-note", default=None, help="what the model was trained on (metadata)")
     e.add_argument("--int8", metavar="CACHE", help="also write an int8 search graph calibrated on CACHE")
     for k, ty in (("instance-size", int), ("scale-num", int), ("window-influence", float),
@@ -161,14 +186,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     v = sub.add_parser("eval", help="OPE on a dataset split with the ONNX runtime tracker")
     v.add_argument("--model", required=True, help="prefix of <name>_exemplar/_search.onnx")
-    v.add_argument("--data", required=True)
-    v.add_argument("--split", default="test")
-    v.add_argument("--max-seqs", type=int, default=0)
-    v.add_argument("--threads", type=int, default=1)
+    v.add_argument("--data", required=True, help="dataset root")
+    v.add_argument("--split", default="test", help="split name")
+    v.add_argument("--max-seqs", type=int, default=0, help="only the first k sequences (0: all)")
+    v.add_argument("--threads", type=int, default=1, help="onnxruntime threads")
     for k, ty in (("instance-size", int), ("scale-num", int), ("window-influence", float), ("scale-lr", float)):
-        v.add_argument(f"--{k}", type=ty, default=None)
+        v.add_argument(f"--{k}", type=ty, default=None, help="override the model's tracking default")
     v.set_defaults(fn=_eval)
-    return p
+    return apply_formatter(p)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -46,9 +46,12 @@ def synthetic_sequences(n: int, frames: int = 60, seed: int = 0, h: int = 240, w
 
 
 def build_cache(sequences, out_dir, exemplar_size: int = 127, cache_size: int = CACHE_SIZE,
-                context_amount: float = 0.5, max_frames: int = 2000, progress: bool = True) -> Path:
+                context_amount: float = 0.5, max_frames: int = 2000, progress: bool = True,
+                data_hash: str | None = None, data_name: str | None = None) -> Path:
     """Write crops.npy (N, S, S, 3) uint8 + index.json. Sequences: iterable of
-    (name, get_image(i), boxes, absent, stride). Frames beyond max_frames are subsampled evenly."""
+    (name, get_image(i), boxes, absent, stride). Frames beyond max_frames are subsampled evenly.
+    data_hash / data_name identify the source data (recorded in index.json, then in the
+    checkpoints and the exported models' metadata)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     seqs = []
@@ -96,8 +99,20 @@ def build_cache(sequences, out_dir, exemplar_size: int = 127, cache_size: int = 
     (out / "crops.npy.tmp").replace(out / "crops.npy")
     (out / "index.json").write_text(json.dumps({
         "sequences": [p[0] for p in plan], "seq": seq_of, "frame": frame_of, "size_in_crop": sizes,
-        "cache_size": cache_size, "exemplar_size": exemplar_size, "context_amount": context_amount}))
+        "cache_size": cache_size, "exemplar_size": exemplar_size, "context_amount": context_amount,
+        "data_hash": data_hash, "data_name": data_name}))
     return out
+
+
+def cache_data_info(cache_dir) -> dict:
+    """{"train_data_hash", "train_data"} of a crop cache: the source data's hash recorded by
+    build_cache, else a sha256 of the cache's index.json (older caches)."""
+    import hashlib
+
+    raw = (Path(cache_dir) / "index.json").read_bytes()
+    index = json.loads(raw)
+    return {"train_data_hash": index.get("data_hash") or hashlib.sha256(raw).hexdigest(),
+            "train_data": index.get("data_name")}
 
 
 class CropCache:

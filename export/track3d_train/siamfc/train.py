@@ -17,7 +17,9 @@ __all__ = ["train", "load_checkpoint", "plot_log"]
 
 
 def load_checkpoint(path) -> tuple[SiamFC, dict]:
-    ck = torch.load(str(path), map_location="cpu", weights_only=False)
+    from ..checkpoint import load_checkpoint_dict
+
+    ck = load_checkpoint_dict(path, "SiamFC")
     net = SiamFC(SiamFCConfig.from_dict(ck["config"]))
     net.load_state_dict(ck["model"])
     return net, ck
@@ -72,6 +74,9 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
     step, elapsed0 = 0, 0.0
     sampler = PairSampler(CropCache(cache_dir), cfg.exemplar_size, cfg.train_instance_size,
                           max_gap=max_gap, seed=seed)
+    from .data import cache_data_info
+
+    data_info = cache_data_info(cache_dir)
     if resume and ck_path.is_file():
         ck = torch.load(str(ck_path), map_location="cpu", weights_only=False)
         net.load_state_dict(ck["model"])
@@ -126,7 +131,7 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
             if now - last_ck >= ckpt_every_s or step == steps or budget_hit:
                 _save(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
                                 "config": cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
-                                "batch": batch, "seed": seed})
+                                "batch": batch, "seed": seed, **data_info})
                 last_ck = now
             if budget_hit:
                 stopped = "time budget"

@@ -83,6 +83,10 @@ class OverlayWriter:
             try:
                 import PIL.Image  # noqa: F401  (only to know whether GIF writing is possible)
             except ImportError:
+                import warnings
+
+                warnings.warn(f"no pillow for GIF overlays: writing {self.path.with_suffix('.mp4').name} "
+                              "instead (pip install 'track3d[plot]')", RuntimeWarning, stacklevel=2)
                 self.path = self.path.with_suffix(".mp4")
         elif self.path.suffix.lower() != ".mp4":
             raise ValueError(f"overlay files are .gif or .mp4, got {self.path.name}")

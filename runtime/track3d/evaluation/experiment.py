@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import math
-import platform
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,25 +24,16 @@ import numpy as np
 
 from ..boxes import iou_3d
 from ..dataset import Dataset, DatasetError, Sequence
+from ..machine import cpu_name
 from ..progress import Progress
 from ..tracker import STAGES, Track3D
 from .draw import OverlayWriter, draw_overlay
 from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, SequenceScore, average_scores,
                       score_sequence)
-from .results import INIT, SKIPPED, SequenceResult, read_result, result_folder, write_result
+from .results import (INIT, SKIPPED, SequenceResult, read_result, read_run_record, result_folder, run_config_key,
+                      write_result, write_run_record)
 
 __all__ = ["TrackerSpec", "Experiment", "run_sequence", "cpu_name"]
-
-
-def cpu_name() -> str:
-    """The CPU model name (for benchmark records)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 @dataclass
@@ -64,9 +54,12 @@ class TrackerSpec:
 
     @property
     def label(self) -> str:
+        """The result name: `name`, else <tracker>+<estimator>, each tagged @<model>-<hash8> when
+        it runs model files other than the shipped ones (so such a run never replaces those)."""
         if self.name:
             return self.name
-        return f"{self.tracker}+{self.estimator}" + ("" if self.fusion else "-nofusion")
+        return (f"{self.tracker}{_model_tag(self.tracker_options)}+{self.estimator}"
+                f"{_model_tag(self.estimator_options)}" + ("" if self.fusion else "-nofusion"))
 
     def _options(self, kind: str, options: dict) -> dict:
         o = dict(options)
@@ -81,6 +74,30 @@ class TrackerSpec:
         return Track3D.create(seq.camera, self.tracker, self.estimator, tracker_options=topts,
                               estimator_options=self._options(self.estimator, self.estimator_options),
                               fusion=self.fusion, weight_3d=self.weight_3d)
+
+
+_MODEL_OPTIONS = ("model", "exemplar_model", "search_model", "backbone", "neckhead")
+
+
+def _model_tag(options: dict) -> str:
+    """'' for the shipped models, else '@<stem>-<8 hex of sha256 over the model files' bytes>'."""
+    import hashlib
+
+    given = [str(options[k]) for k in _MODEL_OPTIONS if options.get(k)]
+    if not given:
+        return ""
+    h = hashlib.sha256()
+    for g in given:
+        p = Path(g)
+        files = [f for f in (p, p.parent / f"{p.name}_exemplar.onnx", p.parent / f"{p.name}_search.onnx")
+                 if f.is_file()]
+        for f in files:
+            h.update(f.read_bytes())
+        if not files:
+            h.update(g.encode())
+    stem = Path(given[0]).name.replace(".onnx", "")
+    stem = "".join(c if c.isalnum() or c in "-_." else "_" for c in stem)[:32]
+    return f"@{stem}-{h.hexdigest()[:8]}"
 
 
 def _gt_ok(seq: Sequence, i: int) -> bool:
@@ -140,6 +157,23 @@ def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, ma
     return SequenceResult(seq.name, box2d, raw, box3d, status, seconds, e2e, stage_ms)
 
 
+def _comparison_warnings(names: list[str], runs: dict, lengths: dict) -> list[str]:
+    """Warnings that the compared runs are not like for like: different frames, restart settings,
+    or results without a run record."""
+    out = []
+    if len({tuple(sorted(v.items())) for v in lengths.values()}) > 1:
+        desc = ", ".join(f"{n}: {sum(lengths[n].values())}" for n in names)
+        out.append(f"the runs cover different frames ({desc} result frames): their scores are not comparable")
+    settings = {n: (r.get("restart"), r.get("restart_skip")) for n, r in runs.items() if r}
+    if len(set(settings.values())) > 1:
+        desc = ", ".join(f"{n}: restart={v[0]} skip={v[1]}" for n, v in settings.items())
+        out.append(f"the runs used different restart settings ({desc})")
+    missing = [n for n, r in runs.items() if not r]
+    if missing:
+        out.append(f"no run record ({', '.join(missing)}): restart settings and models unknown")
+    return out
+
+
 def _json_float(x):
     if isinstance(x, (float, np.floating)):
         return None if not math.isfinite(float(x)) else round(float(x), 6)
@@ -182,15 +216,27 @@ class Experiment:
 
     def run(self, spec: TrackerSpec | Callable[[Sequence], Track3D], name: str | None = None,
             overwrite: bool = True, overlay: str | None = None, overlay_sequences: int = 1,
-            quiet: bool = False) -> list[Path]:
+            quiet: bool = False, replace: bool = False) -> list[Path]:
         """Track every sequence; writes result files, plus overlays (``overlay`` = "gif"/"mp4")
-        for the first `overlay_sequences` sequences. Returns the result folders."""
+        for the first `overlay_sequences` sequences, and the run record (results.RUN_FILE).
+        Returns the result folders.
+
+        Results of another configuration (other names, options, models or restart settings,
+        see results.run_config_key) already under `name` raise ValueError unless `replace`."""
         if isinstance(spec, TrackerSpec):
             factory, name = spec.build, name or spec.label
         elif name is None:
             raise ValueError("name is required when spec is a factory function")
         else:
             factory = spec
+        record = self._run_record(factory, spec)
+        old = read_run_record(self.result_dir, self.split, name)
+        if old is not None and not replace and run_config_key(old) != run_config_key(record):
+            raise ValueError(f"{self.result_dir / self.split / name} holds results of another configuration "
+                             "(tracker, options, models or restart settings differ): pick another --name "
+                             "or pass --replace")
+        if old is not None and run_config_key(old) == run_config_key(record):
+            record["frames"] = {**old.get("frames", {}), **record["frames"]}
         folders = []
         for k, seq in enumerate(self.sequences):
             folder = self.folder(name, seq.name)
@@ -198,6 +244,7 @@ class Experiment:
                 folders.append(folder)
                 continue
             n = len(seq) if self.max_frames is None else min(len(seq), self.max_frames)
+            record["frames"][seq.name] = n
             writer = None
             if overlay and k < overlay_sequences:
                 writer = OverlayWriter(folder / f"{seq.name}_overlay.{overlay}")
@@ -207,7 +254,24 @@ class Experiment:
             if writer is not None:
                 writer.close()
             folders.append(folder)
+            write_run_record(self.result_dir, self.split, name, record)
         return folders
+
+    def _run_record(self, factory, spec) -> dict:
+        """What makes this run's results: Track3D.describe() of a tracker built for the first
+        sequence, the restart settings, threads, versions; `frames` is filled per sequence."""
+        import datetime
+
+        from ..machine import versions
+
+        track = factory(self.sequences[0])
+        desc = track.describe() if hasattr(track, "describe") else {}
+        del track
+        return {"track3d": desc, "threads": getattr(spec, "threads", None), "restart": self.restart,
+                "restart_skip": self.restart_skip, "max_frames": self.max_frames, "split": self.split,
+                "dataset": Path(self.dataset.root).name, "versions": versions(),
+                "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+                "frames": {}}
 
     # --- evaluation ----------------------------------------------------------------------------
     def score(self, name: str) -> list[SequenceScore]:
@@ -237,16 +301,28 @@ class Experiment:
             "trackers": {},
         }
         overall = {}
+        runs = {n: read_run_record(self.result_dir, self.split, n) for n in names}
+        lengths = {}
         for name in names:
             scores = self.score(name)
             ov = average_scores(scores)
             overall[name] = ov
+            lengths[name] = {seq.name: len(read_result(self.folder(name, seq.name), seq.name)) for seq in self.sequences}
+            rec = runs[name] or {}
             report["trackers"][name] = {
-                "overall": ov.summary(),
+                "overall": {**ov.summary(), "result_frames": sum(lengths[name].values())},
                 "curves": ov.curves,
                 "sequences": {s.name: s.summary() for s in scores},
                 "stage_ms_mean": self._stage_means(name),
+                "run": rec or None,
+                "restart": rec.get("restart"), "restart_skip": rec.get("restart_skip"),
             }
+        report["warnings"] = _comparison_warnings(names, runs, lengths)
+        known = [(r["restart"], r["restart_skip"]) for r in runs.values() if r]
+        if known and len(set(known)) == 1 and len(known) == len(names):
+            report["restart"], report["restart_skip"] = known[0]
+        else:   # unknown (results without a record) or mixed: say so, never a made-up value
+            report["restart"] = report["restart_skip"] = None
         if plots:
             from . import plots as P
 

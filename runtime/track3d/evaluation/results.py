@@ -10,12 +10,18 @@ One folder per tracker and sequence: ``<result_dir>/<split>/<tracker>/<sequence>
     <seq>_e2e_time.txt  seconds per frame end to end (reading image + depth, back-projection, tracker)
     <seq>_stages.txt    per-stage milliseconds, a commented header names the columns
 
+One file per tracker folder, ``<result_dir>/<split>/<tracker>/run.json``, records the run
+that made the results (:func:`write_run_record`): tracker and estimator names and options,
+the loop options, every model file with its sha256 and metadata version, the restart
+settings, the thread count, the track3d version, and per sequence the frames tracked.
+
 Frames without output (skipped after a restart, before the first init) are rows of nan.
 Initialisation frames hold the ground truth (as GOT-10k writes the first frame) and are
 never scored; the number of restarts is the number of init frames after the first.
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,7 +29,10 @@ import numpy as np
 
 from ..tracker import STAGES
 
-__all__ = ["SequenceResult", "INIT", "SKIPPED", "write_result", "read_result", "result_folder"]
+__all__ = ["SequenceResult", "INIT", "SKIPPED", "RUN_FILE", "write_result", "read_result", "result_folder",
+           "write_run_record", "read_run_record", "run_config_key"]
+
+RUN_FILE = "run.json"
 
 INIT, SKIPPED = "init", "skipped"
 
@@ -105,3 +114,43 @@ def read_result(folder: str | Path, name: str | None = None) -> SequenceResult:
     if len(lengths) != 1:
         raise ValueError(f"result files of {n} in {folder} differ in length")
     return r
+
+
+def _run_path(result_dir: str | Path, split: str, tracker: str) -> Path:
+    return Path(result_dir) / split / tracker / RUN_FILE
+
+
+def read_run_record(result_dir: str | Path, split: str, tracker: str) -> dict | None:
+    """The run.json of a tracker's results, or None for results written before records existed."""
+    p = _run_path(result_dir, split, tracker)
+    if not p.is_file():
+        return None
+    try:
+        rec = json.loads(p.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise ValueError(f"{p} is not a readable run record ({e})") from None
+    if not isinstance(rec, dict):
+        raise ValueError(f"{p} is not a run record (not a JSON object)")
+    return rec
+
+
+def run_config_key(rec: dict) -> dict:
+    """The part of a run record that decides the outputs (what must match to share a folder):
+    names, options, models (by hash), restart settings; not threads, dates or frame counts."""
+    d = rec.get("track3d", {})
+
+    def opts(o: dict) -> dict:  # threads change speed only; arrays (the oracle's ground truth) are data
+        return {k: v for k, v in o.items() if k != "threads" and not (isinstance(v, str) and v.startswith("<array"))}
+
+    return {"tracker": d.get("tracker"), "estimator": d.get("estimator"),
+            "tracker_options": opts(d.get("tracker_options", {})),
+            "estimator_options": opts(d.get("estimator_options", {})),
+            "options": d.get("options"), "models": sorted(m.get("sha256", "") for m in d.get("models", [])),
+            "restart": rec.get("restart"), "restart_skip": rec.get("restart_skip")}
+
+
+def write_run_record(result_dir: str | Path, split: str, tracker: str, rec: dict) -> Path:
+    p = _run_path(result_dir, split, tracker)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(rec, indent=1, sort_keys=True))
+    return p

@@ -1,0 +1,70 @@
+"""The conventions every track3d command line follows (track3d, track3d-train, benchmarks).
+
+- every flag has help and shows its default (:class:`HelpFormatter` appends "(default: X)"
+  where the help text does not already say it);
+- one name per flag across CLIs (``--checkpoint``, ``--max-steps``, ``--quiet``); older names
+  stay as hidden aliases (:func:`hidden_alias`);
+- a user's mistake is one line on stderr and exit 2 (:func:`run_main`), never a traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Callable
+
+__all__ = ["HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS"]
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Raw descriptions, and "(default: X)" after any help that does not mention its default."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        h = action.help or ""
+        if h is argparse.SUPPRESS or "%(default)" in h or "default" in h.lower():
+            return h
+        d = action.default
+        if d is None or d is False or d is argparse.SUPPRESS or isinstance(action, argparse._HelpAction) \
+                or action.option_strings == [] or d == []:
+            return h
+        return f"{h} (default: %(default)s)"
+
+
+def apply_formatter(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Give `parser` and all its sub-command parsers the HelpFormatter."""
+    parser.formatter_class = HelpFormatter
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                apply_formatter(sub)
+    return parser
+
+
+def hidden_alias(parser: argparse.ArgumentParser, flag: str, dest: str, **kwargs) -> None:
+    """An old flag name that still works but is not shown in --help."""
+    parser.add_argument(flag, dest=dest, help=argparse.SUPPRESS, default=argparse.SUPPRESS, **kwargs)
+
+
+def _user_errors() -> tuple:
+    errs: list = [ValueError, FileNotFoundError, NotADirectoryError, PermissionError]
+    for mod, name in (("track3d.dataset", "DatasetError"), ("track3d.onnxmodel", "ModelError"),
+                      ("track3d.trackers2d", "TrackerUnavailable"), ("track3d.estimators", "EstimatorUnavailable")):
+        try:
+            errs.append(getattr(__import__(mod, fromlist=[name]), name))
+        except ImportError:
+            pass
+    return tuple(errs)
+
+
+USER_ERRORS = _user_errors()
+
+
+def run_main(main: Callable[[], int | None], prog: str) -> int:
+    """Run a script's main(): the errors a user causes become one line and exit 2."""
+    try:
+        return int(main() or 0)
+    except USER_ERRORS as e:
+        print(f"{prog}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130

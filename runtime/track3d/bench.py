@@ -1,0 +1,357 @@
+"""`track3d bench`: the Track3D loop's speed on this machine, from the installed package alone.
+
+    report = run_bench(BenchConfig(frames=1000, threads=(1, 2)))
+    print(format_table(report))
+
+Frames: a synthetic sequence made here (a lit, textured sphere moving towards the camera at
+640x480, its depth back-projected to the point cloud: no dataset and no simulator needed) or
+the first sequences of a dataset (``data=``), preloaded, so I/O is excluded. The loop is
+re-initialised at each pass over the frames. For each thread count the process is pinned to
+that many CPUs (every thread, see track3d.machine), the models get that many intra-op
+threads and OpenCV that many; per stage (2D tracker, its network, frustum, box estimator, its
+network, fusion) and end to end: median, p99, p99.9 and max milliseconds, and FPS (1000 /
+median end-to-end ms). The other processes' CPU load is measured before and after (and the
+load average recorded); a warning says when the machine was busy. ``models_only`` times each
+ONNX network alone, fed the inputs it saw in the loop (like onnxruntime_perf_test).
+"""
+from __future__ import annotations
+
+import gc
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from . import machine
+from .camera import Camera
+
+__all__ = ["BenchConfig", "run_bench", "format_table", "synthetic_frames", "percentiles", "BUSY_THRESHOLD"]
+
+BUSY_THRESHOLD = 0.15      # other processes using more than 15% of all CPUs: timings are suspect
+WARMUP = 20
+
+
+@dataclass
+class BenchConfig:
+    """What to time. tracker/estimator: registry names; tracker_model: a `<dir>/<name>` prefix
+    of a SiamFC pair (`<name>_exemplar.onnx` / `_search.onnx`); boxnet_model: an A3BoxNet ONNX."""
+
+    tracker: str = "siamfc-edge"
+    estimator: str = "a3boxnet"
+    tracker_model: str | None = None
+    boxnet_model: str | None = None
+    frames: int = 1000
+    threads: tuple[int, ...] = (1, 2)
+    data: str | None = None
+    split: str = "test"
+    synthetic_frames: int = 60
+    models_only: bool = False
+    busy_seconds: float = 0.5
+    extra: dict = field(default_factory=dict)
+
+
+def percentiles(ms) -> dict:
+    """median, p99, p99.9, max and mean of a list of milliseconds."""
+    a = np.asarray(ms, dtype=np.float64)
+    if a.size == 0:
+        return {k: None for k in ("median_ms", "p99_ms", "p99_9_ms", "max_ms", "mean_ms")}
+    return {"median_ms": float(np.median(a)), "p99_ms": float(np.percentile(a, 99)),
+            "p99_9_ms": float(np.percentile(a, 99.9)), "max_ms": float(a.max()), "mean_ms": float(a.mean())}
+
+
+# --- frames -----------------------------------------------------------------------------------
+
+def _texture(h: int, w: int, seed: int = 0) -> np.ndarray:
+    """A crater-like grey texture (H, W) in 0..1: a few random dark discs over value noise."""
+    rng = np.random.default_rng(seed)
+    coarse = rng.random((h // 16 + 2, w // 16 + 2))
+    import cv2
+
+    tex = cv2.resize(coarse, (w, h), interpolation=cv2.INTER_CUBIC) * 0.3 + 0.7
+    yy, xx = np.mgrid[0:h, 0:w]
+    for _ in range(40):
+        cx, cy, r = rng.random() * w, rng.random() * h, 3 + rng.random() * 0.05 * max(h, w)
+        d = np.hypot(xx - cx, yy - cy) / r
+        tex = np.where(d < 1.0, tex * (0.55 + 0.45 * d), tex)
+    return np.clip(tex, 0.0, 1.0)
+
+
+def synthetic_frames(camera: Camera, n: int = 60, seed: int = 0):
+    """n frames of a lit, textured sphere (radius 2 m) drifting across and towards the camera.
+
+    Returns [(image (H, W, 3) uint8 RGB, points (N, 3) float32, box2d (4,) float64)], category 0.
+    The texture is painted in longitude/latitude, so it turns with the sphere's rotation."""
+    rays = camera.pixel_rays()
+    tex = _texture(256, 512, seed)
+    radius = 2.0
+    light = np.array([-0.5, -0.4, -0.77])
+    light /= np.linalg.norm(light)
+    out = []
+    for k in range(n):
+        f = k / max(n - 1, 1)
+        c = np.array([-1.5 + 3.0 * f, 0.8 - 1.2 * f, 22.0 - 8.0 * f])
+        a = np.sum(rays * rays, axis=-1)
+        b = -2.0 * rays @ c
+        disc = b * b - 4 * a * (c @ c - radius ** 2)
+        hit = disc >= 0
+        t = np.where(hit, (-b - np.sqrt(np.where(hit, disc, 0.0))) / (2 * a), 0.0)
+        p = rays * t[..., None]
+        nrm = (p - c) / radius
+        shade = np.clip(nrm @ -light, 0.03, 1.0)
+        lon = (np.arctan2(nrm[..., 0], nrm[..., 2]) / (2 * np.pi) + 0.5 + 0.01 * k) % 1.0
+        lat = np.arccos(np.clip(nrm[..., 1], -1, 1)) / np.pi
+        val = shade * tex[(lat * 255).astype(int).clip(0, 255), (lon * 511).astype(int).clip(0, 511)]
+        img = np.zeros((camera.height, camera.width, 3), np.uint8)
+        g = (255 * val).astype(np.uint8)
+        img[hit] = np.stack([g, g, g], -1)[hit]
+        depth = np.where(hit, t, 0.0).astype(np.float32)
+        vv, uu = np.nonzero(hit)
+        box = np.array([uu.min(), vv.min(), uu.max() + 1 - uu.min(), vv.max() + 1 - vv.min()], np.float64)
+        out.append((img, camera.backproject_depth(depth), box))
+    return out
+
+
+def _dataset_frames(root: str, split: str, max_frames: int):
+    """(camera, category, frames) of the first sequences of a dataset split, preloaded."""
+    from .dataset import Dataset
+
+    ds = Dataset(root)
+    seqs = ds.sequences(split)
+    if not seqs:
+        raise ValueError(f"split {split!r} of {root} has no sequences")
+    passes = []
+    total = 0
+    for seq in seqs:
+        fr = [(seq.image(i), seq.points(i), seq.gt2d[i]) for i in range(len(seq))
+              if not seq.absent[i] and np.all(np.isfinite(seq.gt2d[i])) and seq.gt2d[i][2] > 0]
+        if len(fr) >= 2:
+            passes.append((seq.category, fr))
+            total += len(fr)
+        if total >= max_frames:
+            break
+    if not passes:
+        raise ValueError(f"no sequence of {root}/{split} has two frames with a visible target")
+    return ds.camera, passes
+
+
+# --- timing -----------------------------------------------------------------------------------
+
+def _onnx_models(obj) -> list:
+    from .onnxmodel import OnnxModel
+
+    return [v for v in (vars(obj).values() if hasattr(obj, "__dict__") else ()) if isinstance(v, OnnxModel)]
+
+
+class _NetTimer:
+    """Wraps the run() of models to accumulate their time and keep their first feeds."""
+
+    def __init__(self, models):
+        self.ms = 0.0
+        self.feeds: dict[str, dict] = {}
+        for m in models:
+            run = m.run
+            key = m.meta.get("kind", m.path.name)
+
+            def timed(feeds, outputs=None, _run=run, _key=key):
+                self.feeds.setdefault(_key, {k: np.array(v) for k, v in feeds.items()})
+                t = time.perf_counter()
+                try:
+                    return _run(feeds, outputs)
+                finally:
+                    self.ms += (time.perf_counter() - t) * 1e3
+
+            m.run = timed
+
+    def take(self) -> float:
+        v, self.ms = self.ms, 0.0
+        return v
+
+
+def _build(cfg: BenchConfig, camera: Camera, threads: int):
+    from .tracker import Track3D
+
+    topt: dict = dict(cfg.extra.get("tracker_options", {}))
+    eopt: dict = dict(cfg.extra.get("estimator_options", {}))
+    if cfg.tracker.startswith("siamfc") or cfg.tracker_model:
+        topt["threads"] = threads
+        if cfg.tracker_model:
+            topt["model"] = cfg.tracker_model
+    if cfg.estimator == "a3boxnet" or cfg.boxnet_model:
+        eopt["threads"] = threads
+        if cfg.boxnet_model:
+            eopt["model"] = cfg.boxnet_model
+    return Track3D.create(camera, cfg.tracker, cfg.estimator, tracker_options=topt, estimator_options=eopt)
+
+
+STAGE_NAMES = ("track2d", "net2d", "frustum", "box3d", "net3d", "fusion", "end_to_end")
+
+
+def _time_loop(t3d, passes, frames: int) -> tuple[dict, dict, dict]:
+    net2d = _NetTimer(_onnx_models(t3d.tracker2d))
+    net3d = _NetTimer(_onnx_models(t3d.estimator))
+    rows: dict[str, list] = {k: [] for k in STAGE_NAMES}
+    statuses: dict[str, int] = {}
+    done = 0
+    while done < frames + WARMUP:
+        for category, fr in passes:
+            img, pts, box = fr[0]
+            t3d.init(img, box, category, points=pts)
+            net2d.take(), net3d.take()
+            for img, pts, _ in fr[1:]:
+                t = time.perf_counter()
+                res = t3d.update(img, pts)
+                e2e = (time.perf_counter() - t) * 1e3
+                n2, n3 = net2d.take(), net3d.take()
+                done += 1
+                if done > WARMUP:
+                    statuses[res.status] = statuses.get(res.status, 0) + 1
+                    for k, v in (("track2d", res.ms["track2d"]), ("net2d", n2), ("frustum", res.ms["frustum"]),
+                                 ("box3d", res.ms["box3d"]), ("net3d", n3), ("fusion", res.ms["fusion"]),
+                                 ("end_to_end", e2e)):
+                        rows[k].append(v)
+                if done >= frames + WARMUP:
+                    break
+            if done >= frames + WARMUP:
+                break
+    stages = {k: percentiles(v) for k, v in rows.items()}
+    return stages, statuses, {**net2d.feeds, **net3d.feeds}
+
+
+def _time_models(t3d, feeds: dict, frames: int) -> dict:
+    """Each network alone on the inputs it got in the loop: median / p99 / p99.9 / max ms."""
+    out = {}
+    for part in (t3d.tracker2d, t3d.estimator):
+        for m in _onnx_models(part):
+            key = m.meta.get("kind", m.path.name)
+            if key not in feeds:
+                continue
+            run = type(m).run.__get__(m)   # the unwrapped method
+            for _ in range(5):
+                run(feeds[key])
+            ms = []
+            for _ in range(frames):
+                t = time.perf_counter()
+                run(feeds[key])
+                ms.append((time.perf_counter() - t) * 1e3)
+            out[key] = {"file": m.path.name, "inputs": {k: list(v.shape) for k, v in feeds[key].items()},
+                        **percentiles(ms), "runs_per_s": 1e3 / float(np.median(ms))}
+    return out
+
+
+def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dict:
+    """Time the loop (or, with models_only, each network) at each thread count; a JSON-able dict."""
+    import cv2
+
+    if cfg.frames < 1:
+        raise ValueError(f"frames must be >= 1, got {cfg.frames}")
+    if not cfg.threads or min(cfg.threads) < 1:
+        raise ValueError(f"threads must be >= 1, got {cfg.threads}")
+    say = log or (lambda s: None)
+    if cfg.data:
+        camera, passes = _dataset_frames(cfg.data, cfg.split, max(cfg.synthetic_frames, 100))
+        source = {"kind": "dataset", "data": str(cfg.data), "split": cfg.split}
+    else:
+        camera = Camera.from_fov(640, 480, 45.0)
+        say(f"synthesising {cfg.synthetic_frames} frames (640x480 sphere) ...")
+        passes = [(0, synthetic_frames(camera, cfg.synthetic_frames))]
+        source = {"kind": "synthetic", "frames": cfg.synthetic_frames, "width": 640, "height": 480}
+    busy_before = machine.cpu_busy(cfg.busy_seconds)
+    load_before = machine.load_average()
+    allowed = machine.allowed_cpus()
+    results, described = [], None
+    cv_threads = cv2.getNumThreads()
+    try:
+        for threads in cfg.threads:
+            cpus = allowed[:threads]
+            pinned = machine.pin(cpus)
+            cv2.setNumThreads(threads)
+            t3d = _build(cfg, camera, threads)
+            described = described or t3d.describe()
+            say(f"{t3d.tracker_name}+{t3d.estimator_name} at {threads} thread(s) on CPU(s) {cpus} ...")
+            wall0, cpu0 = time.perf_counter(), time.process_time()
+            stages, statuses, feeds = _time_loop(t3d, passes, min(cfg.frames, 200) if cfg.models_only else cfg.frames)
+            wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+            row = {"threads": threads, "cpus": cpus, "pinned": pinned,
+                   "note": None if len(cpus) == threads else f"only {len(cpus)} CPU(s) allowed",
+                   "cpu_utilisation": cpu / max(wall, 1e-9)}
+            if cfg.models_only:
+                row["models"] = _time_models(t3d, feeds, cfg.frames)
+            else:
+                e2e = stages["end_to_end"]["median_ms"]
+                row.update(frames=cfg.frames, fps=1e3 / e2e if e2e else None, stages=stages, statuses=statuses)
+            results.append(row)
+            del t3d
+            gc.collect()
+    finally:
+        machine.pin(allowed)
+        cv2.setNumThreads(cv_threads)
+    busy_after = machine.cpu_busy(cfg.busy_seconds)
+    warnings = []
+    busy = [b for b in (busy_before, busy_after) if b is not None]
+    if busy and max(busy) > BUSY_THRESHOLD:
+        warnings.append(f"the machine was busy: other processes used {100 * max(busy):.0f}% of all CPUs "
+                        f"(before {_pct(busy_before)}, after {_pct(busy_after)}); timings are pessimistic")
+    if any(r.get("note") for r in results):
+        warnings.append("fewer CPUs allowed than threads asked for: see 'note' per row")
+    if cfg.frames < 1000 and not cfg.models_only:
+        warnings.append(f"{cfg.frames} frames: p99.9 is the max of too few samples (use --frames >= 1000)")
+    return {"benchmark": "track3d bench", "mode": "models-only" if cfg.models_only else "loop",
+            "machine": machine.machine_info(), "load": {"busy_before": busy_before, "busy_after": busy_after,
+                                                         "loadavg_before": load_before,
+                                                         "loadavg_after": machine.load_average()},
+            "source": source, "track3d": described, "results": results, "warnings": warnings,
+            "note": "milliseconds per frame, I/O excluded; fps = 1000 / median end-to-end ms; "
+                    "each thread count runs pinned to that many CPUs"}
+
+
+def _pct(x) -> str:
+    return "n/a" if x is None else f"{100 * x:.0f}%"
+
+
+def _f(v) -> str:
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.2f}"
+
+
+def format_table(report: dict) -> str:
+    """The report as a text table (one block per thread count), machine line first."""
+    m = report["machine"]
+    lines = [f"CPU: {m['cpu']} ({m['arch']}, {m['logical_cpus']} logical CPUs; ISA: {' '.join(m['isa']) or 'n/a'})",
+             "versions: " + ", ".join(f"{k} {v}" for k, v in m["versions"].items() if v),
+             f"frames: {report['source']['kind']}"
+             + (f" {report['source'].get('data')}" if report["source"].get("data") else "")]
+    d = report.get("track3d") or {}
+    models = ", ".join(f"{x['file']} ({x['sha256'][:12]})" for x in d.get("models", []))
+    lines.append(f"tracker: {d.get('tracker')} + {d.get('estimator')}" + (f"; models: {models}" if models else ""))
+    for r in report["results"]:
+        lines.append("")
+        if report["mode"] == "models-only":
+            lines.append(f"threads={r['threads']} (CPUs {r['cpus']})")
+            lines.append(f"{'network':18s} {'median':>8s} {'p99':>8s} {'p99.9':>8s} {'max':>8s} {'runs/s':>8s}")
+            for k, v in r["models"].items():
+                lines.append(f"{k:18s} {_f(v['median_ms']):>8s} {_f(v['p99_ms']):>8s} {_f(v['p99_9_ms']):>8s} "
+                             f"{_f(v['max_ms']):>8s} {v['runs_per_s']:8.1f}")
+            continue
+        lines.append(f"threads={r['threads']} (CPUs {r['cpus']}): {r['fps']:.1f} FPS over {r['frames']} frames")
+        lines.append(f"{'stage (ms)':18s} {'median':>8s} {'p99':>8s} {'p99.9':>8s} {'max':>8s}")
+        for k, v in r["stages"].items():
+            lines.append(f"{k:18s} {_f(v['median_ms']):>8s} {_f(v['p99_ms']):>8s} {_f(v['p99_9_ms']):>8s} "
+                         f"{_f(v['max_ms']):>8s}")
+    ld = report["load"]
+    lines.append("")
+    lines.append(f"load: other processes {_pct(ld['busy_before'])} before, {_pct(ld['busy_after'])} after; "
+                 f"loadavg {ld['loadavg_before']} -> {ld['loadavg_after']}")
+    for w in report["warnings"]:
+        lines.append(f"WARNING: {w}")
+    return "\n".join(lines)
+
+
+def write_json(report: dict, path: str | Path) -> Path:
+    import json
+
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(report, indent=1))
+    return p

@@ -1,0 +1,101 @@
+"""`track3d bench` and track3d.machine: runs from the package alone (no dataset, no simulator,
+no tqdm), reports per-stage percentiles, FPS per thread count, the machine and its load."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from track3d import bench, machine
+from track3d.cli import main
+
+
+def test_percentiles_against_a_hand_computed_case():
+    p = bench.percentiles(np.arange(1, 1002, dtype=float))     # 1..1001
+    assert p["median_ms"] == 501.0
+    assert p["p99_ms"] == pytest.approx(991.0)                  # numpy linear: 1 + 0.99 * 1000
+    assert p["p99_9_ms"] == pytest.approx(1000.0)
+    assert p["max_ms"] == 1001.0
+
+
+def test_bench_cli_without_sim_and_tqdm(tmp_path):
+    out = tmp_path / "b.json"
+    code = ("import sys; sys.modules['track3d_sim'] = None; sys.modules['tqdm'] = None; sys.modules['torch'] = None;"
+            "from track3d.cli import main;"
+            f"sys.exit(main(['bench', '--tracker', 'kcf', '--estimator', 'baseline', '--frames', '8', "
+            f"'--threads', '1', '2', '--quiet', '--out', {str(out)!r}]))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "FPS over 8 frames" in r.stdout and "end_to_end" in r.stdout
+    rep = json.loads(out.read_text())
+    assert [x["threads"] for x in rep["results"]] == [1, 2]
+    one = rep["results"][0]
+    assert one["cpus"] == machine.allowed_cpus()[:1]
+    for k in ("median_ms", "p99_ms", "p99_9_ms", "max_ms"):
+        assert one["stages"]["end_to_end"][k] > 0
+    assert one["fps"] == pytest.approx(1e3 / one["stages"]["end_to_end"]["median_ms"])
+    assert rep["machine"]["cpu"] and rep["machine"]["versions"]["onnxruntime"]
+    assert set(rep["load"]) == {"busy_before", "busy_after", "loadavg_before", "loadavg_after"}
+
+
+def test_bench_shipped_models_and_models_only(capsys):
+    pytest.importorskip("track3d.siamfc")
+    assert main(["bench", "--frames", "5", "--threads", "1", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    kinds = {m["kind"] for m in rep["track3d"]["models"]}
+    assert kinds == {"siamfc-exemplar", "siamfc-search", "a3boxnet"}
+    assert rep["results"][0]["stages"]["net2d"]["median_ms"] > 0
+    assert main(["bench", "--frames", "5", "--threads", "1", "--models-only", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert set(rep["results"][0]["models"]) == {"siamfc-exemplar", "siamfc-search", "a3boxnet"}
+    assert rep["results"][0]["models"]["siamfc-search"]["inputs"]["search"][0] >= 1
+
+
+def test_busy_machine_is_warned(monkeypatch):
+    monkeypatch.setattr(machine, "cpu_busy", lambda seconds=0.5: 0.9)
+    rep = bench.run_bench(bench.BenchConfig("kcf", "baseline", frames=3, threads=(1,), synthetic_frames=4))
+    assert any("busy" in w for w in rep["warnings"])
+    monkeypatch.setattr(machine, "cpu_busy", lambda seconds=0.5: 0.0)
+    rep = bench.run_bench(bench.BenchConfig("kcf", "baseline", frames=3, threads=(1,), synthetic_frames=4))
+    assert not any("busy" in w for w in rep["warnings"])
+
+
+def test_bench_bad_model_path_is_one_line(capsys):
+    assert main(["bench", "--boxnet-model", "/nonexistent/x.onnx", "--frames", "2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "error" in err[0]
+
+
+def test_machine_on_aarch64(monkeypatch):
+    arm = ["processor\t: 0", "BogoMIPS\t: 50.00", "Features\t: fp asimd evtstrm aes pmull sha1 asimddp sve i8mm",
+           "CPU implementer\t: 0x41", "CPU part\t: 0xd0c"]
+    monkeypatch.setattr(machine, "_cpuinfo", lambda: arm)
+    assert machine.isa_flags() == ["asimd", "asimddp", "sve", "i8mm"]
+    assert "0xd0c" in machine.cpu_name()
+    monkeypatch.setattr(machine, "_cpuinfo", lambda: [])
+    assert machine.isa_flags() == [] and machine.cpu_name()
+
+
+def test_synthetic_frames_have_the_target():
+    from track3d.camera import Camera
+
+    cam = Camera.from_fov(160, 120, 45.0)
+    fr = bench.synthetic_frames(cam, 3)
+    img, pts, box = fr[0]
+    assert img.shape == (120, 160, 3) and img.dtype == np.uint8 and len(pts) > 100
+    assert box[2] > 5 and box[3] > 5
+
+
+def test_bench_on_a_dataset(tmp_path, capsys):
+    from test_loop import make_synthetic_dataset
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 5})
+    assert main(["bench", "--tracker", "kcf", "--estimator", "baseline", "--data", str(root), "--frames", "6",
+                 "--threads", "1", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["source"]["kind"] == "dataset" and rep["results"][0]["frames"] == 6
+    assert main(["bench", "--data", str(tmp_path / "none"), "--frames", "2"]) == 2
+    assert "no dataset" in capsys.readouterr().err

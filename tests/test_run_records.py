@@ -1,0 +1,96 @@
+"""Result folders say what made them (run.json), `track3d eval` reads it, warns on unlike
+comparisons, shows frames; other models get another name; IoU never exceeds 1."""
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from test_loop import make_synthetic_dataset
+from track3d.boxes import iou_2d, iou_3d, iou_bev
+from track3d.cli import main
+from track3d.evaluation import TrackerSpec
+from track3d.evaluation.metrics import success_curve
+from track3d.evaluation.results import read_run_record
+
+
+@pytest.fixture(scope="module")
+def synth(tmp_path_factory):
+    return make_synthetic_dataset(tmp_path_factory.mktemp("rr") / "ds", {"a": 6, "b": 5})
+
+
+def _track(synth, res, *extra):
+    return main(["track", "--data", str(synth), "--results", str(res), "--video", "none", "--quiet", *extra])
+
+
+def test_run_record_and_eval_read_it(synth, tmp_path, capsys):
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert _track(synth, res, "--tracker", "oracle", "--restart-skip", "3") == 0
+    rec = read_run_record(res, "test", "oracle+baseline")
+    assert rec["track3d"]["tracker"] == "oracle" and rec["track3d"]["estimator"] == "baseline"
+    assert rec["restart"] is True and rec["restart_skip"] == 3 and rec["frames"] == {"a": 6, "b": 5}
+    assert rec["track3d"]["options"]["fusion"] is True and rec["versions"]["numpy"]
+    assert _track(synth, res, "--tracker", "kcf", "--restart-skip", "3") == 0
+    capsys.readouterr()
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--no-plots"]) == 0
+    out, err = capsys.readouterr()
+    assert "frames" in out.splitlines()[0] and "WARNING" not in err
+    report = json.loads((rep / "report.json").read_text())
+    assert report["restart_skip"] == 3 and report["trackers"]["kcf+baseline"]["restart_skip"] == 3
+    assert report["trackers"]["oracle+baseline"]["run"]["frames"] == {"a": 6, "b": 5}
+
+
+def test_eval_warns_on_different_frames_and_restart_settings(synth, tmp_path, capsys):
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert _track(synth, res, "--tracker", "oracle") == 0
+    assert _track(synth, res, "--tracker", "kcf", "--frames", "3", "--restart-skip", "2") == 0
+    capsys.readouterr()
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--no-plots"]) == 0
+    err = capsys.readouterr().err
+    assert "different frames" in err and "different restart settings" in err
+    report = json.loads((rep / "report.json").read_text())
+    assert report["restart_skip"] is None and len(report["warnings"]) == 2
+    assert report["trackers"]["kcf+baseline"]["overall"]["result_frames"] == 6
+
+
+def test_other_models_get_another_name(synth, tmp_path):
+    from track3d.onnxmodel import MODELS_DIR
+
+    if not (MODELS_DIR / "a3boxnet.onnx").is_file():
+        pytest.skip("no shipped A3BoxNet")
+    mine = tmp_path / "a3boxnet.onnx"
+    shutil.copy(MODELS_DIR / "a3boxnet.onnx", mine)
+    label = TrackerSpec("oracle", "a3boxnet", estimator_options={"model": str(mine)}).label
+    assert label.startswith("oracle+a3boxnet@a3boxnet-") and label != TrackerSpec("oracle", "a3boxnet").label
+    res = tmp_path / "res"
+    assert _track(synth, res, "--tracker", "oracle", "--estimator", "a3boxnet", "--estimator-option",
+                  f"model={mine}", "--sequence", "a") == 0
+    assert (res / "test" / label / "a").is_dir() and not (res / "test" / "oracle+a3boxnet").exists()
+
+
+def test_same_name_other_configuration_is_refused(synth, tmp_path, capsys):
+    res = tmp_path / "res"
+    assert _track(synth, res, "--tracker", "oracle", "--name", "mine") == 0
+    capsys.readouterr()
+    assert _track(synth, res, "--tracker", "kcf", "--name", "mine") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "another configuration" in err[0]
+    assert _track(synth, res, "--tracker", "kcf", "--name", "mine", "--replace") == 0
+    assert read_run_record(res, "test", "mine")["track3d"]["tracker"] == "kcf"
+    # the same configuration again (another subset of sequences) just adds to the record
+    assert _track(synth, res, "--tracker", "kcf", "--name", "mine", "--sequence", "a", "--frames", "4") == 0
+    assert read_run_record(res, "test", "mine")["frames"] == {"a": 4, "b": 5}
+
+
+def test_iou_of_a_box_with_itself_is_exactly_one():
+    b2 = np.array([81.32702392002724, 91.27555772777217, 61.663577576717984, 73.94965609839984])
+    b3 = np.array([0.28319671145462966, 1.2428327649956394, 6.706244146936303, 6.5718951157425005,
+                   6.253851114812538, 3.9367755426188347])
+    # before the clamp these gave 1.0000000000000004
+    assert iou_2d(b2, b2) == 1.0 and iou_3d(b3, b3) == 1.0 and iou_bev(b3, b3) <= 1.0
+    rng = np.random.default_rng(1)
+    boxes = rng.random((2000, 4)) * 100 + [0, 0, 1, 1]
+    assert np.all(iou_2d(boxes, boxes) <= 1.0)
+    assert success_curve(np.array([iou_2d(b2, b2)]))[-1] == 0.0     # IoU > 1.0 never succeeds

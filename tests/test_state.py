@@ -1,0 +1,145 @@
+"""Tracker state and confidence: score, lost after K bad frames, held_frames, skip(),
+get_state / set_state (plain data, bit-identical continuation), describe()."""
+from __future__ import annotations
+
+import json
+import pickle
+
+import numpy as np
+import pytest
+
+from test_loop import CAM, render_sphere, sphere_path
+from track3d.tracker import LOST, NO_POINTS, TRACKING, Track3D
+
+PATH = sphere_path(12)
+
+
+def _frame(k):
+    img, depth, box2d, _ = render_sphere(CAM, PATH[k], 1.5)
+    return img, CAM.backproject_depth(depth), box2d
+
+
+def _make(tracker, estimator, **kw):
+    from track3d.trackers2d import TrackerUnavailable
+    from track3d.estimators import EstimatorUnavailable
+
+    try:
+        return Track3D.create(CAM, tracker, estimator, **kw)
+    except (TrackerUnavailable, EstimatorUnavailable) as e:
+        pytest.skip(str(e))
+
+
+def _same(a, b):
+    for x, y in ((a.box2d, b.box2d), (a.box2d_raw, b.box2d_raw), (a.box3d, b.box3d)):
+        assert np.array_equal(x, y, equal_nan=True)
+    assert (a.status, a.num_points, a.score, a.held_frames) == (b.status, b.num_points, b.score, b.held_frames)
+
+
+@pytest.mark.parametrize("tracker,estimator", [("siamfc-edge", "a3boxnet"), ("kcf", "baseline")])
+def test_state_restores_bit_identically(tracker, estimator):
+    t = _make(tracker, estimator)
+    img, pts, box = _frame(0)
+    t.init(img, box, 0, points=pts)
+    for k in range(1, 5):
+        t.update(*_frame(k)[:2])
+    state = t.get_state()
+    plain = json.loads(json.dumps(state))              # JSON-able and picklable, no ORT objects
+    pickle.loads(pickle.dumps(state))
+    a, b = _make(tracker, estimator), _make(tracker, estimator)
+    a.set_state(plain)
+    b.set_state(state)
+    if tracker.startswith("siamfc"):
+        b = t                                          # SiamFC: the original continues identically
+    for k in range(5, 10):
+        img, pts, _ = _frame(k)
+        _same(a.update(img, pts), b.update(img, pts))
+
+
+def test_opencv_state_is_a_reinit_on_the_last_frame():
+    t = _make("kcf", "baseline")
+    img, pts, box = _frame(0)
+    t.init(img, box, 0, points=pts)
+    out = t.update(*_frame(1)[:2])
+    st = t.get_state()["tracker2d"]
+    assert st["restore"] == "reinit"
+    ref = _make("kcf", "baseline")
+    ref.init(_frame(1)[0], out.box2d_raw, 0)          # what the restored KCF must match
+    r = _make("kcf", "baseline")
+    r.set_state(t.get_state())
+    img, pts, _ = _frame(2)
+    assert np.array_equal(r.update(img, pts).box2d_raw, ref.update(img, pts).box2d_raw)
+
+
+def test_state_of_another_configuration_is_refused():
+    t = _make("kcf", "baseline")
+    img, pts, box = _frame(0)
+    t.init(img, box, 0)
+    with pytest.raises(ValueError, match="cannot restore"):
+        _make("csrt", "baseline").set_state(t.get_state())
+
+
+def test_black_frames_turn_lost_after_k_and_held_frames_count():
+    t = _make("oracle", "baseline", tracker_options={"gt": np.tile([60.0, 40, 30, 30], (40, 1))}, lost_after=5)
+    img, pts, box = _frame(0)
+    t.init(img, np.array([60.0, 40, 30, 30]), 0, points=pts)
+    black = np.zeros_like(img)
+    empty = np.zeros((0, 3), np.float32)
+    outs = [t.update(black, empty) for _ in range(30)]
+    assert [o.status for o in outs[:4]] == [NO_POINTS] * 4
+    assert all(o.status == LOST and o.lost for o in outs[4:])
+    assert [o.held_frames for o in outs[:3]] == [1, 2, 3]
+    assert np.array_equal(outs[-1].box3d, t.box3d)
+
+
+def test_skip_and_update_none_coast_without_raising():
+    t = _make("kcf", "baseline", lost_after=3)
+    img, pts, box = _frame(0)
+    t.init(img, box, 0, points=pts)
+    first = t.update(*_frame(1)[:2])
+    assert first.status == TRACKING and first.held_frames == 0
+    s1 = t.skip()
+    s2 = t.update(None, pts)
+    assert s1.status == s2.status == NO_POINTS and (s1.held_frames, s2.held_frames) == (1, 2)
+    assert np.array_equal(s2.box3d, first.box3d) and np.array_equal(s2.box2d, first.box2d)
+    assert t.skip().status == LOST
+
+
+def test_low_score_counts_as_bad():
+    class Scored:
+        score = 0.1
+
+        def init(self, image, box):
+            self.box = np.asarray(box, float)
+
+        def update(self, image):
+            return True, self.box.copy()
+
+    from track3d.estimators import create_estimator
+
+    t = Track3D(CAM, Scored(), create_estimator("baseline"), lost_after=2, min_score=0.5)
+    img, pts, box = _frame(0)
+    t.init(img, box, 0)
+    a, b = t.update(img, pts), t.update(img, pts)
+    assert a.score == pytest.approx(0.1) and a.status == TRACKING and b.status == LOST
+
+
+def test_siamfc_score_is_the_peak_relative_to_the_init_frame():
+    t = _make("siamfc-edge", "baseline")
+    img, pts, box = _frame(0)
+    t.init(img, box, 0)
+    out = t.update(*_frame(1)[:2])
+    tr = t.tracker2d
+    assert tr.ref_peak > 0 and out.score == pytest.approx(min(tr.peak / tr.ref_peak, 1.0))
+    assert out.score > 0.5
+    black = t.update(np.zeros_like(img), pts)
+    assert black.score < 0.2                      # nothing to match: low confidence
+
+
+def test_describe_lists_models_with_hashes():
+    t = _make("siamfc-edge", "a3boxnet")
+    d = t.describe()
+    json.dumps(d)
+    assert d["tracker"] == "siamfc-edge" and d["estimator"] == "a3boxnet"
+    roles = {m["kind"] for m in d["models"]}
+    assert roles == {"siamfc-exemplar", "siamfc-search", "a3boxnet"}
+    assert all(len(m["sha256"]) == 64 for m in d["models"])
