@@ -101,6 +101,18 @@ class BodyRenderer:
         out.update(p=p, n=n, fn=self.FN.take(prim, axis=0), view=view)
         return out
 
+    def surface(self, c) -> tuple[np.ndarray, np.ndarray]:
+        """What an active depth sensor sees of the hits of cast result c, as (H, W) float32 maps
+        (0 where there is no hit): the cosine between the shading normal and the ray back to the
+        eye, and the mean (grey) albedo of the texture."""
+        H, W = c["z"].shape
+        cos_inc = np.zeros((H, W), np.float32)
+        albedo = np.zeros((H, W), np.float32)
+        if len(c["p"]):
+            cos_inc[c["mask"]] = np.clip((c["n"] * c["view"]).sum(1), 0.0, 1.0)
+            albedo[c["mask"]] = self.texture.albedo(c["p"]).mean(1)
+        return cos_inc, albedo
+
     def shade(self, c, R, sun_dir_cam, irradiance, ambient):
         """Radiance in DN (M, 3) float32 of the hits in cast result c, and the lit mask (M,)."""
         p, n, fn, view = c["p"], c["n"], c["fn"], c["view"]
