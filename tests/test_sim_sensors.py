@@ -211,3 +211,112 @@ def test_unknown_sensor_fails_before_rendering(rendered):
     _, spec, settings, cam = rendered
     with pytest.raises(SimError, match="unknown depth sensor 'radar'"):
         render_sequence(dataclasses.replace(spec, sensor="radar"), settings, cam, None)
+
+
+# --- camera effects -------------------------------------------------------------------------
+
+def test_auto_exposure_longer_exposure_first_then_gain():
+    from track3d_sim import render as Rn
+
+    assert Rn.auto_exposure(1.0) == Rn.Exposure(10.0, 1.0)                  # bright: untouched
+    e = Rn.auto_exposure(0.35 / 3)
+    assert e.exposure_ms == pytest.approx(30.0) and e.gain == pytest.approx(1.0)
+    e = Rn.auto_exposure(0.35 / 10)
+    assert e.exposure_ms == pytest.approx(50.0) and e.gain == pytest.approx(2.0)
+    e = Rn.auto_exposure(1e-4)                                                # capped: 5x time, 4x gain
+    assert e.exposure_ms == pytest.approx(50.0) and e.gain == pytest.approx(4.0) and e.scale == pytest.approx(20.0)
+
+
+@pytest.mark.parametrize("dn, exposure_ms, gain", [(5.0, 50.0, 4.0), (5.0, 50.0, 1.0), (20.0, 10.0, 2.0)])
+def test_low_light_sensor_noise_matches_the_model(dn, exposure_ms, gain):
+    from track3d_sim import render as Rn
+
+    img = np.full((200, 200, 3), dn, np.float32)
+    none = (np.zeros(0, int), np.zeros(0, int), np.zeros(0, np.float32))
+    out = Rn.sensor(img, np.random.default_rng(0), none, Rn.Exposure(exposure_ms, gain)).astype(np.float64)
+    e_per_dn = Rn.FULL_WELL_E / 255.0
+    t = exposure_ms / Rn.BASE_EXPOSURE_MS
+    electrons = dn * t * e_per_dn
+    sd = gain / e_per_dn * np.sqrt(electrons + (Rn.READ_NOISE_DN * e_per_dn) ** 2)
+    assert out.mean() == pytest.approx(dn * t * gain, rel=0.01)
+    assert out.std() == pytest.approx(np.sqrt(sd ** 2 + 1 / 12), rel=0.03)     # + 8-bit rounding
+    # same output brightness from the fixed camera (more light): gain makes it noisier
+    ref = Rn.sensor(np.full_like(img, dn * t * gain), np.random.default_rng(0), none).astype(np.float64)
+    assert (out.std() > 1.3 * ref.std()) == (gain > 1.5)
+
+
+def test_exposure_none_is_the_fixed_camera():
+    from track3d_sim import render as Rn
+
+    img = np.random.default_rng(1).uniform(0, 100, (40, 50, 3)).astype(np.float32)
+    hot = Rn.hot_pixels(np.random.default_rng(2), 40, 50, 0.01)
+    a = Rn.sensor(img, np.random.default_rng(3), hot)
+    x = img + Rn.BLACK_LEVEL_DN
+    sd = np.sqrt(x / (Rn.FULL_WELL_E / 255.0) + Rn.READ_NOISE_DN ** 2).astype(np.float32)
+    x = x + sd * np.random.default_rng(3).standard_normal(x.shape, dtype=np.float32)
+    x[hot[0], hot[1]] += hot[2][:, None]
+    np.testing.assert_array_equal(a, np.clip(np.rint(x), 0, 255).astype(np.uint8))
+
+
+def test_exposure_poses_follow_the_motion():
+    from track3d_sim import render as Rn
+    from track3d_sim.motion import rotvec_to_matrix
+
+    w = np.array([0.0, 0.5, 0.0])                        # rad/s about y
+    fps = 10.0
+    R = np.stack([rotvec_to_matrix(w * k / fps) for k in range(3)])
+    T = np.array([[0.0, 0, 10], [0.1, 0, 10], [0.2, 0, 10]])
+    poses = Rn.exposure_poses(R, T, 1, 40.0, fps, 2, ends=True)
+    for (Rk, Tk), tau in zip(poses, (-0.02, 0.02)):
+        np.testing.assert_allclose(Rk, rotvec_to_matrix(w * (0.1 + tau)), atol=1e-9)
+        np.testing.assert_allclose(Tk, [0.1 + 1.0 * tau, 0, 10], atol=1e-9)
+    mid = Rn.exposure_poses(R, T, 1, 40.0, fps, 3)
+    np.testing.assert_allclose(mid[1][0], R[1], atol=1e-12)
+
+
+def test_motion_blur_spreads_a_fast_body_and_keeps_a_still_one():
+    pytest.importorskip("embreex")
+    pytest.importorskip("trimesh")
+    from track3d_sim import render as Rn
+    from track3d_sim.shapes import procedural_shape
+    from track3d_sim.textures import SolidTexture
+
+    cam = Camera.from_fov(160, 120, 45.0)
+    shape = procedural_shape(2, np.random.default_rng(0), 60.0, 3)
+    r = Rn.BodyRenderer(shape, SolidTexture(0, np.random.default_rng(1), shape.vertices), cam)
+    bg = np.zeros((120, 160, 3), np.float32)
+    R0, T0 = np.eye(3), np.array([0.0, 0.0, 12.0])
+    args = (np.zeros(3), np.array([0.0, 0.0, -1.0]), 1.0, 0.8)
+    sharp = r.view(bg, R0, T0, *args)
+    still = r.blurred_view(bg, [(R0, T0)] * 4, *args)
+    np.testing.assert_allclose(still, sharp, rtol=1e-6)
+    R = np.stack([R0, R0, R0])
+    T = np.stack([T0 - [1.0, 0, 0], T0, T0 + [1.0, 0, 0]])       # 10 m/s across: ~3.6 px in 20 ms
+    ends = Rn.exposure_poses(R, T, 1, 20.0, 10.0, 2, ends=True)
+    n = Rn.blur_substeps(cam, shape.vertices, ends)
+    shift = cam.fx * 0.2 / (shape.vertices[:, 2] + 12.0).min()   # the nearest vertex moves most
+    assert 2 <= n == int(np.ceil(shift / Rn.BLUR_STEP_PX)) < Rn.MAX_BLUR_SUBSTEPS
+    blurred = r.blurred_view(bg, Rn.exposure_poses(R, T, 1, 20.0, 10.0, n), *args)
+    lit_sharp, lit_blur = (sharp.sum(-1) > 0).sum(), (blurred.sum(-1) > 0).sum()
+    assert lit_blur > lit_sharp                                     # smeared along x
+    assert blurred.sum() == pytest.approx(sharp.sum(), rel=0.05)    # same light, spread out
+
+
+def test_camera_effects_change_images_not_labels_and_are_recorded():
+    pytest.importorskip("embreex")
+    from track3d_sim.generate import camera_of, make_settings
+    from track3d_sim.sequence import plan, render_sequence
+
+    base = make_settings("tiny", seed=3, frames=2)
+    fx = make_settings("tiny", seed=3, frames=2, auto_exposure=True, motion_blur=True)
+    spec = plan(2, 0)[1]                                   # irradiance 0.13: auto exposure 26 ms
+    a, b = render_sequence(spec, base, camera_of(base), None), render_sequence(spec, fx, camera_of(fx), None)
+    np.testing.assert_array_equal(a["gt2d"], b["gt2d"])
+    np.testing.assert_array_equal(a["gt3d"], b["gt3d"])
+    ce = b["meta"]["camera_effects"]
+    assert ce["auto_exposure"] and ce["motion_blur"] and ce["exposure_ms"] > 20 and ce["gain"] == 1.0
+    assert len(b["meta"]["frame_data"]["blur_substeps"]) == 2
+    assert a["meta"]["camera_effects"] == {"auto_exposure": False, "exposure_ms": 10.0, "gain": 1.0,
+                                           "motion_blur": False}
+    dn_a, dn_b = a["meta"]["frame_data"]["mean_object_dn"], b["meta"]["frame_data"]["mean_object_dn"]
+    assert all(y > 1.5 * x for x, y in zip(dn_a, dn_b))

@@ -19,7 +19,8 @@ from track3d import dataset as ds
 
 from .errors import SimError
 from .motion import FPS, make_motion
-from .render import BodyRenderer, hot_pixels, sensor
+from .render import (BASE_EXPOSURE_MS, BLUR_STEP_PX, MAX_BLUR_SUBSTEPS, BodyRenderer, auto_exposure, blur_substeps,
+                     exposure_poses, hot_pixels, sensor)
 from .scenes import SCENES, make_background
 from .sensors import RenderedFrame, measure_depth, sensor_info
 from .shapes import FAMILIES, VOLUME_RANGE, Shape, load_user_mesh, procedural_shape, scale_to_volume
@@ -126,6 +127,14 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
     hot_l = hot_pixels(rng["sensor"], H, W)
     hot_r = hot_pixels(rng["sensor"], H, W)
     right_eye = camera.right_offset
+    # camera effects (opt-in; render.py): per-sequence auto exposure, motion blur of fast frames
+    exposure = auto_exposure(sun["irradiance"]) if settings.get("auto_exposure") else None
+    exposure_ms = exposure.exposure_ms if exposure is not None else BASE_EXPOSURE_MS
+    blur = bool(settings.get("motion_blur"))
+    camera_effects = {"auto_exposure": exposure is not None, "exposure_ms": exposure_ms,
+                      "gain": exposure.gain if exposure is not None else 1.0, "motion_blur": blur}
+    if blur:
+        camera_effects.update(blur_step_px=BLUR_STEP_PX, max_blur_substeps=MAX_BLUR_SUBSTEPS)
 
     if out_dir is not None:
         for sub in (ds.LEFT_DIR, ds.RIGHT_DIR, ds.DEPTH_DIR):
@@ -146,12 +155,21 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
         off = np.clip(np.rint(drift0 + drift_v * i), 0, 2 * margin).astype(int)
         bgc = bg[off[1]:off[1] + H, off[0]:off[0] + W]
         images = []
+        sub_poses = None
+        if blur:
+            n_sub = blur_substeps(camera, shape.vertices,
+                                  exposure_poses(motion["R"], motion["T"], i, exposure_ms, FPS, 2, ends=True))
+            frames_meta.setdefault("blur_substeps", []).append(n_sub)
+            if n_sub > 1:
+                sub_poses = exposure_poses(motion["R"], motion["T"], i, exposure_ms, FPS, n_sub)
         for side, eye, hot in (("left", np.zeros(3), hot_l), ("right", right_eye, hot_r)):
             c = renderer.cast(R, T, eye)
             dn, lit = renderer.shade(c, R, sun_dir, sun["irradiance"], ambient)
             img = bgc.copy()
             img[c["mask"]] = dn
-            images.append(sensor(img, frng, hot))
+            if sub_poses is not None:
+                img = renderer.blurred_view(bgc, sub_poses, eye, sun_dir, sun["irradiance"], ambient)
+            images.append(sensor(img, frng, hot, exposure))
             if side == "left":
                 left = c
                 if spec.sensor != "ideal":
@@ -196,7 +214,8 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
         "scene": SCENES[spec.scene], "scene_index": spec.scene,
         "shape": {"family": shape.family, "radius_m": shape.radius, "extent_m": shape.extent.tolist(),
                   "vertices": int(len(shape.vertices)), "faces": int(len(shape.faces)), **shape.params},
-        "sun": sun, "ambient_dn": ambient, "depth_sensor": depth_sensor, "motion": motion["info"],
+        "sun": sun, "ambient_dn": ambient, "depth_sensor": depth_sensor,
+        "camera_effects": camera_effects, "motion": motion["info"],
         "seed": [int(settings["seed"]), SPLIT_IDS[spec.split], spec.index],
         "frames": len(gt2d), "fps": FPS, "frame_data": frames_meta,
     }
