@@ -155,7 +155,7 @@ def _tof_full(model: ToFModel):
     return measure
 
 
-def _zbuffer(idx: np.ndarray, depth: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+def _zbuffer(idx: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Nearest sample per cell: (cells, positions into idx) of the winners, deterministic."""
     order = np.lexsort((depth, idx))
     cells, first = np.unique(idx[order], return_index=True)
@@ -186,7 +186,7 @@ def _tof_lowres(model: ToFModel):
         i = np.floor(f * x + cx).astype(np.int64)
         j = np.floor(f * y + cy).astype(np.int64)
         inside = (i >= 0) & (i < w) & (j >= 0) & (j < h)
-        cells, win = _zbuffer((j * w + i)[inside], zs[inside], w * h)
+        cells, win = _zbuffer((j * w + i)[inside], zs[inside])
         src = np.flatnonzero(inside)[win]
         lz = np.zeros(h * w)
         lz[cells] = zs[src]
@@ -203,7 +203,7 @@ def _tof_lowres(model: ToFModel):
         u = np.floor(camera.fx * rx[k] + camera.cx).astype(np.int64)
         v = np.floor(camera.fy * ry[k] + camera.cy).astype(np.int64)
         ok = (u >= 0) & (u < W) & (v >= 0) & (v < H)
-        cells, win = _zbuffer((v * W + u)[ok], zk[ok], H * W)
+        cells, win = _zbuffer((v * W + u)[ok], zk[ok])
         out = np.zeros(H * W)
         out[cells] = zk[ok][win]
         return out.reshape(H, W)
