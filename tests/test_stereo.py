@@ -127,6 +127,21 @@ def test_window_of_a_bad_box_is_empty(pair):
         assert m.points_window(left, right, b).shape == (0, 3)
 
 
+def test_boxes_at_the_left_border_and_narrow_cameras_do_not_crash(pair):
+    # regression: OpenCV fails on crops not wider than the search range + block (found running
+    # `track3d track --depth stereo` on a simulated set: a box near the left border)
+    left, right, _ = pair
+    m = StereoMatcher(CAM)
+    full = m.depth(left, right)
+    for box in ([0, 100, 8, 40], [150, 200, 30, 30], [630, 0, 10, 10]):
+        z, (u0, u1, v0, v1) = m.depth_window(left, right, box)
+        assert z.shape == (v1 - v0, u1 - u0)
+        np.testing.assert_array_equal(z > 0, full[v0:v1, u0:u1] > 0)
+    narrow = Camera.from_fov(120, 90, 45.0)                  # search range 64 px
+    ln, rn, _ = render_pair(narrow, (0.0, 0.0, 3.0), 1.0)
+    assert StereoMatcher(narrow, z_min_m=0.3).depth(ln, rn).shape == (90, 120)   # 272 px > width
+
+
 def test_stereo_refuses_mismatched_images(pair):
     left, right, _ = pair
     with pytest.raises(ValueError, match="camera is"):

@@ -92,6 +92,7 @@ class StereoMatcher:
         self.fb = camera.fx * camera.baseline_m
         self.num_disparities = int(math.ceil(self.fb / p.z_min_m / 16.0)) * 16
         bs = p.block_size
+        self._min_width = self.num_disparities + bs + 1
         self._sgbm = cv2.StereoSGBM_create(
             minDisparity=0, numDisparities=self.num_disparities, blockSize=bs, P1=8 * bs * bs, P2=32 * bs * bs,
             disp12MaxDiff=p.lr_max_diff_px, uniquenessRatio=p.uniqueness_ratio,
@@ -106,8 +107,12 @@ class StereoMatcher:
 
     def _disparity(self, gl: np.ndarray, gr: np.ndarray) -> np.ndarray:
         """Disparity (float32 px, 0 = invalid) of a (crop of a) gray pair."""
-        d = self._sgbm.compute(gl, gr).astype(np.float32) / 16.0
         p = self.params
+        if gl.shape[1] < self._min_width:
+            # OpenCV refuses (or crashes on) images not wider than the search range plus the block;
+            # no pixel of such an image has its full search range anyway
+            return np.zeros(gl.shape, np.float32)
+        d = self._sgbm.compute(gl, gr).astype(np.float32) / 16.0
         if p.min_texture_dn > 0:
             g = gl.astype(np.float32)
             k = (p.block_size, p.block_size)
@@ -152,8 +157,9 @@ class StereoMatcher:
             return np.zeros((0, 0)), None
         u0, u1, v0, v1 = win
         c0 = max(0, u0 - self.num_disparities)   # every right pixel the window can match
-        d = self._disparity(np.ascontiguousarray(gl[v0:v1, c0:u1]), np.ascontiguousarray(gr[v0:v1, c0:u1]))
-        return self._to_depth(d[:, u0 - c0:]), win
+        c1 = min(self.camera.width, max(u1, c0 + self._min_width))   # OpenCV's minimum width
+        d = self._disparity(np.ascontiguousarray(gl[v0:v1, c0:c1]), np.ascontiguousarray(gr[v0:v1, c0:c1]))
+        return self._to_depth(d[:, u0 - c0:u1 - c0]), win
 
     def points_window(self, left: np.ndarray, right: np.ndarray, box2d) -> np.ndarray:
         """(N, 3) float32 cloud (left frame) of the window around `box2d`."""
