@@ -115,6 +115,9 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--restart-skip", type=int, default=1,
                    help="re-initialise this many frames after a zero-3D-IoU frame (default 1: the next)")
     t.add_argument("--no-restart", action="store_true", help="never re-initialise from the ground truth")
+    t.add_argument("--depth", choices=("map", "stereo"), default="map",
+                   help="point clouds from the dataset's depth maps (map, default) or computed from its "
+                        "left/right images by semi-global matching around the 2D box (stereo)")
     t.add_argument("--video", choices=("auto", "gif", "mp4", "none"), default="auto",
                    help="overlay format (default auto: gif when pillow is installed, else mp4; gif needs pillow)")
     t.add_argument("--video-sequences", type=int, default=1, help="how many sequences get an overlay")
@@ -187,8 +190,10 @@ def _cmd_track(a) -> int:
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=a.weight_3d, threads=a.threads,
                        tracker_options=_options(a.tracker_option), estimator_options=_options(a.estimator_option),
                        name=a.name)
+    if a.depth == "stereo" and not a.name:
+        spec.name = spec.label + "-stereo"   # keep the depth-map results of the same pair
     exp = Experiment(a.data, a.split, a.results, sequences=a.sequences, max_frames=a.frames,
-                     restart=not a.no_restart, restart_skip=a.restart_skip)
+                     restart=not a.no_restart, restart_skip=a.restart_skip, depth=a.depth)
     # Build once up front so that an unknown name or a missing model fails before any work.
     spec.build(exp.sequences[0])
     folders = exp.run(spec, overlay=video,

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -165,7 +166,10 @@ class Track3D:
         return cls.create(camera, "siamfc-edge", "a3boxnet", {"threads": threads}, {"threads": threads}, **options)
 
     # --- the loop --------------------------------------------------------------------------------
-    def _frustum(self, points: np.ndarray, box2d: np.ndarray) -> np.ndarray:
+    def _frustum(self, points, box2d: np.ndarray) -> np.ndarray:
+        if callable(points):
+            # a cloud source (e.g. track3d.stereo.StereoCloud.bind): computes only around the box
+            points = points(box2d.copy())
         return extract_frustum(points, box2d, self._M, *self.z_range)
 
     def _estimate(self, pts: np.ndarray) -> np.ndarray | None:
@@ -177,11 +181,12 @@ class Track3D:
         return b
 
     def init(self, image: np.ndarray, box2d: np.ndarray, category: int = -1,
-             points: np.ndarray | None = None) -> None:
+             points: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         """Start on `image` with the target in `box2d` [x, y, w, h]; category: coarse category.
 
-        points: the frame's cloud (N, 3), optional; when given the first 3D box is estimated
-        from its frustum so that a later empty frustum has a box to keep.
+        points: the frame's cloud (N, 3) or a callable box2d -> cloud (as in `update`), optional;
+        when given the first 3D box is estimated from its frustum so that a later empty frustum
+        has a box to keep.
         """
         b = np.asarray(box2d, dtype=np.float64).reshape(-1)
         if b.shape != (4,) or not _valid_box2d(b):
@@ -222,8 +227,12 @@ class Track3D:
                         dict.fromkeys(STAGES, 0.0), None)
         return self._judge(r, estimated=False)
 
-    def update(self, image: np.ndarray | None, points: np.ndarray) -> TrackResult:
-        """Track into the next frame: image (H, W, 3) uint8 RGB, points (N, 3) float32 cloud.
+    def update(self, image: np.ndarray | None,
+               points: np.ndarray | Callable[[np.ndarray], np.ndarray]) -> TrackResult:
+        """Track into the next frame: image (H, W, 3) uint8 RGB, points (N, 3) float32 cloud, or a
+        callable box2d -> (N, 3) cloud that the loop calls with the 2D tracker's box (a stereo
+        camera computes depth only there: `track3d.stereo.StereoCloud.bind`; its time counts in
+        the "frustum" stage).
 
         image None: a dropped frame, see :meth:`skip`."""
         if image is None:

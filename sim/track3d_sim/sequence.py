@@ -19,8 +19,10 @@ from track3d import dataset as ds
 
 from .errors import SimError
 from .motion import FPS, make_motion
-from .render import BodyRenderer, hot_pixels, sensor
+from .render import (BASE_EXPOSURE_MS, BLUR_STEP_PX, MAX_BLUR_SUBSTEPS, BodyRenderer, auto_exposure, blur_substeps,
+                     exposure_poses, hot_pixels, sensor)
 from .scenes import SCENES, make_background
+from .sensors import RenderedFrame, measure_depth, sensor_info
 from .shapes import FAMILIES, VOLUME_RANGE, Shape, load_user_mesh, procedural_shape, scale_to_volume
 from .textures import TEXTURES, SolidTexture
 
@@ -48,6 +50,7 @@ class SeqSpec:
     family: int
     texture: int
     scene: int
+    sensor: str = "ideal"
 
     @property
     def name(self) -> str:
@@ -98,12 +101,14 @@ def make_shape(spec: SeqSpec, rng: np.random.Generator, subdivisions: int, user_
 
 
 def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None = None, progress=None,
-                    keep_right_depth: bool = False):
+                    keep_right_depth: bool = False, keep_depth: bool = False):
     """Render a sequence; write it under out_dir (a folder that must not exist yet) if given.
 
-    Returns a dict with the labels and (when keep_right_depth) the right depth maps, used by tests.
+    Returns a dict with the labels and (when keep_right_depth / keep_depth) the right depth maps
+    and the stored (sensor-measured) left depth maps, used by tests.
     """
     rng, ss = _rngs(settings["seed"], spec)
+    depth_sensor = sensor_info(spec.sensor)  # an unknown name fails here, before any work
     meshes = settings.get("meshes") or []
     user_mesh = meshes[spec.index % len(meshes)] if meshes else None
     shape = make_shape(spec, rng["shape"], settings["subdivisions"], user_mesh)
@@ -122,6 +127,14 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
     hot_l = hot_pixels(rng["sensor"], H, W)
     hot_r = hot_pixels(rng["sensor"], H, W)
     right_eye = camera.right_offset
+    # camera effects (opt-in; render.py): per-sequence auto exposure, motion blur of fast frames
+    exposure = auto_exposure(sun["irradiance"]) if settings.get("auto_exposure") else None
+    exposure_ms = exposure.exposure_ms if exposure is not None else BASE_EXPOSURE_MS
+    blur = bool(settings.get("motion_blur"))
+    camera_effects = {"auto_exposure": exposure is not None, "exposure_ms": exposure_ms,
+                      "gain": exposure.gain if exposure is not None else 1.0, "motion_blur": blur}
+    if blur:
+        camera_effects.update(blur_step_px=BLUR_STEP_PX, max_blur_substeps=MAX_BLUR_SUBSTEPS)
 
     if out_dir is not None:
         for sub in (ds.LEFT_DIR, ds.RIGHT_DIR, ds.DEPTH_DIR):
@@ -132,6 +145,7 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
     cut = np.zeros(N, np.int64)
     frames_meta = {"object_pixels": [], "mean_object_dn": [], "lit_fraction": [], "R": [], "T": []}
     right_depths = []
+    depths = []
     for i in range(N):
         R, T = motion["R"][i], motion["T"][i]
         X = shape.vertices @ R.T + T
@@ -141,14 +155,25 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
         off = np.clip(np.rint(drift0 + drift_v * i), 0, 2 * margin).astype(int)
         bgc = bg[off[1]:off[1] + H, off[0]:off[0] + W]
         images = []
+        sub_poses = None
+        if blur:
+            n_sub = blur_substeps(camera, shape.vertices,
+                                  exposure_poses(motion["R"], motion["T"], i, exposure_ms, FPS, 2, ends=True))
+            frames_meta.setdefault("blur_substeps", []).append(n_sub)
+            if n_sub > 1:
+                sub_poses = exposure_poses(motion["R"], motion["T"], i, exposure_ms, FPS, n_sub)
         for side, eye, hot in (("left", np.zeros(3), hot_l), ("right", right_eye, hot_r)):
             c = renderer.cast(R, T, eye)
             dn, lit = renderer.shade(c, R, sun_dir, sun["irradiance"], ambient)
             img = bgc.copy()
             img[c["mask"]] = dn
-            images.append(sensor(img, frng, hot))
+            if sub_poses is not None:
+                img = renderer.blurred_view(bgc, sub_poses, eye, sun_dir, sun["irradiance"], ambient)
+            images.append(sensor(img, frng, hot, exposure))
             if side == "left":
                 left = c
+                if spec.sensor != "ideal":
+                    cos_inc, albedo = renderer.surface(c)
                 ys, xs = np.nonzero(c["mask"])
                 if len(xs):
                     gt2d[i] = [xs.min(), ys.min(), xs.max() + 1 - xs.min(), ys.max() + 1 - ys.min()]
@@ -163,13 +188,21 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
                 frames_meta["lit_fraction"].append(round(float(lit.mean()), 4) if len(xs) else None)
             elif keep_right_depth:
                 right_depths.append(c["z"])
+        depth = left["z"]
+        if spec.sensor != "ideal":
+            # the sensor's own noise stream per frame, like frng (1) but stream 2
+            drng = np.random.default_rng([int(settings["seed"]), SPLIT_IDS[spec.split], spec.index, i, 2])
+            depth = measure_depth(spec.sensor, RenderedFrame(left["z"], cos_inc, albedo, images[0], images[1]),
+                                  camera, drng)
         frames_meta["R"].append(np.round(R.reshape(-1), 7).tolist())
         frames_meta["T"].append(np.round(T, 6).tolist())
+        if keep_depth:
+            depths.append(depth)
         if out_dir is not None:
             name = ds.frame_name(i)
             ds.write_rgb(out_dir / ds.LEFT_DIR / name, images[0])
             ds.write_rgb(out_dir / ds.RIGHT_DIR / name, images[1])
-            ds.write_depth_png(out_dir / ds.DEPTH_DIR / name, left["z"])
+            ds.write_depth_png(out_dir / ds.DEPTH_DIR / name, depth)
         if progress is not None:
             progress(1)
     meta = {
@@ -181,7 +214,8 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
         "scene": SCENES[spec.scene], "scene_index": spec.scene,
         "shape": {"family": shape.family, "radius_m": shape.radius, "extent_m": shape.extent.tolist(),
                   "vertices": int(len(shape.vertices)), "faces": int(len(shape.faces)), **shape.params},
-        "sun": sun, "ambient_dn": ambient, "motion": motion["info"],
+        "sun": sun, "ambient_dn": ambient, "depth_sensor": depth_sensor,
+        "camera_effects": camera_effects, "motion": motion["info"],
         "seed": [int(settings["seed"]), SPLIT_IDS[spec.split], spec.index],
         "frames": len(gt2d), "fps": FPS, "frame_data": frames_meta,
     }
@@ -192,6 +226,8 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
         np.savetxt(out_dir / ds.CUT, cut, fmt="%d")
         (out_dir / ds.META).write_text(json.dumps(meta, indent=1, sort_keys=True))
     result = {"gt2d": gt2d, "gt3d": gt3d, "absent": absent, "cut": cut, "meta": meta, "shape": shape}
+    if keep_depth:
+        result["depth"] = depths
     if keep_right_depth:
         result["right_depth"] = right_depths
     return result

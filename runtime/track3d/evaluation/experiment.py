@@ -23,7 +23,7 @@ from typing import Callable
 import numpy as np
 
 from ..boxes import iou_3d
-from ..dataset import Dataset, DatasetError, Sequence
+from ..dataset import RIGHT_DIR, Dataset, DatasetError, Sequence, read_rgb
 from ..machine import cpu_name
 from ..progress import Progress
 from ..tracker import STAGES, Track3D
@@ -33,7 +33,9 @@ from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, Sequence
 from .results import (INIT, SKIPPED, SequenceResult, read_result, read_run_record, result_folder, run_config_key,
                       write_result, write_run_record)
 
-__all__ = ["TrackerSpec", "Experiment", "run_sequence", "cpu_name"]
+__all__ = ["TrackerSpec", "Experiment", "run_sequence", "cpu_name", "DEPTH_SOURCES"]
+
+DEPTH_SOURCES = ("map", "stereo")   # where the point clouds come from (run_sequence's depth)
 
 
 @dataclass
@@ -107,10 +109,20 @@ def _gt_ok(seq: Sequence, i: int) -> bool:
 
 def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, max_frames: int | None = None,
                  restart: bool = True, restart_skip: int = 1, overlay: OverlayWriter | None = None,
-                 bar: Progress | None = None) -> SequenceResult:
-    """Track one sequence under the restart protocol; returns its per-frame results."""
+                 bar: Progress | None = None, depth: str = "map") -> SequenceResult:
+    """Track one sequence under the restart protocol; returns its per-frame results.
+
+    depth: "map" = clouds from the stored depth maps; "stereo" = from the left/right images
+    (`track3d.stereo.StereoCloud`, disparity only around the 2D box, timed as tracker time)."""
     if restart_skip < 1:
         raise ValueError(f"restart_skip must be >= 1, got {restart_skip}")
+    if depth not in DEPTH_SOURCES:
+        raise ValueError(f"depth must be one of {', '.join(DEPTH_SOURCES)}, got {depth!r}")
+    stereo = None
+    if depth == "stereo":
+        from ..stereo import StereoCloud
+
+        stereo = StereoCloud(seq.camera)
     n = len(seq) if max_frames is None else min(len(seq), int(max_frames))
     box2d = np.full((n, 4), np.nan)
     raw = np.full((n, 4), np.nan)
@@ -125,7 +137,7 @@ def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, ma
     for i in range(n):
         t0 = time.perf_counter()
         image = seq.image(i)
-        points = seq.points(i)
+        points = seq.points(i) if stereo is None else stereo.bind(image, read_rgb(seq.image_path(i, RIGHT_DIR)))
         t1 = time.perf_counter()
         if pending is not None:
             if i < pending or not _gt_ok(seq, i):
@@ -191,7 +203,8 @@ class Experiment:
 
     def __init__(self, root: str | Path, split: str = "test", result_dir: str | Path = "results",
                  report_dir: str | Path = "reports", sequences: list[str] | None = None,
-                 max_frames: int | None = None, restart: bool = True, restart_skip: int = 1):
+                 max_frames: int | None = None, restart: bool = True, restart_skip: int = 1,
+                 depth: str = "map"):
         self.dataset = Dataset(root)
         self.split = split
         all_seqs = self.dataset.sequences(split)
@@ -210,6 +223,9 @@ class Experiment:
         self.max_frames = max_frames
         self.restart = restart
         self.restart_skip = int(restart_skip)
+        if depth not in DEPTH_SOURCES:
+            raise ValueError(f"depth must be one of {', '.join(DEPTH_SOURCES)}, got {depth!r}")
+        self.depth = depth
 
     def folder(self, name: str, seq: str) -> Path:
         return result_folder(self.result_dir, self.split, name, seq)
@@ -249,7 +265,8 @@ class Experiment:
             if overlay and k < overlay_sequences:
                 writer = OverlayWriter(folder / f"{seq.name}_overlay.{overlay}")
             with Progress(n, f"{name} {seq.name}", enabled=False if quiet else None) as bar:
-                res = run_sequence(factory, seq, self.max_frames, self.restart, self.restart_skip, writer, bar)
+                res = run_sequence(factory, seq, self.max_frames, self.restart, self.restart_skip, writer, bar,
+                                   depth=self.depth)
             write_result(folder, res)
             if writer is not None:
                 writer.close()

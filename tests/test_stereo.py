@@ -1,0 +1,222 @@
+"""Stereo depth (track3d.stereo): accuracy on a textured pair, holes where there is no texture,
+the box window vs the full frame, Track3D and `track3d track --depth stereo` on a stereo pair."""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from track3d import Camera
+from track3d.boxes import iou_3d
+from track3d.dataset import FORMAT, FORMAT_VERSION, frame_name, write_depth_png, write_rgb
+from track3d.estimators import create_estimator
+from track3d.stereo import StereoCloud, StereoMatcher, StereoParams
+from track3d.tracker import TRACKING, Track3D
+from track3d.trackers2d import OracleTracker
+
+CAM = Camera.from_fov(640, 480, 45.0)
+_K = np.random.default_rng(7).normal(0, 1, (40, 3)) * 25.0   # ~0.1 m features: 9 px at 9 m
+_P = np.random.default_rng(8).uniform(0, 2 * np.pi, 40)
+
+
+def _texture(p: np.ndarray) -> np.ndarray:
+    """A 3D solid texture (values 0..1): the same surface point has the same value in both views."""
+    return 0.5 + 0.5 * np.tanh(np.sin(p @ _K.T + _P).sum(-1) / 3.0)
+
+
+def render_pair(cam: Camera, centre, radius: float, textureless_half: bool = False, background=None):
+    """Left and right (H, W, 3) uint8 images of a textured Lambertian sphere (right camera at
+    +baseline), and the left true depth (H, W) float64 (0 = background)."""
+    c = np.asarray(centre, np.float64)
+    imgs, zl = [], None
+    for eye in (np.zeros(3), cam.right_offset):
+        rays = cam.pixel_rays()
+        oc = c - eye
+        a = (rays * rays).sum(-1)
+        b = -2.0 * rays @ oc
+        disc = b * b - 4 * a * (oc @ oc - radius ** 2)
+        hit = disc >= 0
+        t = np.where(hit, (-b - np.sqrt(np.where(hit, disc, 0))) / (2 * a), 0.0)
+        p = rays * t[..., None] + eye
+        n = (p - c) / radius
+        val = 40 + 200 * _texture(p - c) * np.clip(n @ np.array([-0.3, -0.3, -0.9]), 0.2, 1.0)
+        if textureless_half:
+            val = np.where(p[..., 0] > c[0], 120.0, val)
+        img = np.zeros((cam.height, cam.width), np.float64) if background is None else background.astype(np.float64)
+        img = np.where(hit, val, img)
+        imgs.append(np.repeat(np.clip(np.rint(img), 0, 255).astype(np.uint8)[..., None], 3, -1))
+        if zl is None:
+            zl = np.where(hit, t, 0.0)
+    return imgs[0], imgs[1], zl
+
+
+def _box(z):
+    vv, uu = np.nonzero(z > 0)
+    return np.array([uu.min(), vv.min(), uu.max() + 1 - uu.min(), vv.max() + 1 - vv.min()], np.float64)
+
+
+@pytest.fixture(scope="module")
+def pair():
+    return render_pair(CAM, (0.5, 0.2, 9.0), 2.0)
+
+
+def test_stereo_recovers_depth_within_the_disparity_error(pair):
+    left, right, z = pair
+    m = StereoMatcher(CAM)
+    zs = m.depth(left, right)
+    inner = z > 0
+    inner &= np.roll(inner, 6, 0) & np.roll(inner, -6, 0) & np.roll(inner, 6, 1) & np.roll(inner, -6, 1)
+    ok = inner & (zs > 0)
+    assert ok.sum() > 0.9 * inner.sum()
+    dd = CAM.disparity(zs[ok]) - CAM.disparity(z[ok])
+    assert np.median(np.abs(dd)) < 0.25 and np.mean(np.abs(dd) < 1.0) > 0.98
+    # depth error follows dz = z^2 / (fx B) * dd
+    dz = np.abs(zs[ok] - z[ok])
+    assert np.median(dz) < 0.25 * np.median(z[ok]) ** 2 / (CAM.fx * CAM.baseline_m)
+    # the black background (no texture) gives no depth, except a thin band of foreground
+    # fattening along the silhouette (the matching block straddles the edge)
+    near = cv2.dilate((z > 0).astype(np.uint8), np.ones((2 * 8 + 1, 2 * 8 + 1), np.uint8)) > 0
+    assert (zs[(z == 0) & ~near] > 0).sum() == 0
+
+
+def test_stereo_leaves_holes_on_textureless_surfaces():
+    left, right, z = render_pair(CAM, (0.0, 0.0, 9.0), 2.0, textureless_half=True)
+    zs = StereoMatcher(CAM).depth(left, right)
+    u = np.arange(CAM.width)[None, :].repeat(CAM.height, 0)
+    cu = CAM.cx
+    flat = (z > 0) & (u > cu + 15)          # the textureless half (minus the block around the seam)
+    textured = (z > 0) & (u < cu - 15) & (u >= StereoMatcher(CAM).num_disparities)  # full search range
+    assert (zs[flat] > 0).mean() < 0.05
+    assert (zs[textured] > 0).mean() > 0.7
+
+
+def test_box_window_equals_full_frame_inside_the_box_and_is_faster(pair):
+    left, right, z = pair
+    m = StereoMatcher(CAM)
+    box = _box(z)
+    full, win = [], []
+    for _ in range(3):                      # best of three, side by side (the machine is shared)
+        t0 = time.perf_counter()
+        zf = m.depth(left, right)
+        t1 = time.perf_counter()
+        zw, w = m.depth_window(left, right, box)
+        t2 = time.perf_counter()
+        full.append(t1 - t0)
+        win.append(t2 - t1)
+    u0, u1, v0, v1 = w
+    x0, y0, x1, y1 = int(box[0]), int(box[1]), int(box[0] + box[2]), int(box[1] + box[3])
+    a = zf[y0:y1, x0:x1]
+    b = zw[y0 - v0:y1 - v0, x0 - u0:x1 - u0]
+    assert np.mean((a > 0) == (b > 0)) > 0.98
+    both = (a > 0) & (b > 0)
+    dd = np.abs(CAM.disparity(a[both]) - CAM.disparity(b[both]))
+    assert np.mean(dd == 0) > 0.9 and np.mean(dd <= 0.25) > 0.99
+    assert min(win) < 0.7 * min(full)
+
+
+def test_window_of_a_bad_box_is_empty(pair):
+    left, right, _ = pair
+    m = StereoMatcher(CAM)
+    for b in ([np.nan, 0, 10, 10], [10, 10, 0, 5], [5000, 10, 10, 10]):
+        z, w = m.depth_window(left, right, b)
+        assert w is None and z.size == 0
+        assert m.points_window(left, right, b).shape == (0, 3)
+
+
+def test_boxes_at_the_left_border_and_narrow_cameras_do_not_crash(pair):
+    # regression: OpenCV fails on crops not wider than the search range + block (found running
+    # `track3d track --depth stereo` on a simulated set: a box near the left border)
+    left, right, _ = pair
+    m = StereoMatcher(CAM)
+    full = m.depth(left, right)
+    for box in ([0, 100, 8, 40], [150, 200, 30, 30], [630, 0, 10, 10]):
+        z, (u0, u1, v0, v1) = m.depth_window(left, right, box)
+        assert z.shape == (v1 - v0, u1 - u0)
+        np.testing.assert_array_equal(z > 0, full[v0:v1, u0:u1] > 0)
+    narrow = Camera.from_fov(120, 90, 45.0)                  # search range 64 px
+    ln, rn, _ = render_pair(narrow, (0.0, 0.0, 3.0), 1.0)
+    assert StereoMatcher(narrow, z_min_m=0.3).depth(ln, rn).shape == (90, 120)   # 272 px > width
+
+
+def test_stereo_refuses_mismatched_images(pair):
+    left, right, _ = pair
+    with pytest.raises(ValueError, match="camera is"):
+        StereoMatcher(CAM).depth(left[:100], right[:100])
+    with pytest.raises(ValueError, match="odd"):
+        StereoParams(block_size=4)
+
+
+def test_stereo_cloud_points_lie_on_the_sphere(pair):
+    left, right, z = pair
+    pts = StereoCloud(CAM).bind(left, right)(_box(z))
+    assert pts.dtype == np.float32 and pts.shape[1] == 3 and len(pts) > 1000
+    r = np.linalg.norm(pts - np.array([0.5, 0.2, 9.0]), axis=1)
+    assert np.median(np.abs(r - 2.0)) < 0.1
+
+
+def _sphere_frames(n, cam=CAM):
+    out = []
+    for k in range(n):
+        c = (0.3 + 0.1 * k, 0.2, 9.0 + 0.2 * k)
+        left, right, z = render_pair(cam, c, 2.0)
+        out.append((left, right, _box(z), np.array([*c, 4.0, 4.0, 4.0]), z))
+    return out
+
+
+def test_track3d_runs_on_a_stereo_pair_callable():
+    frames = _sphere_frames(4)
+    gt2d = np.array([f[2] for f in frames])
+    cloud = StereoCloud(CAM)
+    t = Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"))
+    t.init(frames[0][0], gt2d[0], category=0, points=cloud.bind(frames[0][0], frames[0][1]))
+    assert np.all(np.isfinite(t.box3d))
+    seen = []
+    for left, right, b2, b3, _ in frames[1:]:
+        src = cloud.bind(left, right)
+
+        def spy(box, src=src):
+            seen.append(np.asarray(box).copy())
+            return src(box)
+        out = t.update(left, spy)
+        assert out.status == TRACKING and out.num_points > 1000
+        np.testing.assert_array_equal(seen[-1], b2)          # called with the 2D tracker's box
+        assert iou_3d(out.box3d, b3) > 0.2                   # the visible cap of the sphere
+
+
+def _stereo_dataset(root: Path, cam: Camera, n: int = 4) -> Path:
+    d = root / "test" / "s1"
+    for sub in ("left", "right", "depth"):
+        (d / sub).mkdir(parents=True)
+    frames = _sphere_frames(n, cam)
+    for i, (left, right, _, _, z) in enumerate(frames):
+        write_rgb(d / "left" / frame_name(i), left)
+        write_rgb(d / "right" / frame_name(i), right)
+        write_depth_png(d / "depth" / frame_name(i), z)
+    np.savetxt(d / "groundtruth_2d.txt", np.array([f[2] for f in frames]), fmt="%.4f", delimiter=",")
+    np.savetxt(d / "groundtruth_3d.txt", np.array([f[3] for f in frames]), fmt="%.6f", delimiter=",")
+    np.savetxt(d / "absence.label", np.zeros(n), fmt="%d")
+    (d / "meta.json").write_text(json.dumps({"family_index": 0}))
+    (root / "dataset.json").write_text(json.dumps({"format": FORMAT, "version": FORMAT_VERSION,
+                                                   "camera": cam.to_dict(), "splits": {"test": ["s1"]}}))
+    return root
+
+
+def test_cli_track_with_stereo_depth(tmp_path, capsys):
+    from track3d.cli import main
+
+    data = _stereo_dataset(tmp_path / "ds", CAM)
+    res = tmp_path / "res"
+    assert main(["track", "--data", str(data), "--tracker", "oracle", "--depth", "stereo", "--results", str(res),
+                 "--video", "none", "--quiet"]) == 0
+    status = (res / "test" / "oracle+baseline-stereo" / "s1" / "s1_status.txt").read_text().split()
+    assert status[0] == "init" and set(status[1:]) == {"tracking"}
+    box3d = np.loadtxt(res / "test" / "oracle+baseline-stereo" / "s1" / "s1_3d_001.txt", delimiter=",")
+    gt = np.loadtxt(data / "test" / "s1" / "groundtruth_3d.txt", delimiter=",")
+    assert all(iou_3d(b, g) > 0.2 for b, g in zip(box3d[1:], gt[1:]))
+    with pytest.raises(SystemExit):                          # argparse: one line, status 2
+        main(["track", "--data", str(data), "--depth", "lidar", "--quiet"])
+    assert "invalid choice: 'lidar'" in capsys.readouterr().err
