@@ -294,7 +294,12 @@ def _run_ray(todo, settings, out: Path, address: str, update, num_cpus: int | No
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
             for ref in done:
-                ray.get(ref)  # re-raises a task's error
+                try:
+                    ray.get(ref)
+                except ray.exceptions.RayTaskError as e:  # a task's SimError stays a one-line error
+                    if isinstance(e.cause, SimError):
+                        raise SimError(str(e.cause)) from None
+                    raise
                 update(frames)
     finally:
         if started:
