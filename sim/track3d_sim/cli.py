@@ -6,6 +6,8 @@ import sys
 
 from .errors import SimError
 from .generate import PRESETS
+from .generators import GENERATORS
+from .sensors import DEPTH_SENSORS
 
 
 def _resolution(text: str):
@@ -56,10 +58,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="number of unseen-shapes test sequences: generators held out of train and test "
                         "(default: the preset's, 0)")
     g.add_argument("--unseen-generators", dest="unseen_generators", metavar="A,B",
-                   help="generators to hold out for --test-unseen (default: sequence.UNSEEN_GENERATORS' rule)")
+                   help=f"generators to hold out for --test-unseen (from {', '.join(GENERATORS)}; default: "
+                        f"the rule of sequence.UNSEEN_GENERATORS, see docs/simulator.md 'Splits')")
     g.add_argument("--sensors", default=None, metavar="A,B",
-                   help="depth sensors, cycled over the sequences (default: ideal); names from "
-                        "sensors.DEPTH_SENSORS")
+                   help=f"depth sensors, cycled over the sequences (default: ideal; from "
+                        f"{', '.join(DEPTH_SENSORS)})")
     g.add_argument("--points-only", action="store_true", dest="points_only",
                    help="write depth, labels and meta only (no images, no shading): box-network data "
                         "(default: off)")

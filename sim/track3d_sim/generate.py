@@ -13,6 +13,7 @@ the bytes are the same whatever the backend and a killed run of any backend resu
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -266,11 +267,10 @@ def _ray_sequence(spec, settings: dict, root: str) -> str:
     return f"{spec.split}/{spec.name}"
 
 
-def _run_ray(todo, settings, out: Path, address: str, update, num_cpus: int | None = None) -> None:
-    """One Ray task per sequence on a local instance (address "local") or a running cluster.
-
-    The workers write straight into `out`, so on a cluster it must be a filesystem every node
-    mounts at the same path (and so must user meshes)."""
+@contextlib.contextmanager
+def _ray_session(address: str, num_cpus: int | None = None):
+    """Ray started locally (address "local") or connected to a cluster; shut down on exit if this
+    call started it. Connecting comes before anything is written, so a bad address leaves no folder."""
     try:
         import ray
     except ImportError:
@@ -288,22 +288,29 @@ def _run_ray(todo, settings, out: Path, address: str, update, num_cpus: int | No
             raise SimError(f"could not start / reach Ray at {address!r}: {type(e).__name__}: {e}") from None
         started = True
     try:
-        task = ray.remote(num_cpus=1, max_retries=2)(_ray_sequence)
-        frames = int(settings["frames"])
-        pending = [task.remote(spec, settings, str(out.resolve())) for spec in todo]
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
-            for ref in done:
-                try:
-                    ray.get(ref)
-                except ray.exceptions.RayTaskError as e:  # a task's SimError stays a one-line error
-                    if isinstance(e.cause, SimError):
-                        raise SimError(str(e.cause)) from None
-                    raise
-                update(frames)
+        yield ray
     finally:
         if started:
             ray.shutdown()
+
+
+def _run_ray(ray, todo, settings, out: Path, update) -> None:
+    """One Ray task per sequence. The workers write straight into `out`, so on a cluster it must
+    be a filesystem every node mounts at the same path (and so must user meshes)."""
+    task = ray.remote(num_cpus=1, max_retries=2)(_ray_sequence)
+    frames = int(settings["frames"])
+    shared = ray.put(settings)
+    pending = [task.remote(spec, shared, str(out.resolve())) for spec in todo]
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1)
+        for ref in done:
+            try:
+                ray.get(ref)
+            except ray.exceptions.RayTaskError as e:  # a task's SimError stays a one-line error
+                if isinstance(e.cause, SimError):
+                    raise SimError(str(e.cause)) from None
+                raise
+            update(frames)
 
 
 def generate(settings: dict, out: str | Path, workers: int = 1, overwrite: bool = False,
@@ -312,11 +319,18 @@ def generate(settings: dict, out: str | Path, workers: int = 1, overwrite: bool 
 
     ray: None (processes), "local" (start a local Ray instance, `ray_num_cpus` CPUs, default all)
     or the address of a running Ray cluster ("auto", "HOST:6379", "ray://HOST:10001")."""
-    from track3d import dataset as ds
     log = log or (lambda msg: print(msg, file=sys.stderr))
     if int(workers) < 1:
         raise SimError(f"--workers must be >= 1, got {workers}")
     out = Path(out)
+    plan_of(settings)  # plan errors before Ray starts
+    with contextlib.ExitStack() as stack:
+        ray_mod = stack.enter_context(_ray_session(ray, ray_num_cpus)) if ray is not None else None
+        return _generate(settings, out, int(workers), overwrite, progress, log, ray, ray_mod)
+
+
+def _generate(settings, out: Path, workers, overwrite, progress, log, ray, ray_mod) -> Path:
+    from track3d import dataset as ds
     specs = plan_of(settings)
     info = dataset_info(settings, specs)
     state = prepare_output(out, settings, overwrite)
@@ -345,14 +359,14 @@ def generate(settings: dict, out: str | Path, workers: int = 1, overwrite: bool 
     update = bar.update if bar else (lambda n: None)
     t0 = time.time()
     try:
-        if ray is not None:
-            _run_ray(todo, settings, out, ray, update, ray_num_cpus)
-        elif int(workers) == 1 or len(todo) <= 1:
+        if ray_mod is not None:
+            _run_ray(ray_mod, todo, settings, out, update)
+        elif workers == 1 or len(todo) <= 1:
             cam = camera_of(settings)
             for spec in todo:
                 write_sequence(spec, settings, cam, out, progress=update)
         else:
-            _run_pool(todo, settings, out, int(workers), update)
+            _run_pool(todo, settings, out, workers, update)
     finally:
         if bar:
             bar.close()
