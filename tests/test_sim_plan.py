@@ -226,6 +226,7 @@ def test_points_only_reads_back_and_boxnet_prepares_it(tmp_path):
                 q.frame(0)
             assert q.meta["points_only"] is True and q.meta["frame_data"]["mean_object_dn"][0] is None
     assert n_points > 100
+    assert main(["preview", str(po / "train" / "0001"), "--out", str(tmp_path / "p.png")]) == 2
     pytest.importorskip("torch")
     from track3d_train.boxnet.cli import main as boxnet_main
     cache = tmp_path / "cache.npz"
