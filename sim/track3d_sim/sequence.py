@@ -235,6 +235,7 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
         drift0 = rng["scene"].uniform(0, 2 * margin, 2)
         drift_v = rng["scene"].normal(0, 0.25 * margin / max(N, 1), 2)  # pixels per frame
     ambient = 3.0 if SCENES[spec.scene] == "planet_limb" else 0.8
+    # drawn in points-only runs too, so the sensor stream that follows is that of the full render
     hot_l = hot_pixels(rng["sensor"], H, W)
     hot_r = hot_pixels(rng["sensor"], H, W)
     right_eye = camera.right_offset
