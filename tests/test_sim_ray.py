@@ -39,3 +39,13 @@ def test_ray_local_same_bytes_as_workers(tmp_path):
         assert _hashes(generate(s, out, ray="local", **quiet)) == one
     finally:
         ray.shutdown()
+
+
+def test_unreachable_ray_address_is_one_line_and_writes_nothing(tmp_path, capsys):
+    from track3d_sim.cli import main
+    out = tmp_path / "r"
+    assert main(["generate", "--preset", "tiny", "--frames", "2", "--ray", "127.0.0.1:1", "--out", str(out),
+                 "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "no Ray cluster answers at 127.0.0.1:1" in err and err.count("\n") == 1
+    assert not out.exists()

@@ -267,6 +267,21 @@ def _ray_sequence(spec, settings: dict, root: str) -> str:
     return f"{spec.split}/{spec.name}"
 
 
+def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
+    """A HOST:PORT (or ray://HOST:PORT) address that does not answer is a one-line error at once
+    (Ray itself retries for minutes). "auto" and other forms are left to Ray."""
+    import socket
+    hostport = address.split("://", 1)[-1]
+    host, sep, port = hostport.rpartition(":")
+    if not sep or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout_s).close()
+    except OSError as e:
+        raise SimError(f"no Ray cluster answers at {address} ({e.strerror or e}); start one with "
+                       f"`ray start --head` or check the address") from None
+
+
 @contextlib.contextmanager
 def _ray_session(address: str, num_cpus: int | None = None):
     """Ray started locally (address "local") or connected to a cluster; shut down on exit if this
@@ -281,6 +296,7 @@ def _ray_session(address: str, num_cpus: int | None = None):
         if address == "local":
             kw["num_cpus"] = num_cpus
         else:
+            _check_reachable(address)
             kw["address"] = address
         try:
             ray.init(**kw)
