@@ -48,8 +48,8 @@ def test_same_seed_same_bytes_for_1_and_2_workers(tmp_path):
 
 
 def test_killed_run_resumes_to_the_same_result(tmp_path):
-    args = ["generate", "--preset", "tiny", "--seed", "5", "--train", "4", "--test", "2", "--frames", "12",
-            "--no-progress"]
+    args = ["generate", "--preset", "tiny", "--seed", "5", "--train", "4", "--test", "2", "--test-unseen", "1",
+            "--frames", "12", "--no-progress"]
     ref = tmp_path / "ref"
     assert main(args + ["--out", str(ref)]) == 0
     out = tmp_path / "killed"

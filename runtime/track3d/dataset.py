@@ -123,7 +123,7 @@ class Frame:
 class Sequence:
     """One sequence folder; labels load eagerly (small), images lazily per frame."""
 
-    def __init__(self, path: str | Path, camera: Camera, split: str | None = None):
+    def __init__(self, path: str | Path, camera: Camera, split: str | None = None, points_only: bool | None = None):
         self.path = Path(path)
         if not self.path.is_dir():
             raise DatasetError(f"sequence folder {self.path} does not exist")
@@ -139,8 +139,10 @@ class Sequence:
         self.cut = _read_flags(self.path / CUT, n)
         meta = self.path / META
         self.meta: dict = json.loads(meta.read_text()) if meta.is_file() else {}
+        # points-only data (track3d-sim --points-only): depth and labels, no images
+        self.points_only = bool(self.meta.get("points_only", False) if points_only is None else points_only)
         left = self.path / LEFT_DIR
-        if not left.is_dir():
+        if not self.points_only and not left.is_dir():
             raise DatasetError(f"{self.path} has no {LEFT_DIR}/ image folder")
 
     def __len__(self) -> int:
@@ -158,6 +160,9 @@ class Sequence:
         return self.path / side / frame_name(i)
 
     def image(self, i: int) -> np.ndarray:
+        if self.points_only:
+            raise DatasetError(f"{self.path} is points-only data (depth and labels, no images): "
+                               f"generate without --points-only to track in images")
         return read_rgb(self.image_path(i))
 
     def depth(self, i: int) -> np.ndarray:
@@ -171,7 +176,8 @@ class Sequence:
         if not 0 <= i < len(self):
             raise IndexError(f"frame {i} out of range for {self!r}")
         depth = self.depth(i)
-        return Frame(i, self.image(i), read_rgb(self.image_path(i, RIGHT_DIR)) if right else None, depth,
+        image = self.image(i)
+        return Frame(i, image, read_rgb(self.image_path(i, RIGHT_DIR)) if right else None, depth,
                      self.camera.backproject_depth(depth), self.gt2d[i].copy(), self.gt3d[i].copy(),
                      bool(self.absent[i]), bool(self.cut[i]))
 
@@ -226,6 +232,7 @@ class Dataset:
             raise DatasetError(f"{meta} has format version {self.info.get('version')}, "
                                f"this reader knows up to {FORMAT_VERSION}")
         self.camera = Camera.from_dict(self.info["camera"])
+        self.points_only = bool(self.info.get("points_only", False))
 
     @cached_property
     def splits(self) -> dict[str, list[str]]:
@@ -238,9 +245,10 @@ class Dataset:
     def sequences(self, split: str) -> list[Sequence]:
         if split not in self.splits:
             raise DatasetError(f"split {split!r} not in {self.root} (has: {', '.join(self.splits) or 'none'})")
-        return [Sequence(self.root / split / name, self.camera, split) for name in self.splits[split]]
+        return [Sequence(self.root / split / name, self.camera, split, self.points_only or None)
+                for name in self.splits[split]]
 
     def sequence(self, split: str, name: str) -> Sequence:
         if name not in self.splits.get(split, []):
             raise DatasetError(f"sequence {name!r} not in split {split!r} of {self.root}")
-        return Sequence(self.root / split / name, self.camera, split)
+        return Sequence(self.root / split / name, self.camera, split, self.points_only or None)

@@ -6,6 +6,8 @@ import sys
 
 from .errors import SimError
 from .generate import PRESETS
+from .generators import GENERATORS
+from .sensors import DEPTH_SENSORS
 
 
 def _resolution(text: str):
@@ -42,16 +44,40 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--out", required=True, help="output folder (created; must be new, or a run of the same settings)")
     g.add_argument("--seed", type=int, default=0, help="global seed (default 0)")
     g.add_argument("--workers", type=int, default=1, help="processes (default 1); output bytes do not depend on it")
+    g.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                   help="render with Ray, one task per sequence: without ADDRESS a local Ray instance, else a "
+                        "running cluster (auto, HOST:6379, ray://HOST:10001; --out must be on a filesystem every "
+                        "node mounts). Needs the 'cluster' extra; output bytes are the same (default: off)")
     g.add_argument("--resolution", type=_resolution, help="WxH, e.g. 640x480 (overrides the preset)")
     g.add_argument("--fov", type=float, dest="fov_x_deg",
                    help="horizontal perspective angle in degrees; the vertical follows for square pixels")
     g.add_argument("--frames", type=int, help="frames per sequence")
     g.add_argument("--train", type=int, help="number of training sequences")
-    g.add_argument("--test", type=int, help="number of test sequences")
+    g.add_argument("--test", type=int, help="number of test sequences (fine categories unseen in train)")
+    g.add_argument("--test-unseen", type=int, dest="test_unseen",
+                   help="number of unseen-shapes test sequences: generators held out of train and test "
+                        "(default: the preset's, 0)")
+    g.add_argument("--unseen-generators", dest="unseen_generators", metavar="A,B",
+                   help=f"generators to hold out for --test-unseen (from {', '.join(GENERATORS)}; default: "
+                        f"the rule of sequence.UNSEEN_GENERATORS, see docs/simulator.md 'Splits')")
+    g.add_argument("--sensors", default=None, metavar="A,B",
+                   help=f"depth sensors, cycled over the sequences (default: ideal; from "
+                        f"{', '.join(DEPTH_SENSORS)})")
+    g.add_argument("--points-only", action="store_true", dest="points_only",
+                   help="write depth, labels and meta only (no images, no shading): box-network data "
+                        "(default: off)")
+    g.add_argument("--auto-exposure", action="store_true", dest="auto_exposure",
+                   help="per-sequence auto exposure: longer exposure, then gain, in low light, with the "
+                        "noise that implies (docs/simulator.md 'Camera effects'; default: off, fixed camera)")
+    g.add_argument("--motion-blur", action="store_true", dest="motion_blur",
+                   help="blur fast frames by averaging sub-exposure renders (default: off)")
     g.add_argument("--subdivisions", type=int, help="icosphere subdivisions of procedural meshes (6 = 82k faces)")
     g.add_argument("--mesh", action="append", type=_mesh, default=[], metavar="PATH[:SIZE_M]",
                    help="use a user mesh (OBJ/PLY/STL...) as the shape of the sequences (repeat to cycle "
                         "through several); SIZE_M = largest extent in metres (default: the sampled box volume)")
+    g.add_argument("--mesh-dir", dest="mesh_dir", metavar="DIR",
+                   help="use every mesh file of DIR that trimesh reads (cycled over the sequences, in name order) "
+                        "as the bodies, scaled to the sampled box volume (default: procedural generators)")
     g.add_argument("--overwrite", action="store_true", help="delete an existing track3d-sim output folder first")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     g.add_argument("--quiet", dest="no_progress", action="store_true", help=argparse.SUPPRESS)  # the other CLIs' name
@@ -59,7 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("stats", help="the paper's Fig. 4 plots (size classes, box volumes, speeds, illumination)")
     s.add_argument("root", help="dataset folder (with dataset.json)")
     s.add_argument("--out", required=True, help="output PNG")
-    s.add_argument("--split", choices=["train", "test", "all"], default="all")
+    s.add_argument("--split", choices=["train", "test", "test_unseen", "all"], default="all",
+                   help="split to plot (default: all)")
 
     v = sub.add_parser("preview", help="contact sheet (PNG) or animation (GIF) of a sequence with its boxes")
     v.add_argument("sequence", help="sequence folder, e.g. DATA/train/0001")
@@ -83,9 +110,13 @@ def main(argv=None) -> int:
             w, h = args.resolution if args.resolution else (None, None)
             settings = make_settings(args.preset, args.seed, width=w, height=h, fov_x_deg=args.fov_x_deg,
                                      frames=args.frames, train=args.train, test=args.test,
-                                     subdivisions=args.subdivisions, meshes=args.mesh or None)
+                                     subdivisions=args.subdivisions, meshes=args.mesh or None,
+                                     test_unseen=args.test_unseen, unseen_generators=args.unseen_generators,
+                                     sensors=args.sensors, points_only=args.points_only or None,
+                                     mesh_dir=args.mesh_dir, auto_exposure=args.auto_exposure or None,
+                                     motion_blur=args.motion_blur or None)
             generate(settings, args.out, workers=args.workers, overwrite=args.overwrite,
-                     progress=not args.no_progress)
+                     progress=not args.no_progress, ray=args.ray)
         elif args.cmd == "stats":
             from .stats import plot_stats
             plot_stats(args.root, args.out, args.split)

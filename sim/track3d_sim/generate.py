@@ -1,4 +1,4 @@
-"""Dataset generation: presets, settings validation, workers, progress and resume.
+"""Dataset generation: presets, settings validation, the plan, workers / Ray, progress and resume.
 
 Layout and resume protocol:
   <out>/.track3d-sim-run.json   the settings of the run (written first; a later run into the
@@ -6,37 +6,84 @@ Layout and resume protocol:
   <out>/<split>/.partial-NNNN/  a sequence being written (deleted and redone on resume)
   <out>/<split>/NNNN/           a complete sequence (renamed atomically from .partial-NNNN)
   <out>/dataset.json            written last, atomically: its presence means "complete"
+
+Backends: one process (`workers=1`), a local process pool (`workers=N`) or a Ray cluster
+(`ray="local"` or an address): one task per sequence, each written with the same protocol, so
+the bytes are the same whatever the backend and a killed run of any backend resumes.
 """
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import json
-import math
 import os
 import shutil
 import sys
 import time
+from collections import Counter
 from pathlib import Path
-
-import numpy as np
 
 from . import __version__
 from .errors import SimError
+from .generators import GENERATORS
 from .scenes import SCENES
-from .sequence import ALL_CATEGORIES, TEST_CATEGORIES, TRAIN_CATEGORIES, fine_name, plan, write_sequence
+from .sequence import (SPLITS, USER, body_sources, fine_name, plan, resolve_unseen, split_categories,
+                       write_sequence)
+from .sensors import DEPTH_SENSORS, SENSORS_NEEDING_IMAGES
 from .shapes import FAMILIES, load_user_mesh
 from .textures import TEXTURES
 
 RUN_FILE = ".track3d-sim-run.json"
 
 PRESETS = {
-    "tiny": {"width": 160, "height": 120, "fov_x_deg": 45.0, "train": 4, "test": 2, "frames": 8, "subdivisions": 4},
-    "small": {"width": 640, "height": 480, "fov_x_deg": 45.0, "train": 18, "test": 9, "frames": 100, "subdivisions": 6},
-    "paper": {"width": 640, "height": 480, "fov_x_deg": 45.0, "train": 360, "test": 135, "frames": 300, "subdivisions": 6},
+    "tiny": {"width": 160, "height": 120, "fov_x_deg": 45.0, "train": 4, "test": 2, "test_unseen": 0, "frames": 8,
+             "subdivisions": 4},
+    "small": {"width": 640, "height": 480, "fov_x_deg": 45.0, "train": 18, "test": 9, "test_unseen": 0,
+              "frames": 100, "subdivisions": 6},
+    "paper": {"width": 640, "height": 480, "fov_x_deg": 45.0, "train": 360, "test": 135, "test_unseen": 0,
+              "frames": 300, "subdivisions": 6},
 }
+
+# Depth sensors whose depth is computed from the rendered images: they cannot run --points-only.
+
+
+def _mesh_files(folder: Path) -> list[Path]:
+    """The files of `folder` whose extension trimesh reads, sorted by name."""
+    import trimesh
+    if not folder.is_dir():
+        raise SimError(f"mesh folder {folder} does not exist or is not a folder")
+    formats = {f.lower() for f in trimesh.available_formats()}
+    files = sorted((p for p in folder.iterdir() if p.is_file() and p.suffix.lower().lstrip(".") in formats),
+                   key=lambda p: p.name)
+    if not files:
+        raise SimError(f"mesh folder {folder} holds no mesh file trimesh reads "
+                       f"({', '.join(sorted(formats)[:8])}, ...)")
+    return files
+
+
+def _user_mesh(path, size_m) -> dict:
+    """A validated user mesh: path (in memory only, for loading), file name, sha256, size."""
+    path = Path(path)
+    size = float(size_m) if size_m else None
+    load_user_mesh(path, size or 1.0)  # validates: raises SimError naming the file
+    return {"path": str(path.resolve()), "name": path.name, "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+            "size_m": size}
+
+
+def _names(value) -> list[str]:
+    if value is None:
+        return []
+    if isinstance(value, str):
+        value = value.split(",")
+    return [str(v).strip() for v in value if str(v).strip()]
 
 
 def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
-    """Settings of a run: a preset with overrides (None = keep the preset's value), validated."""
+    """Settings of a run: a preset with overrides (None = keep the preset's value), validated.
+
+    Overrides besides the preset keys: meshes (list of paths or {"path", "size_m"}), mesh_dir
+    (folder: every mesh file in it, cycled over the sequences), sensors (names or "a,b"),
+    points_only (bool), unseen_generators (names or "a,b"). Raises SimError (one line)."""
     if preset not in PRESETS:
         raise SimError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
     s = dict(PRESETS[preset])
@@ -45,8 +92,7 @@ def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
     for k, v in overrides.items():
         if v is not None:
             s[k] = v
-    s.setdefault("meshes", [])
-    for k in ("width", "height", "frames", "subdivisions", "train", "test", "seed"):
+    for k in ("width", "height", "frames", "subdivisions", "train", "test", "test_unseen", "seed"):
         try:
             s[k] = int(s[k])
         except (TypeError, ValueError):
@@ -58,21 +104,37 @@ def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
     s["fov_x_deg"] = float(s["fov_x_deg"])
     if s["frames"] < 1:
         raise SimError(f"frames per sequence must be >= 1, got {s['frames']}")
-    if s["train"] < 0 or s["test"] < 0 or s["train"] + s["test"] == 0:
-        raise SimError(f"need a non-negative number of train/test sequences, not both zero "
-                       f"(got train={s['train']}, test={s['test']})")
+    if min(s["train"], s["test"], s["test_unseen"]) < 0 or s["train"] + s["test"] + s["test_unseen"] == 0:
+        raise SimError(f"need a non-negative number of train/test/test_unseen sequences, not all zero "
+                       f"(got train={s['train']}, test={s['test']}, test_unseen={s['test_unseen']})")
     if not 1 <= s["subdivisions"] <= 8:
         raise SimError(f"icosphere subdivisions must be in 1..8, got {s['subdivisions']}")
     if s["seed"] < 0:
         raise SimError(f"seed must be >= 0, got {s['seed']}")
+
+    sensors = list(dict.fromkeys(_names(s.get("sensors")) or ["ideal"]))
+    bad = [n for n in sensors if n not in DEPTH_SENSORS]
+    if bad:
+        raise SimError(f"unknown depth sensor {bad[0]!r} (choose from {', '.join(DEPTH_SENSORS)})")
+    s["sensors"] = sensors
+    s["points_only"] = bool(s.get("points_only", False))
+    s["auto_exposure"] = bool(s.get("auto_exposure", False))
+    s["motion_blur"] = bool(s.get("motion_blur", False))
+    if s["points_only"] and SENSORS_NEEDING_IMAGES & set(sensors):
+        raise SimError(f"--points-only renders no images, but the depth sensor(s) "
+                       f"{', '.join(sorted(SENSORS_NEEDING_IMAGES & set(sensors)))} measure depth from them")
+
     meshes = []
-    for m in s["meshes"]:
+    for m in s.get("meshes") or []:
         m = dict(m) if isinstance(m, dict) else {"path": str(m)}
-        m["path"] = str(Path(m["path"]).resolve())
-        size = m.get("size_m")
-        load_user_mesh(m["path"], float(size) if size else 1.0)  # validates: raises SimError
-        meshes.append(m)
+        meshes.append(_user_mesh(m["path"], m.get("size_m")))
+    mesh_dir = s.pop("mesh_dir", None)
+    if mesh_dir is not None:
+        meshes += [_user_mesh(p, None) for p in _mesh_files(Path(mesh_dir))]
     s["meshes"] = meshes
+    unseen, note = resolve_unseen(_names(s.pop("unseen_generators", None)) or None, s["test_unseen"], bool(meshes))
+    s["unseen_generators"] = list(unseen)
+    s["unseen_note"] = note
     return s
 
 
@@ -81,9 +143,23 @@ def camera_of(settings: dict):
     return Camera.from_fov(settings["width"], settings["height"], settings["fov_x_deg"])
 
 
+def _public_meshes(settings: dict) -> list[dict]:
+    """The user meshes as they may be written: file name, content hash and size, never a path."""
+    return [{k: m[k] for k in ("name", "sha256", "size_m")} for m in settings.get("meshes") or []]
+
+
 def _identity(settings: dict) -> dict:
-    keys = ("preset", "seed", "width", "height", "fov_x_deg", "train", "test", "frames", "subdivisions", "meshes")
-    return {"generator_version": __version__, **{k: settings[k] for k in keys}}
+    keys = ("preset", "seed", "width", "height", "fov_x_deg", "train", "test", "test_unseen", "frames",
+            "subdivisions", "sensors", "points_only", "unseen_generators", "auto_exposure", "motion_blur")
+    # the registry is part of the plan: a run resumed after a generator was added is refused
+    return {"generator_version": __version__, "generators": list(GENERATORS), "meshes": _public_meshes(settings),
+            **{k: settings[k] for k in keys}}
+
+
+def plan_of(settings: dict):
+    """The SeqSpecs of a run."""
+    return plan(settings["train"], settings["test"], settings["test_unseen"], settings["unseen_generators"],
+                settings["sensors"], len(settings["meshes"]))
 
 
 def _atomic_write(path: Path, text: str) -> None:
@@ -96,8 +172,10 @@ def dataset_info(settings: dict, specs) -> dict:
     from track3d import boxes
     from track3d import dataset as ds
     cam = camera_of(settings)
-    splits = {"train": [s.name for s in specs if s.split == "train"],
-              "test": [s.name for s in specs if s.split == "test"]}
+    user = bool(settings["meshes"])
+    cats = split_categories(tuple(settings["unseen_generators"]), user)
+    splits = {split: [s.name for s in specs if s.split == split] for split in SPLITS}
+    sensors = {split: dict(sorted(Counter(s.sensor for s in specs if s.split == split).items())) for split in SPLITS}
     return {
         "format": ds.FORMAT,
         "version": ds.FORMAT_VERSION,
@@ -105,13 +183,20 @@ def dataset_info(settings: dict, specs) -> dict:
         "size_classes": boxes.SIZE_TEMPLATES.tolist(),
         "categories": {
             "shape_families": list(FAMILIES),
+            "generators": body_sources(user),
+            "generator_family": {g: (FAMILIES[GENERATORS[g].coarse] if g in GENERATORS else USER)
+                                 for g in body_sources(user)},
             "textures": list(TEXTURES),
-            "fine": [fine_name(f, t) for f, t in ALL_CATEGORIES],
-            "train_fine": [fine_name(f, t) for f, t in TRAIN_CATEGORIES],
-            "test_fine": [fine_name(f, t) for f, t in TEST_CATEGORIES],
+            "fine": [fine_name(g, t) for g in body_sources(user) for t in range(len(TEXTURES))],
+            **{f"{split}_fine": [fine_name(g, t) for g, t in cats[split]] for split in SPLITS},
+            "unseen_generators": list(settings["unseen_generators"]),
+            "unseen_note": settings["unseen_note"],
             "scenes": list(SCENES),
         },
         "splits": splits,
+        "sensors": {"names": list(settings["sensors"]), "per_split": sensors},
+        "points_only": bool(settings["points_only"]),
+        "meshes": _public_meshes(settings),
         "generator": {"name": "track3d-sim", "version": __version__, "preset": settings["preset"],
                       "seed": settings["seed"], "settings": _identity(settings)},
     }
@@ -146,7 +231,7 @@ def prepare_output(out: Path, settings: dict, overwrite: bool = False) -> str:
     return "new"
 
 
-# ---- workers -------------------------------------------------------------------------------------
+# ---- backends ------------------------------------------------------------------------------------
 _W = {}
 
 
@@ -160,24 +245,121 @@ def _work(spec):
     return spec.split, spec.name
 
 
+def _run_pool(todo, settings, out: Path, workers: int, update) -> None:
+    import multiprocessing as mp
+    ctx = mp.get_context("spawn")
+    queue = ctx.Queue()
+    with ctx.Pool(min(workers, len(todo)), initializer=_init_worker, initargs=(settings, str(out), queue)) as pool:
+        res = pool.map_async(_work, todo, chunksize=1)
+        while True:
+            try:
+                update(queue.get(timeout=0.2))
+            except Exception:
+                if res.ready():
+                    break
+        res.get()
+        while not queue.empty():
+            update(queue.get())
+
+
+def _ray_sequence(spec, settings: dict, root: str) -> str:
+    """One Ray task: render and write one sequence (same .partial / rename protocol)."""
+    write_sequence(spec, settings, camera_of(settings), Path(root))
+    return f"{spec.split}/{spec.name}"
+
+
+def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
+    """A HOST:PORT (or ray://HOST:PORT) address that does not answer is a one-line error at once
+    (Ray itself retries for minutes). "auto" and other forms are left to Ray."""
+    import socket
+    hostport = address.split("://", 1)[-1]
+    host, sep, port = hostport.rpartition(":")
+    if not sep or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout_s).close()
+    except OSError as e:
+        raise SimError(f"no Ray cluster answers at {address} ({e.strerror or e}); start one with "
+                       f"`ray start --head` or check the address") from None
+
+
+@contextlib.contextmanager
+def _ray_session(address: str, num_cpus: int | None = None):
+    """Ray started locally (address "local") or connected to a cluster; shut down on exit if this
+    call started it. Connecting comes before anything is written, so a bad address leaves no folder."""
+    try:
+        import ray
+    except ImportError:
+        raise SimError("--ray needs the cluster extra: pip install 'track3d[sim,cluster]'") from None
+    started = False
+    if not ray.is_initialized():
+        kw = {"include_dashboard": False, "log_to_driver": False}
+        if address == "local":
+            kw["num_cpus"] = num_cpus
+        else:
+            _check_reachable(address)
+            kw["address"] = address
+        try:
+            ray.init(**kw)
+        except Exception as e:  # ConnectionError, RuntimeError ... from a bad address
+            raise SimError(f"could not start / reach Ray at {address!r}: {type(e).__name__}: {e}") from None
+        started = True
+    try:
+        yield ray
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _run_ray(ray, todo, settings, out: Path, update) -> None:
+    """One Ray task per sequence. The workers write straight into `out`, so on a cluster it must
+    be a filesystem every node mounts at the same path (and so must user meshes)."""
+    task = ray.remote(num_cpus=1, max_retries=2)(_ray_sequence)
+    frames = int(settings["frames"])
+    shared = ray.put(settings)
+    pending = [task.remote(spec, shared, str(out.resolve())) for spec in todo]
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1)
+        for ref in done:
+            try:
+                ray.get(ref)
+            except ray.exceptions.RayTaskError as e:  # a task's SimError stays a one-line error
+                if isinstance(e.cause, SimError):
+                    raise SimError(str(e.cause)) from None
+                raise
+            update(frames)
+
+
 def generate(settings: dict, out: str | Path, workers: int = 1, overwrite: bool = False,
-             progress: bool = True, log=None) -> Path:
-    """Generate (or resume) a dataset. Deterministic for a seed whatever `workers` is."""
-    from track3d import dataset as ds
+             progress: bool = True, log=None, ray: str | None = None, ray_num_cpus: int | None = None) -> Path:
+    """Generate (or resume) a dataset. Deterministic for a seed whatever `workers` / `ray` is.
+
+    ray: None (processes), "local" (start a local Ray instance, `ray_num_cpus` CPUs, default all)
+    or the address of a running Ray cluster ("auto", "HOST:6379", "ray://HOST:10001")."""
     log = log or (lambda msg: print(msg, file=sys.stderr))
     if int(workers) < 1:
         raise SimError(f"--workers must be >= 1, got {workers}")
     out = Path(out)
-    state = prepare_output(out, settings, overwrite)
-    specs = plan(settings["train"], settings["test"])
+    plan_of(settings)  # plan errors before Ray starts
+    with contextlib.ExitStack() as stack:
+        ray_mod = stack.enter_context(_ray_session(ray, ray_num_cpus)) if ray is not None else None
+        return _generate(settings, out, int(workers), overwrite, progress, log, ray, ray_mod)
+
+
+def _generate(settings, out: Path, workers, overwrite, progress, log, ray, ray_mod) -> Path:
+    from track3d import dataset as ds
+    specs = plan_of(settings)
     info = dataset_info(settings, specs)
+    state = prepare_output(out, settings, overwrite)
+    if settings["unseen_generators"]:
+        log(f"test_unseen: {', '.join(settings['unseen_generators'])} ({settings['unseen_note']})")
     if state == "complete":
         missing = [f"{s.split}/{s.name}" for s in specs if not (out / s.split / s.name).is_dir()]
         if not missing:
             log(f"{out}: dataset already complete ({len(specs)} sequences)")
             return out
         (out / ds.DATASET_JSON).unlink()
-    for split in ("train", "test"):
+    for split in sorted({s.split for s in specs}):
         d = out / split
         d.mkdir(exist_ok=True)
         for p in d.glob(".partial-*"):
@@ -191,38 +373,24 @@ def generate(settings: dict, out: str | Path, workers: int = 1, overwrite: bool 
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=total, unit="frame", desc="track3d-sim", file=sys.stderr, dynamic_ncols=True)
+    update = bar.update if bar else (lambda n: None)
     t0 = time.time()
     try:
-        if int(workers) == 1 or len(todo) <= 1:
+        if ray_mod is not None:
+            _run_ray(ray_mod, todo, settings, out, update)
+        elif workers == 1 or len(todo) <= 1:
             cam = camera_of(settings)
             for spec in todo:
-                write_sequence(spec, settings, cam, out, progress=(bar.update if bar else None))
+                write_sequence(spec, settings, cam, out, progress=update)
         else:
-            import multiprocessing as mp
-            ctx = mp.get_context("spawn")
-            queue = ctx.Queue()
-            with ctx.Pool(min(int(workers), len(todo)), initializer=_init_worker,
-                          initargs=(settings, str(out), queue)) as pool:
-                res = pool.map_async(_work, todo, chunksize=1)
-                while True:
-                    try:
-                        n = queue.get(timeout=0.2)
-                        if bar:
-                            bar.update(n)
-                    except Exception:
-                        if res.ready():
-                            break
-                res.get()
-                while not queue.empty():
-                    n = queue.get()
-                    if bar:
-                        bar.update(n)
+            _run_pool(todo, settings, out, workers, update)
     finally:
         if bar:
             bar.close()
     _atomic_write(out / ds.DATASET_JSON, json.dumps(info, indent=1, sort_keys=True))
     dt = time.time() - t0
     if todo:
-        log(f"{out}: wrote {len(todo)} sequences, {total} stereo frames in {dt:.1f} s "
-            f"({dt / max(total, 1):.3f} s per frame, {workers} worker(s))")
+        how = f"Ray at {ray}" if ray is not None else f"{workers} worker(s)"
+        log(f"{out}: wrote {len(todo)} sequences, {total} {'depth-only' if settings['points_only'] else 'stereo'} "
+            f"frames in {dt:.1f} s ({dt / max(total, 1):.3f} s per frame, {how})")
     return out

@@ -24,9 +24,12 @@ def _open_sequence(path: Path):
         raise SimError(f"{path} is not a sequence of a dataset (no {DATASET_JSON} in {root})")
     cam = Camera.from_dict(json.loads((root / DATASET_JSON).read_text())["camera"])
     try:
-        return Sequence(path, cam, path.parent.name)
+        seq = Sequence(path, cam, path.parent.name)
     except DatasetError as e:
         raise SimError(str(e)) from None
+    if seq.points_only:
+        raise SimError(f"{path} is points-only data (generated with --points-only): no images to show")
+    return seq
 
 
 def draw_frame(seq, i: int, gain: float = 1.0, right: bool = False):

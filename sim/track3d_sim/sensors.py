@@ -36,7 +36,7 @@ import numpy as np
 
 from .errors import SimError
 
-__all__ = ["RenderedFrame", "ToFModel", "TOF", "FLASH_LIDAR", "DEPTH_SENSORS", "measure_depth",
+__all__ = ["RenderedFrame", "ToFModel", "TOF", "FLASH_LIDAR", "DEPTH_SENSORS", "SENSORS_NEEDING_IMAGES", "measure_depth",
            "tof_signal", "tof_sigma", "tof_return_probability", "sensor_info"]
 
 
@@ -223,6 +223,8 @@ def _ideal(frame: RenderedFrame, camera, rng: np.random.Generator) -> np.ndarray
 TOF_MODELS = {m.name: m for m in (TOF, FLASH_LIDAR)}
 DEPTH_SENSORS = {"ideal": _ideal, "tof": _tof_full(TOF), "flash-lidar": _tof_lowres(FLASH_LIDAR),
                  "stereo": _stereo}
+# sensors that measure depth from the rendered images (so a points-only run cannot have them)
+SENSORS_NEEDING_IMAGES = frozenset({"stereo"})
 
 
 def sensor_info(sensor: str) -> dict:

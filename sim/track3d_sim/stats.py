@@ -13,7 +13,7 @@ def collect(root: str | Path, split: str = "all") -> dict:
     from track3d.dataset import Dataset, DatasetError
     try:
         data = Dataset(root)
-        splits = ["train", "test"] if split == "all" else [split]
+        splits = list(data.splits) if split == "all" else [split]
         seqs = [s for sp in splits if sp in data.splits for s in data.sequences(sp)]
     except DatasetError as e:
         raise SimError(str(e)) from None

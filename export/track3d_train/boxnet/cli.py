@@ -101,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Frustum proposals (runtime frustum code) from ground-truth 2D boxes and "
                                    "jittered copies (a 2D tracker's errors), subsampled, with labels.")
     q.add_argument("--data", required=True, help="dataset root (with dataset.json)")
-    q.add_argument("--split", default="train", help="split name (train / test)")
+    q.add_argument("--split", default="train", help="split name (train / test / test_unseen; default train)")
     q.add_argument("--out", default="runs/boxnet/cache", help="a folder (file named by the data hash) or a .npz")
     q.add_argument("--jitters", type=int, default=5, help="jittered boxes per frame (0 for the oracle test set)")
     q.add_argument("--no-oracle", action="store_true", help="do not also keep the exact ground-truth box")
