@@ -244,3 +244,22 @@ def test_settings_summary_lists_every_split():
     assert info["categories"]["test_unseen_fine"] and not (set(info["categories"]["test_unseen_fine"])
                                                            & set(info["categories"]["train_fine"]))
     json.dumps(info)
+
+
+def test_points_only_noisy_sensor_matches_the_full_render(tmp_path):
+    """A range sensor in a points-only run measures from the left cast alone: its depth maps are
+    the bytes of the full render's (the sensor noise has its own per-frame stream)."""
+    kw = dict(seed=4, train=1, test=1, frames=3, sensors="tof,flash-lidar")
+    full = generate(make_settings("tiny", **kw), tmp_path / "full", progress=False, log=_quiet)
+    po = generate(make_settings("tiny", points_only=True, **kw), tmp_path / "po", progress=False, log=_quiet)
+    ideal = generate(make_settings("tiny", seed=4, train=1, test=1, frames=3), tmp_path / "ideal",
+                     progress=False, log=_quiet)
+    differs = 0
+    for sp in ("train", "test"):
+        for q, r, g in zip(Dataset(po).sequences(sp), Dataset(full).sequences(sp), Dataset(ideal).sequences(sp)):
+            assert q.meta["sensor"] in ("tof", "flash-lidar") and q.meta["sensor"] == r.meta["sensor"]
+            for i in range(len(q)):
+                name = f"depth/{i + 1:06d}.png"
+                assert (q.path / name).read_bytes() == (r.path / name).read_bytes()
+                differs += (q.path / name).read_bytes() != (g.path / name).read_bytes()
+    assert differs > 0  # the sensor really changed the depth
