@@ -111,7 +111,7 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
     renderer = BodyRenderer(shape, texture, camera)
     H, W, N = camera.height, camera.width, int(settings["frames"])
     tan_half = (math.tan(math.radians(camera.fov_x_deg) / 2), math.tan(math.radians(camera.fov_y_deg) / 2))
-    motion = make_motion(rng["motion"], N, shape.radius, tan_half)
+    motion = make_motion(rng["motion"], N, shape.radius, tan_half, inertia=shape.inertia())
     sun = _sun(rng["sun"])
     sun_dir = np.asarray(sun["direction"])
     margin = max(4, int(0.06 * W))
