@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from .implicit import SdfGrid, grid_size, mesh_grid, rotation, sd_ellipsoid, sd_sphere, smax
+from .implicit import SdfGrid, _norm, grid_size, mesh_grid, rotation, sd_ellipsoid, sd_sphere, smax
 from .shapes import Shape, scale_to_volume
 
 __all__ = ["make_bilobate", "make_elongated", "make_top_shape", "make_rubble_pile", "make_giant_craters",
@@ -127,7 +127,7 @@ def make_top_shape(rng: np.random.Generator, volume: float, detail: int = 6) -> 
         rho = np.hypot(q[..., 0], q[..., 1])
         z = q[..., 2]
         cone = (rho + np.sqrt(z * z + sharp * sharp) / c - 1.0) * norm  # ridge rounded over ~sharp
-        sph = np.linalg.norm(q, axis=-1) - 0.5 * (1 + c)
+        sph = _norm(q) - 0.5 * (1 + c)
         return mix * cone + (1 - mix) * sph - ridge * np.exp(-(z / 0.12) ** 2) * np.clip(rho, 0, 1)
 
     g.union(body, (-1.2, -1.2, -1.2), (1.2, 1.2, 1.2))

@@ -213,10 +213,21 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     ], -2)
 
 
+def _hull_points(vertices: np.ndarray) -> np.ndarray:
+    """The convex hull's vertices: they alone decide every rotated box (10-50x fewer points)."""
+    if len(vertices) < 64:
+        return vertices
+    try:
+        from scipy.spatial import ConvexHull
+        return vertices[ConvexHull(vertices).vertices]
+    except Exception:  # qhull refuses flat or degenerate point sets: use them all
+        return vertices
+
+
 def mean_box_volume(vertices: np.ndarray, seed: int = 0, n: int = 48) -> float:
     """Geometric mean over random rotations of the axis-aligned box volume (m^3)."""
     R = _random_rotations(np.random.default_rng(seed), n)
-    v = np.einsum("rij,vj->rvi", R, vertices)
+    v = np.einsum("rij,vj->rvi", R, _hull_points(vertices))
     ext = v.max(1) - v.min(1)
     return float(np.exp(np.mean(np.log(np.prod(ext, axis=1)))))
 
