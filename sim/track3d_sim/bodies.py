@@ -94,9 +94,9 @@ def _frame_along(axis, twist: float, tilt: float = 0.0) -> np.ndarray:
 
 def make_elongated(rng: np.random.Generator, volume: float, detail: int = 6) -> Shape:
     """Elongated body along a bent centre line (Eros); a waist makes it a dog-bone (Kleopatra)."""
-    width = _u(rng, 0.28, 0.5)        # end radius / half length
+    width = _u(rng, 0.25, 0.45)       # end radius / half length
     waist = _u(rng, 0.0, 0.55)        # 0: banana / cigar, 0.55: strong dog-bone
-    bend = _u(rng, 0.0, 0.45)         # centre-line sag / half length
+    bend = _u(rng, 0.0, 0.22)         # centre-line sag / 2 half lengths (more looks like a heart)
     asym = _u(rng, -0.25, 0.25)       # one end bigger than the other
     flat = _u(rng, 0.6, 1.0)          # cross-section flattening (z)
     s = np.linspace(-1.0, 1.0, 25)
@@ -154,13 +154,14 @@ def make_rubble_pile(rng: np.random.Generator, volume: float, detail: int = 6) -
 def make_giant_craters(rng: np.random.Generator, volume: float, detail: int = 6) -> Shape:
     """Body dominated by giant craters and concavities (Mathilde): lumpy ellipsoid with 2-5
     craters of radius comparable to the body, then small craters."""
-    axes = np.array([1.0, _u(rng, 0.7, 0.9), _u(rng, 0.55, 0.8)])
+    axes = np.array([1.0, _u(rng, 0.7, 0.9), _u(rng, 0.6, 0.8)])
     g = _grid(-axes, axes, detail)
     g.union(lambda q: sd_ellipsoid(q, np.zeros(3), axes), -axes - 0.1, axes + 0.1)
     g.displace(rng, _u(rng, 0.04, 0.08), 0.6, beta=4.0)
     n_giant = int(rng.integers(2, 6))
-    big = _u(rng, 0.4, 0.75)
-    g.craters(rng, n_giant, 0.3, big, depth=(0.15, 0.3), rim=0.04)
+    big = _u(rng, 0.4, 0.7)
+    # shallow enough (depth <= 0.3 body radius) never to punch through the thinnest axis
+    g.craters(rng, n_giant, 0.3, big, depth=(0.12, 0.22), rim=0.04)
     p = dict(axes=axes.tolist(), giant_craters=n_giant, giant_crater_max=big)
     _surface_detail(g, rng, p, 0.02, int(rng.integers(20, 45)), 0.2, int(rng.integers(10, 40)), 0.03)
     return _finish(g, rng, "giant_craters", volume, detail, p)
