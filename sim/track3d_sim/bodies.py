@@ -155,14 +155,23 @@ def make_giant_craters(rng: np.random.Generator, volume: float, detail: int = 6)
     """Body dominated by giant craters and concavities (Mathilde): lumpy ellipsoid with 2-5
     craters of radius comparable to the body, then small craters."""
     axes = np.array([1.0, _u(rng, 0.7, 0.9), _u(rng, 0.6, 0.8)])
-    g = _grid(-axes, axes, detail)
+    g = _grid(-axes - 0.1, axes + 0.1, detail)
     g.union(lambda q: sd_ellipsoid(q, np.zeros(3), axes), -axes - 0.1, axes + 0.1)
+    # two to three knobs blended in: an angular, lumpy outline with saddles between them
+    n_knobs = int(rng.integers(2, 4))
+    for _ in range(n_knobs):
+        d = rng.standard_normal(3)
+        d /= np.linalg.norm(d)
+        kr = axes * _u(rng, 0.45, 0.65)
+        kc = d * axes * 0.7
+        R = rotation(rng)
+        g.union(lambda q, kc=kc, kr=kr, R=R: sd_ellipsoid(q, kc, kr, R), kc - kr.max(), kc + kr.max(), k=0.12)
     g.displace(rng, _u(rng, 0.04, 0.08), 0.6, beta=4.0)
     n_giant = int(rng.integers(2, 6))
     big = _u(rng, 0.4, 0.7)
     # shallow enough (depth <= 0.3 body radius) never to punch through the thinnest axis
-    g.craters(rng, n_giant, 0.3, big, depth=(0.12, 0.22), rim=0.04)
-    p = dict(axes=axes.tolist(), giant_craters=n_giant, giant_crater_max=big)
+    g.craters(rng, n_giant, 0.3, big, depth=(0.14, 0.22), rim=0.08)
+    p = dict(axes=axes.tolist(), knobs=n_knobs, giant_craters=n_giant, giant_crater_max=big)
     _surface_detail(g, rng, p, 0.02, int(rng.integers(20, 45)), 0.2, int(rng.integers(10, 40)), 0.03)
     return _finish(g, rng, "giant_craters", volume, detail, p)
 

@@ -25,7 +25,7 @@ __all__ = ["SdfGrid", "grid_size", "rotation", "sd_ellipsoid", "sd_sphere", "sd_
 
 def grid_size(detail: int) -> int:
     """Voxels along the longest axis for a detail level: about the legacy icosphere's face
-    count at the same level (detail 4 ~ 2-6k faces, 6 ~ 45-100k; capped at 8 -> 256 voxels)."""
+    count at the same level (detail 4 ~ 2-6k faces, 6 ~ 40-90k; capped at 8 -> 256 voxels)."""
     d = int(detail)
     if not 1 <= d <= 8:
         raise SimError(f"detail must be 1..8, got {detail}")
@@ -170,7 +170,8 @@ class SdfGrid:
     def craters(self, rng: np.random.Generator, n: int, rmin: float, rmax: float,
                 depth: tuple[float, float] = (0.15, 0.25), rim: float = 0.1):
         """n bowl craters, power-law radii N(>r) ~ r^-2 in [rmin, rmax]: a sphere carved out of the
-        surface (depth/diameter drawn from `depth`) and a raised rim (`rim` x radius high)."""
+        surface (depth/diameter drawn from `depth`) and a raised rim (`rim` x radius high); the
+        rim edge is blended over min(r/4, 0.04) so that big craters keep a crisp rim."""
         if n <= 0:
             return
         c, nrm = self.surface_samples(rng, n)
@@ -185,7 +186,7 @@ class SdfGrid:
             hr = rim * r * rng.uniform(0.5, 1.2)
             cj = c[j]
             self.add(lambda p, cj=cj, r=r, hr=hr: _rim(_norm(p - cj.astype(np.float32)), r, hr), cj - ext, cj + ext)
-            self.subtract(lambda p, cs=cs, Rs=Rs: sd_sphere(p, cs, Rs), cj - ext, cj + ext, k=0.25 * r)
+            self.subtract(lambda p, cs=cs, Rs=Rs: sd_sphere(p, cs, Rs), cj - ext, cj + ext, k=min(0.25 * r, 0.04))
 
     def boulders(self, rng: np.random.Generator, n: int, size: float, perch: tuple[float, float] = (0.0, 0.5),
                  angular: float = 0.3):
