@@ -5,6 +5,7 @@ scikit-image (`measure.marching_cubes`, Lewiner), PyMCubes (`mcubes.marching_cub
 manifold3d (`Manifold.level_set`, marching tetrahedra, sampling the grid through a Python
 callback). Writes results/meshing_<tag>.json and prints a table.
 
+    .venv/bin/pip install pymcubes manifold3d   # the two candidates not in the sim extra
     nice .venv/bin/python benchmarks/bench_meshing.py --tag cpu
 """
 from __future__ import annotations
