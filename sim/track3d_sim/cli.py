@@ -1,4 +1,4 @@
-"""`track3d-sim`: generate | stats | preview. Errors print one line naming the problem, exit 2."""
+"""`track3d-sim`: generate | stats | preview | ply | shapes. Errors print one line naming the problem, exit 2."""
 from __future__ import annotations
 
 import argparse
@@ -34,7 +34,7 @@ def _mesh(text: str):
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="track3d-sim", description="3D asteroid tracking dataset simulator "
                                 "(headless CPU ray casting; writes the layout of docs/dataset.md).")
-    sub = p.add_subparsers(dest="cmd", required=True, metavar="{generate,stats,preview,ply}")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="{generate,stats,preview,ply,shapes}")
     g = sub.add_parser("generate", help="render a dataset (resumable, deterministic for a seed)",
                        description="Render a dataset into --out. A killed run continues where it stopped "
                        "when started again with the same arguments; dataset.json is written last.")
@@ -98,6 +98,15 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("sequence", help="sequence folder, e.g. DATA/train/0001")
     e.add_argument("--frame", type=int, default=1, help="1-based frame number (default 1)")
     e.add_argument("--out", required=True, help="output .ply")
+    c = sub.add_parser("shapes", help="contact sheet (PNG) of bodies from the shape generators, lit by a sun")
+    c.add_argument("--out", required=True, help="output .png")
+    c.add_argument("--generator", action="append", default=[], metavar="NAME",
+                   help="generator to show (repeat for several; default: every registered generator)")
+    c.add_argument("--count", type=int, default=6, help="bodies per generator (default 6)")
+    c.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    c.add_argument("--detail", type=int, default=5, help="mesh detail 1..8 (default 5; the datasets use 6)")
+    c.add_argument("--cell", type=int, default=192, help="pixels per body image (default 192)")
+    c.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
 
@@ -126,6 +135,10 @@ def main(argv=None) -> int:
         elif args.cmd == "ply":
             from .preview import export_ply
             export_ply(args.sequence, args.frame, args.out)
+        elif args.cmd == "shapes":
+            from .contact_sheet import contact_sheet
+            contact_sheet(args.out, args.generator or None, count=args.count, seed=args.seed, detail=args.detail,
+                          cell=args.cell, progress=not args.no_progress)
     except SimError as e:
         print(f"track3d-sim: error: {e}", file=sys.stderr)
         return 2

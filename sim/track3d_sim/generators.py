@@ -82,3 +82,19 @@ def _legacy(family: int):
 register(Generator("contact_binary", _legacy(0), 0, True, "two ellipsoidal lobes, radial p-norm union (star-shaped)"))
 register(Generator("spinning_top", _legacy(1), 1, True, "double cone with an equatorial ridge (star-shaped)"))
 register(Generator("irregular", _legacy(2), 2, True, "elongated, bent, saddle-dented, cratered (star-shaped)"))
+
+# Implicit (signed distance field + marching cubes) generators: not star-shaped (bodies.py).
+from . import bodies as _bodies  # noqa: E402  (the registry above must exist first)
+
+register(Generator("bilobate", _bodies.make_bilobate, 0, False,
+                   "contact binary with a concave neck, lobe ratio 0.4-0.95, bent up to 50 deg (Itokawa, 67P)"))
+register(Generator("elongated", _bodies.make_elongated, 2, False,
+                   "elongated body on a bent centre line, optional dog-bone waist (Eros, Kleopatra)"))
+register(Generator("top_shape", _bodies.make_top_shape, 1, False,
+                   "double cone blended with a sphere, equatorial ridge, many boulders (Ryugu, Bennu)"))
+register(Generator("rubble_pile", _bodies.make_rubble_pile, 1, False,
+                   "near-spherical or oblate lumpy spheroid strewn with boulders (Didymos)"))
+register(Generator("giant_craters", _bodies.make_giant_craters, 2, False,
+                   "lumpy ellipsoid with 2-5 craters as large as the body (Mathilde)"))
+register(Generator("fragment", _bodies.make_fragment, 2, False,
+                   "flat or angular bevelled polyhedron with conchoidal scoops (collisional fragment)"))

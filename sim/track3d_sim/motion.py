@@ -6,8 +6,17 @@ components come out close to normally distributed), plus planned "excursions": s
 raised-cosine detours that carry the body across the image border (truncation) and
 for a few frames wholly out of view (absence). Depth stays in [1 + R + margin, 45 - R]
 so the camera is never inside the body and every surface point lies in the frustum's
-1..45 m range. Rotation: spin about a random body axis composed with a slower
-precession about a random inertial axis (tumbling), constant rates per sequence.
+1..45 m range.
+
+Rotation (spin state, `spin=`):
+  principal  uniform rotation about one principal axis of the body's inertia tensor (the
+             axis of largest inertia, 80%, or of smallest), the axis fixed in space;
+  tumbling   torque-free non-principal-axis rotation (Toutatis, Apophis): Euler's equations
+             I dw/dt = (I w) x w in the body frame with the attitude quaternion, integrated
+             by RK4 with `SUBSTEPS` steps per frame; energy and angular momentum are conserved
+             (tests/test_sim_motion.py). The body rotates about its box centre.
+The inertia tensor comes from the mesh at uniform density (`shapes.mesh_inertia`); without one,
+a random triaxial tensor is drawn.
 """
 from __future__ import annotations
 
@@ -45,11 +54,109 @@ def _sines(rng, t, n, amp, fmin, fmax):
     return out
 
 
+SPIN_MODES = ("principal", "tumbling")
+TUMBLING_FRACTION = 0.3   # of sequences when the spin mode is drawn
+SUBSTEPS = 16             # RK4 steps per frame interval for tumbling
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw])
+
+
+def _quat_matrix(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def torque_free(inertia: np.ndarray, omega0: np.ndarray, times: np.ndarray,
+                substeps: int = SUBSTEPS) -> tuple[np.ndarray, np.ndarray]:
+    """Torque-free rigid rotation from identity attitude with body-frame angular velocity omega0
+    (rad/s) at times[0]. Returns R (N, 3, 3) body -> inertial and omega (N, 3) body frame.
+
+    State: attitude quaternion q (dq/dt = q * (0, w) / 2) and w (I dw/dt = (I w) x w),
+    integrated by classical RK4 with `substeps` steps per interval; q is renormalised per step."""
+    I = np.asarray(inertia, np.float64)
+    Iinv = np.linalg.inv(I)
+
+    def deriv(y):
+        q, w = y[:4], y[4:]
+        dq = 0.5 * _quat_mul(q, np.array([0.0, *w]))
+        dw = Iinv @ np.cross(I @ w, w)
+        return np.concatenate([dq, dw])
+
+    y = np.concatenate([[1.0, 0.0, 0.0, 0.0], np.asarray(omega0, np.float64)])
+    Rs = np.zeros((len(times), 3, 3))
+    ws = np.zeros((len(times), 3))
+    for i in range(len(times)):
+        if i > 0:
+            dt = (times[i] - times[i - 1]) / substeps
+            for _ in range(substeps):
+                k1 = deriv(y)
+                k2 = deriv(y + 0.5 * dt * k1)
+                k3 = deriv(y + 0.5 * dt * k2)
+                k4 = deriv(y + dt * k3)
+                y = y + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+                y[:4] /= np.linalg.norm(y[:4])
+        Rs[i] = _quat_matrix(y[:4])
+        ws[i] = y[4:]
+    return Rs, ws
+
+
+def _spin(rng: np.random.Generator, t: np.ndarray, fast: bool, spin: str | None,
+          inertia: np.ndarray | None) -> tuple[np.ndarray, dict]:
+    """Body -> inertial rotations (N, 3, 3) relative to the initial attitude, and the info."""
+    if spin is None:
+        spin = "tumbling" if rng.random() < TUMBLING_FRACTION else "principal"
+    if spin not in SPIN_MODES:
+        raise ValueError(f"spin must be one of {SPIN_MODES}, got {spin!r}")
+    info: dict = {"spin": spin}
+    if inertia is None:
+        I = np.diag(np.sort(rng.uniform(0.5, 1.5, 3)))
+        info["inertia_source"] = "random"
+    else:
+        I = np.asarray(inertia, np.float64)
+        if I.shape != (3, 3) or not np.all(np.isfinite(I)):
+            raise ValueError(f"inertia must be a finite (3, 3) tensor, got shape {I.shape}")
+        I = 0.5 * (I + I.T)
+        info["inertia_source"] = "mesh"
+    evals, evecs = np.linalg.eigh(I)            # ascending principal moments, columns = axes
+    if evals[0] <= 0:
+        raise ValueError(f"inertia must be positive definite, got principal moments {evals.tolist()}")
+    info["principal_moments"] = (evals / evals.max()).tolist()
+    w = math.radians(abs(rng.normal(0, 10.0)) + 1.0) * (2.0 if fast else 1.0)  # rad/s
+    if spin == "principal":
+        axis = evecs[:, 2] if rng.random() < 0.8 else evecs[:, 0]
+        axis = axis * rng.choice([-1.0, 1.0])
+        info.update(spin_axis_body=axis.tolist(), spin_deg_s=math.degrees(w))
+        return rotvec_to_matrix(axis[None] * (w * t)[:, None]), info
+    # tumbling: angular velocity well away from every principal axis
+    while True:
+        u = _unit(rng)
+        if np.abs(evecs.T @ u).max() < 0.9:
+            break
+    Rs, _ = torque_free(I, u * w, t)
+    L = I @ (u * w)
+    E = 0.5 * (u * w) @ L
+    info.update(spin_axis_body=u.tolist(), spin_deg_s=math.degrees(w),
+                angular_momentum_body0=L.tolist(), energy=float(E),
+                # 2 E I_mid / L^2 > 1: short-axis mode (SAM), < 1: long-axis mode (LAM)
+                tumbling_mode="SAM" if 2 * E * evals[1] / (L @ L) > 1 else "LAM")
+    return Rs, info
+
+
 def make_motion(rng: np.random.Generator, n_frames: int, radius: float, tan_half: tuple[float, float],
-                fast: bool | None = None, exits: bool | None = None) -> dict:
+                fast: bool | None = None, exits: bool | None = None, spin: str | None = None,
+                inertia: np.ndarray | None = None) -> dict:
     """Poses for n_frames: R (N,3,3) body->camera, T (N,3) body origin in the left camera frame.
 
     radius: bounding radius of the body (m). tan_half: (tan(ax/2), tan(ay/2)).
+    spin: "principal" | "tumbling" (drawn from rng when None, `TUMBLING_FRACTION` tumbling).
+    inertia: (3, 3) body-frame inertia tensor (any scale), e.g. `shapes.mesh_inertia`.
     """
     N = int(n_frames)
     t = np.arange(N) / FPS
@@ -103,16 +210,10 @@ def make_motion(rng: np.random.Generator, n_frames: int, radius: float, tan_half
     T = np.stack([un * z * tan_half[0], vn * z * tan_half[1], z], axis=1)
     # rotation
     R0 = rotvec_to_matrix(_unit(rng) * rng.uniform(0, np.pi))
-    w_spin = math.radians(abs(rng.normal(0, 10.0)) + 1.0) * (2.0 if fast else 1.0)  # rad/s
-    w_prec = math.radians(abs(rng.normal(0, 4.0)))
-    a_spin, a_prec = _unit(rng), _unit(rng)
-    Rs = rotvec_to_matrix(a_spin[None] * (w_spin * t)[:, None])
-    Rp = rotvec_to_matrix(a_prec[None] * (w_prec * t)[:, None])
-    R = Rp @ R0 @ Rs
+    Rs, spin_info = _spin(rng, t, fast, spin, inertia)
+    R = R0 @ Rs  # the observer does not rotate: the body's own rotation seen from a fixed attitude
     v = np.diff(T, axis=0) * FPS
     info = {"fps": FPS, "fast": fast, "speed_scale": float(speed), "z0_m": float(z0), "close_up": close,
-            "z_range_m": [float(zmin), float(zmax)], "spin_axis_body": a_spin.tolist(),
-            "spin_deg_s": math.degrees(w_spin), "precession_axis": a_prec.tolist(),
-            "precession_deg_s": math.degrees(w_prec), "excursions": events,
+            "z_range_m": [float(zmin), float(zmax)], **spin_info, "excursions": events,
             "mean_speed_m_s": float(np.linalg.norm(v, axis=1).mean()) if len(v) else 0.0}
     return {"R": R, "T": T, "info": info}

@@ -46,6 +46,33 @@ class Shape:
     def vertex_normals(self) -> np.ndarray:
         return vertex_normals(self.vertices, self.faces)
 
+    def inertia(self) -> np.ndarray | None:
+        """(3, 3) inertia tensor about the centre of mass, body axes, unit density (kg m^2 per
+        kg/m^3); None when the mesh is not a closed outward solid (an open user mesh)."""
+        try:
+            I = mesh_inertia(self.vertices, self.faces)[2]
+        except SimError:
+            return None
+        return I if np.all(np.linalg.eigvalsh(I) > 0) else None
+
+
+def mesh_inertia(v: np.ndarray, f: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Volume (m^3), centre of mass (3,) and inertia tensor (3, 3) about the centre of mass of a
+    closed outward-oriented mesh at uniform unit density: a sum over signed tetrahedra
+    (origin, a, b, c) with the exact second moments of a tetrahedron."""
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    vol = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+    V = float(vol.sum())
+    if not V > 0:
+        raise SimError(f"mesh encloses no positive volume ({V}); it must be closed and outward-oriented")
+    com = (vol[:, None] * (a + b + c)).sum(0) / 4.0 / V
+    # second moments  S_jk = sum vol/20 (sum_i x_ij x_ik + (sum_i x_ij)(sum_i x_ik)), vertices o, a, b, c
+    s = a + b + c
+    S = (np.einsum("n,nj,nk->jk", vol, a, a) + np.einsum("n,nj,nk->jk", vol, b, b)
+         + np.einsum("n,nj,nk->jk", vol, c, c) + np.einsum("n,nj,nk->jk", vol, s, s)) / 20.0
+    S -= V * np.outer(com, com)  # about the centre of mass
+    return V, com, np.trace(S) * np.eye(3) - S
+
 
 def vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     """Area-weighted vertex normals (V, 3) float32 of an outward-oriented mesh."""
@@ -186,10 +213,21 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     ], -2)
 
 
+def _hull_points(vertices: np.ndarray) -> np.ndarray:
+    """The convex hull's vertices: they alone decide every rotated box (10-50x fewer points)."""
+    if len(vertices) < 64:
+        return vertices
+    try:
+        from scipy.spatial import ConvexHull
+        return vertices[ConvexHull(vertices).vertices]
+    except Exception:  # qhull refuses flat or degenerate point sets: use them all
+        return vertices
+
+
 def mean_box_volume(vertices: np.ndarray, seed: int = 0, n: int = 48) -> float:
     """Geometric mean over random rotations of the axis-aligned box volume (m^3)."""
     R = _random_rotations(np.random.default_rng(seed), n)
-    v = np.einsum("rij,vj->rvi", R, vertices)
+    v = np.einsum("rij,vj->rvi", R, _hull_points(vertices))
     ext = v.max(1) - v.min(1)
     return float(np.exp(np.mean(np.log(np.prod(ext, axis=1)))))
 
