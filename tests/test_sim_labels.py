@@ -33,7 +33,7 @@ def test_reader_reads_everything(tiny):
     assert len(data.splits["train"]) == settings["train"] and len(data.splits["test"]) == settings["test"]
     assert data.camera.width == settings["width"] and data.camera.fx == pytest.approx(data.camera.fy)
     info = data.info
-    assert len(info["categories"]["fine"]) == 18 and len(info["size_classes"]) == 14
+    assert len(info["categories"]["fine"]) == 6 * len(info["categories"]["generators"]) and len(info["size_classes"]) == 14
     assert not set(info["categories"]["train_fine"]) & set(info["categories"]["test_fine"])
     cats = {split: {s.meta["fine_category"] for s in data.sequences(split)} for split in ("train", "test")}
     assert not cats["train"] & cats["test"]

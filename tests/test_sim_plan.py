@@ -27,13 +27,21 @@ def _quiet(msg):
 
 
 @pytest.fixture
-def extra_generators(monkeypatch):
-    """Two temporary generators registered like the shapes helper's (restored afterwards)."""
-    monkeypatch.setattr(G, "GENERATORS", dict(G.GENERATORS))
-    import track3d_sim.sequence as seq_mod
+def legacy_registry(monkeypatch):
+    """The registry of the first release: the three legacy families only, no named held-out
+    generators (restored afterwards), so the plan's rules are tested on a known registry."""
     import track3d_sim.generate as gen_mod
+    import track3d_sim.sequence as seq_mod
+    monkeypatch.setattr(G, "GENERATORS", {k: v for k, v in G.GENERATORS.items() if k in LEGACY_GENERATORS})
     monkeypatch.setattr(seq_mod, "GENERATORS", G.GENERATORS)
     monkeypatch.setattr(gen_mod, "GENERATORS", G.GENERATORS)
+    monkeypatch.setattr(seq_mod, "UNSEEN_GENERATORS", ())
+    return G.GENERATORS
+
+
+@pytest.fixture
+def extra_generators(legacy_registry):
+    """Two temporary generators registered on the legacy registry."""
 
     def lumpy(rng, volume, detail):
         return procedural_shape(2, rng, volume, min(detail, 3))
@@ -75,14 +83,14 @@ def test_plan_follows_the_registry(extra_generators):
     assert "override" in note or "--unseen-generators" in note
 
 
-def test_legacy_plan_keeps_the_first_release_categories():
+def test_legacy_plan_keeps_the_first_release_categories(legacy_registry):
     cats = split_categories()
     assert [f"{g}/{t}" for g, t in cats["test"]] == [
         "contact_binary/0", "spinning_top/2", "irregular/4", "contact_binary/3", "spinning_top/5"]
     assert len(cats["train"]) == 13 and not cats["test_unseen"]
 
 
-def test_fallback_holds_out_a_legacy_family():
+def test_fallback_holds_out_a_legacy_family(legacy_registry):
     unseen, note = resolve_unseen(None, 3)
     assert unseen == ("irregular",) and "fewer than" in note
     gens, _ = _check_splits(plan(40, 20, 6, unseen))
@@ -115,7 +123,7 @@ def test_extra_generator_dataset_reads_back(tmp_path, extra_generators, monkeypa
 @pytest.mark.parametrize("argv, needle", [
     (["--test-unseen", "1", "--unseen-generators", "no_such_shape"], "unknown shape generator 'no_such_shape'"),
     (["--unseen-generators", "irregular"], "--test-unseen"),
-    (["--test-unseen", "1", "--unseen-generators", "contact_binary,spinning_top,irregular"], "every generator"),
+    (["--test-unseen", "1", "--unseen-generators", ",".join(G.GENERATORS)], "every generator"),
     (["--sensors", "ideal,lidar9000"], "unknown depth sensor 'lidar9000'"),
     (["--test", "-1"], "non-negative"),
 ])
@@ -263,3 +271,13 @@ def test_points_only_noisy_sensor_matches_the_full_render(tmp_path):
                 assert (q.path / name).read_bytes() == (r.path / name).read_bytes()
                 differs += (q.path / name).read_bytes() != (g.path / name).read_bytes()
     assert differs > 0  # the sensor really changed the depth
+
+
+def test_shipped_registry_holds_out_the_named_generators():
+    """The real registry: test_unseen is exactly UNSEEN_GENERATORS, none of it in train or test."""
+    import track3d_sim.sequence as seq_mod
+    unseen, note = resolve_unseen(None, 6)
+    assert unseen == seq_mod.UNSEEN_GENERATORS and "UNSEEN_GENERATORS" in note
+    gens, _ = _check_splits(plan(90, 45, 12, unseen))
+    assert gens["test_unseen"] == set(unseen)
+    assert gens["train"] == set(G.GENERATORS) - set(unseen)
