@@ -113,13 +113,28 @@ class Track3D:
                    create_estimator(estimator, **(estimator_options or {})), **options)
 
     @classmethod
-    def from_default(cls, camera: Camera, threads: int = 1, **options) -> "Track3D":
+    def from_default(cls, camera: Camera, threads: int = 1, precision: str = "fp32", engine: str = "onnxruntime",
+                     **options) -> "Track3D":
         """The shipped models: SiamFC (edge variant) + A3BoxNet, on `threads` CPU threads.
 
+        precision / engine: "fp32" | "int8" | "bf16" | "auto" and "onnxruntime" | "openvino" |
+        "auto" (track3d.onnxmodel; "auto": the fastest variant this CPU allows, see describe()).
         Raises TrackerUnavailable / EstimatorUnavailable when the models are not shipped.
         """
-        return cls(camera, create_tracker("siamfc-edge", threads=threads),
-                   create_estimator("a3boxnet", threads=threads), **options)
+        arith = {"threads": threads, "precision": precision, "engine": engine}
+        return cls(camera, create_tracker("siamfc-edge", **arith), create_estimator("a3boxnet", **arith), **options)
+
+    def describe(self) -> dict:
+        """What runs: the 2D tracker, the estimator, fusion, and for each network the engine,
+        precision, file and the reason of that choice (``models``)."""
+        from .onnxmodel import OnnxModel
+
+        def models(obj) -> list[dict]:
+            found = [v for v in vars(obj).values() if isinstance(v, OnnxModel)] if hasattr(obj, "__dict__") else []
+            return [m.describe() for m in found]
+
+        return {"tracker2d": repr(self.tracker2d), "estimator": repr(self.estimator), "fusion": self.fusion,
+                "weight_3d": self.weight_3d, "models": models(self.tracker2d) + models(self.estimator)}
 
     # --- the loop --------------------------------------------------------------------------------
     def _frustum(self, points: np.ndarray, box2d: np.ndarray) -> np.ndarray:
