@@ -22,7 +22,7 @@ import numpy as np
 import onnxruntime as ort
 
 __all__ = ["META_KEY", "MODELS_DIR", "OnnxModel", "ModelError", "EngineUnavailable", "shipped_model",
-           "ENGINES", "PRECISIONS", "variant_path", "open_session"]
+           "ENGINES", "PRECISIONS", "PARITY_TOLERANCE", "variant_path", "open_session"]
 
 META_KEY = "track3d"
 MODELS_DIR = Path(__file__).resolve().parent / "models"
@@ -30,6 +30,10 @@ MODELS_DIR = Path(__file__).resolve().parent / "models"
 
 ENGINES = ("onnxruntime", "openvino")
 PRECISIONS = ("fp32", "int8", "bf16")
+# Parity of a variant with onnxruntime fp32 on fixed random inputs (variant_choice.example_feeds):
+# max |diff| / max |fp32| per output. What decides shipping is the tracking accuracy rule
+# (docs/models.md, "Arithmetic"); these bounds catch a broken or mismatched file.
+PARITY_TOLERANCE = {"fp32": 1e-4, "int8": 0.25, "bf16": 0.05}
 
 
 class ModelError(Exception):

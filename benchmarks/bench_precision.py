@@ -1,0 +1,202 @@
+"""Every engine x precision side by side: per network and for the whole Track3D loop.
+
+    python benchmarks/bench_precision.py --data data/small --frames 300 --rounds 3
+
+Per network (A3BoxNet at its N points, SiamFC-edge search at its instance size with one scale,
+SiamFC-edge exemplar): each available variant (onnxruntime fp32 / int8, OpenVINO fp32 / int8 /
+bf16) on the same fixed random inputs, all variants run ROUND-ROBIN for --net-seconds (so that
+other load on the machine hits them alike), median ms; max relative difference to onnxruntime
+fp32 (max |diff| / max |fp32| over the outputs).
+
+Whole loop (siamfc-edge + a3boxnet, fusion on, bench_fps's loop and stage timers on preloaded
+frames, one thread pinned to one core): one configuration per variant (both networks at that
+engine / precision) plus precision=auto / engine=auto, interleaved: --rounds rounds, each
+running every configuration for frames/rounds frames; the reported ms is the median of the
+rounds' medians. Ratios are to onnxruntime fp32 of the same run (> 1: faster).
+
+Writes <out-dir>/precision_<tag>.json (CPU name, ISA flags, versions, every number) and .md.
+"""
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import os
+import platform
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_fps import RESULTS, load_frames, pin, run_config  # noqa: E402  (the loop machinery, not a copy)
+
+from track3d.cpu_features import cpu_model, isa_flags  # noqa: E402
+from track3d.onnxmodel import MODELS_DIR, ModelError, OnnxModel, openvino_version, variant_path  # noqa: E402
+from track3d.variant_choice import example_feeds, measure  # noqa: E402
+
+VARIANTS = (("onnxruntime", "fp32"), ("onnxruntime", "int8"), ("openvino", "fp32"), ("openvino", "int8"),
+            ("openvino", "bf16"))
+NETWORKS = {"a3boxnet": "a3boxnet.onnx", "siamfc_edge_search": "siamfc_edge_search.onnx",
+            "siamfc_edge_exemplar": "siamfc_edge_exemplar.onnx"}
+STAGES = ("net2d", "net3d", "end_to_end")
+
+
+def label(v) -> str:
+    return f"{v[0]}/{v[1]}"
+
+
+def available(path: Path) -> tuple[dict, list[str]]:
+    """{variant: OnnxModel} that load here; [why the others do not]."""
+    models, skipped = {}, []
+    for v in VARIANTS:
+        if v[1] == "int8" and not variant_path(path, "int8").is_file():
+            skipped.append(f"{label(v)}: no int8 file")
+            continue
+        try:
+            models[v] = OnnxModel(path, threads=1, engine=v[0], precision=v[1])
+        except ModelError as e:
+            skipped.append(f"{label(v)}: {e}")
+    return models, skipped
+
+
+def bench_networks(seconds: float) -> dict:
+    out = {}
+    for name, file in NETWORKS.items():
+        path = MODELS_DIR / file
+        models, skipped = available(path)
+        ref = models[("onnxruntime", "fp32")]
+        feeds = example_feeds(path, ref.meta)
+        want = ref.run(feeds)
+        diffs = {}
+        for v, m in models.items():
+            got = m.run(feeds)
+            diffs[v] = max(float(np.abs(g.astype(np.float64) - w).max() / max(np.abs(w).max(), 1e-12))
+                           for g, w in zip(got, want))
+        ms = measure(models, feeds, seconds)
+        base = ms[("onnxruntime", "fp32")]
+        out[name] = {"inputs": {k: list(v.shape) for k, v in feeds.items()}, "skipped": skipped,
+                     "variants": {label(v): {"median_ms": ms[v], "speedup_vs_ort_fp32": base / ms[v],
+                                             "max_rel_diff_vs_ort_fp32": diffs[v]} for v in models}}
+        print(f"{name}: " + ", ".join(f"{label(v)} {ms[v]:.2f} ms (x{base / ms[v]:.2f}, rel {diffs[v]:.1e})"
+                                      for v in models), flush=True)
+        del models
+        gc.collect()
+    return out
+
+
+def loop_configs() -> list[dict]:
+    cfgs = []
+    for e, p in VARIANTS + (("auto", "auto"),):
+        if p == "int8" and not variant_path(MODELS_DIR / "a3boxnet.onnx", "int8").is_file():
+            continue
+        opts = {"precision": p, "engine": e}
+        cfgs.append({"label": f"{e}/{p}", "tracker": "siamfc-edge", "estimator": "a3boxnet", "backend": e,
+                     "precision": p, "tracker_options": dict(opts), "estimator_options": dict(opts)})
+    return cfgs
+
+
+def bench_loop(data: Path, split: str, frames: int, rounds: int, preload: int, sequences: int) -> dict:
+    camera, seqs = load_frames(data, split, preload, sequences)
+    per = max(frames // rounds, 20)
+    runs: dict[str, list[dict]] = {}
+    skipped = {}
+    for r in range(rounds):
+        for cfg in loop_configs():
+            if cfg["label"] in skipped:
+                continue
+            try:
+                res = run_config(camera, seqs, cfg, 1, per)
+            except ModelError as e:  # e.g. OpenVINO not installed: skip the configuration
+                skipped[cfg["label"]] = str(e)
+                continue
+            finally:
+                gc.collect()
+            runs.setdefault(cfg["label"], []).append(res)
+            s = res["stages"]
+            print(f"round {r + 1}/{rounds} {cfg['label']:22s} e2e {s['end_to_end']['median_ms']:.2f} ms "
+                  f"net2d {s['net2d']['median_ms']:.2f} net3d {s['net3d']['median_ms']:.2f}", flush=True)
+    out = {}
+    base = None
+    for lab, rs in runs.items():
+        med = {k: float(np.median([x["stages"][k]["median_ms"] for x in rs])) for k in STAGES}
+        if lab == "onnxruntime/fp32":
+            base = med
+        out[lab] = {"median_ms": med, "rounds": len(rs), "frames_per_round": per,
+                    "statuses": rs[-1]["statuses"]}
+    for lab, row in out.items():
+        row["speedup_vs_ort_fp32"] = {k: base[k] / row["median_ms"][k] if base and row["median_ms"][k] > 0 else None
+                                      for k in STAGES}
+    return {"configs": out, "skipped": skipped}
+
+
+def markdown(res: dict) -> str:
+    lines = [f"Precision benchmark, {res['cpu']} (ISA: {', '.join(res['isa_flags'])}), onnxruntime "
+             f"{res['onnxruntime']}, OpenVINO {res['openvino'] or 'not installed'}; 1 thread; medians, ms "
+             f"(x = speed-up vs onnxruntime fp32 in the same run)", "",
+             "| network | " + " | ".join(label(v) for v in VARIANTS) + " |", "|---" * (len(VARIANTS) + 1) + "|"]
+    for name, r in res["networks"].items():
+        cells = []
+        for v in VARIANTS:
+            c = r["variants"].get(label(v))
+            cells.append("—" if c is None else f"{c['median_ms']:.2f} (x{c['speedup_vs_ort_fp32']:.2f}, "
+                                               f"rel {c['max_rel_diff_vs_ort_fp32']:.1e})")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    if res.get("loop"):
+        lines += ["", "| whole loop config | end-to-end ms | x | net2d ms | net3d ms |", "|---|---|---|---|---|"]
+        for lab, r in res["loop"]["configs"].items():
+            m, x = r["median_ms"], r["speedup_vs_ort_fp32"]
+            lines.append(f"| {lab} | {m['end_to_end']:.2f} | x{x['end_to_end']:.2f} | {m['net2d']:.2f} | "
+                         f"{m['net3d']:.2f} |")
+        for lab, why in res["loop"]["skipped"].items():
+            lines.append(f"- skipped {lab}: {why}")
+    if res.get("auto"):
+        lines += ["", "precision=auto / engine=auto picks:"]
+        lines += [f"- {d['model']}: {d['engine']}/{d['precision']} — {d['reason']}" for d in res["auto"]]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", type=Path, default=None, help="dataset root for the whole-loop rows (none: networks only)")
+    ap.add_argument("--split", default="test", help="dataset split (default test)")
+    ap.add_argument("--frames", type=int, default=300, help="measured loop frames per configuration (default 300)")
+    ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of the loop configurations (default 3)")
+    ap.add_argument("--preload", type=int, default=200, help="frames kept in memory (default 200)")
+    ap.add_argument("--sequences", type=int, default=6, help="sequences preloaded (default 6)")
+    ap.add_argument("--net-seconds", type=float, default=3.0, help="round-robin seconds per network (default 3)")
+    ap.add_argument("--tag", default=None, help="result file tag (default: the host name)")
+    ap.add_argument("--out-dir", type=Path, default=RESULTS, help="output folder (default: benchmarks/results)")
+    a = ap.parse_args(argv)
+    if a.rounds < 1 or a.frames < 1:
+        ap.error("--rounds and --frames must be >= 1")
+    all_cpus = os.sched_getaffinity(0)
+    pin({min(all_cpus)})  # one thread, one core (as bench_fps --threads 1)
+    import onnxruntime
+
+    res = {"benchmark": "track3d precision x engine", "cpu": cpu_model(), "isa_flags": sorted(isa_flags()),
+           "machine": platform.machine(), "python": platform.python_version(), "onnxruntime": onnxruntime.__version__,
+           "openvino": openvino_version(), "threads": 1, "networks": bench_networks(a.net_seconds)}
+    if a.data is not None:
+        res["loop"] = bench_loop(a.data, a.split, a.frames, a.rounds, a.preload, a.sequences)
+        res["data_split"] = a.split
+    from track3d.siamfc import create as siamfc
+    from track3d.boxnet import A3BoxNetEstimator
+
+    trk = siamfc("edge", precision="auto", engine="auto")
+    res["auto"] = [trk.exemplar.describe(), trk.search.describe(),
+                   A3BoxNetEstimator(precision="auto", engine="auto").model.describe()]
+    pin(all_cpus)
+    a.out_dir.mkdir(parents=True, exist_ok=True)
+    tag = a.tag or platform.node()
+    path = a.out_dir / f"precision_{tag}.json"
+    path.write_text(json.dumps(res, indent=2))
+    md = markdown(res)
+    path.with_suffix(".md").write_text(md)
+    print(md)
+    print(f"wrote {path} and {path.with_suffix('.md')}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
