@@ -3,8 +3,8 @@
     python benchmarks/bench_precision.py --data data/small --frames 300 --rounds 3
 
 Per network (A3BoxNet at its N points, SiamFC-edge search at its instance size with one scale,
-SiamFC-edge exemplar): each available variant (onnxruntime fp32 / int8, OpenVINO fp32 / int8 /
-bf16) on the same fixed random inputs, all variants run ROUND-ROBIN for --net-seconds (so that
+SiamFC-edge exemplar): each available variant (onnxruntime fp32 / int8, OpenVINO fp32 / bf16;
+OpenVINO does not run the int8 files, see track3d.onnxmodel) on the same fixed random inputs, all variants run ROUND-ROBIN for --net-seconds (so that
 other load on the machine hits them alike), median ms; max relative difference to onnxruntime
 fp32 (max |diff| / max |fp32| over the outputs).
 
@@ -35,8 +35,7 @@ from track3d.cpu_features import cpu_model, isa_flags  # noqa: E402
 from track3d.onnxmodel import MODELS_DIR, ModelError, OnnxModel, openvino_version, variant_path  # noqa: E402
 from track3d.variant_choice import example_feeds, measure  # noqa: E402
 
-VARIANTS = (("onnxruntime", "fp32"), ("onnxruntime", "int8"), ("openvino", "fp32"), ("openvino", "int8"),
-            ("openvino", "bf16"))
+VARIANTS = (("onnxruntime", "fp32"), ("onnxruntime", "int8"), ("openvino", "fp32"), ("openvino", "bf16"))
 NETWORKS = {"a3boxnet": "a3boxnet.onnx", "siamfc_edge_search": "siamfc_edge_search.onnx",
             "siamfc_edge_exemplar": "siamfc_edge_exemplar.onnx"}
 STAGES = ("net2d", "net3d", "end_to_end")
@@ -130,6 +129,68 @@ def bench_loop(data: Path, split: str, frames: int, rounds: int, preload: int, s
     return {"configs": out, "skipped": skipped}
 
 
+AO_TOL, ACE_TOL_M = 0.005, 0.01   # the shipping rule (docs/models.md, "Arithmetic")
+
+
+def accuracy_configs() -> list[tuple[str, dict, dict]]:
+    """(label, SiamFC options, A3BoxNet options): fp32 first, then each variant of one network
+    at a time and of both together."""
+    fp32 = {"precision": "fp32", "engine": "onnxruntime"}
+    out = [("onnxruntime/fp32", fp32, fp32)]
+    for e, p in VARIANTS[1:]:
+        v = {"precision": p, "engine": e}
+        out += [(f"{e}/{p} siamfc only", v, fp32), (f"{e}/{p} a3boxnet only", fp32, v), (f"{e}/{p} both", v, v)]
+    return out
+
+
+def bench_accuracy(data: Path, split: str, out_dir: Path, tracker: str = "siamfc-edge",
+                   only: list[str] | None = None) -> dict:
+    """AO_3d / ACE_3d of Track3D (siamfc-edge + a3boxnet) per variant, restart and one-pass rows,
+    and whether each variant passes the rule against fp32."""
+    import tempfile
+
+    from track3d.evaluation import Experiment, TrackerSpec
+    from track3d.evaluation.metrics import average_scores
+
+    rows: dict[str, dict] = {}
+    with tempfile.TemporaryDirectory(dir=out_dir) as tmp:
+        for lab, topt, eopt in accuracy_configs():
+            if only and lab != "onnxruntime/fp32" and not any(lab.startswith(o) for o in only):
+                continue
+            name = lab.replace("/", "-").replace(" ", "_")
+            spec = TrackerSpec(tracker, "a3boxnet", threads=1, tracker_options=topt, estimator_options=eopt,
+                               name=name)
+            try:
+                spec.build(Experiment(data, split, tmp).sequences[0])
+            except ModelError as e:
+                rows[lab] = {"skipped": str(e)}
+                continue
+            row = {}
+            for mode, restart in (("restart", True), ("one_pass", False)):
+                exp = Experiment(data, split, Path(tmp) / mode, restart=restart)
+                exp.run(spec, overlay=None, quiet=True)
+                ov = average_scores(exp.score(name))
+                row[mode] = {"ao_3d": float(ov.values["ao_3d"]), "ace_3d": float(ov.values["ace_3d"]),
+                             "restarts": int(ov.restarts)}
+            rows[lab] = row
+            print(f"accuracy {lab:32s} " + " ".join(f"{m}: AO_3d {r['ao_3d']:.4f} ACE_3d {r['ace_3d']:.4f} m"
+                                                     for m, r in row.items()), flush=True)
+    ref = rows["onnxruntime/fp32"]
+    for lab, row in rows.items():
+        if "skipped" in row or lab == "onnxruntime/fp32":
+            continue
+        d = {m: {"d_ao_3d": row[m]["ao_3d"] - ref[m]["ao_3d"], "d_ace_3d": row[m]["ace_3d"] - ref[m]["ace_3d"]}
+             for m in ("restart", "one_pass")}
+        row["delta"] = d
+        row["passes"] = all(v["d_ao_3d"] >= -AO_TOL and v["d_ace_3d"] <= ACE_TOL_M for v in d.values())
+    from track3d.dataset import Dataset
+
+    seqs = Dataset(data).sequences(split)
+    return {"tracker": tracker, "split": split, "sequences": len(seqs), "frames": int(sum(len(q) for q in seqs)),
+            "rule": f"AO_3d >= fp32 - {AO_TOL}, ACE_3d <= fp32 + {ACE_TOL_M} m, restart and one-pass",
+            "rows": rows}
+
+
 def markdown(res: dict) -> str:
     lines = [f"Precision benchmark, {res['cpu']} (ISA: {', '.join(res['isa_flags'])}), onnxruntime "
              f"{res['onnxruntime']}, OpenVINO {res['openvino'] or 'not installed'}; 1 thread; medians, ms "
@@ -150,6 +211,19 @@ def markdown(res: dict) -> str:
                          f"{m['net3d']:.2f} |")
         for lab, why in res["loop"]["skipped"].items():
             lines.append(f"- skipped {lab}: {why}")
+    if res.get("accuracy"):
+        acc = res["accuracy"]
+        lines += ["", f"Track3D ({acc['tracker']} + a3boxnet) accuracy on {acc['sequences']} sequences / {acc['frames']} frames of "
+                      f"'{acc['split']}'; rule: {acc['rule']}", "",
+                  "| variant | AO_3d restart | ACE_3d restart (m) | AO_3d one-pass | ACE_3d one-pass (m) | passes |",
+                  "|---|---|---|---|---|---|"]
+        for lab, r in acc["rows"].items():
+            if "skipped" in r:
+                lines.append(f"| {lab} | skipped: {r['skipped']} |||||")
+                continue
+            a, b = r["restart"], r["one_pass"]
+            lines.append(f"| {lab} | {a['ao_3d']:.4f} | {a['ace_3d']:.4f} | {b['ao_3d']:.4f} | {b['ace_3d']:.4f} | "
+                         f"{'reference' if 'passes' not in r else ('yes' if r['passes'] else 'NO')} |")
     if res.get("auto"):
         lines += ["", "precision=auto / engine=auto picks:"]
         lines += [f"- {d['model']}: {d['engine']}/{d['precision']} — {d['reason']}" for d in res["auto"]]
@@ -165,6 +239,14 @@ def main(argv=None) -> int:
     ap.add_argument("--preload", type=int, default=200, help="frames kept in memory (default 200)")
     ap.add_argument("--sequences", type=int, default=6, help="sequences preloaded (default 6)")
     ap.add_argument("--net-seconds", type=float, default=3.0, help="round-robin seconds per network (default 3)")
+    ap.add_argument("--accuracy-data", type=Path, default=None,
+                    help="dataset root: also Track3D's AO_3d / ACE_3d per variant (restart and one-pass) "
+                         "and the shipping rule (default: not measured)")
+    ap.add_argument("--accuracy-split", default="test", help="split of --accuracy-data (default test)")
+    ap.add_argument("--accuracy-tracker", default="siamfc-edge", help="2D tracker of the accuracy rows (default siamfc-edge)")
+    ap.add_argument("--accuracy-variants", nargs="+", default=None, metavar="LABEL",
+                    help="only the accuracy rows starting with these labels, e.g. onnxruntime/int8 (default: all)")
+    ap.add_argument("--no-speed", action="store_true", help="skip the speed rows (accuracy only)")
     ap.add_argument("--tag", default=None, help="result file tag (default: the host name)")
     ap.add_argument("--out-dir", type=Path, default=RESULTS, help="output folder (default: benchmarks/results)")
     a = ap.parse_args(argv)
@@ -176,10 +258,15 @@ def main(argv=None) -> int:
 
     res = {"benchmark": "track3d precision x engine", "cpu": cpu_model(), "isa_flags": sorted(isa_flags()),
            "machine": platform.machine(), "python": platform.python_version(), "onnxruntime": onnxruntime.__version__,
-           "openvino": openvino_version(), "threads": 1, "networks": bench_networks(a.net_seconds)}
-    if a.data is not None:
+           "openvino": openvino_version(), "threads": 1,
+           "networks": {} if a.no_speed else bench_networks(a.net_seconds)}
+    if a.data is not None and not a.no_speed:
         res["loop"] = bench_loop(a.data, a.split, a.frames, a.rounds, a.preload, a.sequences)
         res["data_split"] = a.split
+    if a.accuracy_data is not None:
+        a.out_dir.mkdir(parents=True, exist_ok=True)
+        res["accuracy"] = bench_accuracy(a.accuracy_data, a.accuracy_split, a.out_dir, a.accuracy_tracker,
+                                         a.accuracy_variants)
     from track3d.siamfc import create as siamfc
     from track3d.boxnet import A3BoxNetEstimator
 

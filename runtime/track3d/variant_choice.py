@@ -82,9 +82,12 @@ def candidates(path: Path, precision: str, engine: str, flags: frozenset[str]) -
         if not flags & BF16_DOT:
             precs.remove("bf16")
             notes.append("bf16 not allowed: CPU has no bf16 arithmetic")
-    out = [(e, p) for e in engines for p in precs if not (e == "onnxruntime" and p == "bf16")]
+    unsupported = {("onnxruntime", "bf16"), ("openvino", "int8")}  # see onnxmodel's sessions
+    out = [(e, p) for e in engines for p in precs if (e, p) not in unsupported]
     if precision == "bf16" and not any(p == "bf16" for _, p in out):
         raise EngineUnavailable("bf16 needs engine 'openvino': pip install 'track3d[openvino]'")
+    if precision == "int8" and not out:
+        raise EngineUnavailable("int8 runs on engine 'onnxruntime' only")
     return out, notes
 
 
