@@ -30,10 +30,13 @@ MODELS_DIR = Path(__file__).resolve().parent / "models"
 
 ENGINES = ("onnxruntime", "openvino")
 PRECISIONS = ("fp32", "int8", "bf16")
-# Parity of a variant with onnxruntime fp32 on fixed random inputs (variant_choice.example_feeds):
-# max |diff| / max |fp32| per output. What decides shipping is the tracking accuracy rule
-# (docs/models.md, "Arithmetic"); these bounds catch a broken or mismatched file.
-PARITY_TOLERANCE = {"fp32": 1e-4, "int8": 0.25, "bf16": 0.05}
+# Parity of a variant with onnxruntime fp32 on fixed realistic inputs (tests/test_precision.py),
+# per output: max |diff| / max |fp32| and the cosine of the two flattened outputs. What decides
+# shipping is the tracking accuracy rule (docs/models.md, "Arithmetic"); these bounds catch a
+# broken or mismatched file (measured: int8 up to 0.47 / down to 0.89 for SiamFC's exemplar
+# feature, 0.04 / 0.999 for A3BoxNet; bf16 up to 0.03).
+PARITY_TOLERANCE = {"fp32": {"max_rel": 1e-4, "min_cos": 0.9999}, "int8": {"max_rel": 0.6, "min_cos": 0.85},
+                    "bf16": {"max_rel": 0.05, "min_cos": 0.999}}
 
 
 class ModelError(Exception):
