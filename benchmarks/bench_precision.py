@@ -191,6 +191,34 @@ def bench_accuracy(data: Path, split: str, out_dir: Path, tracker: str = "siamfc
             "rows": rows}
 
 
+def write_verdicts(acc: dict, models_dir: Path = MODELS_DIR) -> Path:
+    """Merge the per-network verdicts of an accuracy run into <models_dir>/accuracy.json, the file
+    precision="auto" reads (track3d.variant_choice.VERDICTS_FILE): a network's variant is allowed
+    only if its "<network> only" row passed."""
+    from track3d.variant_choice import VERDICTS_FILE
+
+    stems = {"siamfc": ["siamfc_edge_exemplar.onnx", "siamfc_edge_search.onnx"]
+             if acc["tracker"] == "siamfc-edge" else ["siamfc_faithful_exemplar.onnx", "siamfc_faithful_search.onnx"],
+             "a3boxnet": ["a3boxnet.onnx"]}
+    path = models_dir / VERDICTS_FILE
+    data = json.loads(path.read_text()) if path.is_file() else {}
+    data["rule"] = acc["rule"]
+    models = data.setdefault("models", {})
+    for lab, row in acc["rows"].items():
+        if "passes" not in row or not lab.endswith(" only"):
+            continue
+        variant, net = lab[: -len(" only")].split(" ")
+        engine, precision = variant.split("/")
+        for f in stems[net]:
+            models.setdefault(f, {})[f"{engine}/{precision}"] = {
+                "passes": bool(row["passes"]), "tracker": acc["tracker"], "split": acc["split"],
+                "sequences": acc["sequences"], "frames": acc["frames"],
+                "d_ao_3d": {m: round(v["d_ao_3d"], 5) for m, v in row["delta"].items()},
+                "d_ace_3d_m": {m: round(v["d_ace_3d"], 5) for m, v in row["delta"].items()}}
+    path.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
+    return path
+
+
 def markdown(res: dict) -> str:
     lines = [f"Precision benchmark, {res['cpu']} (ISA: {', '.join(res['isa_flags'])}), onnxruntime "
              f"{res['onnxruntime']}, OpenVINO {res['openvino'] or 'not installed'}; 1 thread; medians, ms "
@@ -246,6 +274,8 @@ def main(argv=None) -> int:
     ap.add_argument("--accuracy-tracker", default="siamfc-edge", help="2D tracker of the accuracy rows (default siamfc-edge)")
     ap.add_argument("--accuracy-variants", nargs="+", default=None, metavar="LABEL",
                     help="only the accuracy rows starting with these labels, e.g. onnxruntime/int8 (default: all)")
+    ap.add_argument("--write-verdicts", action="store_true",
+                    help="merge the accuracy verdicts into runtime/track3d/models/accuracy.json (read by auto)")
     ap.add_argument("--no-speed", action="store_true", help="skip the speed rows (accuracy only)")
     ap.add_argument("--tag", default=None, help="result file tag (default: the host name)")
     ap.add_argument("--out-dir", type=Path, default=RESULTS, help="output folder (default: benchmarks/results)")
@@ -267,6 +297,8 @@ def main(argv=None) -> int:
         a.out_dir.mkdir(parents=True, exist_ok=True)
         res["accuracy"] = bench_accuracy(a.accuracy_data, a.accuracy_split, a.out_dir, a.accuracy_tracker,
                                          a.accuracy_variants)
+        if a.write_verdicts:
+            print(f"wrote {write_verdicts(res['accuracy'])}")
     from track3d.siamfc import create as siamfc
     from track3d.boxnet import A3BoxNetEstimator
 

@@ -223,3 +223,22 @@ def test_cli_reports_missing_openvino_in_one_line(monkeypatch, tiny_dataset, tmp
                "--frames", "3"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "track3d[openvino]" in err[0]
+
+
+def test_auto_needs_an_accuracy_verdict(tmp_path):
+    """A model folder without accuracy.json: auto keeps fp32 even where int8 exists and is allowed."""
+    import shutil
+
+    src = MODELS_DIR / "a3boxnet.onnx"
+    if not variant_path(src, "int8").is_file():
+        pytest.skip("no int8 variant shipped")
+    d = tmp_path / "models"
+    d.mkdir()
+    for f in (src, variant_path(src, "int8")):
+        shutil.copy(f, d / f.name)
+    m = OnnxModel(d / src.name, precision="auto", engine="onnxruntime", flags=VNNI_BF16)
+    assert m.precision == "fp32" and "no accuracy verdict" in m.choice["reason"]
+    (d / "accuracy.json").write_text(json.dumps({"models": {src.name: {"onnxruntime/int8": {"passes": False}}}}))
+    m = OnnxModel(d / src.name, precision="auto", engine="onnxruntime", flags=VNNI_BF16)
+    assert m.precision == "fp32" and "failed the accuracy rule" in m.choice["reason"]
+    assert OnnxModel(d / src.name, precision="int8").precision == "int8"  # explicit: the caller's choice

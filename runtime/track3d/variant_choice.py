@@ -36,6 +36,7 @@ __all__ = ["choose", "candidates", "cache_dir", "BUDGET_S", "MIN_GAIN", "example
 BUDGET_S = 0.5          # seconds of measurement per model (all candidates together)
 MIN_GAIN = 1.05         # a variant must be 5% faster than fp32 onnxruntime to replace it
 CACHE_FILE = "variants.json"
+VERDICTS_FILE = "accuracy.json"  # beside the models: which variants passed the accuracy rule
 CACHE_VERSION = 1
 
 
@@ -56,8 +57,20 @@ def _openvino_installed() -> bool:
         return False
 
 
+def verdicts(path: Path) -> dict:
+    """{"engine/precision": {"passes": bool, ...}} of the model `path` from the accuracy.json
+    beside it (written by benchmarks/bench_precision.py --write-verdicts); {} without one."""
+    try:
+        data = json.loads((path.parent / VERDICTS_FILE).read_text())
+        return dict(data.get("models", {}).get(path.name, {}))
+    except (OSError, ValueError, AttributeError):
+        return {}
+
+
 def candidates(path: Path, precision: str, engine: str, flags: frozenset[str]) -> tuple[list, list[str]]:
-    """([(engine, precision)...] allowed, reference first when it is allowed; [why others are not])."""
+    """([(engine, precision)...] allowed, reference first when it is allowed; [why others are not]).
+    With precision="auto", a variant other than fp32 must also have passed the accuracy rule
+    (``verdicts``); an explicit precision is the caller's choice."""
     if engine != "auto" and engine not in ENGINES:
         raise ValueError(f"engine must be one of {', '.join(ENGINES)} or auto, got {engine!r}")
     if precision != "auto" and precision not in PRECISIONS:
@@ -84,6 +97,17 @@ def candidates(path: Path, precision: str, engine: str, flags: frozenset[str]) -
             notes.append("bf16 not allowed: CPU has no bf16 arithmetic")
     unsupported = {("onnxruntime", "bf16"), ("openvino", "int8")}  # see onnxmodel's sessions
     out = [(e, p) for e in engines for p in precs if (e, p) not in unsupported]
+    if precision == "auto":
+        v = verdicts(path)
+        keep = []
+        for c in out:
+            ok = c[1] == "fp32" or v.get(f"{c[0]}/{c[1]}", {}).get("passes", False)
+            if ok:
+                keep.append(c)
+            else:
+                notes.append(f"{c[0]}/{c[1]} " + ("failed the accuracy rule" if f"{c[0]}/{c[1]}" in v
+                                                   else "has no accuracy verdict"))
+        out = keep
     if precision == "bf16" and not any(p == "bf16" for _, p in out):
         raise EngineUnavailable("bf16 needs engine 'openvino': pip install 'track3d[openvino]'")
     if precision == "int8" and not out:
