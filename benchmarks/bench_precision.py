@@ -85,13 +85,21 @@ def bench_networks(seconds: float) -> dict:
 
 
 def loop_configs() -> list[dict]:
+    """One configuration per variant: each network at that engine / precision when it has it
+    (else fp32 on that engine, said in the label), plus auto / auto."""
     cfgs = []
     for e, p in VARIANTS + (("auto", "auto"),):
-        if p == "int8" and not variant_path(MODELS_DIR / "a3boxnet.onnx", "int8").is_file():
-            continue
-        opts = {"precision": p, "engine": e}
-        cfgs.append({"label": f"{e}/{p}", "tracker": "siamfc-edge", "estimator": "a3boxnet", "backend": e,
-                     "precision": p, "tracker_options": dict(opts), "estimator_options": dict(opts)})
+        topt, eopt = {"precision": p, "engine": e}, {"precision": p, "engine": e}
+        if p == "int8":
+            if not variant_path(MODELS_DIR / "siamfc_edge_search.onnx", "int8").is_file():
+                topt["precision"] = "fp32"
+            if not variant_path(MODELS_DIR / "a3boxnet.onnx", "int8").is_file():
+                eopt["precision"] = "fp32"
+            if topt["precision"] == eopt["precision"] == "fp32":
+                continue
+        lab = f"{e}/{p}" if topt == eopt else f"{e}: siamfc {topt['precision']}, a3boxnet {eopt['precision']}"
+        cfgs.append({"label": lab, "tracker": "siamfc-edge", "estimator": "a3boxnet", "backend": e,
+                     "precision": p, "tracker_options": topt, "estimator_options": eopt})
     return cfgs
 
 
@@ -106,7 +114,7 @@ def bench_loop(data: Path, split: str, frames: int, rounds: int, preload: int, s
                 continue
             try:
                 res = run_config(camera, seqs, cfg, 1, per)
-            except ModelError as e:  # e.g. OpenVINO not installed: skip the configuration
+            except (ModelError, RuntimeError) as e:  # e.g. OpenVINO not installed (Tracker/EstimatorUnavailable)
                 skipped[cfg["label"]] = str(e)
                 continue
             finally:
