@@ -242,3 +242,36 @@ def test_auto_needs_an_accuracy_verdict(tmp_path):
     m = OnnxModel(d / src.name, precision="auto", engine="onnxruntime", flags=VNNI_BF16)
     assert m.precision == "fp32" and "failed the accuracy rule" in m.choice["reason"]
     assert OnnxModel(d / src.name, precision="int8").precision == "int8"  # explicit: the caller's choice
+
+
+# --- the quantisation recipe ---------------------------------------------------------------------
+def test_quantize_keeps_first_layers_and_heads_float():
+    onnx = pytest.importorskip("onnx")
+    from track3d_train.quantize import head_nodes, input_nodes
+
+    g = onnx.load(str(MODELS_DIR / "a3boxnet.onnx"))
+    assert sorted(head_nodes(g, ["Conv", "Gemm"])) == ["/box_net/fc/fc.6/Gemm", "/center_net/fc/fc.6/Gemm"]
+    firsts = input_nodes(g, ["Conv", "Gemm"])
+    assert "/box_net/mlp/mlp.0/Conv" in firsts and "/center_net/mlp/mlp.0/Conv" in firsts
+    assert "/box_net/mlp/mlp.3/Conv" not in firsts
+
+
+def test_quantize_command_writes_an_int8_twin_with_provenance(tiny_dataset, tmp_path):
+    pytest.importorskip("onnx")
+    import shutil
+
+    from track3d_train.cli import main
+
+    d = tmp_path / "m"
+    d.mkdir()
+    shutil.copy(MODELS_DIR / "a3boxnet.onnx", d / "a3boxnet.onnx")
+    assert main(["quantize", "--data", str(tiny_dataset), "--models-dir", str(d), "--models", "a3boxnet",
+                 "--samples", "8"]) == 0
+    m = OnnxModel(d / "a3boxnet.onnx", precision="int8")
+    assert m.meta["calibration"]["split"] == "train" and 1 <= m.meta["calibration"]["samples"] <= 8
+    assert m.meta["parent_sha256"] == hashlib.sha256((d / "a3boxnet.onnx").read_bytes()).hexdigest()
+    assert "/box_net/fc/fc.6/Gemm" in m.meta["quantization"]["float_nodes"]
+    assert not list(d.glob("*.pre.onnx"))
+    with pytest.raises(SystemExit) as e:  # argparse's one-line error, exit 2
+        main(["quantize", "--data", str(tiny_dataset), "--models", "nope"])
+    assert e.value.code == 2
