@@ -7,5 +7,5 @@ cd "$(dirname "$0")"
 VENV=${TRACK3D_VENV:-.venv}
 [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
 "$VENV/bin/python" -m pip install -q torch==2.13.0
-"$VENV/bin/python" -m pip install -q -e ".[dev,sim,train,cluster]"
+"$VENV/bin/python" -m pip install -q -e ".[dev,sim,train,cluster,openvino]"
 exec "$VENV/bin/python" -m pytest -q "$@"

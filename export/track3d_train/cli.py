@@ -3,6 +3,7 @@
     track3d-train boxnet  ...   A3BoxNet (see `track3d-train boxnet --help`)
     track3d-train siamfc  ...   SiamFC, faithful and edge variants
     track3d-train --version
+    track3d-train quantize ...  int8 twins of the shipped models (see `track3d-train quantize --help`)
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import sys
 COMMANDS = {
     "boxnet": ("track3d_train.boxnet.cli", "train, export and check A3BoxNet"),
     "siamfc": ("track3d_train.siamfc.cli", "train, export and check SiamFC"),
+    "quantize": ("track3d_train.quantize", "int8 (static QDQ) twins of the models, calibrated on a train split"),
 }
 
 

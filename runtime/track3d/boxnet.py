@@ -143,15 +143,17 @@ class A3BoxNetEstimator:
     model: path of an exported A3BoxNet ONNX file (default: the shipped one);
     threads: onnxruntime intra-op threads; num_points: override of the model's N (only for
     models exported with a dynamic point axis, which ours are); seed: the sampling seed, fixed
-    per call so that the same points always give the same box (deterministic).
+    per call so that the same points always give the same box (deterministic); precision /
+    engine: the model variant ("fp32" | "int8" | "bf16" | "auto", "onnxruntime" | "openvino" |
+    "auto", see track3d.onnxmodel; the choice is in ``.model.choice``).
     """
 
     name = KIND
 
     def __init__(self, model: str | Path | None = None, threads: int = 1, num_points: int | None = None,
-                 seed: int = 0):
+                 seed: int = 0, precision: str = "fp32", engine: str = "onnxruntime"):
         path = Path(model) if model is not None else shipped_model(DEFAULT_MODEL)
-        self.model = OnnxModel(path, threads=threads, kind=KIND)
+        self.model = OnnxModel(path, threads=threads, kind=KIND, precision=precision, engine=engine)
         meta = self.model.meta
         try:
             self.num_points = int(num_points or meta["num_points"])

@@ -107,6 +107,11 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--no-fusion", action="store_true", help="report the 2D tracker's box, no 2D-3D fusion")
     t.add_argument("--weight-3d", type=float, default=0.3, help="fusion weight of the projected 3D box")
     t.add_argument("--threads", type=int, default=1, help="CPU threads of the ONNX models (default 1)")
+    t.add_argument("--precision", choices=("fp32", "int8", "bf16", "auto"), default=None,
+                   help="arithmetic of the networks (SiamFC, A3BoxNet); auto: the fastest this CPU allows, "
+                        "measured once and cached (default fp32)")
+    t.add_argument("--engine", choices=("onnxruntime", "openvino", "auto"), default=None,
+                   help="inference engine of the networks; openvino needs track3d[openvino] (default onnxruntime)")
     t.add_argument("--results", default="results", help="result folder (default ./results)")
     t.add_argument("--name", help="result name (default <tracker>+<estimator>, tagged @<model>-<hash> for "
                                   "non-shipped model files)")
@@ -187,9 +192,14 @@ def _cmd_track(a) -> int:
         raise ValueError("--threads must be >= 1")
     set_threads(a.threads)
     video = _video_format(a.video)
+    topts, eopts = _options(a.tracker_option), _options(a.estimator_option)
+    arith = {k: v for k, v in (("precision", a.precision), ("engine", a.engine)) if v is not None}
+    if a.tracker.startswith("siamfc"):  # the networks; other trackers / estimators have no variants
+        topts = {**arith, **topts}
+    if a.estimator == "a3boxnet":
+        eopts = {**arith, **eopts}
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=a.weight_3d, threads=a.threads,
-                       tracker_options=_options(a.tracker_option), estimator_options=_options(a.estimator_option),
-                       name=a.name)
+                       tracker_options=topts, estimator_options=eopts, name=a.name)
     if a.depth == "stereo" and not a.name:
         spec.name = spec.label + "-stereo"   # keep the depth-map results of the same pair
     exp = Experiment(a.data, a.split, a.results, sequences=a.sequences, max_frames=a.frames,

@@ -1,8 +1,17 @@
-"""Loading ONNX models with their metadata: one place for session options.
+"""Loading ONNX models with their metadata: the ONE model loader (engines, precisions, options).
 
 Every model track3d ships carries its metadata in the ONNX file (``metadata_props``):
 one key, ``track3d``, whose value is a JSON object (input sizes, size-class table,
 hyper-parameters, version, training-data hash ...). The runtime needs nothing else.
+
+Arithmetic (docs/models.md, "Arithmetic"): a model ``<stem>.onnx`` (fp32) may have an int8
+twin ``<stem>_int8.onnx`` (static QDQ, written by ``track3d-train quantize``, shipped only when
+it passes the accuracy rule). Engines: ``onnxruntime`` (always there) and ``openvino`` (the
+optional extra ``track3d[openvino]``, imported only when asked for). Precisions: ``fp32``,
+``int8`` (the int8 file, on onnxruntime) and ``bf16`` (OpenVINO's bf16 inference precision
+on a CPU with bf16 arithmetic). ``precision="auto"`` / ``engine="auto"`` pick at load time the
+fastest variant this CPU allows (``track3d.variant_choice``), and ``OnnxModel.choice`` says
+which and why.
 """
 from __future__ import annotations
 
@@ -12,14 +21,41 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 
-__all__ = ["META_KEY", "MODELS_DIR", "OnnxModel", "ModelError", "shipped_model"]
+__all__ = ["META_KEY", "MODELS_DIR", "OnnxModel", "ModelError", "EngineUnavailable", "shipped_model",
+           "ENGINES", "PRECISIONS", "PARITY_TOLERANCE", "variant_path", "open_session"]
 
 META_KEY = "track3d"
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 
 
+ENGINES = ("onnxruntime", "openvino")
+PRECISIONS = ("fp32", "int8", "bf16")
+# Parity of a variant with onnxruntime fp32 on fixed realistic inputs (tests/test_precision.py),
+# per output: max |diff| / max |fp32| and the cosine of the two flattened outputs. What decides
+# shipping is the tracking accuracy rule (docs/models.md, "Arithmetic"); these bounds catch a
+# broken or mismatched file (measured: int8 up to 0.47 / down to 0.89 for SiamFC's exemplar
+# feature, 0.04 / 0.999 for A3BoxNet; bf16 up to 0.03).
+PARITY_TOLERANCE = {"fp32": {"max_rel": 1e-4, "min_cos": 0.9999}, "int8": {"max_rel": 0.6, "min_cos": 0.85},
+                    "bf16": {"max_rel": 0.05, "min_cos": 0.999}}
+
+
 class ModelError(Exception):
     """A model file is missing, unreadable or lacks the metadata the runtime needs."""
+
+
+class EngineUnavailable(ModelError):
+    """The engine or precision asked for cannot run here (e.g. OpenVINO not installed)."""
+
+
+def variant_path(path: str | Path, precision: str) -> Path:
+    """The file of a precision of the model at `path` (the fp32 file): fp32 and bf16 use the fp32
+    file (bf16 is an engine setting), int8 the sibling ``<stem>_int8.onnx``."""
+    p = Path(path)
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {', '.join(PRECISIONS)} or auto, got {precision!r}")
+    if precision != "int8" or p.stem.endswith("_int8"):
+        return p
+    return p.with_name(f"{p.stem}_int8{p.suffix}")
 
 
 def shipped_model(name: str) -> Path:
@@ -46,29 +82,149 @@ def session_options(threads: int = 1) -> ort.SessionOptions:
     return so
 
 
-class OnnxModel:
-    """An onnxruntime session on the CPU plus the model's track3d metadata (``.meta``)."""
+class _OrtSession:
+    """onnxruntime on the CPU (fp32 or the int8 file)."""
 
-    def __init__(self, path: str | Path, threads: int = 1, kind: str | None = None):
+    engine = "onnxruntime"
+
+    def __init__(self, path: Path, threads: int, precision: str):
+        if precision == "bf16":
+            raise EngineUnavailable("onnxruntime has no bf16 arithmetic on x86 CPUs: use engine='openvino' "
+                                    "for bf16")
+        try:
+            self.session = ort.InferenceSession(str(path), session_options(threads),
+                                                providers=["CPUExecutionProvider"])
+        except Exception as e:  # onnxruntime raises its own exception types
+            raise ModelError(f"onnxruntime cannot load {path}: {e}") from None
+        self.input_names = [i.name for i in self.session.get_inputs()]
+        self.output_names = [o.name for o in self.session.get_outputs()]
+        self.inputs = [(i.name, i.shape, i.type) for i in self.session.get_inputs()]
+
+    def metadata(self) -> str | None:
+        return self.session.get_modelmeta().custom_metadata_map.get(META_KEY)
+
+    def run(self, feeds, outputs=None):
+        return self.session.run(outputs, feeds)
+
+
+def _import_openvino():
+    try:
+        import openvino  # noqa: F401  (the optional extra)
+    except ImportError:
+        raise EngineUnavailable("engine 'openvino' needs OpenVINO: pip install 'track3d[openvino]'") from None
+    return openvino
+
+
+def openvino_version() -> str | None:
+    """OpenVINO's version if installed (without importing it when it is not)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("openvino")
+    except metadata.PackageNotFoundError:
+        return None
+
+
+class _OvSession:
+    """OpenVINO's own runtime on the CPU: fp32 or bf16 (inference precision hint). One synchronous
+    infer request, `threads` inference threads, one stream, latency mode. Not the int8 files:
+    OpenVINO rewrites their QDQ pairs its own way and its outputs left the parity bound
+    (A3BoxNet centre offsets off by their full range, measured)."""
+
+    engine = "openvino"
+
+    def __init__(self, path: Path, threads: int, precision: str):
+        if precision == "int8":
+            raise EngineUnavailable("int8 runs on onnxruntime only (OpenVINO's int8 of these QDQ files "
+                                    "fails the parity check)")
+        ov = _import_openvino()
+        core = ov.Core()
+        config = {"INFERENCE_NUM_THREADS": int(threads), "NUM_STREAMS": 1, "PERFORMANCE_HINT": "LATENCY",
+                  "INFERENCE_PRECISION_HINT": "bf16" if precision == "bf16" else "f32",
+                  "ENABLE_CPU_PINNING": False}
+        try:
+            self.compiled = core.compile_model(core.read_model(str(path)), "CPU", config)
+        except Exception as e:  # OpenVINO raises RuntimeError with a long text
+            first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+            raise ModelError(f"OpenVINO cannot load {path} ({precision}): {first}") from None
+        self.request = self.compiled.create_infer_request()
+        self.input_names = [i.get_any_name() for i in self.compiled.inputs]
+        self.output_names = [o.get_any_name() for o in self.compiled.outputs]
+        self.inputs = None
+        self._path = path
+
+    def metadata(self) -> str | None:
+        return None  # read by the caller with onnxruntime (OpenVINO drops metadata_props)
+
+    def run(self, feeds, outputs=None):
+        res = self.request.infer({k: np.ascontiguousarray(v) for k, v in feeds.items()})
+        by_name = {o.get_any_name(): res[o] for o in self.compiled.outputs}
+        # copies: the request's buffers are reused by its next call
+        return [np.array(by_name[n]) for n in (outputs or self.output_names)]
+
+
+def open_session(path: str | Path, threads: int = 1, engine: str = "onnxruntime", precision: str = "fp32"):
+    """A session of one engine at one precision on the file `path` (already the variant's file)."""
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {', '.join(ENGINES)} or auto, got {engine!r}")
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {', '.join(PRECISIONS)} or auto, got {precision!r}")
+    return (_OrtSession if engine == "onnxruntime" else _OvSession)(Path(path), int(threads), precision)
+
+
+class OnnxModel:
+    """A model session on the CPU plus the model's track3d metadata (``.meta``).
+
+    path: the fp32 file (its variants are found beside it, ``variant_path``); engine:
+    "onnxruntime" (default), "openvino" or "auto"; precision: "fp32" (default), "int8", "bf16"
+    or "auto". ``choice`` holds the engine, precision, file and the reason of the choice.
+    """
+
+    def __init__(self, path: str | Path, threads: int = 1, kind: str | None = None,
+                 precision: str = "fp32", engine: str = "onnxruntime", flags: frozenset[str] | None = None):
         self.path = Path(path)
         if not self.path.is_file():
             raise ModelError(f"model file {self.path} does not exist")
-        try:
-            self.session = ort.InferenceSession(str(self.path), session_options(threads),
-                                                providers=["CPUExecutionProvider"])
-        except Exception as e:  # onnxruntime raises its own exception types
-            raise ModelError(f"onnxruntime cannot load {self.path}: {e}") from None
-        raw = self.session.get_modelmeta().custom_metadata_map.get(META_KEY)
+        if int(threads) < 1:
+            raise ValueError(f"threads must be >= 1, got {threads}")
+        self.threads = int(threads)
+        if precision == "auto" or engine == "auto":
+            from .variant_choice import choose
+
+            choice, session = choose(self.path, self.threads, precision, engine, flags=flags)
+        else:
+            file = variant_path(self.path, precision)
+            if not file.is_file():
+                raise ModelError(f"no {precision} variant of {self.path.name} ({file.name} does not exist)")
+            session = open_session(file, self.threads, engine, precision)
+            choice = {"engine": engine, "precision": precision, "file": file.name, "reason": "asked for"}
+        self.choice: dict = choice
+        self.engine, self.precision = choice["engine"], choice["precision"]
+        self.file = variant_path(self.path, self.precision)
+        self._session = session
+        raw = session.metadata()
+        if raw is None and session.engine != "onnxruntime":
+            raw = _OrtSession(self.file, 1, "fp32").metadata()
         if raw is None:
-            raise ModelError(f"{self.path} has no '{META_KEY}' metadata: not a track3d model")
+            raise ModelError(f"{self.file} has no '{META_KEY}' metadata: not a track3d model")
         try:
             self.meta: dict = json.loads(raw)
         except json.JSONDecodeError as e:
-            raise ModelError(f"{self.path}: metadata is not JSON ({e})") from None
+            raise ModelError(f"{self.file}: metadata is not JSON ({e})") from None
         if kind is not None and self.meta.get("kind") != kind:
-            raise ModelError(f"{self.path} is a {self.meta.get('kind')!r} model, expected {kind!r}")
-        self.input_names = [i.name for i in self.session.get_inputs()]
-        self.output_names = [o.name for o in self.session.get_outputs()]
+            raise ModelError(f"{self.file} is a {self.meta.get('kind')!r} model, expected {kind!r}")
+        self.input_names = list(session.input_names)
+        self.output_names = list(session.output_names)
+
+    @property
+    def session(self):
+        """The engine's own session object (onnxruntime.InferenceSession with onnxruntime)."""
+        s = self._session
+        return s.session if isinstance(s, _OrtSession) else s.compiled
+
+    def describe(self) -> dict:
+        """Engine, precision, file and why (for Track3D.describe())."""
+        return {"model": self.path.name, "kind": self.meta.get("kind"), "threads": self.threads, **self.choice}
 
     def run(self, feeds: dict[str, np.ndarray], outputs: list[str] | None = None) -> list[np.ndarray]:
-        return self.session.run(outputs, feeds)
+        return self._session.run(feeds, outputs)

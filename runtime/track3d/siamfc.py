@@ -97,9 +97,12 @@ class SiamFCTracker:
     (exemplar feature, centre, sizes, mean colour), so a restored tracker continues bit-identically.
     """
 
-    def __init__(self, exemplar_model: str | Path, search_model: str | Path, threads: int = 1, **overrides):
-        self.exemplar = OnnxModel(exemplar_model, threads, "siamfc-exemplar")
-        self.search = OnnxModel(search_model, threads, "siamfc-search")
+    def __init__(self, exemplar_model: str | Path, search_model: str | Path, threads: int = 1,
+                 precision: str = "fp32", engine: str = "onnxruntime", **overrides):
+        # precision / engine: "fp32" | "int8" | "bf16" | "auto", "onnxruntime" | "openvino" | "auto"
+        # (track3d.onnxmodel); each graph makes its own choice (see .exemplar.choice / .search.choice)
+        self.exemplar = OnnxModel(exemplar_model, threads, "siamfc-exemplar", precision=precision, engine=engine)
+        self.search = OnnxModel(search_model, threads, "siamfc-search", precision=precision, engine=engine)
         meta = self.search.meta
         self.meta = meta
         unknown = set(overrides) - set(TUNABLE)
@@ -275,7 +278,8 @@ def create(variant: str = "edge", threads: int = 1, exemplar_model: str | Path |
            **overrides) -> SiamFCTracker:
     """A SiamFC tracker. `variant` picks the shipped models ("edge", the default, or "faithful");
     `model` a prefix `<dir>/<name>` of a pair `<name>_exemplar.onnx` / `<name>_search.onnx`, or
-    `exemplar_model` + `search_model` explicit paths. Keyword overrides: see TUNABLE."""
+    `exemplar_model` + `search_model` explicit paths (the fp32 files; their int8 twins are found
+    beside them). precision / engine: see SiamFCTracker. Keyword overrides: see TUNABLE."""
     if model is not None:
         p = Path(model)
         stem = p.name

@@ -158,12 +158,16 @@ class Track3D:
         return t
 
     @classmethod
-    def from_default(cls, camera: Camera, threads: int = 1, **options) -> "Track3D":
+    def from_default(cls, camera: Camera, threads: int = 1, precision: str = "fp32", engine: str = "onnxruntime",
+                     **options) -> "Track3D":
         """The shipped models: SiamFC (edge variant) + A3BoxNet, on `threads` CPU threads.
 
+        precision / engine: "fp32" | "int8" | "bf16" | "auto" and "onnxruntime" | "openvino" |
+        "auto" (track3d.onnxmodel; "auto": the fastest variant this CPU allows, see describe()).
         Raises TrackerUnavailable / EstimatorUnavailable when the models are not shipped.
         """
-        return cls.create(camera, "siamfc-edge", "a3boxnet", {"threads": threads}, {"threads": threads}, **options)
+        arith = {"threads": threads, "precision": precision, "engine": engine}
+        return cls.create(camera, "siamfc-edge", "a3boxnet", arith, dict(arith), **options)
 
     # --- the loop --------------------------------------------------------------------------------
     def _frustum(self, points, box2d: np.ndarray) -> np.ndarray:
@@ -363,9 +367,11 @@ def _models_of(part) -> list[dict]:
         if isinstance(v, OnnxModel):
             import hashlib
 
-            key = (str(v.path), v.path.stat().st_mtime_ns)
+            f = getattr(v, "file", v.path)  # the variant that runs (fp32, int8 twin ...)
+            key = (str(f), f.stat().st_mtime_ns)
             if key not in _SHA:
-                _SHA[key] = hashlib.sha256(v.path.read_bytes()).hexdigest()
-            out.append({"role": attr, "file": v.path.name, "sha256": _SHA[key], "kind": v.meta.get("kind"),
-                        "version": v.meta.get("version")})
+                _SHA[key] = hashlib.sha256(f.read_bytes()).hexdigest()
+            out.append({"role": attr, "file": f.name, "sha256": _SHA[key], "kind": v.meta.get("kind"),
+                        "version": v.meta.get("version"), "engine": v.engine, "precision": v.precision,
+                        "threads": v.threads, "reason": v.choice.get("reason")})
     return out

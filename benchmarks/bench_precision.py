@@ -1,0 +1,329 @@
+"""Every engine x precision side by side: per network and for the whole Track3D loop.
+
+    python benchmarks/bench_precision.py --data data/small --frames 300 --rounds 3
+
+Per network (A3BoxNet at its N points, SiamFC-edge search at its instance size with one scale,
+SiamFC-edge exemplar): each available variant (onnxruntime fp32 / int8, OpenVINO fp32 / bf16;
+OpenVINO does not run the int8 files, see track3d.onnxmodel) on the same fixed random inputs, all variants run ROUND-ROBIN for --net-seconds (so that
+other load on the machine hits them alike), median ms; max relative difference to onnxruntime
+fp32 (max |diff| / max |fp32| over the outputs).
+
+Whole loop (siamfc-edge + a3boxnet, fusion on, bench_fps's loop and stage timers on preloaded
+frames, one thread pinned to one core): one configuration per variant (both networks at that
+engine / precision) plus precision=auto / engine=auto, interleaved: --rounds rounds, each
+running every configuration for frames/rounds frames; the reported ms is the median of the
+rounds' medians. Ratios are to onnxruntime fp32 of the same run (> 1: faster).
+
+Writes <out-dir>/precision_<tag>.json (CPU name, ISA flags, versions, every number) and .md.
+"""
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import os
+import platform
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_fps import RESULTS, load_frames, pin, run_config  # noqa: E402  (the loop machinery, not a copy)
+
+from track3d.cpu_features import cpu_model, isa_flags  # noqa: E402
+from track3d.onnxmodel import MODELS_DIR, ModelError, OnnxModel, openvino_version, variant_path  # noqa: E402
+from track3d.variant_choice import example_feeds, measure  # noqa: E402
+
+VARIANTS = (("onnxruntime", "fp32"), ("onnxruntime", "int8"), ("openvino", "fp32"), ("openvino", "bf16"))
+NETWORKS = {"a3boxnet": "a3boxnet.onnx", "siamfc_edge_search": "siamfc_edge_search.onnx",
+            "siamfc_edge_exemplar": "siamfc_edge_exemplar.onnx"}
+STAGES = ("net2d", "net3d", "end_to_end")
+
+
+def label(v) -> str:
+    return f"{v[0]}/{v[1]}"
+
+
+def available(path: Path) -> tuple[dict, list[str]]:
+    """{variant: OnnxModel} that load here; [why the others do not]."""
+    models, skipped = {}, []
+    for v in VARIANTS:
+        if v[1] == "int8" and not variant_path(path, "int8").is_file():
+            skipped.append(f"{label(v)}: no int8 file")
+            continue
+        try:
+            models[v] = OnnxModel(path, threads=1, engine=v[0], precision=v[1])
+        except ModelError as e:
+            skipped.append(f"{label(v)}: {e}")
+    return models, skipped
+
+
+def bench_networks(seconds: float) -> dict:
+    out = {}
+    for name, file in NETWORKS.items():
+        path = MODELS_DIR / file
+        models, skipped = available(path)
+        ref = models[("onnxruntime", "fp32")]
+        feeds = example_feeds(path, ref.meta)
+        want = ref.run(feeds)
+        diffs = {}
+        for v, m in models.items():
+            got = m.run(feeds)
+            diffs[v] = max(float(np.abs(g.astype(np.float64) - w).max() / max(np.abs(w).max(), 1e-12))
+                           for g, w in zip(got, want))
+        ms = measure(models, feeds, seconds)
+        base = ms[("onnxruntime", "fp32")]
+        out[name] = {"inputs": {k: list(v.shape) for k, v in feeds.items()}, "skipped": skipped,
+                     "variants": {label(v): {"median_ms": ms[v], "speedup_vs_ort_fp32": base / ms[v],
+                                             "max_rel_diff_vs_ort_fp32": diffs[v]} for v in models}}
+        print(f"{name}: " + ", ".join(f"{label(v)} {ms[v]:.2f} ms (x{base / ms[v]:.2f}, rel {diffs[v]:.1e})"
+                                      for v in models), flush=True)
+        del models
+        gc.collect()
+    return out
+
+
+def loop_configs() -> list[dict]:
+    """One configuration per variant: each network at that engine / precision when it has it
+    (else fp32 on that engine, said in the label), plus auto / auto."""
+    cfgs = []
+    for e, p in VARIANTS + (("auto", "auto"),):
+        topt, eopt = {"precision": p, "engine": e}, {"precision": p, "engine": e}
+        if p == "int8":
+            if not variant_path(MODELS_DIR / "siamfc_edge_search.onnx", "int8").is_file():
+                topt["precision"] = "fp32"
+            if not variant_path(MODELS_DIR / "a3boxnet.onnx", "int8").is_file():
+                eopt["precision"] = "fp32"
+            if topt["precision"] == eopt["precision"] == "fp32":
+                continue
+        lab = f"{e}/{p}" if topt == eopt else f"{e}: siamfc {topt['precision']}, a3boxnet {eopt['precision']}"
+        cfgs.append({"label": lab, "tracker": "siamfc-edge", "estimator": "a3boxnet", "backend": e,
+                     "precision": p, "tracker_options": topt, "estimator_options": eopt})
+    return cfgs
+
+
+def bench_loop(data: Path, split: str, frames: int, rounds: int, preload: int, sequences: int) -> dict:
+    camera, seqs = load_frames(data, split, preload, sequences)
+    per = max(frames // rounds, 20)
+    runs: dict[str, list[dict]] = {}
+    skipped = {}
+    for r in range(rounds):
+        for cfg in loop_configs():
+            if cfg["label"] in skipped:
+                continue
+            try:
+                res = run_config(camera, seqs, cfg, 1, per)
+            except (ModelError, RuntimeError) as e:  # e.g. OpenVINO not installed (Tracker/EstimatorUnavailable)
+                skipped[cfg["label"]] = str(e)
+                continue
+            finally:
+                gc.collect()
+            runs.setdefault(cfg["label"], []).append(res)
+            s = res["stages"]
+            print(f"round {r + 1}/{rounds} {cfg['label']:22s} e2e {s['end_to_end']['median_ms']:.2f} ms "
+                  f"net2d {s['net2d']['median_ms']:.2f} net3d {s['net3d']['median_ms']:.2f}", flush=True)
+    out = {}
+    base = None
+    for lab, rs in runs.items():
+        med = {k: float(np.median([x["stages"][k]["median_ms"] for x in rs])) for k in STAGES}
+        if lab == "onnxruntime/fp32":
+            base = med
+        out[lab] = {"median_ms": med, "rounds": len(rs), "frames_per_round": per,
+                    "statuses": rs[-1]["statuses"]}
+    for lab, row in out.items():
+        row["speedup_vs_ort_fp32"] = {k: base[k] / row["median_ms"][k] if base and row["median_ms"][k] > 0 else None
+                                      for k in STAGES}
+    return {"configs": out, "skipped": skipped}
+
+
+AO_TOL, ACE_TOL_M = 0.005, 0.01   # the shipping rule (docs/models.md, "Arithmetic")
+
+
+def accuracy_configs() -> list[tuple[str, dict, dict]]:
+    """(label, SiamFC options, A3BoxNet options): fp32 first, then each variant of one network
+    at a time and of both together."""
+    fp32 = {"precision": "fp32", "engine": "onnxruntime"}
+    out = [("onnxruntime/fp32", fp32, fp32)]
+    for e, p in VARIANTS[1:]:
+        v = {"precision": p, "engine": e}
+        out += [(f"{e}/{p} siamfc only", v, fp32), (f"{e}/{p} a3boxnet only", fp32, v), (f"{e}/{p} both", v, v)]
+    return out
+
+
+def bench_accuracy(data: Path, split: str, out_dir: Path, tracker: str = "siamfc-edge",
+                   only: list[str] | None = None) -> dict:
+    """AO_3d / ACE_3d of Track3D (siamfc-edge + a3boxnet) per variant, restart and one-pass rows,
+    and whether each variant passes the rule against fp32."""
+    import tempfile
+
+    from track3d.evaluation import Experiment, TrackerSpec
+    from track3d.evaluation.metrics import average_scores
+
+    rows: dict[str, dict] = {}
+    with tempfile.TemporaryDirectory(dir=out_dir) as tmp:
+        for lab, topt, eopt in accuracy_configs():
+            if only and lab != "onnxruntime/fp32" and not any(lab.startswith(o) for o in only):
+                continue
+            name = lab.replace("/", "-").replace(" ", "_")
+            spec = TrackerSpec(tracker, "a3boxnet", threads=1, tracker_options=topt, estimator_options=eopt,
+                               name=name)
+            try:
+                spec.build(Experiment(data, split, tmp).sequences[0])
+            except ModelError as e:
+                rows[lab] = {"skipped": str(e)}
+                continue
+            row = {}
+            for mode, restart in (("restart", True), ("one_pass", False)):
+                exp = Experiment(data, split, Path(tmp) / mode, restart=restart)
+                exp.run(spec, overlay=None, quiet=True)
+                ov = average_scores(exp.score(name))
+                row[mode] = {"ao_3d": float(ov.values["ao_3d"]), "ace_3d": float(ov.values["ace_3d"]),
+                             "restarts": int(ov.restarts)}
+            rows[lab] = row
+            print(f"accuracy {lab:32s} " + " ".join(f"{m}: AO_3d {r['ao_3d']:.4f} ACE_3d {r['ace_3d']:.4f} m"
+                                                     for m, r in row.items()), flush=True)
+    ref = rows["onnxruntime/fp32"]
+    for lab, row in rows.items():
+        if "skipped" in row or lab == "onnxruntime/fp32":
+            continue
+        d = {m: {"d_ao_3d": row[m]["ao_3d"] - ref[m]["ao_3d"], "d_ace_3d": row[m]["ace_3d"] - ref[m]["ace_3d"]}
+             for m in ("restart", "one_pass")}
+        row["delta"] = d
+        row["passes"] = all(v["d_ao_3d"] >= -AO_TOL and v["d_ace_3d"] <= ACE_TOL_M for v in d.values())
+    from track3d.dataset import Dataset
+
+    seqs = Dataset(data).sequences(split)
+    return {"tracker": tracker, "split": split, "sequences": len(seqs), "frames": int(sum(len(q) for q in seqs)),
+            "rule": f"AO_3d >= fp32 - {AO_TOL}, ACE_3d <= fp32 + {ACE_TOL_M} m, restart and one-pass",
+            "rows": rows}
+
+
+def write_verdicts(acc: dict, models_dir: Path = MODELS_DIR) -> Path:
+    """Merge the per-network verdicts of an accuracy run into <models_dir>/accuracy.json, the file
+    precision="auto" reads (track3d.variant_choice.VERDICTS_FILE): a network's variant is allowed
+    only if its "<network> only" row passed."""
+    from track3d.variant_choice import VERDICTS_FILE
+
+    stems = {"siamfc": ["siamfc_edge_exemplar.onnx", "siamfc_edge_search.onnx"]
+             if acc["tracker"] == "siamfc-edge" else ["siamfc_faithful_exemplar.onnx", "siamfc_faithful_search.onnx"],
+             "a3boxnet": ["a3boxnet.onnx"]}
+    path = models_dir / VERDICTS_FILE
+    data = json.loads(path.read_text()) if path.is_file() else {}
+    data["rule"] = acc["rule"]
+    models = data.setdefault("models", {})
+    for lab, row in acc["rows"].items():
+        if "passes" not in row or not lab.endswith(" only"):
+            continue
+        variant, net = lab[: -len(" only")].split(" ")
+        engine, precision = variant.split("/")
+        for f in stems[net]:
+            models.setdefault(f, {})[f"{engine}/{precision}"] = {
+                "passes": bool(row["passes"]), "tracker": acc["tracker"], "split": acc["split"],
+                "sequences": acc["sequences"], "frames": acc["frames"],
+                "d_ao_3d": {m: round(v["d_ao_3d"], 5) for m, v in row["delta"].items()},
+                "d_ace_3d_m": {m: round(v["d_ace_3d"], 5) for m, v in row["delta"].items()}}
+    path.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
+    return path
+
+
+def markdown(res: dict) -> str:
+    lines = [f"Precision benchmark, {res['cpu']} (ISA: {', '.join(res['isa_flags'])}), onnxruntime "
+             f"{res['onnxruntime']}, OpenVINO {res['openvino'] or 'not installed'}; 1 thread; medians, ms "
+             f"(x = speed-up vs onnxruntime fp32 in the same run)", "",
+             "| network | " + " | ".join(label(v) for v in VARIANTS) + " |", "|---" * (len(VARIANTS) + 1) + "|"]
+    for name, r in res["networks"].items():
+        cells = []
+        for v in VARIANTS:
+            c = r["variants"].get(label(v))
+            cells.append("—" if c is None else f"{c['median_ms']:.2f} (x{c['speedup_vs_ort_fp32']:.2f}, "
+                                               f"rel {c['max_rel_diff_vs_ort_fp32']:.1e})")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    if res.get("loop"):
+        lines += ["", "| whole loop config | end-to-end ms | x | net2d ms | net3d ms |", "|---|---|---|---|---|"]
+        for lab, r in res["loop"]["configs"].items():
+            m, x = r["median_ms"], r["speedup_vs_ort_fp32"]
+            lines.append(f"| {lab} | {m['end_to_end']:.2f} | x{x['end_to_end']:.2f} | {m['net2d']:.2f} | "
+                         f"{m['net3d']:.2f} |")
+        for lab, why in res["loop"]["skipped"].items():
+            lines.append(f"- skipped {lab}: {why}")
+    if res.get("accuracy"):
+        acc = res["accuracy"]
+        lines += ["", f"Track3D ({acc['tracker']} + a3boxnet) accuracy on {acc['sequences']} sequences / {acc['frames']} frames of "
+                      f"'{acc['split']}'; rule: {acc['rule']}", "",
+                  "| variant | AO_3d restart | ACE_3d restart (m) | AO_3d one-pass | ACE_3d one-pass (m) | passes |",
+                  "|---|---|---|---|---|---|"]
+        for lab, r in acc["rows"].items():
+            if "skipped" in r:
+                lines.append(f"| {lab} | skipped: {r['skipped']} |||||")
+                continue
+            a, b = r["restart"], r["one_pass"]
+            lines.append(f"| {lab} | {a['ao_3d']:.4f} | {a['ace_3d']:.4f} | {b['ao_3d']:.4f} | {b['ace_3d']:.4f} | "
+                         f"{'reference' if 'passes' not in r else ('yes' if r['passes'] else 'NO')} |")
+    if res.get("auto"):
+        lines += ["", "precision=auto / engine=auto picks:"]
+        lines += [f"- {d['model']}: {d['engine']}/{d['precision']} — {d['reason']}" for d in res["auto"]]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", type=Path, default=None, help="dataset root for the whole-loop rows (none: networks only)")
+    ap.add_argument("--split", default="test", help="dataset split (default test)")
+    ap.add_argument("--frames", type=int, default=300, help="measured loop frames per configuration (default 300)")
+    ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of the loop configurations (default 3)")
+    ap.add_argument("--preload", type=int, default=200, help="frames kept in memory (default 200)")
+    ap.add_argument("--sequences", type=int, default=6, help="sequences preloaded (default 6)")
+    ap.add_argument("--net-seconds", type=float, default=3.0, help="round-robin seconds per network (default 3)")
+    ap.add_argument("--accuracy-data", type=Path, default=None,
+                    help="dataset root: also Track3D's AO_3d / ACE_3d per variant (restart and one-pass) "
+                         "and the shipping rule (default: not measured)")
+    ap.add_argument("--accuracy-split", default="test", help="split of --accuracy-data (default test)")
+    ap.add_argument("--accuracy-tracker", default="siamfc-edge", help="2D tracker of the accuracy rows (default siamfc-edge)")
+    ap.add_argument("--accuracy-variants", nargs="+", default=None, metavar="LABEL",
+                    help="only the accuracy rows starting with these labels, e.g. onnxruntime/int8 (default: all)")
+    ap.add_argument("--write-verdicts", action="store_true",
+                    help="merge the accuracy verdicts into runtime/track3d/models/accuracy.json (read by auto)")
+    ap.add_argument("--no-speed", action="store_true", help="skip the speed rows (accuracy only)")
+    ap.add_argument("--tag", default=None, help="result file tag (default: the host name)")
+    ap.add_argument("--out-dir", type=Path, default=RESULTS, help="output folder (default: benchmarks/results)")
+    a = ap.parse_args(argv)
+    if a.rounds < 1 or a.frames < 1:
+        ap.error("--rounds and --frames must be >= 1")
+    all_cpus = os.sched_getaffinity(0)
+    pin({min(all_cpus)})  # one thread, one core (as bench_fps --threads 1)
+    import onnxruntime
+
+    res = {"benchmark": "track3d precision x engine", "cpu": cpu_model(), "isa_flags": sorted(isa_flags()),
+           "machine": platform.machine(), "python": platform.python_version(), "onnxruntime": onnxruntime.__version__,
+           "openvino": openvino_version(), "threads": 1,
+           "networks": {} if a.no_speed else bench_networks(a.net_seconds)}
+    if a.data is not None and not a.no_speed:
+        res["loop"] = bench_loop(a.data, a.split, a.frames, a.rounds, a.preload, a.sequences)
+        res["data_split"] = a.split
+    if a.accuracy_data is not None:
+        a.out_dir.mkdir(parents=True, exist_ok=True)
+        res["accuracy"] = bench_accuracy(a.accuracy_data, a.accuracy_split, a.out_dir, a.accuracy_tracker,
+                                         a.accuracy_variants)
+        if a.write_verdicts:
+            print(f"wrote {write_verdicts(res['accuracy'])}")
+    from track3d.siamfc import create as siamfc
+    from track3d.boxnet import A3BoxNetEstimator
+
+    trk = siamfc("edge", precision="auto", engine="auto")
+    res["auto"] = [trk.exemplar.describe(), trk.search.describe(),
+                   A3BoxNetEstimator(precision="auto", engine="auto").model.describe()]
+    pin(all_cpus)
+    a.out_dir.mkdir(parents=True, exist_ok=True)
+    tag = a.tag or platform.node()
+    path = a.out_dir / f"precision_{tag}.json"
+    path.write_text(json.dumps(res, indent=2))
+    md = markdown(res)
+    path.with_suffix(".md").write_text(md)
+    print(md)
+    print(f"wrote {path} and {path.with_suffix('.md')}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,239 @@
+"""`track3d-train quantize`: int8 twins of the shipped networks (static QDQ, onnxruntime.quantization).
+
+    track3d-train quantize --data DATASET [--models-dir runtime/track3d/models] [--out-dir DIR]
+                           [--models a3boxnet siamfc_edge siamfc_faithful] [--samples 300]
+
+For each fp32 model ``<stem>.onnx`` writes ``<stem>_int8.onnx`` (the file the runtime's loader
+finds for ``precision="int8"``): static QDQ, uint8 activations, int8 per-channel weights
+(full range: the runtime only picks int8 on CPUs with int8 dot-product instructions, where
+reduce_range is not needed), calibrated (MinMax) on the TRAIN split of DATASET with the
+runtime's own input preparation:
+
+- A3BoxNet: frustum proposals of the ground-truth 2D boxes (``track3d.frustum.extract_frustum``),
+  sampled and centred with ``A3BoxNetEstimator.sample`` / ``track3d.boxnet.normalise``;
+  Conv + Gemm are quantised except the heads (the layers producing the outputs, ``head_nodes``);
+- SiamFC: exemplar crops and search crops at the ground-truth boxes cut with
+  ``track3d.siamfc.crop_square`` by the tracker's own geometry, each search crop paired with
+  its sequence's exemplar feature; Conv is quantised (the correlation stays float).
+
+The int8 file carries the parent's metadata plus ``precision``, ``quantization`` (recipe),
+``parent_sha256`` (hash of the fp32 file) and ``calibration`` (split, count, data hash: sha256
+of the split's labels, ``track3d_train.boxnet.data.split_hash``). Whether a variant SHIPS is
+decided by the accuracy rule in docs/models.md ("Arithmetic"), not here.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from track3d.onnxmodel import META_KEY, MODELS_DIR, variant_path
+
+from .onnx_meta import attach_metadata, file_hash
+
+__all__ = ["QUANT_RECIPE", "calibration_boxnet", "calibration_siamfc", "quantize_file", "main"]
+
+QUANT_RECIPE = {"format": "QDQ", "method": "MinMax", "activations": "uint8", "weights": "int8 per channel",
+                "reduce_range": False, "tool": "onnxruntime.quantization.quantize_static"}
+SIAMFC_STEMS = {"siamfc_edge": "edge", "siamfc_faithful": "faithful"}
+
+
+def _frames(root, split: str, samples: int, seed: int):
+    """(sequence, frame index) pairs spread evenly over the split's visible frames."""
+    from track3d.dataset import Dataset
+
+    ds = Dataset(root)
+    seqs = ds.sequences(split)
+    if not seqs:
+        raise FileNotFoundError(f"{root} has no {split} sequences")
+    pairs = [(s, i) for s in seqs for i in range(len(s)) if not s.absent[i] and s.gt2d[i][2] >= 4 and s.gt2d[i][3] >= 4]
+    rng = np.random.default_rng(seed)
+    if len(pairs) > samples:
+        pairs = [pairs[j] for j in sorted(rng.choice(len(pairs), samples, replace=False))]
+    return ds, pairs
+
+
+def calibration_boxnet(fp32: Path, root, split: str = "train", samples: int = 200, seed: int = 0) -> list[dict]:
+    """Feeds of A3BoxNet from the split's frustum proposals (batch 1 each)."""
+    from track3d.boxnet import INPUT_CATEGORY, INPUT_POINTS, A3BoxNetEstimator, normalise, one_hot
+    from track3d.frustum import extract_frustum
+
+    est = A3BoxNetEstimator(fp32)
+    ds, pairs = _frames(root, split, samples, seed)
+    feeds = []
+    for seq, i in pairs:
+        pts = extract_frustum(seq.points(i), seq.gt2d[i].astype(np.float32), ds.camera.M)
+        if len(pts) < 16:
+            continue
+        centred, _, _ = normalise(est.sample(pts), est.size_norm)
+        f = {INPUT_POINTS: centred[None].astype(np.float32)}
+        if est._with_category:
+            f[INPUT_CATEGORY] = one_hot([seq.category], est.num_categories)
+        feeds.append(f)
+    return feeds
+
+
+def calibration_siamfc(exemplar: Path, search: Path, root, split: str = "train", samples: int = 200,
+                       seed: int = 0) -> tuple[list[dict], list[dict]]:
+    """(exemplar feeds, search feeds) at the split's ground-truth boxes, cut as the tracker cuts."""
+    import cv2
+
+    from track3d.siamfc import SiamFCTracker, crop_square
+
+    trk = SiamFCTracker(exemplar, search)
+    ds, pairs = _frames(root, split, samples, seed)
+    rng = np.random.default_rng(seed)
+    kernels: dict[str, np.ndarray] = {}
+    ex, se = [], []
+    for seq, i in pairs:
+        img = seq.image(i)
+        trk._set_box(seq.gt2d[i])
+        avg = tuple(float(c) for c in cv2.mean(img)[:3])
+        z = crop_square(img, trk.center, trk.z_sz, trk.exemplar_size, avg)[None]
+        ex.append({"exemplar": z})
+        if seq.name not in kernels:
+            kernels[seq.name] = trk.exemplar.run({"exemplar": z})[0]
+        # the search region lies around the LAST centre: shift by up to a quarter of the target
+        c = trk.center + rng.uniform(-0.25, 0.25, 2) * trk.target_sz
+        f = trk.scale_factors[rng.integers(len(trk.scale_factors))]
+        x = crop_square(img, c, trk.x_sz * f, trk.instance_size, avg)[None]
+        se.append({"search": x, "exemplar_feature": kernels[seq.name]})
+    return ex, se
+
+
+def input_nodes(model, op_types: list[str]) -> list[str]:
+    """Names of the `op_types` nodes fed by a graph input without another `op_types` node between:
+    the first layers. A3BoxNet's see raw point coordinates in metres; 8 bits over their range
+    are steps of several cm (measured: int8 first layers cost 0.007 AO_3d), so they stay float."""
+    producers = {o: n for n in model.graph.node for o in n.output}
+    inputs = {i.name for i in model.graph.input}
+    firsts = []
+    for n in model.graph.node:
+        if n.op_type not in op_types:
+            continue
+        todo, seen = [n.input[0]], set()
+        while todo:
+            t = todo.pop()
+            if t in inputs:
+                firsts.append(n.name)
+                break
+            m = producers.get(t)
+            if m is not None and m.op_type not in op_types and id(m) not in seen:
+                seen.add(id(m))
+                todo.extend(m.input)
+    return firsts
+
+
+def head_nodes(model, op_types: list[str]) -> list[str]:
+    """Names of the `op_types` nodes whose output reaches a graph output without passing through
+    another `op_types` node: the regression heads. Quantising their outputs puts the box
+    residuals and centre offsets on an 8-bit grid (measured on A3BoxNet: steps of 0.09 of L,
+    i.e. several % of the size), so they stay float."""
+    consumers: dict[str, list] = {}
+    for n in model.graph.node:
+        for i in n.input:
+            consumers.setdefault(i, []).append(n)
+    outputs = {o.name for o in model.graph.output}
+    heads = []
+    for n in model.graph.node:
+        if n.op_type not in op_types:
+            continue
+        todo, seen = list(n.output), set()
+        while todo:
+            t = todo.pop()
+            if t in outputs:
+                heads.append(n.name)
+                break
+            for c in consumers.get(t, []):
+                if c.op_type not in op_types and id(c) not in seen:
+                    seen.add(id(c))
+                    todo.extend(c.output)
+    return heads
+
+
+def quantize_file(fp32: Path, out: Path, feeds: list[dict], op_types: list[str], data_hash: str,
+                  split: str, float_heads: bool = False) -> Path:
+    """Static QDQ int8 of `fp32` into `out`, calibrated on `feeds`, with the variant's metadata;
+    float_heads: keep the first layers and the layers that produce the outputs in float
+    (``input_nodes``, ``head_nodes``)."""
+    import onnx
+    from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+    from onnxruntime.quantization.shape_inference import quant_pre_process
+
+    class Reader(CalibrationDataReader):
+        def __init__(self):
+            self.items = iter(feeds)
+
+        def get_next(self):
+            return next(self.items, None)
+
+    if not feeds:
+        raise ValueError(f"no calibration data for {fp32.name}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    pre = out.with_name(out.stem + ".pre.onnx")
+    try:
+        quant_pre_process(str(fp32), str(pre), skip_symbolic_shape=True)
+        src = pre
+    except Exception:  # pre-processing is an optimisation; the plain graph quantises too
+        src = fp32
+    graph = onnx.load(str(src))
+    exclude = sorted(set(head_nodes(graph, op_types) + input_nodes(graph, op_types))) if float_heads else []
+    try:
+        quantize_static(str(src), str(out), Reader(), quant_format=QuantFormat.QDQ,
+                        activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8, per_channel=True,
+                        reduce_range=False, op_types_to_quantize=op_types, nodes_to_exclude=exclude)
+    finally:
+        if pre.exists():
+            pre.unlink()
+    meta = json.loads({p.key: p.value for p in onnx.load(str(fp32)).metadata_props}[META_KEY])
+    meta.update({"precision": "int8", "quantization": {**QUANT_RECIPE, "op_types": op_types,
+                                                       "float_nodes": exclude},
+                 "parent_model": fp32.name, "parent_sha256": file_hash(fp32),
+                 "calibration": {"split": split, "samples": len(feeds), "data_hash": data_hash}})
+    attach_metadata(out, meta)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="track3d-train quantize", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", required=True, help="dataset root (track3d-sim output) with a train split")
+    ap.add_argument("--split", default="train", help="calibration split (default: train)")
+    ap.add_argument("--models-dir", type=Path, default=MODELS_DIR,
+                    help="folder of the fp32 models (default: the shipped models)")
+    ap.add_argument("--out-dir", type=Path, default=None, help="where the *_int8.onnx go (default: --models-dir)")
+    ap.add_argument("--models", nargs="+", default=["a3boxnet", "siamfc_edge", "siamfc_faithful"],
+                    help="stems to quantise (default: a3boxnet siamfc_edge siamfc_faithful)")
+    ap.add_argument("--samples", type=int, default=300, help="calibration samples per network (default 300)")
+    ap.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
+    a = ap.parse_args(argv)
+    if a.samples < 1:
+        ap.error("--samples must be >= 1")
+    unknown = [m for m in a.models if m != "a3boxnet" and m not in SIAMFC_STEMS]
+    if unknown:
+        ap.error(f"unknown model stem(s) {', '.join(unknown)} (known: a3boxnet, {', '.join(SIAMFC_STEMS)})")
+    from track3d.dataset import Dataset
+
+    from .boxnet.data import split_hash
+
+    data_hash = split_hash(Dataset(a.data), a.split)
+    out_dir = a.out_dir or a.models_dir
+    for stem in a.models:
+        if stem == "a3boxnet":
+            fp32 = a.models_dir / "a3boxnet.onnx"
+            feeds = calibration_boxnet(fp32, a.data, a.split, a.samples, a.seed)
+            out = quantize_file(fp32, out_dir / variant_path(fp32, "int8").name, feeds, ["Conv", "Gemm"],
+                                data_hash, a.split, float_heads=True)
+            print(f"wrote {out} ({len(feeds)} calibration samples)")
+        elif stem in SIAMFC_STEMS:
+            pz, px = a.models_dir / f"{stem}_exemplar.onnx", a.models_dir / f"{stem}_search.onnx"
+            ex, se = calibration_siamfc(pz, px, a.data, a.split, a.samples, a.seed)
+            for fp32, feeds in ((pz, ex), (px, se)):
+                out = quantize_file(fp32, out_dir / variant_path(fp32, "int8").name, feeds, ["Conv"],
+                                    data_hash, a.split)
+                print(f"wrote {out} ({len(feeds)} calibration samples)")
+        else:
+            raise ValueError(f"unknown model stem {stem!r} (known: a3boxnet, {', '.join(SIAMFC_STEMS)})")
+    return 0

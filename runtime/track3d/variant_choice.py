@@ -1,0 +1,250 @@
+"""precision="auto" / engine="auto": the fastest model variant this CPU allows, chosen at load.
+
+Two steps (docs/models.md, "Arithmetic"):
+
+1. The CPU's instructions (``track3d.cpu_features.isa_flags``) decide what is ALLOWED: int8
+   needs an int8 dot-product instruction (x86 VNNI / AMX-int8, ARM dotprod / i8mm; on an
+   AVX2-only CPU int8 measured slower than fp32 for SiamFC and no faster for A3BoxNet), bf16
+   needs bf16 arithmetic (AVX512_BF16 / AMX-bf16, ARM bf16) and OpenVINO; fp32 on onnxruntime
+   is always allowed and is the reference.
+2. When more than one variant is allowed, a short measurement (each candidate run round-robin
+   on fixed random inputs for at most ``BUDGET_S`` seconds in all) picks the fastest; a variant
+   must beat the reference by ``MIN_GAIN`` to be picked, so auto never picks a loser. The result is
+   cached per machine (CPU model + flags + package and engine versions + model hashes) in
+   ``$TRACK3D_CACHE_DIR``, else ``$XDG_CACHE_HOME/track3d``, else ``~/.cache/track3d``.
+
+Given a choice, the outputs are deterministic: the choice only selects the session.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sys
+import time
+from importlib.util import find_spec
+from pathlib import Path
+
+import numpy as np
+
+from .cpu_features import BF16_DOT, INT8_DOT, cpu_model, isa_flags
+from .onnxmodel import (ENGINES, PRECISIONS, EngineUnavailable, ModelError, _OrtSession, open_session,
+                        openvino_version, variant_path)
+
+__all__ = ["choose", "candidates", "cache_dir", "BUDGET_S", "MIN_GAIN", "example_feeds"]
+
+BUDGET_S = 0.5          # seconds of measurement per model (all candidates together)
+MIN_GAIN = 1.05         # a variant must be 5% faster than fp32 onnxruntime to replace it
+CACHE_FILE = "variants.json"
+VERDICTS_FILE = "accuracy.json"  # beside the models: which variants passed the accuracy rule
+CACHE_VERSION = 1
+
+
+def cache_dir() -> Path:
+    """Where the per-machine choices are kept (never inside the repository)."""
+    if os.environ.get("TRACK3D_CACHE_DIR"):
+        return Path(os.environ["TRACK3D_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "track3d"
+
+
+def _openvino_installed() -> bool:
+    if "openvino" in sys.modules:
+        return sys.modules["openvino"] is not None  # None: import blocked (as in the tests)
+    try:
+        return find_spec("openvino") is not None
+    except (ImportError, ValueError):
+        return False
+
+
+def verdicts(path: Path) -> dict:
+    """{"engine/precision": {"passes": bool, ...}} of the model `path` from the accuracy.json
+    beside it (written by benchmarks/bench_precision.py --write-verdicts); {} without one."""
+    try:
+        data = json.loads((path.parent / VERDICTS_FILE).read_text())
+        return dict(data.get("models", {}).get(path.name, {}))
+    except (OSError, ValueError, AttributeError):
+        return {}
+
+
+def candidates(path: Path, precision: str, engine: str, flags: frozenset[str]) -> tuple[list, list[str]]:
+    """([(engine, precision)...] allowed, reference first when it is allowed; [why others are not]).
+    With precision="auto", a variant other than fp32 must also have passed the accuracy rule
+    (``verdicts``); an explicit precision is the caller's choice."""
+    if engine != "auto" and engine not in ENGINES:
+        raise ValueError(f"engine must be one of {', '.join(ENGINES)} or auto, got {engine!r}")
+    if precision != "auto" and precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {', '.join(PRECISIONS)} or auto, got {precision!r}")
+    notes: list[str] = []
+    engines = [engine] if engine != "auto" else ["onnxruntime"]
+    if engine == "auto":
+        if _openvino_installed():
+            engines.append("openvino")
+        else:
+            notes.append("OpenVINO not installed")
+    if engine == "openvino" and not _openvino_installed():
+        raise EngineUnavailable("engine 'openvino' needs OpenVINO: pip install 'track3d[openvino]'")
+    precs = [precision] if precision != "auto" else list(PRECISIONS)
+    if precision == "auto":
+        if not variant_path(path, "int8").is_file():
+            precs.remove("int8")
+            notes.append("no int8 file")
+        elif not flags & INT8_DOT:
+            precs.remove("int8")
+            notes.append("int8 not allowed: CPU has no int8 dot-product instruction (VNNI/AMX/dotprod/i8mm)")
+        if not flags & BF16_DOT:
+            precs.remove("bf16")
+            notes.append("bf16 not allowed: CPU has no bf16 arithmetic")
+    unsupported = {("onnxruntime", "bf16"), ("openvino", "int8")}  # see onnxmodel's sessions
+    out = [(e, p) for e in engines for p in precs if (e, p) not in unsupported]
+    if precision == "auto":
+        v = verdicts(path)
+        keep = []
+        for c in out:
+            ok = c[1] == "fp32" or v.get(f"{c[0]}/{c[1]}", {}).get("passes", False)
+            if ok:
+                keep.append(c)
+            else:
+                notes.append(f"{c[0]}/{c[1]} " + ("failed the accuracy rule" if f"{c[0]}/{c[1]}" in v
+                                                   else "has no accuracy verdict"))
+        out = keep
+    if precision == "bf16" and not any(p == "bf16" for _, p in out):
+        raise EngineUnavailable("bf16 needs engine 'openvino': pip install 'track3d[openvino]'")
+    if precision == "int8" and not out:
+        raise EngineUnavailable("int8 runs on engine 'onnxruntime' only")
+    return out, notes
+
+
+def example_feeds(path: Path, meta: dict, seed: int = 0) -> dict[str, np.ndarray]:
+    """Fixed random inputs of the model's shapes (dynamic axes from the metadata: one scale or
+    batch item, instance_size, num_points), for the measurement and for parity tests."""
+    sess = _OrtSession(path, 1, "fp32")
+    rng = np.random.default_rng(seed)
+    dims = {"batch": 1, "scales": 1, "height": meta.get("instance_size", 1), "width": meta.get("instance_size", 1),
+            "num_points": meta.get("num_points", 1)}
+    feeds = {}
+    for name, shape, typ in sess.inputs:
+        shp = [d if isinstance(d, int) and d > 0 else int(dims.get(str(d), 1)) for d in shape]
+        if typ == "tensor(uint8)":
+            feeds[name] = rng.integers(0, 256, size=shp, dtype=np.uint8)
+        elif name == "category":  # a one-hot
+            a = np.zeros(shp, np.float32)
+            a[..., 0] = 1.0
+            feeds[name] = a
+        else:
+            feeds[name] = rng.normal(size=shp).astype(np.float32)
+    return feeds
+
+
+def _file_digest(p: Path) -> str:
+    return hashlib.sha256(p.read_bytes()).hexdigest()[:16] if p.is_file() else "-"
+
+
+def _key(path: Path, threads: int, cands: list, flags: frozenset[str]) -> str:
+    import onnxruntime
+
+    from . import __version__
+
+    k = {"v": CACHE_VERSION, "cpu": cpu_model(), "flags": sorted(flags), "track3d": __version__,
+         "onnxruntime": onnxruntime.__version__, "openvino": openvino_version(), "threads": threads,
+         "candidates": [list(c) for c in cands], "model": _file_digest(path),
+         "int8": _file_digest(variant_path(path, "int8"))}
+    return hashlib.sha256(json.dumps(k, sort_keys=True).encode()).hexdigest()
+
+
+def _cache_read(key: str) -> dict | None:
+    try:
+        return json.loads((cache_dir() / CACHE_FILE).read_text()).get(key)
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def _cache_write(key: str, entry: dict) -> None:
+    d = cache_dir()
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        f = d / CACHE_FILE
+        try:
+            data = json.loads(f.read_text())
+            if not isinstance(data, dict):
+                data = {}
+        except (OSError, ValueError):
+            data = {}
+        data[key] = entry
+        tmp = f.with_name(f"{CACHE_FILE}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(data, indent=1, sort_keys=True))
+        tmp.replace(f)
+    except OSError:
+        pass  # a read-only home: measure again next time, never fail a load
+
+
+def measure(sessions: dict, feeds: dict, budget_s: float = BUDGET_S) -> dict:
+    """Median ms per session, run round-robin (so that a load change hits all alike)."""
+    times: dict = {k: [] for k in sessions}
+    for s in sessions.values():  # warm-up: first-call allocations, OpenVINO's shape compile
+        s.run(feeds)
+        s.run(feeds)
+    t_end = time.perf_counter() + budget_s
+    rounds = 0
+    while rounds < 3 or (time.perf_counter() < t_end and rounds < 200):
+        for k, s in sessions.items():
+            t = time.perf_counter()
+            s.run(feeds)
+            times[k].append((time.perf_counter() - t) * 1e3)
+        rounds += 1
+    return {k: float(np.median(v)) for k, v in times.items()}
+
+
+def _label(c) -> str:
+    return f"{c[0]}/{c[1]}"
+
+
+def choose(path: Path, threads: int, precision: str = "auto", engine: str = "auto",
+           flags: frozenset[str] | None = None, use_cache: bool = True):
+    """(choice dict, open session) of the fastest allowed variant of the fp32 model `path`.
+    flags: the CPU's ISA names (default: this CPU's; tests inject a smaller set)."""
+    flags = isa_flags() if flags is None else frozenset(flags)
+    cands, notes = candidates(path, precision, engine, flags)
+    if not cands:
+        raise ModelError(f"no variant of {path.name} fits precision={precision} engine={engine}")
+    shown = ", ".join(sorted(f for f in flags if f not in ("int8_dot", "bf16_dot"))) or "none known"
+    if len(cands) == 1:
+        (e, p), = cands
+        why = "; ".join(notes) if notes else "the only variant asked for"
+        return ({"engine": e, "precision": p, "file": variant_path(path, p).name,
+                 "reason": f"{why} (CPU flags: {shown})"},
+                open_session(variant_path(path, p), threads, e, p))
+    key = _key(path, threads, cands, flags)
+    hit = _cache_read(key) if use_cache else None
+    if hit and tuple(hit.get("pick", ())) in cands:
+        e, p = hit["pick"]
+        ms = ", ".join(f"{k} {v:.2f} ms" for k, v in hit["ms"].items())
+        return ({"engine": e, "precision": p, "file": variant_path(path, p).name,
+                 "reason": f"fastest allowed, measured earlier on this machine (cached): {ms} "
+                           f"(CPU flags: {shown})", "measured_ms": hit["ms"]},
+                open_session(variant_path(path, p), threads, e, p))
+    sessions = {}
+    for c in cands:
+        try:
+            sessions[c] = open_session(variant_path(path, c[1]), threads, c[0], c[1])
+        except ModelError as err:  # e.g. an engine that cannot compile this graph: not a candidate
+            notes.append(f"{_label(c)} failed to load ({err})")
+    if not sessions:
+        raise ModelError(f"no variant of {path.name} loads: {'; '.join(notes)}")
+    meta = json.loads(_OrtSession(path, 1, "fp32").metadata() or "{}")
+    t0 = time.perf_counter()
+    ms = measure(sessions, example_feeds(path, meta))
+    spent = time.perf_counter() - t0
+    ref = cands[0]
+    pick = min(ms, key=ms.get)
+    if ref in ms and pick != ref and ms[pick] * MIN_GAIN > ms[ref]:
+        pick = ref  # not clearly faster: keep the reference
+    shown_ms = {_label(c): round(v, 3) for c, v in ms.items()}
+    _cache_write(key, {"pick": list(pick), "ms": shown_ms, "cpu": cpu_model(), "flags": sorted(flags),
+                       "model": path.name, "measured": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
+    listing = ", ".join(f"{k} {v:.2f} ms" for k, v in shown_ms.items())
+    choice = {"engine": pick[0], "precision": pick[1], "file": variant_path(path, pick[1]).name,
+              "reason": f"fastest allowed, measured now in {spent:.2f} s: {listing}"
+                        + (f"; {'; '.join(notes)}" if notes else "") + f" (CPU flags: {shown})",
+              "measured_ms": shown_ms}
+    return choice, sessions[pick]
