@@ -15,9 +15,11 @@ SHIPPED = sorted(MODELS_DIR.glob("*.onnx"))
 
 
 def _walk_strings(v):
+    """Every string of the metadata but ONNX node names (lists under keys ending in 'nodes')."""
     if isinstance(v, dict):
-        for x in v.values():
-            yield from _walk_strings(x)
+        for k, x in v.items():
+            if not str(k).endswith("nodes"):
+                yield from _walk_strings(x)
     elif isinstance(v, list):
         for x in v:
             yield from _walk_strings(x)

@@ -10,7 +10,9 @@ What it fixes (the exporters now write all of this themselves):
 - siamfc_*: no training-data identity: `train_data` now names the recipe of the data (the
   generator is deterministic), `train_data_hash` is null with a note (it was not recorded at
   training time and the data is not on this machine; a re-export of a new training fills it);
-- all: ONNX's standard fields producer_name / producer_version / model_version / doc_string.
+- all: ONNX's standard fields producer_name / producer_version / model_version / doc_string;
+- variants (`<stem>_int8.onnx`): `parent_sha256` is the hash of the parent file as it is now
+  (its metadata changed above; its graph did not).
 """
 from __future__ import annotations
 
@@ -48,10 +50,16 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--models", type=Path, default=MODELS_DIR, help="folder of the shipped models (default: %(default)s)")
     a = ap.parse_args(argv)
-    for f in sorted(a.models.glob("*.onnx")):
+    # parents first: a variant records the hash of its parent file as rewritten here
+    files = sorted(a.models.glob("*.onnx"), key=lambda f: (f.stem.endswith("_int8"), f.name))
+    for f in files:
         props = {p.key: p.value for p in onnx.load(str(f)).metadata_props}
         meta = json.loads(props[META_KEY])
         new = fixed(meta)
+        parent = a.models / str(meta.get("parent_model", ""))
+        if meta.get("parent_sha256") and parent.is_file():
+            import hashlib
+            new["parent_sha256"] = hashlib.sha256(parent.read_bytes()).hexdigest()
         rewrite_metadata(f, new)
         changed = sorted(k for k in set(meta) | set(new) if meta.get(k) != new.get(k))
         print(f"{f.name}: metadata {'fixed: ' + ', '.join(changed) if changed else 'unchanged'}; "

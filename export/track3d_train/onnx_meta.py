@@ -77,11 +77,14 @@ def rewrite_metadata(onnx_path: str | Path, meta: dict) -> None:
 
 
 def check_portable(meta) -> None:
-    """No absolute path of the exporting machine in metadata (a user has only the package)."""
+    """No absolute path of the exporting machine in metadata (a user has only the package).
+    ONNX node names ('/box_net/fc/fc.0/Gemm', under a key ending in 'nodes') look like paths
+    and are not checked."""
     def walk(v):
         if isinstance(v, dict):
-            for x in v.values():
-                walk(x)
+            for k, x in v.items():
+                if not str(k).endswith("nodes"):
+                    walk(x)
         elif isinstance(v, list):
             for x in v:
                 walk(x)
