@@ -2,6 +2,7 @@
 
     track3d-train boxnet  ...   A3BoxNet (see `track3d-train boxnet --help`)
     track3d-train siamfc  ...   SiamFC, faithful and edge variants
+    track3d-train edgetrack ... EdgeTrack, the fast edge 2D tracker
 """
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import sys
 COMMANDS = {
     "boxnet": ("track3d_train.boxnet.cli", "train, export and check A3BoxNet"),
     "siamfc": ("track3d_train.siamfc.cli", "train, export and check SiamFC"),
+    "edgetrack": ("track3d_train.edgetrack.cli", "train, export and check EdgeTrack (fast edge 2D tracker)"),
 }
 
 

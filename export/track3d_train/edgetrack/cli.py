@@ -1,0 +1,157 @@
+"""`track3d-train edgetrack prepare|train|export|eval`: the EdgeTrack pipeline.
+
+    track3d-train edgetrack prepare --data DATA --out CACHE
+    track3d-train edgetrack train   --cache CACHE --out RUN --time-budget-min 180   # resumes from RUN/ckpt.pt
+    track3d-train edgetrack export  --checkpoint RUN/ckpt.pt --out runtime/track3d/models/edgetrack
+    track3d-train edgetrack eval    --model runtime/track3d/models/edgetrack --data DATA --split test --compare siamfc-edge
+
+The recipe of the shipped model (the real training command) is export/scripts/train_edgetrack.sh.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+
+def _prepare(a) -> int:
+    from .data import prepare
+
+    if not a.synthetic and not a.data:
+        print("error: give --data ROOT (a dataset) or --synthetic N", file=sys.stderr)
+        return 2
+    t0 = time.perf_counter()
+    info = prepare(a.out, data=a.data, split=a.split, synthetic=a.synthetic, synthetic_frames=a.synthetic_frames,
+                   max_frames=a.max_frames, max_background=a.max_background, seed=a.seed, progress=not a.quiet)
+    print(f"cache {a.out}: {info['target_crops']} target crops, {info['background_crops']} background crops "
+          f"in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+def _train(a) -> int:
+    from .model import EdgeTrackConfig
+    from .train import train
+
+    if not (Path(a.cache) / "target" / "index.json").is_file():
+        print(f"error: {a.cache} is no EdgeTrack cache (run `prepare` first)", file=sys.stderr)
+        return 2
+    cfg = EdgeTrackConfig()
+    print(f"EdgeTrack: widths {cfg.widths}, crops {cfg.exemplar_size}/{cfg.instance_size}, batch {a.batch}, "
+          f"{a.steps} steps, {a.threads} thread(s)")
+    s = train(cfg, a.cache, a.out, steps=a.steps, batch=a.batch, lr=a.lr, seed=a.seed, threads=a.threads,
+              time_budget_s=a.time_budget_min * 60 if a.time_budget_min else None,
+              ckpt_every_s=a.ckpt_every_min * 60, val_every=a.val_every, max_gap=a.max_gap,
+              resume=not a.no_resume, init_from=a.init_from, progress=not a.quiet)
+    print(json.dumps(s))
+    return 0
+
+
+def _export(a) -> int:
+    import dataclasses
+
+    from .export import export_onnx, parity
+    from .train import load_checkpoint
+
+    net, ck = load_checkpoint(a.checkpoint)
+    over = {k: getattr(a, k) for k in ("window_influence", "penalty_k", "size_lr", "score_threshold",
+                                       "instance_size", "lost_instance_size") if getattr(a, k) is not None}
+    if over:
+        net.cfg = dataclasses.replace(net.cfg, **over)
+    extra = {"training": {"steps": ck.get("step"), "batch": ck.get("batch"), "seed": ck.get("seed"),
+                          "elapsed_s": round(float(ck.get("elapsed_s", 0)), 1),
+                          "data": a.data_note or "track3d simulator train split"}}
+    pz, px = export_onnx(net, a.out, extra)
+    p = parity(net, pz, px)
+    print(f"wrote {pz} ({pz.stat().st_size / 1e3:.0f} kB), {px} ({px.stat().st_size / 1e3:.0f} kB)")
+    print("parity torch vs onnxruntime:", json.dumps(p))
+    return 0
+
+
+def _eval(a) -> int:
+    from track3d.dataset import Dataset
+    from track3d.trackers2d import create_tracker
+
+    from .evaluate import evaluate_tracker
+
+    seqs = Dataset(a.data).sequences(a.split)[: a.max_seqs or None]
+    rows = {}
+    if a.model:
+        from track3d.edgetrack import create
+
+        rows["edgetrack"] = evaluate_tracker(lambda: create(model=a.model, threads=a.threads), seqs,
+                                             progress=not a.quiet)
+    for name in a.compare:
+        opts = {"threads": a.threads} if name.startswith("siamfc") or name == "edgetrack" else {}
+        rows[name] = evaluate_tracker(lambda: create_tracker(name, **opts), seqs, progress=not a.quiet)
+    print(json.dumps(rows, indent=1))
+    if a.out:
+        Path(a.out).write_text(json.dumps({"data_split": a.split, "sequences": len(seqs), "trackers": rows}, indent=1))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="track3d-train edgetrack", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="cmd", required=True)
+    d = argparse.ArgumentDefaultsHelpFormatter
+
+    q = sub.add_parser("prepare", help="crop target and background caches once", formatter_class=d)
+    q.add_argument("--data", help="dataset root (dataset.json)")
+    q.add_argument("--split", default="train", help="dataset split")
+    q.add_argument("--out", required=True, help="cache folder")
+    q.add_argument("--max-frames", type=int, default=3000, help="bound on target crops (442 kB each)")
+    q.add_argument("--max-background", type=int, default=1000, help="bound on background crops")
+    q.add_argument("--synthetic", type=int, default=0, help="N synthetic sequences instead of a dataset")
+    q.add_argument("--synthetic-frames", type=int, default=60, help="frames per synthetic sequence")
+    q.add_argument("--seed", type=int, default=0, help="random seed")
+    q.add_argument("--quiet", action="store_true", help="no progress bar")
+    q.set_defaults(fn=_prepare)
+
+    t = sub.add_parser("train", help="train (resumes from <out>/ckpt.pt)", formatter_class=d)
+    t.add_argument("--cache", required=True, help="cache folder from `prepare`")
+    t.add_argument("--out", required=True, help="run folder: ckpt.pt, log.jsonl, curves.json/png")
+    t.add_argument("--steps", type=int, default=20000, help="planned steps (sets the LR schedule)")
+    t.add_argument("--batch", type=int, default=32, help="pairs per step")
+    t.add_argument("--lr", type=float, default=3e-3, help="peak AdamW learning rate")
+    t.add_argument("--max-gap", type=int, default=50, help="max frame gap of a pair")
+    t.add_argument("--val-every", type=int, default=200, help="steps between validations")
+    t.add_argument("--ckpt-every-min", type=float, default=3.0, help="minutes between atomic checkpoints")
+    t.add_argument("--seed", type=int, default=0, help="random seed")
+    t.add_argument("--threads", type=int, default=1, help="torch threads")
+    t.add_argument("--time-budget-min", type=float, default=None, help="stop (and checkpoint) after this much training time")
+    t.add_argument("--init-from", help="start from another run's checkpoint (fine-tuning)")
+    t.add_argument("--no-resume", action="store_true", help="start over even if <out>/ckpt.pt exists")
+    t.add_argument("--quiet", action="store_true", help="no progress bar")
+    t.set_defaults(fn=_train)
+
+    e = sub.add_parser("export", help="write <out>_template.onnx + <out>_search.onnx, check parity", formatter_class=d)
+    e.add_argument("--checkpoint", required=True, help="ckpt.pt of a run")
+    e.add_argument("--out", required=True, help="path prefix")
+    e.add_argument("--data-note", default=None, help="what the model was trained on (metadata)")
+    for k, ty in (("window-influence", float), ("penalty-k", float), ("size-lr", float), ("score-threshold", float),
+                  ("instance-size", int), ("lost-instance-size", int)):
+        e.add_argument(f"--{k}", type=ty, default=None, help="tracking default stored in the metadata (default: the config's)")
+    e.set_defaults(fn=_export)
+
+    v = sub.add_parser("eval", help="one-pass AO_2d + lost precision/recall on a split", formatter_class=d)
+    v.add_argument("--model", help="prefix of <name>_template/_search.onnx")
+    v.add_argument("--data", required=True, help="dataset root")
+    v.add_argument("--split", default="test", help="dataset split")
+    v.add_argument("--compare", nargs="*", default=[], help="registered 2D trackers to run on the same frames")
+    v.add_argument("--max-seqs", type=int, default=0, help="0: all")
+    v.add_argument("--threads", type=int, default=1, help="onnxruntime threads")
+    v.add_argument("--out", help="also write the numbers to this JSON file")
+    v.add_argument("--quiet", action="store_true", help="no progress bar")
+    v.set_defaults(fn=_eval)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    return int(a.fn(a) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
