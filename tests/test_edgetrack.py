@@ -20,7 +20,7 @@ from track3d_train.edgetrack.model import (EdgeTrack, EdgeTrackConfig, _iou_loss
                                            edgetrack_loss, make_targets)
 from track3d_train.edgetrack.train import fit_platt  # noqa: E402
 
-TINY = dict(exemplar_size=128, instance_size=256, lost_instance_size=384, widths=(8, 16, 24, 32),
+TINY = dict(exemplar_size=128, instance_size=256, lost_instance_size=336, widths=(8, 16, 24, 32),
             feat_channels=32, head_channels=32, head_blocks=1)
 
 
@@ -120,12 +120,19 @@ def test_training_resumes_from_its_checkpoint(tmp_path, trained):
     steps = [json.loads(l)["step"] for l in (tmp_path / "r" / "log.jsonl").read_text().splitlines()
              if json.loads(l)["kind"] == "train"]
     assert steps == [4, 6]          # one log across the interruption, no step repeated
+    # a kill after logging step 7 but before its checkpoint: the resumed run logs step 7 once
+    with open(tmp_path / "r" / "log.jsonl", "a") as f:
+        f.write(json.dumps({"kind": "train", "step": 7, "loss": 1.0}) + "\n")
+    train(cfg, cache, tmp_path / "r", steps=7, batch=4, val_every=100, progress=False)
+    steps = [json.loads(l)["step"] for l in (tmp_path / "r" / "log.jsonl").read_text().splitlines()
+             if json.loads(l)["kind"] == "train"]
+    assert steps == [4, 6, 7]
 
 
 def test_export_parity_and_metadata(trained):
     from track3d_train.edgetrack.export import parity
 
-    for size in (256, 384):   # the normal and the wider 'lost' search
+    for size in (256, 336):   # the normal and the wider 'lost' search
         p = parity(trained["net"], trained["pz"], trained["px"], instance_size=size)
         assert p["kernel_max_abs"] < 1e-4 and p["logit_max_abs"] < 1e-3
         assert p["ltrb_max_abs"] < 1e-4 * max(1.0, p["ltrb_scale"])

@@ -1,9 +1,10 @@
-"""`track3d-train edgetrack prepare|train|export|eval`: the EdgeTrack pipeline.
+"""`track3d-train edgetrack prepare|train|export|eval|time`: the EdgeTrack pipeline.
 
     track3d-train edgetrack prepare --data DATA --out CACHE
     track3d-train edgetrack train   --cache CACHE --out RUN --time-budget-min 180   # resumes from RUN/ckpt.pt
     track3d-train edgetrack export  --checkpoint RUN/ckpt.pt --out runtime/track3d/models/edgetrack
     track3d-train edgetrack eval    --model runtime/track3d/models/edgetrack --data DATA --split test --compare siamfc-edge
+    track3d-train edgetrack time    --model runtime/track3d/models/edgetrack --pin
 
 The recipe of the shipped model (the real training command) is export/scripts/train_edgetrack.sh.
 """
@@ -91,6 +92,46 @@ def _eval(a) -> int:
     return 0
 
 
+def _time(a) -> int:
+    """Median ms of the networks and the crop at a thread count, EdgeTrack vs SiamFC-edge,
+    interleaved in one process (ratios hold under load, absolute numbers do not)."""
+    import os
+
+    import numpy as np
+
+    from track3d.onnxmodel import OnnxModel
+    from track3d.siamfc import crop_square, model_paths
+
+    if a.pin and hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[-1]})
+    rng = np.random.default_rng(0)
+    et_z, et_x = OnnxModel(f"{a.model}_template.onnx", a.threads), OnnxModel(f"{a.model}_search.onnx", a.threads)
+    sz, sx = (OnnxModel(p, a.threads) for p in model_paths("edge"))
+    n_et, n_sf = int(et_x.meta["instance_size"]), int(sx.meta["instance_size"])
+    n_lost = int(et_x.meta["lost_instance_size"])
+    ez = int(et_x.meta["exemplar_size"])
+    kern = et_z.run({"template": rng.integers(0, 256, (1, ez, ez, 3), dtype=np.uint8)})[0]
+    feat = sz.run({"exemplar": rng.integers(0, 256, (1, 127, 127, 3), dtype=np.uint8)})[0]
+    image = rng.integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    jobs = {
+        f"edgetrack search {n_et}": lambda: et_x.run({"search": image[None, :n_et, :n_et].copy(), "kernel": kern}),
+        f"edgetrack search lost {n_lost}": lambda: et_x.run({"search": image[None, :n_lost, :n_lost].copy(), "kernel": kern}),
+        f"siamfc-edge search {n_sf}": lambda: sx.run({"search": image[None, :n_sf, :n_sf].copy(), "exemplar_feature": feat}),
+        f"crop {n_et} of a 300 px region": lambda: crop_square(image, np.array([320.0, 240.0]), 300.0, n_et, (9, 9, 9)),
+        f"crop {n_sf} of a 300 px region": lambda: crop_square(image, np.array([320.0, 240.0]), 300.0, n_sf, (9, 9, 9)),
+    }
+    times = {k: [] for k in jobs}
+    for _ in range(a.repeats):
+        for k, f in jobs.items():
+            t0 = time.perf_counter()
+            f()
+            times[k].append(1e3 * (time.perf_counter() - t0))
+    out = {k: round(float(np.median(v[3:])), 3) for k, v in times.items()}
+    out["threads"], out["pinned"], out["repeats"] = a.threads, bool(a.pin), a.repeats
+    print(json.dumps(out, indent=1))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="track3d-train edgetrack", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -98,7 +139,7 @@ def build_parser() -> argparse.ArgumentParser:
     d = argparse.ArgumentDefaultsHelpFormatter
 
     q = sub.add_parser("prepare", help="crop target and background caches once", formatter_class=d)
-    q.add_argument("--data", help="dataset root (dataset.json)")
+    q.add_argument("--data", nargs="+", help="dataset root(s) (dataset.json); several are concatenated")
     q.add_argument("--split", default="train", help="dataset split")
     q.add_argument("--out", required=True, help="cache folder")
     q.add_argument("--max-frames", type=int, default=3000, help="bound on target crops (442 kB each)")
@@ -145,6 +186,13 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out", help="also write the numbers to this JSON file")
     v.add_argument("--quiet", action="store_true", help="no progress bar")
     v.set_defaults(fn=_eval)
+
+    m = sub.add_parser("time", help="median ms of the nets and crops vs SiamFC-edge, interleaved", formatter_class=d)
+    m.add_argument("--model", required=True, help="prefix of <name>_template/_search.onnx")
+    m.add_argument("--threads", type=int, default=1, help="onnxruntime threads")
+    m.add_argument("--repeats", type=int, default=200, help="calls of each, interleaved")
+    m.add_argument("--pin", action="store_true", help="pin the process to one core")
+    m.set_defaults(fn=_time)
     return p
 
 

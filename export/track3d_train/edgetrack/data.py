@@ -79,13 +79,17 @@ def _background(sequences, out_dir: Path, exemplar_size: int, instance_size: int
 def prepare(out_dir, data=None, split: str = "train", synthetic: int = 0, synthetic_frames: int = 60,
             max_frames: int = 3000, max_background: int = 1000, exemplar_size: int = 128,
             instance_size: int = 256, context_amount: float = 0.5, seed: int = 0, progress: bool = True) -> dict:
-    """Write <out>/target (crops.npy, index.json) and <out>/background (bg.npy, bg.json)."""
+    """Write <out>/target (crops.npy, index.json) and <out>/background (bg.npy, bg.json).
+    `data`: one dataset root or a list of them (their `split` sequences, in order)."""
     out = Path(out_dir)
+    roots = [data] if isinstance(data, (str, Path)) else list(data or [])
 
     def seqs():
         if synthetic:
-            return synthetic_sequences(synthetic, frames=synthetic_frames, seed=seed)
-        return sequences_from_dataset(data, split)
+            yield from synthetic_sequences(synthetic, frames=synthetic_frames, seed=seed)
+            return
+        for root in roots:
+            yield from sequences_from_dataset(root, split)
 
     build_cache(seqs(), out / "target", exemplar_size=exemplar_size, cache_size=3 * exemplar_size,
                 context_amount=context_amount, max_frames=max_frames, progress=progress)

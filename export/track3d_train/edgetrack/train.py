@@ -157,6 +157,9 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
     torch.set_num_threads(int(threads))
     torch.manual_seed(seed)
     ck_path, log_path = out / "ckpt.pt", out / "log.jsonl"
+    ck = torch.load(str(ck_path), map_location="cpu", weights_only=False) if resume and ck_path.is_file() else None
+    if ck is not None:   # the run's own architecture and calibration, whatever the caller's defaults
+        cfg = EdgeTrackConfig.from_dict(ck["config"])
     cache = CropCache(Path(cache_dir) / "target")
     bg = load_background(cache_dir)
     nseq = len(cache.index["sequences"])
@@ -173,14 +176,16 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
     net = EdgeTrack(cfg)
     opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=weight_decay)
     step, elapsed0 = 0, 0.0
-    if resume and ck_path.is_file():
-        ck = torch.load(str(ck_path), map_location="cpu", weights_only=False)
+    if ck is not None:
         net.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optim"])
         step, elapsed0 = int(ck["step"]), float(ck.get("elapsed_s", 0.0))
-        if "calib" in ck:
-            net.cfg = cfg = replace(cfg, calib_a=ck["calib"][0], calib_b=ck["calib"][1])
         sampler.rng = np.random.default_rng([seed, step])
+        if log_path.exists():   # drop rows logged after the checkpoint (a kill between checkpoints)
+            rows = [l for l in log_path.read_text().splitlines() if l.strip() and json.loads(l)["step"] <= step]
+            tmp = log_path.with_name(log_path.name + ".tmp")
+            tmp.write_text("".join(r + "\n" for r in rows))
+            os.replace(tmp, log_path)
         torch.manual_seed(seed + step)
         print(f"resumed from {ck_path} at step {step} ({elapsed0 / 60:.1f} min trained)")
     else:
