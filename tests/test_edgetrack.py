@@ -193,16 +193,17 @@ def test_runtime_follows_reports_lost_and_recovers(trained):
     assert ious[after].mean() > 0.5, ious[after]                     # recovers after the return
 
 
-def test_registry_builds_edgetrack_and_says_when_no_model_is_shipped(trained):
+def test_registry_builds_edgetrack_and_says_when_no_model_is_shipped(trained, tmp_path, monkeypatch):
+    from track3d import onnxmodel
     from track3d import trackers2d as T
-    from track3d.onnxmodel import MODELS_DIR
 
     assert "edgetrack" in T.available_trackers()
     tr = T.create_tracker("edgetrack", model=trained["root"] / "model" / "et", window_influence=0.2)
     assert tr.window_influence == 0.2
-    if not (MODELS_DIR / "edgetrack_search.onnx").is_file():
-        with pytest.raises(T.TrackerUnavailable, match="EdgeTrack"):
-            T.create_tracker("edgetrack")
+    monkeypatch.setattr(onnxmodel, "MODELS_DIR", tmp_path)     # a package without the model
+    with pytest.raises(T.TrackerUnavailable, match="EdgeTrack"):
+        T.create_tracker("edgetrack")
+    monkeypatch.undo()
     with pytest.raises(TypeError, match="unknown EdgeTrack options"):
         T.create_tracker("edgetrack", model=trained["root"] / "model" / "et", scale_num=3)
 
@@ -225,3 +226,19 @@ def test_cli_errors_are_one_line(tmp_path):
     r = subprocess.run([sys.executable, "-m", "track3d_train.cli", "edgetrack", "train", "--cache",
                         str(tmp_path / "none"), "--out", str(tmp_path / "r")], capture_output=True, text=True)
     assert r.returncode == 2 and "no EdgeTrack cache" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_shipped_edgetrack_carries_its_metadata_and_tracks_the_tiny_split(tiny_dataset):
+    from track3d.dataset import Dataset
+    from track3d.onnxmodel import MODELS_DIR
+    from track3d.trackers2d import create_tracker
+    from track3d_train.edgetrack.evaluate import evaluate_tracker
+
+    if not (MODELS_DIR / "edgetrack_search.onnx").is_file():
+        pytest.skip("no EdgeTrack model shipped")
+    meta = OnnxModel(MODELS_DIR / "edgetrack_search.onnx", 1, "edgetrack-search").meta
+    assert meta["exemplar_size"] == 128 and meta["total_stride"] == 16 and meta["training"]["steps"] > 0
+    assert OnnxModel(MODELS_DIR / "edgetrack_template.onnx", 1, "edgetrack-template").meta["config"] == meta["config"]
+    seqs = Dataset(tiny_dataset).sequences("test")
+    r = evaluate_tracker(lambda: create_tracker("edgetrack"), seqs)
+    assert r["sequences"] == len(seqs) and r["AO_2d"] > 0.3, r
