@@ -242,3 +242,15 @@ def test_shipped_edgetrack_carries_its_metadata_and_tracks_the_tiny_split(tiny_d
     seqs = Dataset(tiny_dataset).sequences("test")
     r = evaluate_tracker(lambda: create_tracker("edgetrack"), seqs)
     assert r["sequences"] == len(seqs) and r["AO_2d"] > 0.3, r
+
+
+def test_cli_eval_and_time_run_on_an_exported_model(trained, tiny_dataset, tmp_path, capsys):
+    from track3d_train.edgetrack.cli import main
+
+    prefix = str(trained["root"] / "model" / "et")
+    assert main(["eval", "--model", prefix, "--data", str(tiny_dataset), "--max-seqs", "1", "--quiet",
+                 "--out", str(tmp_path / "e.json")]) == 0
+    rows = json.loads((tmp_path / "e.json").read_text())["trackers"]
+    assert rows["model et"]["sequences"] == 1 and 0.0 <= rows["model et"]["AO_2d"] <= 1.0
+    assert main(["time", "--model", prefix, "--repeats", "5"]) == 0
+    assert "edgetrack search 256" in capsys.readouterr().out

@@ -6,7 +6,8 @@
     track3d-train edgetrack eval    --model runtime/track3d/models/edgetrack --data DATA --split test --compare siamfc-edge
     track3d-train edgetrack time    --model runtime/track3d/models/edgetrack --pin
 
-The recipe of the shipped model (the real training command) is export/scripts/train_edgetrack.sh.
+The long-run recipe (the real training command, resumable, ~3 h) is export/scripts/train_edgetrack.sh;
+the shipped short-run model is described in docs/models.md.
 """
 from __future__ import annotations
 
@@ -81,7 +82,7 @@ def _eval(a) -> int:
     if a.model:
         from track3d.edgetrack import create
 
-        rows["edgetrack"] = evaluate_tracker(lambda: create(model=a.model, threads=a.threads), seqs,
+        rows[f"model {Path(a.model).name}"] = evaluate_tracker(lambda: create(model=a.model, threads=a.threads), seqs,
                                              progress=not a.quiet)
     for name in a.compare:
         opts = {"threads": a.threads} if name.startswith("siamfc") or name == "edgetrack" else {}
@@ -153,7 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
     t = sub.add_parser("train", help="train (resumes from <out>/ckpt.pt)", formatter_class=d)
     t.add_argument("--cache", required=True, help="cache folder from `prepare`")
     t.add_argument("--out", required=True, help="run folder: ckpt.pt, log.jsonl, curves.json/png")
-    t.add_argument("--steps", type=int, default=20000, help="planned steps (sets the LR schedule)")
+    t.add_argument("--steps", type=int, default=20000, help="step cap; the cosine LR ends here or at the time budget, whichever comes first")
     t.add_argument("--batch", type=int, default=32, help="pairs per step")
     t.add_argument("--lr", type=float, default=3e-3, help="peak AdamW learning rate")
     t.add_argument("--max-gap", type=int, default=50, help="max frame gap of a pair")

@@ -214,9 +214,14 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
     elapsed = elapsed0
     with open(log_path, "a") as log:
         while step < steps:
-            for g in opt.param_groups:   # short warm-up, then cosine to 1% of lr
-                warm = min(1.0, (step + 1) / 100.0)
-                g["lr"] = lr * warm * (0.01 + 0.99 * 0.5 * (1 + math.cos(math.pi * step / steps)))
+            # short warm-up, then cosine to 1% of lr over the steps or the time budget, whichever
+            # ends first (the step rate on a shared CPU is not known in advance)
+            frac = step / steps
+            if time_budget_s:
+                frac = max(frac, (elapsed0 + time.perf_counter() - t_start) / time_budget_s)
+            warm = min(1.0, (step + 1) / 100.0)
+            for g in opt.param_groups:
+                g["lr"] = lr * warm * (0.01 + 0.99 * 0.5 * (1 + math.cos(math.pi * min(frac, 1.0))))
             z, x, boxes = sampler.sample(batch)
             logit, ltrb = net(net.normalise(torch.from_numpy(z)), net.normalise(torch.from_numpy(x)))
             parts = edgetrack_loss(logit, ltrb, torch.from_numpy(boxes).float(), cfg)
