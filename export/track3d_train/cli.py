@@ -4,6 +4,7 @@
     track3d-train siamfc  ...   SiamFC, faithful and edge variants
     track3d-train --version
     track3d-train quantize ...  int8 twins of the shipped models (see `track3d-train quantize --help`)
+    track3d-train edgetrack ... EdgeTrack, the fast edge 2D tracker
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ COMMANDS = {
     "boxnet": ("track3d_train.boxnet.cli", "train, export and check A3BoxNet"),
     "siamfc": ("track3d_train.siamfc.cli", "train, export and check SiamFC"),
     "quantize": ("track3d_train.quantize", "int8 (static QDQ) twins of the models, calibrated on a train split"),
+    "edgetrack": ("track3d_train.edgetrack.cli", "train, export and check EdgeTrack (fast edge 2D tracker)"),
 }
 
 

@@ -17,6 +17,8 @@ Built-in names (:func:`available_trackers`):
 - ``"nano"``: OpenCV's NanoTrack with ``backbone=`` / ``neckhead=`` ONNX paths (default: the
   peer models in ``shared/peers/nanotrack-v2`` next to the repository; benchmarks only).
 - ``"siamfc"``, ``"siamfc-edge"``: this project's SiamFC (``track3d.siamfc``), loaded lazily.
+- ``"edgetrack"``: the fast edge tracker (``track3d.edgetrack``); ``model=<dir>/<name>`` picks an
+  exported pair instead of the shipped one; it exposes ``score`` (0..1) and reports ok=False when lost.
 
 OpenCV trackers cannot take a new state box without relearning their appearance model, so
 their ``correct`` does nothing by default (the fused box is reported but the OpenCV tracker
@@ -287,12 +289,23 @@ def _siamfc(variant: str) -> Callable[..., Tracker2D]:
     return factory
 
 
+def _edgetrack(**options) -> Tracker2D:
+    """EdgeTrack (track3d.edgetrack): the shipped model, or model=<dir>/<name> of an exported pair."""
+    from .onnxmodel import ModelError
+    try:
+        from .edgetrack import create
+        return create(**options)
+    except (ModelError, FileNotFoundError) as e:
+        raise TrackerUnavailable(f"EdgeTrack model not available: {e}") from None
+
+
 _REGISTRY: dict[str, Callable[..., Tracker2D]] = {
     "oracle": OracleTracker,
     **{name: _opencv(name) for name in _OPENCV},
     "nano": _nano,
     "siamfc": _siamfc("faithful"),
     "siamfc-edge": _siamfc("edge"),
+    "edgetrack": _edgetrack,
 }
 
 

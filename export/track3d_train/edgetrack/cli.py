@@ -1,0 +1,206 @@
+"""`track3d-train edgetrack prepare|train|export|eval|time`: the EdgeTrack pipeline.
+
+    track3d-train edgetrack prepare --data DATA --out CACHE
+    track3d-train edgetrack train   --cache CACHE --out RUN --time-budget-min 180   # resumes from RUN/ckpt.pt
+    track3d-train edgetrack export  --checkpoint RUN/ckpt.pt --out runtime/track3d/models/edgetrack
+    track3d-train edgetrack eval    --model runtime/track3d/models/edgetrack --data DATA --split test --compare siamfc-edge
+    track3d-train edgetrack time    --model runtime/track3d/models/edgetrack --pin
+
+The long-run recipe (the real training command, resumable, ~3 h) is export/scripts/train_edgetrack.sh;
+the shipped short-run model is described in docs/models.md.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+
+def _prepare(a) -> int:
+    from .data import prepare
+
+    if not a.synthetic and not a.data:
+        print("error: give --data ROOT (a dataset) or --synthetic N", file=sys.stderr)
+        return 2
+    t0 = time.perf_counter()
+    info = prepare(a.out, data=a.data, split=a.split, synthetic=a.synthetic, synthetic_frames=a.synthetic_frames,
+                   max_frames=a.max_frames, max_background=a.max_background, seed=a.seed, progress=not a.quiet)
+    print(f"cache {a.out}: {info['target_crops']} target crops, {info['background_crops']} background crops "
+          f"in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+def _train(a) -> int:
+    from .model import EdgeTrackConfig
+    from .train import train
+
+    if not (Path(a.cache) / "target" / "index.json").is_file():
+        print(f"error: {a.cache} is no EdgeTrack cache (run `prepare` first)", file=sys.stderr)
+        return 2
+    cfg = EdgeTrackConfig()
+    print(f"EdgeTrack: widths {cfg.widths}, crops {cfg.exemplar_size}/{cfg.instance_size}, batch {a.batch}, "
+          f"{a.steps} steps, {a.threads} thread(s)")
+    s = train(cfg, a.cache, a.out, steps=a.steps, batch=a.batch, lr=a.lr, seed=a.seed, threads=a.threads,
+              time_budget_s=a.time_budget_min * 60 if a.time_budget_min else None,
+              ckpt_every_s=a.ckpt_every_min * 60, val_every=a.val_every, max_gap=a.max_gap,
+              resume=not a.no_resume, init_from=a.init_from, progress=not a.quiet)
+    print(json.dumps(s))
+    return 0
+
+
+def _export(a) -> int:
+    import dataclasses
+
+    from .export import export_onnx, parity
+    from .train import load_checkpoint
+
+    net, ck = load_checkpoint(a.checkpoint)
+    over = {k: getattr(a, k) for k in ("window_influence", "penalty_k", "size_lr", "score_threshold",
+                                       "instance_size", "lost_instance_size") if getattr(a, k) is not None}
+    if over:
+        net.cfg = dataclasses.replace(net.cfg, **over)
+    extra = {"training": {"steps": ck.get("step"), "batch": ck.get("batch"), "seed": ck.get("seed"),
+                          "elapsed_s": round(float(ck.get("elapsed_s", 0)), 1),
+                          "data": a.data_note or "track3d simulator train split"}}
+    pz, px = export_onnx(net, a.out, extra)
+    p = parity(net, pz, px)
+    print(f"wrote {pz} ({pz.stat().st_size / 1e3:.0f} kB), {px} ({px.stat().st_size / 1e3:.0f} kB)")
+    print("parity torch vs onnxruntime:", json.dumps(p))
+    return 0
+
+
+def _eval(a) -> int:
+    from track3d.dataset import Dataset
+    from track3d.trackers2d import create_tracker
+
+    from .evaluate import evaluate_tracker
+
+    seqs = Dataset(a.data).sequences(a.split)[: a.max_seqs or None]
+    rows = {}
+    if a.model:
+        from track3d.edgetrack import create
+
+        rows[f"model {Path(a.model).name}"] = evaluate_tracker(lambda: create(model=a.model, threads=a.threads), seqs,
+                                             progress=not a.quiet)
+    for name in a.compare:
+        opts = {"threads": a.threads} if name.startswith("siamfc") or name == "edgetrack" else {}
+        rows[name] = evaluate_tracker(lambda: create_tracker(name, **opts), seqs, progress=not a.quiet)
+    print(json.dumps(rows, indent=1))
+    if a.out:
+        Path(a.out).write_text(json.dumps({"data_split": a.split, "sequences": len(seqs), "trackers": rows}, indent=1))
+    return 0
+
+
+def _time(a) -> int:
+    """Median ms of the networks and the crop at a thread count, EdgeTrack vs SiamFC-edge,
+    interleaved in one process (ratios hold under load, absolute numbers do not)."""
+    import os
+
+    import numpy as np
+
+    from track3d.onnxmodel import OnnxModel
+    from track3d.siamfc import crop_square, model_paths
+
+    if a.pin and hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[-1]})
+    rng = np.random.default_rng(0)
+    et_z, et_x = OnnxModel(f"{a.model}_template.onnx", a.threads), OnnxModel(f"{a.model}_search.onnx", a.threads)
+    sz, sx = (OnnxModel(p, a.threads) for p in model_paths("edge"))
+    n_et, n_sf = int(et_x.meta["instance_size"]), int(sx.meta["instance_size"])
+    n_lost = int(et_x.meta["lost_instance_size"])
+    ez = int(et_x.meta["exemplar_size"])
+    kern = et_z.run({"template": rng.integers(0, 256, (1, ez, ez, 3), dtype=np.uint8)})[0]
+    feat = sz.run({"exemplar": rng.integers(0, 256, (1, 127, 127, 3), dtype=np.uint8)})[0]
+    image = rng.integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    jobs = {
+        f"edgetrack search {n_et}": lambda: et_x.run({"search": image[None, :n_et, :n_et].copy(), "kernel": kern}),
+        f"edgetrack search lost {n_lost}": lambda: et_x.run({"search": image[None, :n_lost, :n_lost].copy(), "kernel": kern}),
+        f"siamfc-edge search {n_sf}": lambda: sx.run({"search": image[None, :n_sf, :n_sf].copy(), "exemplar_feature": feat}),
+        f"crop {n_et} of a 300 px region": lambda: crop_square(image, np.array([320.0, 240.0]), 300.0, n_et, (9, 9, 9)),
+        f"crop {n_sf} of a 300 px region": lambda: crop_square(image, np.array([320.0, 240.0]), 300.0, n_sf, (9, 9, 9)),
+    }
+    times = {k: [] for k in jobs}
+    for _ in range(a.repeats):
+        for k, f in jobs.items():
+            t0 = time.perf_counter()
+            f()
+            times[k].append(1e3 * (time.perf_counter() - t0))
+    out = {k: round(float(np.median(v[3:])), 3) for k, v in times.items()}
+    out["threads"], out["pinned"], out["repeats"] = a.threads, bool(a.pin), a.repeats
+    print(json.dumps(out, indent=1))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="track3d-train edgetrack", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="cmd", required=True)
+    d = argparse.ArgumentDefaultsHelpFormatter
+
+    q = sub.add_parser("prepare", help="crop target and background caches once", formatter_class=d)
+    q.add_argument("--data", nargs="+", help="dataset root(s) (dataset.json); several are concatenated")
+    q.add_argument("--split", default="train", help="dataset split")
+    q.add_argument("--out", required=True, help="cache folder")
+    q.add_argument("--max-frames", type=int, default=3000, help="bound on target crops (442 kB each)")
+    q.add_argument("--max-background", type=int, default=1000, help="bound on background crops")
+    q.add_argument("--synthetic", type=int, default=0, help="N synthetic sequences instead of a dataset")
+    q.add_argument("--synthetic-frames", type=int, default=60, help="frames per synthetic sequence")
+    q.add_argument("--seed", type=int, default=0, help="random seed")
+    q.add_argument("--quiet", action="store_true", help="no progress bar")
+    q.set_defaults(fn=_prepare)
+
+    t = sub.add_parser("train", help="train (resumes from <out>/ckpt.pt)", formatter_class=d)
+    t.add_argument("--cache", required=True, help="cache folder from `prepare`")
+    t.add_argument("--out", required=True, help="run folder: ckpt.pt, log.jsonl, curves.json/png")
+    t.add_argument("--steps", type=int, default=20000, help="step cap; the cosine LR ends here or at the time budget, whichever comes first")
+    t.add_argument("--batch", type=int, default=32, help="pairs per step")
+    t.add_argument("--lr", type=float, default=3e-3, help="peak AdamW learning rate")
+    t.add_argument("--max-gap", type=int, default=50, help="max frame gap of a pair")
+    t.add_argument("--val-every", type=int, default=200, help="steps between validations")
+    t.add_argument("--ckpt-every-min", type=float, default=3.0, help="minutes between atomic checkpoints")
+    t.add_argument("--seed", type=int, default=0, help="random seed")
+    t.add_argument("--threads", type=int, default=1, help="torch threads")
+    t.add_argument("--time-budget-min", type=float, default=None, help="stop (and checkpoint) after this much training time")
+    t.add_argument("--init-from", help="start from another run's checkpoint (fine-tuning)")
+    t.add_argument("--no-resume", action="store_true", help="start over even if <out>/ckpt.pt exists")
+    t.add_argument("--quiet", action="store_true", help="no progress bar")
+    t.set_defaults(fn=_train)
+
+    e = sub.add_parser("export", help="write <out>_template.onnx + <out>_search.onnx, check parity", formatter_class=d)
+    e.add_argument("--checkpoint", required=True, help="ckpt.pt of a run")
+    e.add_argument("--out", required=True, help="path prefix")
+    e.add_argument("--data-note", default=None, help="what the model was trained on (metadata)")
+    for k, ty in (("window-influence", float), ("penalty-k", float), ("size-lr", float), ("score-threshold", float),
+                  ("instance-size", int), ("lost-instance-size", int)):
+        e.add_argument(f"--{k}", type=ty, default=None, help="tracking default stored in the metadata (default: the config's)")
+    e.set_defaults(fn=_export)
+
+    v = sub.add_parser("eval", help="one-pass AO_2d + lost precision/recall on a split", formatter_class=d)
+    v.add_argument("--model", help="prefix of <name>_template/_search.onnx")
+    v.add_argument("--data", required=True, help="dataset root")
+    v.add_argument("--split", default="test", help="dataset split")
+    v.add_argument("--compare", nargs="*", default=[], help="registered 2D trackers to run on the same frames")
+    v.add_argument("--max-seqs", type=int, default=0, help="0: all")
+    v.add_argument("--threads", type=int, default=1, help="onnxruntime threads")
+    v.add_argument("--out", help="also write the numbers to this JSON file")
+    v.add_argument("--quiet", action="store_true", help="no progress bar")
+    v.set_defaults(fn=_eval)
+
+    m = sub.add_parser("time", help="median ms of the nets and crops vs SiamFC-edge, interleaved", formatter_class=d)
+    m.add_argument("--model", required=True, help="prefix of <name>_template/_search.onnx")
+    m.add_argument("--threads", type=int, default=1, help="onnxruntime threads")
+    m.add_argument("--repeats", type=int, default=200, help="calls of each, interleaved")
+    m.add_argument("--pin", action="store_true", help="pin the process to one core")
+    m.set_defaults(fn=_time)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    return int(a.fn(a) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

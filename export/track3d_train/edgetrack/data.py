@@ -1,0 +1,213 @@
+"""Training pairs for EdgeTrack: crop caches and an augmenting pair sampler.
+
+`prepare` writes two caches into one folder:
+- ``target/``: target-centred crops (SiamFC's cache format and code, `siamfc.data.build_cache`,
+  here with a 128 template and a 384 cache = 3x the template's image extent, room for the
+  scale and shift jitter of the 256 search crop);
+- ``background/``: 256 search crops with no target in them (``bg.npy`` + ``bg.json``): around
+  the last seen position on frames where the target is absent (the exits from view) and at
+  random places away from the target, so the classifier learns what 'lost' looks like.
+
+The sampler draws (template, search, box) with the field's augmentations: search scale and shift
+jitter (the target anywhere in the search region), colour / brightness / gamma / low light,
+grayscale, Gaussian or motion blur, sensor noise, horizontal flip, and negative pairs (a search
+crop from another sequence or from the background cache: no target, all cells negative).
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from track3d.siamfc import crop_square
+
+from ..siamfc.data import CropCache, build_cache, sequences_from_dataset, synthetic_sequences
+
+__all__ = ["prepare", "PairSampler", "CropCache", "CACHE_SIZE", "load_background"]
+
+CACHE_SIZE = 384   # 3 x the default template's image extent
+
+
+def _background(sequences, out_dir: Path, exemplar_size: int, instance_size: int, context_amount: float,
+                max_crops: int, seed: int) -> int:
+    rng = np.random.default_rng(seed)
+    crops, origin = [], []
+    plans = []
+    for name, get, boxes, absent, stride in sequences:
+        boxes = np.asarray(boxes, np.float64)
+        absent = np.asarray(absent, bool)
+        ok = ~absent & np.all(np.isfinite(boxes), 1) & (boxes[:, 2] > 2) & (boxes[:, 3] > 2)
+        last = None
+        for i in range(len(boxes)):
+            if ok[i]:
+                last = boxes[i]
+                if i % 2 == 0:
+                    plans.append((name, get, i, boxes[i], "away"))
+            elif last is not None and absent[i]:
+                plans.append((name, get, i, last, "absent"))
+    if len(plans) > max_crops:
+        keep = np.sort(rng.choice(len(plans), max_crops, replace=False))
+        plans = [plans[k] for k in keep]
+    for name, get, i, b, kind in plans:
+        img = get(i)
+        h, w = img.shape[:2]
+        ctx = context_amount * (b[2] + b[3])
+        x_sz = math.sqrt((b[2] + ctx) * (b[3] + ctx)) * instance_size / exemplar_size
+        c = b[:2] + b[2:] / 2
+        if kind == "away":   # a search window that does not touch the target
+            for _ in range(20):
+                cand = rng.uniform([0, 0], [w, h])
+                if np.all(np.abs(cand - c) > x_sz / 2 + b[2:] / 2 + 2):
+                    c = cand
+                    break
+            else:
+                continue
+        else:
+            c = np.clip(c, 0, [w, h])
+        avg = tuple(float(v) for v in cv2.mean(img)[:3])
+        crops.append(crop_square(img, c, x_sz, instance_size, avg))
+        origin.append([name, int(i), kind])
+    arr = np.stack(crops) if crops else np.zeros((0, instance_size, instance_size, 3), np.uint8)
+    np.save(out_dir / "bg.npy", arr)
+    (out_dir / "bg.json").write_text(json.dumps({"origin": origin, "instance_size": instance_size}))
+    return len(arr)
+
+
+def prepare(out_dir, data=None, split: str = "train", synthetic: int = 0, synthetic_frames: int = 60,
+            max_frames: int = 3000, max_background: int = 1000, exemplar_size: int = 128,
+            instance_size: int = 256, context_amount: float = 0.5, seed: int = 0, progress: bool = True) -> dict:
+    """Write <out>/target (crops.npy, index.json) and <out>/background (bg.npy, bg.json).
+    `data`: one dataset root or a list of them (their `split` sequences, in order)."""
+    out = Path(out_dir)
+    roots = [data] if isinstance(data, (str, Path)) else list(data or [])
+
+    def seqs():
+        if synthetic:
+            yield from synthetic_sequences(synthetic, frames=synthetic_frames, seed=seed)
+            return
+        for root in roots:
+            yield from sequences_from_dataset(root, split)
+
+    build_cache(seqs(), out / "target", exemplar_size=exemplar_size, cache_size=3 * exemplar_size,
+                context_amount=context_amount, max_frames=max_frames, progress=progress)
+    (out / "background").mkdir(parents=True, exist_ok=True)
+    nb = _background(seqs(), out / "background", exemplar_size, instance_size, context_amount,
+                     max_background, seed)
+    nt = len(json.loads((out / "target" / "index.json").read_text())["seq"])
+    return {"target_crops": nt, "background_crops": nb}
+
+
+def load_background(cache_dir) -> np.ndarray:
+    p = Path(cache_dir) / "background" / "bg.npy"
+    return np.load(p, mmap_mode="r") if p.is_file() else np.zeros((0, 256, 256, 3), np.uint8)
+
+
+def _motion_kernel(rng, length):
+    k = np.zeros((length, length), np.float32)
+    k[length // 2] = 1.0
+    rot = cv2.getRotationMatrix2D(((length - 1) / 2, (length - 1) / 2), float(rng.uniform(0, 180)), 1.0)
+    k = cv2.warpAffine(k, rot, (length, length))
+    return k / max(k.sum(), 1e-6)
+
+
+class PairSampler:
+    """Random (template, search, box) batches: uint8 NHWC crops and boxes (B, 4) [x0, y0, x1, y1]
+    in search-crop pixels (NaN for negative pairs). `sequences` restricts to some sequence ids
+    (the train / validation split of the cache)."""
+
+    def __init__(self, cache: CropCache, background: np.ndarray, exemplar_size: int = 128,
+                 instance_size: int = 256, max_gap: int = 50, scale_jitter: float = 0.25,
+                 shift: float | None = None, neg_other: float = 0.1, neg_background: float = 0.1,
+                 sequences=None, seed: int = 0, augment: bool = True):
+        self.c = cache
+        self.bg = background
+        self.ez, self.xz = exemplar_size, instance_size
+        # the target anywhere within a quarter crop of the centre (64 px of a 256 search crop)
+        self.max_gap, self.scale_jitter = max_gap, scale_jitter
+        self.shift = instance_size / 4.0 if shift is None else shift
+        self.neg_other, self.neg_background = neg_other, neg_background
+        self.augment = augment
+        self.rng = np.random.default_rng(seed)
+        self.src = cache.crops.shape[1]
+        sizes = np.asarray(cache.index["size_in_crop"], np.float64)
+        self.size_in_crop = sizes * 1.0      # the cache scale equals the template's
+        groups = [np.nonzero(cache.seq == s)[0] for s in range(len(cache.index["sequences"]))]
+        ids = range(len(groups)) if sequences is None else sequences
+        self.groups = [groups[s] for s in ids if len(groups[s]) >= 2]
+        if not self.groups:
+            raise ValueError("the crop cache has no sequence with two usable frames")
+
+    def _warp(self, crop, out, scale, dx, dy):
+        cs, co = (self.src - 1) / 2.0, (out - 1) / 2.0
+        m = np.array([[scale, 0, co - scale * cs + dx], [0, scale, co - scale * cs + dy]])
+        return cv2.warpAffine(np.asarray(crop), m, (out, out), flags=cv2.INTER_LINEAR,
+                              borderMode=cv2.BORDER_REPLICATE)
+
+    def _photometric(self, im: np.ndarray, search: bool) -> np.ndarray:
+        r = self.rng
+        f = im.astype(np.float32)
+        if r.random() < 0.8:   # brightness / low light, per-channel tint, gamma
+            f = f * r.uniform(0.4, 1.5) * r.uniform(0.92, 1.08, 3)
+            f = 255.0 * (np.clip(f, 0, 255) / 255.0) ** r.uniform(0.7, 1.4)
+        if search and r.random() < 0.25:
+            if r.random() < 0.5:
+                f = cv2.GaussianBlur(f, (0, 0), r.uniform(0.5, 1.8))
+            else:
+                f = cv2.filter2D(f, -1, _motion_kernel(r, int(r.integers(3, 10))))
+        if search and r.random() < 0.4:
+            f = f + r.normal(0, r.uniform(1, 8), f.shape).astype(np.float32)
+        return np.clip(f, 0, 255).astype(np.uint8)
+
+    def sample(self, batch: int):
+        r = self.rng
+        z = np.empty((batch, self.ez, self.ez, 3), np.uint8)
+        x = np.empty((batch, self.xz, self.xz, 3), np.uint8)
+        boxes = np.full((batch, 4), np.nan, np.float64)
+        for k in range(batch):
+            g = self.groups[r.integers(len(self.groups))]
+            a = r.integers(len(g))
+            fr = self.c.frame[g]
+            near = np.nonzero(np.abs(fr - fr[a]) <= self.max_gap)[0]
+            b = near[r.integers(len(near))]
+            jz = 1.0 + (r.uniform(-0.04, 0.04) if self.augment else 0.0)
+            zc = self._warp(self.c.crops[g[a]], self.ez, jz, *(r.uniform(-3, 3, 2) if self.augment else (0, 0)))
+            u = r.random()
+            if u < self.neg_background and len(self.bg):
+                xc = np.array(self.bg[r.integers(len(self.bg))])
+                if xc.shape[0] != self.xz:
+                    xc = cv2.resize(xc, (self.xz, self.xz), interpolation=cv2.INTER_AREA)
+                box = None
+            else:
+                other = u < self.neg_background + self.neg_other and len(self.groups) > 1
+                src = g[b]
+                if other:
+                    while True:
+                        h = self.groups[r.integers(len(self.groups))]
+                        if h is not g:
+                            break
+                    src = h[r.integers(len(h))]
+                s = math.exp(r.uniform(-self.scale_jitter, self.scale_jitter))
+                dx, dy = r.uniform(-self.shift, self.shift, 2)
+                xc = self._warp(self.c.crops[src], self.xz, s, dx, dy)
+                if other:
+                    box = None
+                else:
+                    cx, cy = self.xz / 2.0 + dx, self.xz / 2.0 + dy
+                    w, h2 = self.size_in_crop[src] * s
+                    box = np.array([cx - w / 2, cy - h2 / 2, cx + w / 2, cy + h2 / 2])
+            if self.augment:
+                zc, xc = self._photometric(zc, False), self._photometric(xc, True)
+                if r.random() < 0.1:   # grayscale, both crops
+                    zc = np.repeat(cv2.cvtColor(zc, cv2.COLOR_RGB2GRAY)[..., None], 3, 2)
+                    xc = np.repeat(cv2.cvtColor(xc, cv2.COLOR_RGB2GRAY)[..., None], 3, 2)
+                if r.random() < 0.5:
+                    zc, xc = zc[:, ::-1], xc[:, ::-1]
+                    if box is not None:
+                        box = np.array([self.xz - box[2], box[1], self.xz - box[0], box[3]])
+            z[k], x[k] = zc, xc
+            if box is not None:
+                boxes[k] = box
+        return z, x, boxes

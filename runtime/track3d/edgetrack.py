@@ -1,0 +1,201 @@
+"""EdgeTrack 2D tracker on onnxruntime (no torch): a depthwise-separable Siamese tracker with a
+classification + box-regression head, built for one CPU thread, that knows when it has lost
+the target.
+
+Two ONNX graphs (written by `track3d-train edgetrack export`):
+    <name>_template.onnx  uint8 (1, 128, 128, 3) RGB template crop -> kernel (1, 64, C), once per init
+    <name>_search.onnx    uint8 (1, N, N, 3) RGB search crop + kernel -> logit (1, n, n), ltrb (1, 4, n, n)
+
+Per frame: one search crop around the last centre (`track3d.siamfc.crop_square`: one
+cv2.warpAffine, or a pyramid + area resize when shrinking by more than 2), one ORT call, then
+numpy: the box of every cell from its (l, t, r, b) distances, a size / aspect change penalty,
+a cosine window, the best cell, its logit calibrated into `score` (0..1), and a damped size
+update (SiamRPN / NanoTrack post-processing).
+
+Lost and found: when `score` falls below the threshold, `update` returns ok=False and the box
+stays where it was; while lost the search crop is wider (`lost_instance_size` pixels at the
+same image scale, so the template still matches) and has no cosine window; the first frame
+whose score passes the threshold again re-acquires the target there.
+
+Every size and hyper-parameter comes from the models' metadata (key 'track3d'); keyword
+overrides to `create` / `EdgeTracker` win over it.
+"""
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .frames import check_image
+from .onnxmodel import OnnxModel, shipped_model
+from .siamfc import crop_square
+
+__all__ = ["EdgeTracker", "create", "model_paths", "TUNABLE", "SHIPPED_NAME"]
+
+SHIPPED_NAME = "edgetrack"
+TUNABLE = ("instance_size", "lost_instance_size", "window_influence", "penalty_k", "size_lr",
+           "score_threshold", "context_amount")
+
+
+def model_paths(name: str = SHIPPED_NAME) -> tuple[Path, Path]:
+    """(template, search) paths of a shipped model."""
+    return shipped_model(f"{name}_template.onnx"), shipped_model(f"{name}_search.onnx")
+
+
+def _sigmoid(x):
+    return 1.0 / (1.0 + np.exp(-x))
+
+
+def _change(r):
+    return np.maximum(r, 1.0 / r)
+
+
+class EdgeTracker:
+    """EdgeTrack behind the Tracker2D seam: init(image, box), update(image) -> (ok, box), correct(box).
+
+    Images are (H, W, 3) uint8 RGB; boxes [x, y, w, h] pixels. After each update `score` is
+    the calibrated probability (0..1) that the chosen cell is on the target, `lost` whether
+    the tracker considers the target gone (then update returned ok=False), and `timings_ms`
+    the stage times (crop, net, post).
+    """
+
+    def __init__(self, template_model: str | Path, search_model: str | Path, threads: int = 1, **overrides):
+        self.template_net = OnnxModel(template_model, threads, "edgetrack-template")
+        self.search_net = OnnxModel(search_model, threads, "edgetrack-search")
+        meta = self.search_net.meta
+        self.meta = meta
+        unknown = set(overrides) - set(TUNABLE)
+        if unknown:
+            raise TypeError(f"unknown EdgeTrack options: {', '.join(sorted(unknown))} (tunable: {', '.join(TUNABLE)})")
+        hp = dict(meta["tracking"])
+        hp["instance_size"] = meta["instance_size"]
+        hp["lost_instance_size"] = meta["lost_instance_size"]
+        hp.update({k: v for k, v in overrides.items() if v is not None})
+        self.exemplar_size = int(meta["exemplar_size"])
+        self.stride = int(meta["total_stride"])
+        self.instance_size = int(hp["instance_size"])
+        self.lost_instance_size = int(hp["lost_instance_size"])
+        for name in ("instance_size", "lost_instance_size"):
+            v = getattr(self, name)
+            if v < self.exemplar_size or v % self.stride:
+                raise ValueError(f"{name} {v} must be >= {self.exemplar_size} and a multiple of the stride {self.stride}")
+        self.window_influence = float(hp["window_influence"])
+        self.penalty_k = float(hp["penalty_k"])
+        self.size_lr = float(hp["size_lr"])
+        self.score_threshold = float(hp["score_threshold"])
+        self.context_amount = float(hp["context_amount"])
+        self.calib_a, self.calib_b = float(meta["score"]["a"]), float(meta["score"]["b"])
+        self._grids = {}
+        self._kernel = None
+        self.score = float("nan")
+        self.lost = False
+        self.timings_ms: dict[str, float] = {}
+
+    def _grid(self, size: int):
+        """(cell centres (n,), cosine window (n, n)) of a search crop of `size` pixels."""
+        g = self._grids.get(size)
+        if g is None:
+            n = size // self.stride
+            centres = np.arange(n, dtype=np.float64) * self.stride + self.stride / 2.0
+            h = np.hanning(n + 2)[1:-1]     # no zero weight on the border cells
+            g = self._grids[size] = (centres, np.outer(h, h))
+        return g
+
+    # -- state -------------------------------------------------------------------------------
+    def _set_box(self, box) -> None:
+        b = np.asarray(box, dtype=np.float64).reshape(-1)
+        if b.shape != (4,) or not np.all(np.isfinite(b)) or b[2] <= 0 or b[3] <= 0:
+            raise ValueError(f"box must be [x, y, w, h], finite with positive size, got {b.tolist()}")
+        self.center = b[:2] + b[2:] / 2.0
+        self.target_sz = b[2:].copy()
+        self._min_sz = max(2.0, 0.2 * float(self.target_sz.min()))
+
+    def _z_sz(self) -> float:
+        ctx = self.context_amount * self.target_sz.sum()
+        return math.sqrt(float(np.prod(self.target_sz + ctx)))
+
+    def init(self, image: np.ndarray, box) -> None:
+        image = check_image(image)
+        self._set_box(box)
+        self.avg_color = tuple(float(c) for c in cv2.mean(image)[:3])
+        z = crop_square(image, self.center, self._z_sz(), self.exemplar_size, self.avg_color)
+        self._kernel = self.template_net.run({"template": z[None]})[0]
+        self.lost = False
+        self.score = 1.0
+
+    def correct(self, box) -> None:
+        """Adopt a new state box (e.g. the 2D-3D fused box): centre and size, same template."""
+        if self._kernel is None:
+            raise RuntimeError("correct() before init()")
+        self._set_box(box)
+
+    @property
+    def box(self) -> np.ndarray:
+        return np.concatenate([self.center - self.target_sz / 2.0, self.target_sz])
+
+    def update(self, image: np.ndarray) -> tuple[bool, np.ndarray]:
+        if self._kernel is None:
+            raise RuntimeError("update() before init()")
+        image = check_image(image)
+        t0 = time.perf_counter()
+        size = self.lost_instance_size if self.lost else self.instance_size
+        scale = self.exemplar_size / self._z_sz()            # crop pixels per image pixel
+        crop = crop_square(image, self.center, size / scale, size, self.avg_color)
+        t1 = time.perf_counter()
+        logit, ltrb = self.search_net.run({"search": crop[None], "kernel": self._kernel})
+        t2 = time.perf_counter()
+        logit, ltrb = logit[0].astype(np.float64), ltrb[0].astype(np.float64)
+        if not (np.all(np.isfinite(logit)) and np.all(np.isfinite(ltrb))):
+            self.score, self.lost = 0.0, True
+            return False, self.box
+        centres, window = self._grid(size)
+        px, py = centres[None, :], centres[:, None]
+        w, h = ltrb[0] + ltrb[2], ltrb[1] + ltrb[3]
+        cx, cy = px + (ltrb[2] - ltrb[0]) / 2.0, py + (ltrb[3] - ltrb[1]) / 2.0
+        tw, th = self.target_sz * scale
+        pad = (w + h) / 2.0
+        s_c = _change(np.sqrt((w + pad) * (h + pad)) / math.sqrt((tw + (tw + th) / 2) * (th + (tw + th) / 2)))
+        r_c = _change((tw / th) / np.maximum(w / np.maximum(h, 1e-6), 1e-6))
+        penalty = np.exp(-(r_c * s_c - 1.0) * self.penalty_k)
+        prob = _sigmoid(logit)
+        pscore = penalty * prob
+        if not self.lost:
+            pscore = pscore * (1.0 - self.window_influence) + window * self.window_influence
+        i, j = np.unravel_index(int(np.argmax(pscore)), pscore.shape)
+        self.score = float(_sigmoid(self.calib_a * logit[i, j] + self.calib_b))
+        if self.score < self.score_threshold:
+            self.lost = True
+            self.timings_ms = {"crop": 1e3 * (t1 - t0), "net": 1e3 * (t2 - t1), "post": 1e3 * (time.perf_counter() - t2)}
+            return False, self.box
+        self.lost = False
+        lr = float(penalty[i, j] * prob[i, j] * self.size_lr)
+        self.center = self.center + (np.array([cx[i, j], cy[i, j]]) - size / 2.0) / scale
+        new_sz = np.array([w[i, j], h[i, j]]) / scale
+        self.target_sz = np.maximum((1.0 - lr) * self.target_sz + lr * new_sz, self._min_sz)
+        hh, ww = image.shape[:2]
+        self.center = np.clip(self.center, 0.0, [ww, hh])
+        self.timings_ms = {"crop": 1e3 * (t1 - t0), "net": 1e3 * (t2 - t1), "post": 1e3 * (time.perf_counter() - t2)}
+        return True, self.box
+
+
+def create(threads: int = 1, model: str | Path | None = None, template_model: str | Path | None = None,
+           search_model: str | Path | None = None, **overrides) -> EdgeTracker:
+    """An EdgeTrack tracker: the shipped model, or `model` a prefix `<dir>/<name>` of a pair
+    `<name>_template.onnx` / `<name>_search.onnx`, or both explicit paths. Overrides: TUNABLE."""
+    if model is not None:
+        p = Path(model)
+        stem = p.name
+        for suffix in ("_template.onnx", "_search.onnx", ".onnx"):
+            if stem.endswith(suffix):
+                stem = stem[: -len(suffix)]
+                break
+        template_model = template_model or p.parent / f"{stem}_template.onnx"
+        search_model = search_model or p.parent / f"{stem}_search.onnx"
+    if (template_model is None) != (search_model is None):
+        raise ValueError("give both template_model and search_model, or neither")
+    if template_model is None:
+        template_model, search_model = model_paths()
+    return EdgeTracker(template_model, search_model, threads=threads, **overrides)

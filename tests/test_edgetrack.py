@@ -1,0 +1,256 @@
+"""EdgeTrack: labels and losses (hand cases), score calibration, training with resume, export +
+parity + metadata, and the runtime tracker on a synthetic target that leaves the view and
+comes back (a tiny model trained here, on synthetic sequences, in about a minute)."""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from track3d.boxes import iou_2d  # noqa: E402
+from track3d.onnxmodel import OnnxModel  # noqa: E402
+from track3d_train.edgetrack.model import (EdgeTrack, EdgeTrackConfig, _iou_loss, cell_centres,  # noqa: E402
+                                           edgetrack_loss, make_targets)
+from track3d_train.edgetrack.train import fit_platt  # noqa: E402
+
+TINY = dict(exemplar_size=128, instance_size=256, lost_instance_size=336, widths=(8, 16, 24, 32),
+            feat_channels=32, head_channels=32, head_blocks=1)
+
+
+# -- labels, losses, calibration: hand cases -----------------------------------------------------
+def test_cell_centres_and_targets_hand_case():
+    assert cell_centres(3, 16).tolist() == [8.0, 24.0, 40.0]
+    # 4x4 map (64 px crop), a 20 x 20 box centred on cell (1, 2): centre (40, 24)
+    boxes = torch.tensor([[30.0, 14.0, 50.0, 34.0], [float("nan")] * 4])
+    cls, reg_mask, ltrb = make_targets(boxes, 4, 16, 0.5)
+    # half axes max(10 * 0.5, 12) = 12: only the centre cell lies within
+    assert cls[0].nonzero().tolist() == [[1, 2]]
+    assert reg_mask[0].nonzero().tolist() == [[1, 2]]
+    assert ltrb[0, :, 1, 2].tolist() == [10.0, 10.0, 10.0, 10.0]
+    assert cls[1].sum() == 0 and reg_mask[1].sum() == 0   # negative pair: no target anywhere
+
+
+def test_iou_loss_hand_case():
+    t = torch.tensor([[10.0, 10.0, 10.0, 10.0]])
+    assert float(_iou_loss(t, t)) == pytest.approx(0.0, abs=1e-6)
+    # 20x20 target, prediction 10x20 inside it: IoU 1/2
+    assert float(_iou_loss(torch.tensor([[0.0 + 1e-9, 10.0, 10.0, 10.0]]), t)) == pytest.approx(0.5, abs=1e-6)
+
+
+def test_loss_is_balanced_and_perfect_logits_cost_nothing():
+    cfg = EdgeTrackConfig(**TINY)
+    boxes = torch.tensor([[30.0, 14.0, 50.0, 34.0]])
+    cls, _, tgt = make_targets(boxes, 8, 16, cfg.pos_radius)
+    zero = edgetrack_loss(torch.zeros(1, 1, 8, 8), tgt, boxes, cfg)
+    assert float(zero["cls"]) == pytest.approx(math.log(2), rel=1e-5)   # 0.5 log2 + 0.5 log2
+    assert float(zero["reg"]) == pytest.approx(0.0, abs=1e-6)
+    perfect = edgetrack_loss((cls * 2 - 1)[:, None] * 30, tgt, boxes, cfg)
+    assert float(perfect["loss"]) < 1e-6
+
+
+def test_platt_fit_recovers_a_known_calibration():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=20000)
+    y = rng.random(20000) < 1 / (1 + np.exp(-(2 * x - 1)))
+    a, b = fit_platt(x, y)
+    assert a == pytest.approx(2.0, abs=0.1) and b == pytest.approx(-1.0, abs=0.1)
+    a, b = fit_platt(np.array([-3.0, -2, 2, 3]), np.array([0, 0, 1, 1]))   # separable: stays finite
+    assert 0 < a < 20 and abs(b) < 5
+
+
+def test_lost_scores_hand_case():
+    from track3d_train.edgetrack.evaluate import lost_scores
+
+    absent = np.array([0, 1, 1, 0, 0], bool)
+    oks = np.array([True, False, True, False, True])
+    gt = np.tile([10.0, 10, 10, 10], (5, 1))
+    pred = gt.copy()
+    s = lost_scores(oks, absent, pred, gt, reacquire_frames=3)
+    assert s == {"lost_true": 1, "lost_reported": 2, "absent_frames": 2, "returns": 1, "reacquired": 1}
+
+
+# -- training, export, runtime -------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """A tiny EdgeTrack trained on synthetic sequences, exported to ONNX."""
+    from track3d_train.edgetrack.data import prepare
+    from track3d_train.edgetrack.export import export_onnx
+    from track3d_train.edgetrack.train import load_checkpoint, train
+
+    root = tmp_path_factory.mktemp("edgetrack")
+    info = prepare(root / "cache", synthetic=10, synthetic_frames=24, max_frames=400, exemplar_size=128,
+                   instance_size=256, progress=False)
+    assert info["target_crops"] > 100 and info["background_crops"] > 0
+    cfg = EdgeTrackConfig(**TINY)
+    summary = train(cfg, root / "cache", root / "run", steps=150, batch=16, lr=5e-3, val_every=50,
+                    progress=False)
+    net, ck = load_checkpoint(root / "run" / "ckpt.pt")
+    pz, px = export_onnx(net, root / "model" / "et", {"training": {"steps": ck["step"]}})
+    return {"root": root, "summary": summary, "net": net, "pz": pz, "px": px}
+
+
+def test_training_lowers_the_loss_and_writes_curves(trained):
+    run = trained["root"] / "run"
+    rows = [json.loads(l) for l in (run / "log.jsonl").read_text().splitlines()]
+    tr = [r["loss"] for r in rows if r["kind"] == "train"]
+    va = [r for r in rows if r["kind"] == "val"]
+    assert np.mean(tr[-3:]) < 0.7 * np.mean(tr[:3]), tr
+    assert len(va) == 3 and va[-1]["loss"] < va[0]["loss"]
+    assert (run / "curves.png").is_file() and json.loads((run / "curves.json").read_text())["val"]
+    assert trained["summary"]["step"] == 150
+
+
+def test_training_resumes_from_its_checkpoint(tmp_path, trained):
+    from track3d_train.edgetrack.train import train
+
+    cache = trained["root"] / "cache"
+    cfg = EdgeTrackConfig(**TINY)
+    s1 = train(cfg, cache, tmp_path / "r", steps=4, batch=4, val_every=100, progress=False)
+    ck = torch.load(str(tmp_path / "r" / "ckpt.pt"), weights_only=False)
+    assert s1["step"] == 4 and ck["step"] == 4 and not (tmp_path / "r" / "ckpt.pt.tmp").exists()
+    s2 = train(cfg, cache, tmp_path / "r", steps=6, batch=4, val_every=100, progress=False)
+    assert s2["step"] == 6
+    steps = [json.loads(l)["step"] for l in (tmp_path / "r" / "log.jsonl").read_text().splitlines()
+             if json.loads(l)["kind"] == "train"]
+    assert steps == [4, 6]          # one log across the interruption, no step repeated
+    # a kill after logging step 7 but before its checkpoint: the resumed run logs step 7 once
+    with open(tmp_path / "r" / "log.jsonl", "a") as f:
+        f.write(json.dumps({"kind": "train", "step": 7, "loss": 1.0}) + "\n")
+    train(cfg, cache, tmp_path / "r", steps=7, batch=4, val_every=100, progress=False)
+    steps = [json.loads(l)["step"] for l in (tmp_path / "r" / "log.jsonl").read_text().splitlines()
+             if json.loads(l)["kind"] == "train"]
+    assert steps == [4, 6, 7]
+
+
+def test_export_parity_and_metadata(trained):
+    from track3d_train.edgetrack.export import parity
+
+    for size in (256, 336):   # the normal and the wider 'lost' search
+        p = parity(trained["net"], trained["pz"], trained["px"], instance_size=size)
+        assert p["kernel_max_abs"] < 1e-4 and p["logit_max_abs"] < 1e-3
+        assert p["ltrb_max_abs"] < 1e-4 * max(1.0, p["ltrb_scale"])
+        assert p["logit_shape"] == [1, size // 16, size // 16]
+    meta = OnnxModel(trained["px"], 1, "edgetrack-search").meta
+    for k in ("exemplar_size", "instance_size", "lost_instance_size", "total_stride", "score", "tracking"):
+        assert k in meta
+    assert meta["exemplar_size"] == 128 and meta["total_stride"] == 16
+    assert set(meta["tracking"]) >= {"window_influence", "penalty_k", "size_lr", "score_threshold", "context_amount"}
+    assert meta["score"]["a"] > 0       # calibrated: a higher logit is a higher score
+    assert OnnxModel(trained["pz"], 1, "edgetrack-template").meta["kind"] == "edgetrack-template"
+
+
+def _exit_and_return_sequence():
+    """A textured blob moving right, fully out of view for 8 frames, then coming back."""
+    from track3d_train.siamfc.synthetic import blob_sprite, star_field
+
+    rng = np.random.default_rng(3)
+    h, w = 240, 320
+    bg = star_field(h, w, rng)
+    sprite, mask = blob_sprite(40, rng)
+    ys, xs = np.nonzero(mask > 0.5)
+    xs_path = list(np.linspace(100, 290, 20)) + [400.0] * 8 + list(np.linspace(290, 150, 15))
+    frames, boxes, absent = [], [], []
+    for i, x in enumerate(xs_path):
+        y = 120 + 10 * np.sin(i / 5)
+        m = np.array([[1.0, 0, x - 20], [0, 1.0, y - 20]])
+        s = cv2.warpAffine(sprite, m, (w, h))
+        k = cv2.warpAffine(mask, m, (w, h))[..., None]
+        frames.append(np.clip(bg * (1 - k) + s * k + rng.normal(0, 2, (h, w, 3)), 0, 255).astype(np.uint8))
+        boxes.append([x - 20 + xs.min(), y - 20 + ys.min(), xs.max() + 1 - xs.min(), ys.max() + 1 - ys.min()])
+        absent.append(x - 20 >= w)
+    return frames, np.array(boxes), np.array(absent)
+
+
+def test_runtime_follows_reports_lost_and_recovers(trained):
+    from track3d.edgetrack import create
+    from track3d.trackers2d import Tracker2D
+
+    frames, gt, absent = _exit_and_return_sequence()
+    tr = create(model=trained["root"] / "model" / "et")
+    assert isinstance(tr, Tracker2D)
+    tr.init(frames[0], gt[0])
+    oks, ious, scores = [], [], []
+    for i in range(1, len(frames)):
+        ok, box = tr.update(frames[i])
+        assert box.shape == (4,) and box.dtype == np.float64 and 0.0 <= tr.score <= 1.0
+        oks.append(ok)
+        scores.append(tr.score)
+        ious.append(float(iou_2d(box[None], gt[i][None])[0]))
+        assert set(tr.timings_ms) == {"crop", "net", "post"}
+    oks, ious, ab = np.array(oks), np.array(ious), absent[1:]
+    before, after = np.arange(len(ab)) < 19, np.arange(len(ab)) >= 27 + 3
+    assert ious[before].mean() > 0.5, ious[before]                  # follows
+    lost = ~oks
+    assert lost[ab].mean() >= 0.75 and lost[~ab].mean() <= 0.2      # knows when it is gone
+    assert np.mean(np.array(scores)[ab]) < np.mean(np.array(scores)[~ab])
+    assert ious[after].mean() > 0.5, ious[after]                     # recovers after the return
+
+
+def test_registry_builds_edgetrack_and_says_when_no_model_is_shipped(trained, tmp_path, monkeypatch):
+    from track3d import onnxmodel
+    from track3d import trackers2d as T
+
+    assert "edgetrack" in T.available_trackers()
+    tr = T.create_tracker("edgetrack", model=trained["root"] / "model" / "et", window_influence=0.2)
+    assert tr.window_influence == 0.2
+    monkeypatch.setattr(onnxmodel, "MODELS_DIR", tmp_path)     # a package without the model
+    with pytest.raises(T.TrackerUnavailable, match="EdgeTrack"):
+        T.create_tracker("edgetrack")
+    monkeypatch.undo()
+    with pytest.raises(TypeError, match="unknown EdgeTrack options"):
+        T.create_tracker("edgetrack", model=trained["root"] / "model" / "et", scale_num=3)
+
+
+def test_runtime_checks_its_input(trained):
+    from track3d.edgetrack import create
+
+    tr = create(model=trained["root"] / "model" / "et")
+    with pytest.raises(RuntimeError):
+        tr.update(np.zeros((50, 50, 3), np.uint8))
+    with pytest.raises(ValueError, match="box"):
+        tr.init(np.zeros((50, 50, 3), np.uint8), [0, 0, 0, 5])
+    with pytest.raises(ValueError, match="uint8"):
+        tr.init(np.zeros((50, 50), np.uint8), [0, 0, 5, 5])
+    with pytest.raises(ValueError, match="multiple of the stride"):
+        create(model=trained["root"] / "model" / "et", instance_size=130)
+
+
+def test_cli_errors_are_one_line(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "track3d_train.cli", "edgetrack", "train", "--cache",
+                        str(tmp_path / "none"), "--out", str(tmp_path / "r")], capture_output=True, text=True)
+    assert r.returncode == 2 and "no EdgeTrack cache" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_shipped_edgetrack_carries_its_metadata_and_tracks_the_tiny_split(tiny_dataset):
+    from track3d.dataset import Dataset
+    from track3d.onnxmodel import MODELS_DIR
+    from track3d.trackers2d import create_tracker
+    from track3d_train.edgetrack.evaluate import evaluate_tracker
+
+    if not (MODELS_DIR / "edgetrack_search.onnx").is_file():
+        pytest.skip("no EdgeTrack model shipped")
+    meta = OnnxModel(MODELS_DIR / "edgetrack_search.onnx", 1, "edgetrack-search").meta
+    assert meta["exemplar_size"] == 128 and meta["total_stride"] == 16 and meta["training"]["steps"] > 0
+    assert OnnxModel(MODELS_DIR / "edgetrack_template.onnx", 1, "edgetrack-template").meta["config"] == meta["config"]
+    seqs = Dataset(tiny_dataset).sequences("test")
+    r = evaluate_tracker(lambda: create_tracker("edgetrack"), seqs)
+    assert r["sequences"] == len(seqs) and r["AO_2d"] > 0.3, r
+
+
+def test_cli_eval_and_time_run_on_an_exported_model(trained, tiny_dataset, tmp_path, capsys):
+    from track3d_train.edgetrack.cli import main
+
+    prefix = str(trained["root"] / "model" / "et")
+    assert main(["eval", "--model", prefix, "--data", str(tiny_dataset), "--max-seqs", "1", "--quiet",
+                 "--out", str(tmp_path / "e.json")]) == 0
+    rows = json.loads((tmp_path / "e.json").read_text())["trackers"]
+    assert rows["model et"]["sequences"] == 1 and 0.0 <= rows["model et"]["AO_2d"] <= 1.0
+    assert main(["time", "--model", prefix, "--repeats", "5"]) == 0
+    assert "edgetrack search 256" in capsys.readouterr().out
