@@ -204,7 +204,7 @@ def test_registry_builds_edgetrack_and_says_when_no_model_is_shipped(trained, tm
     with pytest.raises(T.TrackerUnavailable, match="EdgeTrack"):
         T.create_tracker("edgetrack")
     monkeypatch.undo()
-    with pytest.raises(TypeError, match="unknown EdgeTrack options"):
+    with pytest.raises(ValueError, match="unknown EdgeTrack options"):
         T.create_tracker("edgetrack", model=trained["root"] / "model" / "et", scale_num=3)
 
 
