@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from .boxes import NUM_SIZE_CLASSES, SIZE_TEMPLATES, decode_size, size_class_of
-from .frames import check_estimator_points
+from .frames import check_category, check_estimator_points, check_point_bounds, point_bounds
 from .onnxmodel import ModelError, OnnxModel, shipped_model
 
 __all__ = [
@@ -81,7 +81,10 @@ def normalise(points: np.ndarray, size_norm: str = "points") -> tuple[np.ndarray
 
 def one_hot(category, num_categories: int) -> np.ndarray:
     """Coarse category index (or indices) -> float32 one-hot; an unknown category (-1) gives zeros."""
-    c = np.asarray(category, dtype=np.int64)
+    try:
+        c = np.asarray(category, dtype=np.int64)
+    except (OverflowError, TypeError, ValueError):
+        raise ValueError(f"category must be integers in -1..{num_categories - 1}, got {category!r}") from None
     if np.any((c < -1) | (c >= num_categories)):
         raise ValueError(f"category must be in -1..{num_categories - 1}, got {category}")
     flat = c.reshape(-1)
@@ -191,9 +194,15 @@ class A3BoxNetEstimator:
         return self.model.run(feeds, list(OUTPUTS))
 
     def estimate(self, points: np.ndarray, category: int) -> np.ndarray:
-        """Frustum points (n, 3) float32, n >= 1, and the coarse category -> box (6,) float64."""
-        pts = check_estimator_points(points)
-        centred, centroid, scale = normalise(self.sample(pts), self.size_norm)
+        """Frustum points (n, 3) float32, n >= 1, and the coarse category -> box (6,) float64.
+
+        Raises ValueError on points or a category outside the contract (track3d.frames). The
+        values are checked on the sample the network sees (N points), not on the whole frustum."""
+        category = check_category(category, self.num_categories)
+        pts = check_estimator_points(points, finite=False)
+        sample = self.sample(pts)
+        check_point_bounds(*point_bounds(sample))
+        centred, centroid, scale = normalise(sample, self.size_norm)
         out = self.infer(centred[None], [category])
         return decode(centroid, scale, *out, size_norm=self.size_norm)
 
