@@ -13,7 +13,8 @@ size, OpenCV trackers ignore it by default, see trackers2d).
 Nothing in the loop raises on bad sensor data: a lost 2D target is status "lost"; a frustum
 too thin to estimate from (fewer than `min_points` points, or all of them within 1 cm of each
 other, e.g. a quantised or stuck cloud) or an estimate that is not a finite box of positive size
-is status "no_points"; the 3D box then keeps the last estimate (nan before the first one).
+is status "no_points", as is a frustum the estimator refuses (ValueError, e.g. points spanning
+more than A3BoxNet answers for); the 3D box then keeps the last estimate (nan before the first one).
 Caller errors raise ValueError (the checks live in track3d.frames): an image that is not
 (H, W, 3) uint8 or not the camera's size, a cloud that is not (N, 3), a category that is not an
 integer in -1 .. categories - 1, an init box that is not finite, has no positive size, does not
@@ -127,7 +128,10 @@ class Track3D:
         lo, hi = bounds
         if (hi - lo).max() < MIN_SPREAD_M or lo.min() < -MAX_COORD_M or hi.max() > MAX_COORD_M:
             return None
-        b = np.asarray(self.estimator.estimate(pts, self.category), dtype=np.float64).reshape(-1)
+        try:
+            b = np.asarray(self.estimator.estimate(pts, self.category), dtype=np.float64).reshape(-1)
+        except ValueError:  # points outside the estimator's domain (e.g. A3BoxNet's extent)
+            return None
         if b.shape != (6,) or not np.all(np.isfinite(b)) or np.any(b[3:] <= 0.0):
             return None
         return b
