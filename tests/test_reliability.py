@@ -266,3 +266,18 @@ def test_sim_mesh_size_zero_is_refused(capsys):
             sim_main(["generate", "--preset", "tiny", "--mesh", spec, "--out", "unused"])
         assert e.value.code == 2
         assert "mesh size" in capsys.readouterr().err
+
+
+def test_a3boxnet_refuses_point_sets_wider_than_it_answers_for():
+    """Measured before: a 200 m wide Gaussian blob gave boxes 200-3000x its extent."""
+    from track3d.boxnet import MAX_EXTENT_M
+
+    pts = np.random.default_rng(0).normal([0, 0, 30], 50, (500, 3)).astype(np.float32)
+    assert np.ptp(pts, axis=0).max() > MAX_EXTENT_M
+    with pytest.raises(ValueError, match="span"):
+        create_estimator("a3boxnet").estimate(pts, 0)
+    t = Track3D(CAM, _Fixed([0.0, 0.0, CAM.width, CAM.height]), create_estimator("a3boxnet"), z_range=(1.0, 1e4))
+    img = np.zeros((CAM.height, CAM.width, 3), np.uint8)
+    t.init(img, [0, 0, 20, 20], 0)
+    pts[:, 2] = np.abs(pts[:, 2]) * 20 + 1
+    assert t.update(img, pts).status == NO_POINTS
