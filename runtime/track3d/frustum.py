@@ -3,8 +3,10 @@
 Two implementations with identical results:
 
 - the compiled extension ``track3d._frustum`` (one C++ pass over the cloud, GIL released),
-  used by :func:`extract_frustum` and :func:`sample_points`;
-- plain numpy references, :func:`extract_frustum_numpy` and :func:`sample_points_numpy`,
+  used by :func:`extract_frustum`, :func:`extract_frustum_bounds` (the same points plus their
+  per-axis min / max from the same pass, which the loop's checks use) and :func:`sample_points`;
+- plain numpy references, :func:`extract_frustum_numpy`, :func:`extract_frustum_bounds_numpy`
+  and :func:`sample_points_numpy`,
   which define the semantics and which the tests compare the extension against.
 
 Frustum semantics (paper IV-A): keep the points with ``z_min <= z <= z_max`` (1 .. 45 m),
