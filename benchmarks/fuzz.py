@@ -424,9 +424,16 @@ def t_mesh_loader(rng, env):
     from track3d_sim.errors import SimError
     from track3d_sim.shapes import load_user_mesh
 
-    ext = str(rng.choice(["obj", "ply", "stl", "off"]))
+    r = rng.random()
+    ext = "obj" if r < 0.4 else str(rng.choice(["obj", "ply", "stl", "off"]))
     f = env.tmp / f"mesh.{ext}"
-    if rng.random() < 0.5 and ext == "obj":
+    if r < 0.4:  # a readable mesh: random finite vertices, some degenerate
+        v = rng.normal(0, 10.0 ** rng.uniform(-4, 4), (int(rng.integers(3, 12)), 3))
+        if rng.random() < 0.2:
+            v[:, int(rng.integers(0, 3))] = 0.0  # flat
+        faces = rng.integers(1, len(v) + 1, (int(rng.integers(1, 24)), 3))
+        f.write_text("".join(f"v {a} {b} {c}\n" for a, b, c in v) + "".join(f"f {a} {b} {c}\n" for a, b, c in faces))
+    elif r < 0.7 and ext == "obj":
         v = rng.choice(SPECIALS, (int(rng.integers(0, 8)), 3))
         faces = rng.integers(0, 10, (int(rng.integers(0, 6)), 3)) + 1
         f.write_text("".join(f"v {a} {b} {c}\n" for a, b, c in v) + "".join(f"f {a} {b} {c}\n" for a, b, c in faces))
