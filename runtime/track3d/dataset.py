@@ -12,6 +12,7 @@ Point clouds are not stored: they are the depth map back-projected with K on loa
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -85,7 +86,9 @@ def _read_table(path: Path, cols: int) -> np.ndarray:
     if not path.is_file():
         raise DatasetError(f"missing label file {path}")
     try:
-        a = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
+        with warnings.catch_warnings():  # an empty file is 0 rows, checked against the images
+            warnings.simplefilter("ignore", UserWarning)
+            a = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
     except ValueError as e:
         raise DatasetError(f"malformed label file {path}: {e}") from None
     if a.size == 0:
@@ -103,7 +106,9 @@ def _read_flags(path: Path, n: int) -> np.ndarray:
     if not path.is_file():
         raise DatasetError(f"missing label file {path}")
     try:
-        f = np.loadtxt(path, dtype=np.float64, ndmin=1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            f = np.loadtxt(path, dtype=np.float64, ndmin=1)
     except ValueError as e:
         raise DatasetError(f"malformed label file {path}: {e}") from None
     if f.ndim != 1 or len(f) != n:
