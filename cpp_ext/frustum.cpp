@@ -67,8 +67,11 @@ int64_t frustum_mask(const float* pts, int64_t n, const double* b, const double*
   return k;
 }
 
-py::array_t<float> extract_frustum(FloatArray points, DoubleArray box2d, DoubleArray M, double z_min,
-                                   double z_max) {
+// The kept points in input order; when `bounds` is given also their per-axis minimum and
+// maximum (lo[3], hi[3]; +inf / -inf when none is kept), gathered in the same compaction pass
+// so that callers need no second pass over the frustum (kept points are finite by construction).
+py::array_t<float> frustum_points(FloatArray points, DoubleArray box2d, DoubleArray M, double z_min,
+                                  double z_max, double* bounds) {
   if (points.ndim() != 2 || points.shape(1) != 3)
     throw std::invalid_argument("points must have shape (N, 3)");
   if (box2d.size() != 4) throw std::invalid_argument("box2d must have 4 values [x, y, w, h]");
@@ -88,14 +91,46 @@ py::array_t<float> extract_frustum(FloatArray points, DoubleArray box2d, DoubleA
   float* o = out.mutable_data();
   {
     py::gil_scoped_release release;
-    for (int64_t i = 0; i < n; ++i) {
-      if (mask[static_cast<size_t>(i)]) {
-        std::memcpy(o, pts + 3 * i, 3 * sizeof(float));
-        o += 3;
+    if (bounds == nullptr) {
+      for (int64_t i = 0; i < n; ++i) {
+        if (mask[static_cast<size_t>(i)]) {
+          std::memcpy(o, pts + 3 * i, 3 * sizeof(float));
+          o += 3;
+        }
+      }
+    } else {
+      float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+      for (int64_t i = 0; i < n; ++i) {
+        if (mask[static_cast<size_t>(i)]) {
+          const float* p = pts + 3 * i;
+          for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], p[a]);
+            hi[a] = std::max(hi[a], p[a]);
+          }
+          std::memcpy(o, p, 3 * sizeof(float));
+          o += 3;
+        }
+      }
+      for (int a = 0; a < 3; ++a) {
+        bounds[a] = lo[a];
+        bounds[3 + a] = hi[a];
       }
     }
   }
   return out;
+}
+
+py::array_t<float> extract_frustum(FloatArray points, DoubleArray box2d, DoubleArray M, double z_min,
+                                   double z_max) {
+  return frustum_points(points, box2d, M, z_min, z_max, nullptr);
+}
+
+// (frustum points, (2, 3) float64 [[min x, y, z], [max x, y, z]] of them).
+py::tuple extract_frustum_bounds(FloatArray points, DoubleArray box2d, DoubleArray M, double z_min,
+                                 double z_max) {
+  py::array_t<double> bounds({static_cast<py::ssize_t>(2), static_cast<py::ssize_t>(3)});
+  py::array_t<float> pts = frustum_points(points, box2d, M, z_min, z_max, bounds.mutable_data());
+  return py::make_tuple(pts, bounds);
 }
 
 // SplitMix64 (Steele, Lea, Flood 2014); identical to _SplitMix64 in frustum.py.
@@ -170,10 +205,13 @@ py::array_t<float> sample_points(FloatArray points, int64_t num, uint64_t seed) 
 
 PYBIND11_MODULE(_frustum, m) {
   m.doc() = "track3d C++ frustum extension: frustum proposal (paper IV-A) and point sampling";
-  m.attr("ABI_VERSION") = 2;
+  m.attr("ABI_VERSION") = 3;
   m.def("extract_frustum", &extract_frustum, py::arg("points"), py::arg("box2d"), py::arg("M"),
         py::arg("z_min") = 1.0, py::arg("z_max") = 45.0,
         "(N,3) float32 points, [x,y,w,h] box, (3,4) camera matrix -> (n,3) float32 frustum points");
+  m.def("extract_frustum_bounds", &extract_frustum_bounds, py::arg("points"), py::arg("box2d"), py::arg("M"),
+        py::arg("z_min") = 1.0, py::arg("z_max") = 45.0,
+        "as extract_frustum, plus the (2,3) float64 [min; max] of the kept points (+inf/-inf if none)");
   m.def("sample_indices", &sample_indices, py::arg("n"), py::arg("num"), py::arg("seed"),
         "(num,) int64 indices: num of n points, SplitMix64-seeded (see track3d.frustum)");
   m.def("sample_points", &sample_points, py::arg("points"), py::arg("num"), py::arg("seed"),

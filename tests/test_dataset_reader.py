@@ -22,6 +22,7 @@ def _write_fake(root, n=3):
     np.savetxt(seq / D.GT2D, np.tile([10, 10, 4, 2], (n, 1)), delimiter=",", fmt="%.3f")
     np.savetxt(seq / D.GT3D, np.tile([0, 0, 5, 1, 1, 1], (n, 1)), delimiter=",", fmt="%.4f")
     np.savetxt(seq / D.ABSENCE, [0, 1, 0][:n], fmt="%d")
+    np.savetxt(seq / D.CUT, [0, 0, 0][:n], fmt="%d")
     (seq / D.META).write_text(json.dumps({"family_index": 2}))
     (root / D.DATASET_JSON).write_text(json.dumps({
         "format": D.FORMAT, "version": 1, "camera": cam.to_dict(), "splits": {"test": ["0001"]}}))

@@ -16,12 +16,12 @@ def _image(x=50, y=40, w=40, h=30, size=(120, 160)):
 
 def test_registry_lists_the_builtin_names():
     names = T.available_trackers()
-    for n in ("oracle", "kcf", "csrt", "mosse", "mil", "medianflow", "boosting", "tld", "nano",
+    for n in ("oracle", "kcf", "csrt", "mosse", "mil", "medianflow", "boosting", "nano",
               "siamfc", "siamfc-edge"):
         assert n in names
 
 
-@pytest.mark.parametrize("name", ["kcf", "csrt", "mosse", "mil", "medianflow", "boosting", "tld"])
+@pytest.mark.parametrize("name", ["kcf", "csrt", "mosse", "mil", "medianflow", "boosting"])
 def test_opencv_adapters_follow_a_moving_patch(name):
     tr = T.create_tracker(name)
     assert isinstance(tr, T.Tracker2D)

@@ -34,11 +34,11 @@ from pathlib import Path
 import numpy as np
 
 from .boxes import NUM_SIZE_CLASSES, SIZE_TEMPLATES, decode_size, size_class_of
-from .frames import check_estimator_points
+from .frames import check_category, check_estimator_points, check_point_bounds, point_bounds
 from .onnxmodel import ModelError, OnnxModel, shipped_model
 
 __all__ = [
-    "KIND", "DEFAULT_MODEL", "SIZE_NORMS", "INPUT_POINTS", "INPUT_CATEGORY", "OUTPUTS",
+    "KIND", "DEFAULT_MODEL", "SIZE_NORMS", "MAX_EXTENT_M", "INPUT_POINTS", "INPUT_CATEGORY", "OUTPUTS",
     "remap_length", "remap_extent", "normalise", "one_hot", "size_labels", "decode", "decode_batch",
     "A3BoxNetEstimator", "create",
 ]
@@ -51,6 +51,10 @@ INPUT_POINTS = "points"        # (B, N, 3) float32, centroid-subtracted
 INPUT_CATEGORY = "category"    # (B, C) float32 one-hot coarse category (absent without category)
 OUTPUTS = ("center1", "center2", "size_scores", "size_residuals")  # (B,3) (B,3) (B,14) (B,14,3)
 _MIN_LENGTH = 1e-3             # metres: L of a degenerate point set (one point, a line)
+# metres: the largest extent of the sampled points A3BoxNet answers for. The frustum of the
+# paper's 1..45 m crop is at most 44 m deep; on point sets spanning hundreds of metres the net
+# (trained on asteroids of a few metres) returned boxes 200-3000x their extent (measured).
+MAX_EXTENT_M = 60.0
 
 
 def remap_length(points: np.ndarray) -> np.ndarray:
@@ -81,7 +85,10 @@ def normalise(points: np.ndarray, size_norm: str = "points") -> tuple[np.ndarray
 
 def one_hot(category, num_categories: int) -> np.ndarray:
     """Coarse category index (or indices) -> float32 one-hot; an unknown category (-1) gives zeros."""
-    c = np.asarray(category, dtype=np.int64)
+    try:
+        c = np.asarray(category, dtype=np.int64)
+    except (OverflowError, TypeError, ValueError):
+        raise ValueError(f"category must be integers in -1..{num_categories - 1}, got {category!r}") from None
     if np.any((c < -1) | (c >= num_categories)):
         raise ValueError(f"category must be in -1..{num_categories - 1}, got {category}")
     flat = c.reshape(-1)
@@ -193,9 +200,19 @@ class A3BoxNetEstimator:
         return self.model.run(feeds, list(OUTPUTS))
 
     def estimate(self, points: np.ndarray, category: int) -> np.ndarray:
-        """Frustum points (n, 3) float32, n >= 1, and the coarse category -> box (6,) float64."""
-        pts = check_estimator_points(points)
-        centred, centroid, scale = normalise(self.sample(pts), self.size_norm)
+        """Frustum points (n, 3) float32, n >= 1, and the coarse category -> box (6,) float64.
+
+        Raises ValueError on points or a category outside the contract (track3d.frames). The
+        values are checked on the sample the network sees (N points), not on the whole frustum."""
+        category = check_category(category, self.num_categories)
+        pts = check_estimator_points(points, finite=False)
+        sample = self.sample(pts)
+        lo, hi = point_bounds(sample)
+        check_point_bounds(lo, hi)
+        if float(np.max(hi.astype(np.float64) - lo)) > MAX_EXTENT_M:
+            raise ValueError(f"A3BoxNet answers for points spanning at most {MAX_EXTENT_M:g} m, "
+                             f"these span {float(np.max(hi.astype(np.float64) - lo)):.3g} m")
+        centred, centroid, scale = normalise(sample, self.size_norm)
         out = self.infer(centred[None], [category])
         return decode(centroid, scale, *out, size_norm=self.size_norm)
 

@@ -62,12 +62,23 @@ def _options(pairs: list[str] | None) -> dict:
     return out
 
 
+def _positive_int(text: str) -> int:
+    """argparse type: an integer >= 1 (a count of frames or threads)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
+    return v
+
+
 def _add_data_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, help="dataset root (the folder with dataset.json)")
     p.add_argument("--split", default="test", help="dataset split (default: test)")
     p.add_argument("--sequence", "--sequences", dest="sequences", nargs="+", metavar="NAME",
                    help="only these sequences of the split")
-    p.add_argument("--frames", type=int, help="only the first N frames of each sequence")
+    p.add_argument("--frames", type=_positive_int, help="only the first N (>= 1) frames of each sequence (default: all)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     hidden_alias(p, "--no-progress", "quiet", action="store_true")
 
@@ -204,8 +215,14 @@ def _cmd_track(a) -> int:
         spec.name = spec.label + "-stereo"   # keep the depth-map results of the same pair
     exp = Experiment(a.data, a.split, a.results, sequences=a.sequences, max_frames=a.frames,
                      restart=not a.no_restart, restart_skip=a.restart_skip, depth=a.depth)
+    results = Path(a.results)
+    if results.exists() and not results.is_dir():
+        raise ValueError(f"--results {results} is a file, not a folder")
     # Build once up front so that an unknown name or a missing model fails before any work.
-    spec.build(exp.sequences[0])
+    try:
+        spec.build(exp.sequences[0])
+    except TypeError as e:  # an option the tracker or estimator does not take
+        raise ValueError(f"bad --tracker-option / --estimator-option for {a.tracker} / {a.estimator}: {e}") from None
     folders = exp.run(spec, overlay=video,
                       overlay_sequences=a.video_sequences, quiet=a.quiet, replace=a.replace)
     root = Path(a.results) / a.split / spec.label
@@ -295,7 +312,7 @@ def main(argv: list[str] | None = None) -> int:
 
             return run_demo(args)
         return _cmd_trackers(args)
-    except (DatasetError, TrackerUnavailable, EstimatorUnavailable, ModelError, FileNotFoundError,
+    except (DatasetError, TrackerUnavailable, EstimatorUnavailable, ModelError, OSError,
             ValueError, RuntimeError) as e:
         print(f"track3d {args.command}: error: {e}", file=sys.stderr)
         return 2

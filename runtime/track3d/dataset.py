@@ -12,6 +12,7 @@ Point clouds are not stored: they are the depth map back-projected with K on loa
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -85,22 +86,35 @@ def _read_table(path: Path, cols: int) -> np.ndarray:
     if not path.is_file():
         raise DatasetError(f"missing label file {path}")
     try:
-        a = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
+        with warnings.catch_warnings():  # an empty file is 0 rows, checked against the images
+            warnings.simplefilter("ignore", UserWarning)
+            a = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
     except ValueError as e:
         raise DatasetError(f"malformed label file {path}: {e}") from None
     if a.size == 0:
         a = a.reshape(0, cols)
     if a.shape[1] != cols:
         raise DatasetError(f"{path} has {a.shape[1]} columns, expected {cols}")
+    bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
+    if len(bad):
+        raise DatasetError(f"{path} has non-finite values on line {bad[0] + 1} ({len(bad)} line(s))")
     return a
 
 
 def _read_flags(path: Path, n: int) -> np.ndarray:
+    # A missing flag file would silently score absent frames as present: refused, not defaulted.
     if not path.is_file():
-        return np.zeros(n, dtype=bool)
-    f = np.loadtxt(path, dtype=np.int64, ndmin=1)
-    if len(f) != n:
+        raise DatasetError(f"missing label file {path}")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            f = np.loadtxt(path, dtype=np.float64, ndmin=1)
+    except ValueError as e:
+        raise DatasetError(f"malformed label file {path}: {e}") from None
+    if f.ndim != 1 or len(f) != n:
         raise DatasetError(f"{path} has {len(f)} flags for {n} frames")
+    if not np.all((f == 0) | (f == 1)):
+        raise DatasetError(f"{path} has flags other than 0 / 1")
     return f.astype(bool)
 
 
@@ -138,12 +152,28 @@ class Sequence:
         self.absent = _read_flags(self.path / ABSENCE, n)
         self.cut = _read_flags(self.path / CUT, n)
         meta = self.path / META
-        self.meta: dict = json.loads(meta.read_text()) if meta.is_file() else {}
+        if not meta.is_file():
+            raise DatasetError(f"missing sequence metadata {meta}")
+        try:
+            self.meta: dict = json.loads(meta.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise DatasetError(f"{meta} is not valid JSON: {e}") from None
+        if not isinstance(self.meta, dict):
+            raise DatasetError(f"{meta} is not a JSON object")
+        if not isinstance(self.meta.get("family_index", -1), int) or self.meta.get("family_index", -1) < -1:
+            raise DatasetError(f"{meta}: family_index must be an integer >= -1")
         # points-only data (track3d-sim --points-only): depth and labels, no images
         self.points_only = bool(self.meta.get("points_only", False) if points_only is None else points_only)
         left = self.path / LEFT_DIR
         if not self.points_only and not left.is_dir():
             raise DatasetError(f"{self.path} has no {LEFT_DIR}/ image folder")
+        # Labels and images must cover the same frames: shorter labels would silently drop
+        # frames from tracking and scoring, missing images would fail mid-run. Points-only data
+        # has no images: its depth maps are the frames.
+        frames = self.path / DEPTH_DIR if self.points_only else left
+        images = sum(1 for f in frames.iterdir() if f.suffix == ".png") if frames.is_dir() else 0
+        if images != n:
+            raise DatasetError(f"{self.path}: {images} images in {frames.name}/ but {n} label rows in {GT2D}")
 
     def __len__(self) -> int:
         return len(self.gt2d)
@@ -224,14 +254,27 @@ class Dataset:
             raise DatasetError(_not_a_root(self.root))
         try:
             self.info: dict = json.loads(meta.read_text())
-        except json.JSONDecodeError as e:
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
             raise DatasetError(f"{meta} is not valid JSON: {e}") from None
+        if not isinstance(self.info, dict):
+            raise DatasetError(f"{meta} is not a JSON object")
         if self.info.get("format") != FORMAT:
             raise DatasetError(f"{meta} is not a {FORMAT} file")
-        if int(self.info.get("version", -1)) > FORMAT_VERSION:
-            raise DatasetError(f"{meta} has format version {self.info.get('version')}, "
+        version = self.info.get("version", -1)
+        if not isinstance(version, int) or version > FORMAT_VERSION:
+            raise DatasetError(f"{meta} has format version {version!r}, "
                                f"this reader knows up to {FORMAT_VERSION}")
-        self.camera = Camera.from_dict(self.info["camera"])
+        if not isinstance(self.info.get("camera"), dict):
+            raise DatasetError(f"{meta} has no 'camera' object")
+        try:
+            self.camera = Camera.from_dict(self.info["camera"])
+        except (ValueError, TypeError) as e:
+            raise DatasetError(f"{meta}: bad camera: {e}") from None
+        splits = self.info.get("splits", {})
+        if not isinstance(splits, dict) or not all(
+                isinstance(v, list) and all(isinstance(n, str) and n and "/" not in n and n not in (".", "..")
+                                            for n in v) for v in splits.values()):
+            raise DatasetError(f"{meta}: 'splits' must map each split name to a list of sequence names")
         self.points_only = bool(self.info.get("points_only", False))
 
     @cached_property

@@ -14,7 +14,7 @@ from typing import Callable, Protocol, runtime_checkable
 import numpy as np
 
 from .boxes import box3d_from_points
-from .frames import check_estimator_points
+from .frames import check_category, check_estimator_points, check_point_bounds, point_bounds
 
 __all__ = ["BoxEstimator", "BaselineEstimator", "EstimatorUnavailable", "create_estimator",
            "available_estimators", "register_estimator"]
@@ -29,7 +29,9 @@ class BoxEstimator(Protocol):
     """Frustum points -> axis-aligned 3D box [cx, cy, cz, sx, sy, sz] in the camera frame."""
 
     def estimate(self, points: np.ndarray, category: int) -> np.ndarray:
-        """points (n, 3) float32 with n >= 1; category: coarse category index -> (6,) float64."""
+        """points (n, 3) float32 with n >= 1; category: coarse category index -> (6,) float64.
+
+        Raises ValueError on points or a category outside the contract (track3d.frames)."""
 
 
 class BaselineEstimator:
@@ -44,7 +46,14 @@ class BaselineEstimator:
         return "BaselineEstimator()"
 
     def estimate(self, points: np.ndarray, category: int = -1) -> np.ndarray:
-        return box3d_from_points(check_estimator_points(points, np.float64))
+        check_category(category)
+        p = np.asarray(points)
+        p = check_estimator_points(p, p.dtype if p.dtype in (np.float32, np.float64) else np.float64, finite=False)
+        # One pass: the enclosing box's corners carry both the check (NaN / inf / range show up
+        # in min / max) and the answer (the box of the two corners is the box of all points).
+        lo, hi = point_bounds(p)
+        check_point_bounds(lo, hi)
+        return box3d_from_points(np.stack([lo, hi]))
 
 
 def _a3boxnet(**options) -> BoxEstimator:

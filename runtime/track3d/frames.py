@@ -1,12 +1,22 @@
 """The data contract shared by every tracker, estimator and the loop: an RGB image is a
 (H, W, 3) uint8 array with H, W >= 1; a sensor cloud is (N, 3) and may hold nan / inf (the
 frustum drops them, see track3d.frustum); the points handed to a 3D box estimator are (n, 3),
-n >= 1, all finite. One check each, one message each."""
+n >= 1, all finite and within MAX_COORD_M of the camera; a coarse category is an integer in
+-1 .. categories - 1; an initial 2D box overlaps the image and is at most MAX_BOX_SCALE times
+its larger side. One check each, one message each.
+
+The checks cost far less than the work they guard: the estimators check finiteness and range
+on the enclosing box of their points (a NaN or inf coordinate makes min / max non-finite) or
+on the sample they actually use, never with a separate pass over a large frustum."""
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_image", "check_estimator_points"]
+__all__ = ["check_image", "check_estimator_points", "check_point_bounds", "point_bounds", "check_category", "check_init_box",
+           "is_integer", "MAX_COORD_M", "MAX_BOX_SCALE"]
+
+MAX_COORD_M = 1e5     # metres: beyond, float32 points lose centimetres and the nets never saw such scenes
+MAX_BOX_SCALE = 10.0  # an initial 2D box side above 10x the image's larger side is a caller error
 
 
 def check_image(image, size: tuple[int, int] | None = None) -> np.ndarray:
@@ -22,14 +32,83 @@ def check_image(image, size: tuple[int, int] | None = None) -> np.ndarray:
     return a if a.flags.c_contiguous else np.ascontiguousarray(a)
 
 
-def check_estimator_points(points, dtype=np.float32) -> np.ndarray:
+def check_estimator_points(points, dtype=np.float32, finite: bool = True) -> np.ndarray:
     """Return the points of a 3D box estimate as (n, 3) `dtype`, or raise ValueError: an empty
-    set, another shape, or a non-finite coordinate would otherwise come back as a nan box."""
-    p = np.asarray(points, dtype=dtype)
+    set, another shape, or a non-finite or out-of-range coordinate (see check_point_bounds)
+    would otherwise come back as a nan or absurd box.
+
+    finite=False leaves the value check to the caller, who does it on the enclosing box or on
+    the sample it uses (cheaper than a pass here)."""
+    p = np.asarray(points)
+    if p.dtype != dtype:
+        if p.dtype.kind not in "fiub":
+            raise ValueError(f"estimator points must be numbers, got dtype {p.dtype}")
+        p = p.astype(dtype)
     if p.ndim != 2 or p.shape[1] != 3:
         raise ValueError(f"estimator points must have shape (n, 3), got {p.shape}")
     if len(p) == 0:
         raise ValueError("a 3D box estimate needs at least one point")
-    if not np.isfinite(p).all():
-        raise ValueError("estimator points must be finite (the frustum drops nan / inf; see track3d.frustum)")
+    if finite:
+        check_point_bounds(*point_bounds(p))
     return p
+
+
+def point_bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo (3,), hi (3,)) per-axis minimum and maximum of (n, 3) points, n >= 1, in their dtype.
+
+    Column by column: numpy's ``min(axis=0)`` over a (n, 3) array walks it 3 values at a time
+    and costs ~40x more (2.3 ms vs 60 us on 46,000 points, measured)."""
+    lo = np.array([points[:, k].min() for k in range(3)], dtype=points.dtype)
+    hi = np.array([points[:, k].max() for k in range(3)], dtype=points.dtype)
+    return lo, hi
+
+
+def check_point_bounds(lo, hi) -> None:
+    """Raise ValueError unless the enclosing box [lo, hi] of a point set is finite and within
+    +-MAX_COORD_M (NaN / inf in any point shows up in min / max)."""
+    lo = np.asarray(lo, dtype=np.float64)
+    hi = np.asarray(hi, dtype=np.float64)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise ValueError("estimator points must be finite (the frustum drops nan / inf; see track3d.frustum)")
+    if np.any(lo < -MAX_COORD_M) or np.any(hi > MAX_COORD_M):
+        raise ValueError(f"estimator points must lie within {MAX_COORD_M:g} m of the camera, "
+                         f"got coordinates in [{lo.min():.3g}, {hi.max():.3g}]")
+
+
+def is_integer(v) -> bool:
+    """An int / numpy integer, or a float with an integer value (2.0); never a bool or a string."""
+    if isinstance(v, (bool, np.bool_)):
+        return False
+    if isinstance(v, (int, np.integer)):
+        return True
+    return isinstance(v, (float, np.floating)) and float(v).is_integer()
+
+
+def check_category(category, num_categories: int | None = None) -> int:
+    """Return the coarse category as an int in -1 .. num_categories - 1 (-1: unknown), or raise
+    ValueError; without num_categories any integer >= -1 is taken."""
+    if not is_integer(category):
+        raise ValueError(f"category must be an integer (-1: unknown), got {category!r}")
+    c = int(category)
+    if c < -1 or (num_categories is not None and c >= int(num_categories)):
+        top = "" if num_categories is None else f"{int(num_categories) - 1}"
+        raise ValueError(f"category must be in -1..{top or 'any'}, got {category!r}")
+    return c
+
+
+def check_init_box(box, size: tuple[int, int]) -> np.ndarray:
+    """Return an initial 2D box [x, y, w, h] as (4,) float64, or raise ValueError: not 4 finite
+    numbers, a non-positive size, no overlap with the (width, height) image, or a side above
+    MAX_BOX_SCALE times the image's larger side (a tracker would then follow nothing)."""
+    try:
+        b = np.asarray(box, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"a 2D box is 4 numbers [x, y, w, h], got {box!r}") from None
+    if b.shape != (4,) or not np.all(np.isfinite(b)) or b[2] <= 0 or b[3] <= 0:
+        raise ValueError(f"init needs a finite [x, y, w, h] box with positive size, got {box}")
+    w, h = float(size[0]), float(size[1])
+    if not (b[0] < w and b[1] < h and b[0] + b[2] > 0 and b[1] + b[3] > 0):
+        raise ValueError(f"init box {b.tolist()} does not overlap the {int(w)}x{int(h)} image")
+    if max(b[2], b[3]) > MAX_BOX_SCALE * max(w, h):
+        raise ValueError(f"init box {b.tolist()} is more than {MAX_BOX_SCALE:g}x the {int(w)}x{int(h)} image")
+    return b

@@ -3,8 +3,10 @@
 Two implementations with identical results:
 
 - the compiled extension ``track3d._frustum`` (one C++ pass over the cloud, GIL released),
-  used by :func:`extract_frustum` and :func:`sample_points`;
-- plain numpy references, :func:`extract_frustum_numpy` and :func:`sample_points_numpy`,
+  used by :func:`extract_frustum`, :func:`extract_frustum_bounds` (the same points plus their
+  per-axis min / max from the same pass, which the loop's checks use) and :func:`sample_points`;
+- plain numpy references, :func:`extract_frustum_numpy`, :func:`extract_frustum_bounds_numpy`
+  and :func:`sample_points_numpy`,
   which define the semantics and which the tests compare the extension against.
 
 Frustum semantics (paper IV-A): keep the points with ``z_min <= z <= z_max`` (1 .. 45 m),
@@ -38,6 +40,7 @@ import numpy as np
 
 __all__ = [
     "Z_MIN", "Z_MAX", "extract_frustum", "extract_frustum_numpy", "frustum_mask_numpy",
+    "extract_frustum_bounds", "extract_frustum_bounds_numpy", "MAX_SAMPLE",
     "sample_points", "sample_points_numpy", "sample_indices_numpy", "HAVE_EXTENSION",
 ]
 
@@ -52,6 +55,7 @@ except ImportError:  # pragma: no cover - the package is always built with it
 # Per function: an older build of the extension may lack one; numpy then stands in for it.
 _ext_extract = getattr(_ext, "extract_frustum", None)
 _ext_sample = getattr(_ext, "sample_points", None)
+_ext_bounds = getattr(_ext, "extract_frustum_bounds", None)
 HAVE_EXTENSION = _ext_extract is not None and _ext_sample is not None
 
 _MASK64 = (1 << 64) - 1
@@ -131,6 +135,35 @@ def extract_frustum(points: np.ndarray, box2d: np.ndarray, M: np.ndarray,
     return _ext_extract(p, b, m, float(z_min), float(z_max))
 
 
+def _bounds_of(p: np.ndarray) -> np.ndarray:
+    if len(p) == 0:
+        return np.array([[np.inf] * 3, [-np.inf] * 3])
+    return np.stack([p.min(axis=0), p.max(axis=0)]).astype(np.float64)
+
+
+def extract_frustum_bounds_numpy(points: np.ndarray, box2d: np.ndarray, M: np.ndarray,
+                                 z_min: float = Z_MIN, z_max: float = Z_MAX) -> tuple[np.ndarray, np.ndarray]:
+    """Numpy reference of :func:`extract_frustum_bounds`."""
+    kept = extract_frustum_numpy(points, box2d, M, z_min, z_max)
+    return kept, _bounds_of(kept)
+
+
+def extract_frustum_bounds(points: np.ndarray, box2d: np.ndarray, M: np.ndarray,
+                           z_min: float = Z_MIN, z_max: float = Z_MAX) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`extract_frustum` plus the enclosing box of the kept points, from the same pass.
+
+    Returns (points (n, 3) float32, bounds (2, 3) float64 ``[[min x, y, z], [max x, y, z]]``;
+    ``+inf`` / ``-inf`` rows when n == 0). The kept points are finite by construction (the
+    selection drops NaN / inf), so the loop needs no second pass to check or measure them.
+    """
+    p = _check_points(points)
+    b = _check_box(box2d)
+    m = _check_matrix(M)
+    if _ext_bounds is None:
+        return extract_frustum_bounds_numpy(p, b, m, z_min, z_max)
+    return _ext_bounds(p, b, m, float(z_min), float(z_max))
+
+
 # --- sampling -------------------------------------------------------------------------------
 
 class _SplitMix64:
@@ -151,9 +184,20 @@ class _SplitMix64:
         return ((self.next() >> 11) * k) >> 53
 
 
-def _check_sampling(n: int, num: int) -> None:
-    if int(num) < 1:
-        raise ValueError(f"num must be >= 1, got {num}")
+MAX_SAMPLE = 10_000_000   # more sampled points than any network takes: a caller error
+
+
+def _check_seed(seed) -> int:
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise ValueError(f"seed must be an integer, got {seed!r}")
+    return int(seed) & _MASK64
+
+
+def _check_sampling(n: int, num) -> None:
+    if isinstance(num, (bool, np.bool_)) or not isinstance(num, (int, np.integer)):
+        raise ValueError(f"num must be an integer, got {num!r}")
+    if not 1 <= int(num) <= MAX_SAMPLE:
+        raise ValueError(f"num must be in 1..{MAX_SAMPLE}, got {num}")
     if n == 0:
         raise ValueError("cannot sample from an empty point set")
 
@@ -164,7 +208,8 @@ def sample_indices_numpy(n: int, num: int, seed: int) -> np.ndarray:
     Pure Python integer arithmetic: slow, for tests; the extension does the same in C++.
     """
     _check_sampling(n, num)
-    rng = _SplitMix64(seed)
+    num = int(num)
+    rng = _SplitMix64(_check_seed(seed))
     if n >= num:
         idx = list(range(n))
         for i in range(num):
@@ -186,10 +231,11 @@ def sample_points(points: np.ndarray, num: int, seed: int) -> np.ndarray:
 
     points: (n, 3) float32, n >= 1; returns (num, 3) float32. Without replacement when
     n >= num; all points plus ``num - n`` random repeats when n < num. Deterministic for a
-    seed (SplitMix64, module docstring). Raises ValueError when n == 0 or num < 1.
+    seed (SplitMix64, module docstring). Raises ValueError when n == 0, or num or seed is not
+    an integer, or num is outside 1..MAX_SAMPLE.
     """
     p = _check_points(points)
     _check_sampling(len(p), num)
     if _ext_sample is None:
         return sample_points_numpy(p, num, seed)
-    return _ext_sample(p, int(num), int(seed) & _MASK64)
+    return _ext_sample(p, int(num), _check_seed(seed))

@@ -21,7 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .frames import check_image
+from .frames import MAX_BOX_SCALE, check_image, check_init_box
 from .onnxmodel import ModelError, OnnxModel, shipped_model
 
 __all__ = ["SiamFCTracker", "create", "crop_square", "model_paths", "VARIANT_FILES", "TUNABLE"]
@@ -140,6 +140,7 @@ class SiamFCTracker:
         self.peak = float("nan")
         self.ref_peak = float("nan")
         self.score: float | None = None
+        self._max_side = float("inf")
         self.timings_ms: dict[str, float] = {}
 
     # -- state -------------------------------------------------------------------------------
@@ -148,16 +149,22 @@ class SiamFCTracker:
         if not np.all(np.isfinite(b)) or b[2] <= 0 or b[3] <= 0:
             raise ValueError(f"box must be finite with positive size, got {b.tolist()}")
         self.center = b[:2] + b[2:] / 2.0
-        self.target_sz = b[2:].copy()
+        # A (fused) state box larger than MAX_BOX_SCALE x the image is capped there: beyond,
+        # the crops overflow and the tracker would follow nothing.
+        self.target_sz = np.minimum(b[2:], self._max_side)
         ctx = self.context_amount * self.target_sz.sum()
         self.z_sz = math.sqrt(float(np.prod(self.target_sz + ctx)))
         self.x_sz = self.z_sz * self.instance_size / self.exemplar_size
         self._min_sz = max(2.0, 0.2 * float(self.target_sz.min()))
 
     def init(self, image: np.ndarray, box) -> None:
+        """Start on `image` with the target in `box`; ValueError for a box that is not finite,
+        not of positive size, does not overlap the image or is absurdly large (track3d.frames)."""
         image = check_image(image)
-        self._set_box(box)
+        b = check_init_box(box, (image.shape[1], image.shape[0]))
         self._image_hw = image.shape[:2]
+        self._max_side = MAX_BOX_SCALE * max(image.shape[:2])
+        self._set_box(b)
         self.avg_color = tuple(float(c) for c in cv2.mean(image)[:3])
         z = crop_square(image, self.center, self.z_sz, self.exemplar_size, self.avg_color)
         self._kernel = self.exemplar.run({"exemplar": z[None]})[0]
@@ -214,6 +221,8 @@ class SiamFCTracker:
         disp_img = disp_inst * self.x_sz * self.scale_factors[best] / self.instance_size
         self.center = self.center + disp_img
         scale = (1.0 - self.scale_lr) + self.scale_lr * self.scale_factors[best]
+        if float(self.target_sz.max()) * scale > self._max_side:
+            scale = 1.0  # never grow beyond the cap of _set_box
         self.target_sz = np.maximum(self.target_sz * scale, self._min_sz)
         self.z_sz *= scale
         self.x_sz *= scale

@@ -13,14 +13,17 @@ size, OpenCV trackers ignore it by default, see trackers2d).
 Nothing in the loop raises on bad sensor data: a lost 2D target is status "lost"; a frustum
 too thin to estimate from (fewer than `min_points` points, or all of them within 1 cm of each
 other, e.g. a quantised or stuck cloud) or an estimate that is not a finite box of positive size
-is status "no_points"; the 3D box then keeps the last estimate (nan before the first one).
+is status "no_points", as is a frustum the estimator refuses (ValueError, e.g. points spanning
+more than A3BoxNet answers for); the 3D box then keeps the last estimate (nan before the first one).
 Each result also carries the 2D tracker's confidence (`score`, 0..1 or None), how many frames
 the 3D box has been held (`held_frames`); after `lost_after` consecutive frames without a usable
 estimate (or with a score below `min_score`) the status is "lost". `skip()` / `update(None,
 points)` coasts over a dropped frame. `get_state()` / `set_state()` checkpoint the tracker as
 plain data; `describe()` says what it runs (names, options, model files with sha256).
-Caller errors raise ValueError: an image that is not (H, W, 3) uint8 or not the camera's size,
-a cloud that is not (N, 3), a category that is not an integer.
+Caller errors raise ValueError (the checks live in track3d.frames): an image that is not
+(H, W, 3) uint8 or not the camera's size, a cloud that is not (N, 3), a category that is not an
+integer in -1 .. categories - 1, an init box that is not finite, has no positive size, does not
+overlap the image or is more than 10x the image.
 """
 from __future__ import annotations
 
@@ -32,8 +35,8 @@ import numpy as np
 
 from .camera import Camera
 from .estimators import BoxEstimator, create_estimator
-from .frames import check_image
-from .frustum import Z_MAX, Z_MIN, extract_frustum
+from .frames import MAX_COORD_M, check_category, check_image, check_init_box
+from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .fusion import WEIGHT_3D, fuse
 from .trackers2d import Tracker2D, create_tracker
 
@@ -89,14 +92,6 @@ class TrackResult:
 
 def _valid_box2d(b: np.ndarray) -> bool:
     return bool(np.all(np.isfinite(b)) and b[2] > 0 and b[3] > 0)
-
-
-def _is_integer(v) -> bool:
-    if isinstance(v, (bool, np.bool_)):
-        return False
-    if isinstance(v, (int, np.integer)):
-        return True
-    return isinstance(v, (float, np.floating)) and float(v).is_integer()
 
 
 class Track3D:
@@ -170,16 +165,25 @@ class Track3D:
         return cls.create(camera, "siamfc-edge", "a3boxnet", arith, dict(arith), **options)
 
     # --- the loop --------------------------------------------------------------------------------
-    def _frustum(self, points, box2d: np.ndarray) -> np.ndarray:
+    def _frustum(self, points, box2d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(frustum points, their (2, 3) [min; max]) from one C++ pass; the points are finite.
+        points: a cloud (N, 3) or a callable box2d -> cloud (e.g. track3d.stereo.StereoCloud.bind,
+        which computes depth only around the box)."""
         if callable(points):
-            # a cloud source (e.g. track3d.stereo.StereoCloud.bind): computes only around the box
             points = points(box2d.copy())
-        return extract_frustum(points, box2d, self._M, *self.z_range)
+        return extract_frustum_bounds(points, box2d, self._M, *self.z_range)
 
-    def _estimate(self, pts: np.ndarray) -> np.ndarray | None:
-        if len(pts) < self.min_points or np.ptp(pts, axis=0).max() < MIN_SPREAD_M:
+    def _estimate(self, pts: np.ndarray, bounds: np.ndarray) -> np.ndarray | None:
+        # The checks use the frustum pass's bounds: no second pass over a large frustum.
+        if len(pts) < self.min_points:
             return None
-        b = np.asarray(self.estimator.estimate(pts, self.category), dtype=np.float64).reshape(-1)
+        lo, hi = bounds
+        if (hi - lo).max() < MIN_SPREAD_M or lo.min() < -MAX_COORD_M or hi.max() > MAX_COORD_M:
+            return None
+        try:
+            b = np.asarray(self.estimator.estimate(pts, self.category), dtype=np.float64).reshape(-1)
+        except ValueError:  # points outside the estimator's domain (e.g. A3BoxNet's extent)
+            return None
         if b.shape != (6,) or not np.all(np.isfinite(b)) or np.any(b[3:] <= 0.0):
             return None
         return b
@@ -192,23 +196,17 @@ class Track3D:
         when given the first 3D box is estimated from its frustum so that a later empty frustum
         has a box to keep.
         """
-        b = np.asarray(box2d, dtype=np.float64).reshape(-1)
-        if b.shape != (4,) or not _valid_box2d(b):
-            raise ValueError(f"init needs a finite [x, y, w, h] box with positive size, got {box2d}")
-        if not _is_integer(category):
-            raise ValueError(f"category must be an integer (-1: unknown), got {category!r}")
-        n_cat = getattr(self.estimator, "num_categories", None)
-        if n_cat is not None and not -1 <= int(category) < int(n_cat):
-            raise ValueError(f"category must be in -1..{int(n_cat) - 1} for {self.estimator!r}, got {category}")
+        b = check_init_box(box2d, self._size)
+        category = check_category(category, getattr(self.estimator, "num_categories", None))
         image = self.camera.undistort_image(check_image(image, self._size))
-        self.category = int(category)
+        self.category = category
         self.tracker2d.init(image, b)
         self.box2d = b.copy()
         self.box3d = np.full(6, np.nan)
         self.bad_frames = 0
         self.held_frames = 0
         if points is not None:
-            est = self._estimate(self._frustum(points, b))
+            est = self._estimate(*self._frustum(points, b))
             if est is not None:
                 self.box3d = est
 
@@ -255,10 +253,10 @@ class Track3D:
             r = TrackResult(self.box2d.copy(), raw, self.box3d.copy(), LOST, 0, ms, _tracker_score(self.tracker2d))
             return self._judge(r, estimated=False)
 
-        pts = self._frustum(points, raw)
+        pts, bounds = self._frustum(points, raw)
         t2 = time.perf_counter()
         ms["frustum"] = (t2 - t1) * 1e3
-        est = self._estimate(pts)
+        est = self._estimate(pts, bounds)
         t3 = time.perf_counter()
         ms["box3d"] = (t3 - t2) * 1e3
         status = TRACKING

@@ -12,8 +12,14 @@ Built-in names (:func:`available_trackers`):
   box estimator alone (the paper's A3BoxNet row). It knows its frame index: ``seek(i)`` before
   ``init`` says which frame the init image is (the evaluation does this); without ``seek`` the
   init box is looked up among the ground-truth rows. Each ``update`` advances one frame.
-- ``"kcf"``, ``"csrt"``, ``"mosse"``, ``"mil"``, ``"medianflow"``, ``"boosting"``, ``"tld"``:
+- ``"kcf"``, ``"csrt"``, ``"mosse"``, ``"mil"``, ``"medianflow"``, ``"boosting"``:
   OpenCV's classic trackers (opencv-contrib-python-headless, some under ``cv2.legacy``).
+  OpenCV only ever gets integer boxes inside the image of at least ``MIN_SIDE[name]`` pixels
+  (measured with OpenCV 5.0: Boosting segfaults in ``update`` after an ``init`` with a
+  fractional box touching the image border; MIL and Boosting never return from ``init`` on a
+  box under 5 px); a smaller box starts the tracker 'lost'. TLD is not registered: it takes
+  seconds per frame on small boxes (11 s for one update on 3x3 px) and reports boxes far
+  outside the image, which no input check can make safe.
 - ``"nano"``: OpenCV's NanoTrack with ``backbone=`` / ``neckhead=`` ONNX paths (default: the
   peer models in ``shared/peers/nanotrack-v2`` next to the repository; benchmarks only).
 - ``"siamfc"``, ``"siamfc-edge"``: this project's SiamFC (``track3d.siamfc``), loaded lazily.
@@ -37,7 +43,7 @@ import numpy as np
 from .frames import check_image
 
 __all__ = [
-    "Tracker2D", "OpenCVTracker", "OracleTracker", "TrackerUnavailable",
+    "Tracker2D", "OpenCVTracker", "OracleTracker", "TrackerUnavailable", "MIN_SIDE",
     "create_tracker", "available_trackers", "register_tracker", "NANOTRACK_DIR",
 ]
 
@@ -135,18 +141,21 @@ def _cv_constructor(candidates) -> tuple[Callable[[], object], bool] | None:
 class OpenCVTracker:
     """Adapter for a cv2 tracker: RGB in (converted to BGR as OpenCV expects), float64 boxes out.
 
-    Boxes given to OpenCV are clipped to the image and rounded to at least 1 pixel (OpenCV
-    asserts on empty boxes); a box wholly outside the image starts the tracker 'lost'.
-    OpenCV exceptions in ``update`` become ``ok=False`` (never a crash on odd frames).
+    Boxes given to OpenCV are clipped to the image and rounded outwards to integer pixels
+    (fractional boxes at the border crash Boosting); a box wholly outside the image, or with a
+    side under ``min_side`` pixels after clipping (MIL and Boosting hang on those), starts the
+    tracker 'lost'. OpenCV exceptions in ``update`` become ``ok=False``.
     """
 
-    def __init__(self, name: str, make: Callable[[], object], legacy: bool, correct: str = "none"):
+    def __init__(self, name: str, make: Callable[[], object], legacy: bool, correct: str = "none",
+                 min_side: int = 1):
         if correct not in ("none", "reinit"):
             raise ValueError(f"correct must be 'none' or 'reinit', got {correct!r}")
         self.name = name
         self._make = make
         self._legacy = legacy     # legacy trackers take float Rect2d, the new API int Rect
         self.correct_mode = correct
+        self.min_side = max(1, int(min_side))
         self._tracker = None
         self._last_bgr: np.ndarray | None = None
         self._box = np.full(4, np.nan)
@@ -162,10 +171,14 @@ class OpenCVTracker:
         y1 = np.clip(box[1] + box[3], 0, h_img)
         if not np.all(np.isfinite([x0, y0, x1, y1])) or x1 - x0 < 1 or y1 - y0 < 1:
             return None
-        if self._legacy:
-            return (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
+        # Integer pixels, rounded outwards, still inside the image (x1 <= w_img after the clip).
         xi, yi = int(np.floor(x0)), int(np.floor(y0))
-        return (xi, yi, max(1, int(np.ceil(x1)) - xi), max(1, int(np.ceil(y1)) - yi))
+        wi, hi = int(np.ceil(x1)) - xi, int(np.ceil(y1)) - yi
+        if wi < self.min_side or hi < self.min_side:
+            return None
+        if self._legacy:  # legacy trackers take a Rect2d: the same integer values as floats
+            return (float(xi), float(yi), float(wi), float(hi))
+        return (xi, yi, wi, hi)
 
     def _start(self, bgr: np.ndarray, box: np.ndarray) -> None:
         self._box = box.copy()
@@ -235,8 +248,11 @@ _OPENCV = {  # name -> constructors to try in order, with "is it the legacy API"
     "mosse": (("legacy.TrackerMOSSE_create", True),),
     "medianflow": (("legacy.TrackerMedianFlow_create", True),),
     "boosting": (("legacy.TrackerBoosting_create", True),),
-    "tld": (("legacy.TrackerTLD_create", True),),
+    # "tld" is deliberately absent: see the module docstring.
 }
+# The smallest box side OpenCV gets, per tracker: MIL and Boosting never return from init on
+# boxes under 5 px (measured: 3x3 and 4x4 hang, 5x5 and 4x40 do not); 8 leaves a margin.
+MIN_SIDE = {"mil": 8, "boosting": 8}
 
 
 def _opencv(name: str) -> Callable[..., OpenCVTracker]:
@@ -245,7 +261,7 @@ def _opencv(name: str) -> Callable[..., OpenCVTracker]:
         if found is None:
             raise TrackerUnavailable(f"this OpenCV build ({cv2.__version__}) has no {name} tracker "
                                      "(install opencv-contrib-python-headless)")
-        return OpenCVTracker(name, found[0], found[1], correct)
+        return OpenCVTracker(name, found[0], found[1], correct, MIN_SIDE.get(name, 1))
 
     return factory
 

@@ -28,6 +28,8 @@ def _mesh(text: str):
             path = head
         except ValueError:
             pass
+        if size is not None and not (size > 0 and size < float("inf")):
+            raise argparse.ArgumentTypeError(f"mesh size must be a positive number of metres, got {tail!r}")
     return {"path": path, "size_m": size}
 
 

@@ -1,0 +1,164 @@
+"""Latency distribution of the Track3D loop: median, p99, p99.9, max per update, and where the tail is.
+
+    python benchmarks/bench_latency.py --data data/small --frames 10000 --out /tmp/latency.json
+
+Runs the default tracker (shipped SiamFC edge + A3BoxNet, one thread) over preloaded frames of a
+split (I/O excluded), re-initialising at each sequence start, pinned to one core (every thread of
+the process). It records each update's total and per-stage times, the frustum size, and the
+garbage collections that ran during the update (gc.callbacks), then reports
+
+- the distribution of the total (median, p90, p99, p99.9, max, and the ratios to the median);
+- the slowest 0.1% of frames: their stages' excess over the stage medians (which stage makes
+  the tail), their frustum sizes vs the median, and GC collections during them;
+- whether spikes are periodic (the spread of the gaps between p99 frames);
+- the latency by frustum size (quartiles of num_points): the near, large targets.
+
+Writes JSON only with --out (nothing is written into the repository by default).
+"""
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from track3d.dataset import Dataset
+from track3d.tracker import STAGES, Track3D
+
+
+def pin_all(cpu: int) -> None:
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            os.sched_setaffinity(int(tid), {cpu})
+        except OSError:
+            pass
+
+
+def load(data: Path, split: str, max_frames: int):
+    ds = Dataset(data)
+    seqs, total = [], 0
+    for seq in ds.sequences(split):
+        fr = [(seq.image(i), seq.points(i), seq.gt2d[i]) for i in range(min(len(seq), max_frames - total))]
+        first = next((k for k in range(len(fr)) if not seq.absent[k] and fr[k][2][2] > 0), None)
+        if first is not None and len(fr) > first + 1:
+            seqs.append((seq.category, fr[first:]))
+        total += len(fr)
+        if total >= max_frames:
+            break
+    return ds.camera, seqs
+
+
+def stats(v: np.ndarray) -> dict:
+    med = float(np.median(v))
+    out = {"median_ms": med, "p90_ms": float(np.percentile(v, 90)), "p99_ms": float(np.percentile(v, 99)),
+           "p99.9_ms": float(np.percentile(v, 99.9)), "max_ms": float(v.max()), "mean_ms": float(v.mean())}
+    for k in ("p99", "p99.9", "max"):
+        out[f"{k}/median"] = out[f"{k}_ms"] / med
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", type=Path, required=True, help="dataset root (track3d-sim output)")
+    ap.add_argument("--split", default="test", help="split (default test)")
+    ap.add_argument("--frames", type=int, default=10_000, help="measured updates (default 10000)")
+    ap.add_argument("--warmup", type=int, default=50, help="updates before measuring (default 50)")
+    ap.add_argument("--preload", type=int, default=400, help="frames kept in memory, looped over (default 400)")
+    ap.add_argument("--cpu", type=int, default=None, help="pin every thread to this CPU (default: the lowest allowed)")
+    ap.add_argument("--gc-freeze", action="store_true", help="gc.freeze() after warm-up (objects alive then are never scanned)")
+    ap.add_argument("--out", type=Path, help="write the JSON report here (default: print only)")
+    a = ap.parse_args(argv)
+    if a.frames < 1 or a.warmup < 0:
+        ap.error("--frames must be >= 1 and --warmup >= 0")
+
+    import cv2
+
+    cv2.setNumThreads(1)
+    camera, seqs = load(a.data, a.split, a.preload)
+    if not seqs:
+        print(f"no trackable sequence in {a.data}/{a.split}", file=sys.stderr)
+        return 2
+    t3d = Track3D.from_default(camera, threads=1)
+    cpu = min(os.sched_getaffinity(0)) if a.cpu is None else a.cpu
+    pin_all(cpu)
+
+    gc_events: list[float] = []
+    gc.callbacks.append(lambda phase, info: gc_events.append(time.perf_counter()) if phase == "start" else None)
+    total, stages, npts, gcs = [], {k: [] for k in STAGES}, [], []
+    done, measuring = 0, False
+    while len(total) < a.frames:
+        for category, fr in seqs:
+            t3d.init(fr[0][0], fr[0][2], category, points=fr[0][1])
+            for img, pts, _ in fr[1:]:
+                n_gc = len(gc_events)
+                t = time.perf_counter()
+                res = t3d.update(img, pts)
+                ms = (time.perf_counter() - t) * 1e3
+                done += 1
+                if not measuring:
+                    if done >= a.warmup:
+                        measuring = True
+                        if a.gc_freeze:
+                            gc.freeze()
+                    continue
+                total.append(ms)
+                for k in STAGES:
+                    stages[k].append(res.ms[k])
+                npts.append(res.num_points)
+                gcs.append(len(gc_events) - n_gc)
+                if len(total) >= a.frames:
+                    break
+            if len(total) >= a.frames:
+                break
+    total_a = np.asarray(total)
+    npts_a = np.asarray(npts)
+    st = {k: np.asarray(v) for k, v in stages.items()}
+    tail = total_a >= np.percentile(total_a, 99.9)
+    p99 = np.flatnonzero(total_a >= np.percentile(total_a, 99))
+    gaps = np.diff(p99)
+    q = np.percentile(npts_a, [25, 50, 75])
+    bins = np.digitize(npts_a, q)
+    report = {
+        "machine": {"cpu": platform.processor() or platform.machine(), "pinned_cpu": cpu,
+                    "loadavg": os.getloadavg(), "python": platform.python_version()},
+        "config": {"tracker": "siamfc-edge", "estimator": "a3boxnet", "threads": 1, "frames": len(total),
+                   "gc_freeze": a.gc_freeze, "data": Path(a.data).name, "split": a.split},
+        "total": stats(total_a),
+        "stages_median_ms": {k: float(np.median(v)) for k, v in st.items()},
+        "tail": {
+            "frames": int(tail.sum()),
+            "stage_excess_ms": {k: float(np.mean(v[tail]) - np.median(v)) for k, v in st.items() if k != "total"},
+            "num_points_mean": float(npts_a[tail].mean()), "num_points_median_all": float(np.median(npts_a)),
+            "gc_collections": int(np.asarray(gcs)[tail].sum()),
+        },
+        "gc_collections_total": int(sum(gcs)),
+        "p99_gaps": {"count": int(len(gaps)), "mean": float(gaps.mean()) if len(gaps) else None,
+                     "std": float(gaps.std()) if len(gaps) else None},
+        "by_frustum_quartile": [{"num_points_upto": float(q[i]) if i < 3 else float(npts_a.max()),
+                                 "median_ms": float(np.median(total_a[bins == i])) if np.any(bins == i) else None}
+                                for i in range(4)],
+    }
+    t = report["total"]
+    print(f"{len(total)} updates: median {t['median_ms']:.2f} ms, p99 {t['p99_ms']:.2f} ({t['p99/median']:.2f}x), "
+          f"p99.9 {t['p99.9_ms']:.2f} ({t['p99.9/median']:.2f}x), max {t['max_ms']:.2f} ({t['max/median']:.2f}x); "
+          f"GC collections {report['gc_collections_total']}; load average {os.getloadavg()[0]:.1f}")
+    print("tail (slowest 0.1%) stage excess over medians, ms: "
+          + ", ".join(f"{k} {v:+.2f}" for k, v in report["tail"]["stage_excess_ms"].items())
+          + f"; frustum points {report['tail']['num_points_mean']:.0f} vs median {report['tail']['num_points_median_all']:.0f}")
+    print("median ms by frustum-size quartile: "
+          + ", ".join(f"<= {b['num_points_upto']:.0f}: {b['median_ms']:.2f}" for b in report["by_frustum_quartile"]
+                      if b["median_ms"] is not None))
+    if a.out:
+        a.out.write_text(json.dumps(report, indent=1))
+        print(f"wrote {a.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

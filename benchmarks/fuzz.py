@@ -1,0 +1,579 @@
+"""Seeded fuzz run of every public entry point; prints counts per outcome.
+
+    python benchmarks/fuzz.py --cases 100000 --minutes 20 --out /tmp/fuzz.json
+
+Each case draws a random input (seeded: case i of target T always draws the same input) and is
+classified as one of
+
+- ``ok``: the call returned and its answer meets the contract below;
+- ``clean_error``: a one-line error of the documented kind (ValueError, DatasetError, SimError;
+  a CLI exiting 2 with one line on stderr);
+- ``wrong``: the call returned an answer that breaks the contract (a silent wrong answer);
+- ``crash``: another exception escaped, or the process died (a segfault);
+- ``hang``: a case took longer than --timeout seconds.
+
+Cases run in worker subprocesses (one at a time, niced): a crash or hang of third-party code
+(OpenCV) kills only the worker, which is counted and restarted at the next case.
+
+Contracts (the oracles, shared with tests/test_fuzz.py):
+
+- frustum / sampling: the C++ functions equal the numpy references bit for bit, or both raise
+  ValueError; frustum points are finite, inside the depth crop, their bounds are their min / max;
+- estimators: a finite (6,) box with sizes > 0; the baseline equals the points' min / max box;
+  A3BoxNet's centre lies within 10 L of the points' enclosing box and its sizes are at most 10 L
+  (L = the points' largest extent, at least 1 m);
+- the loop (Track3D.update): never raises on sensor data; status in STATUSES; box2d finite;
+  "tracking" implies a finite box3d of positive size and num_points >= min_points;
+- 2D trackers: update returns (bool, finite (4,) float64 box when ok);
+- dataset reader: a dataset that reads has as many label rows as images, finite labels and 0/1
+  flags for every frame;
+- CLIs: exit 0, or exit 2 with one error line on stderr (argparse prints its usage above it);
+  never a traceback;
+- the simulator's mesh loader: a Shape with finite vertices, or SimError.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import select
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+OUTCOMES = ("ok", "clean_error", "wrong", "crash", "hang")
+ORACLE_K = 10.0  # A3BoxNet: centre offset and size at most 10 L (measured worst 5.2 L, see docs)
+
+
+# --- oracles ------------------------------------------------------------------------------------
+
+class Wrong(AssertionError):
+    """A returned answer that breaks the contract."""
+
+
+def expect(cond, what: str) -> None:
+    if not cond:
+        raise Wrong(what)
+
+
+def check_box3d(box, points=None, exact=False, k: float = ORACLE_K) -> None:
+    """A finite (6,) float64 box; with points: exact=True, their min / max box (the baseline, sizes
+    may be 0 for one point), else sizes > 0 and centre / sizes within k L of their enclosing box."""
+    b = np.asarray(box)
+    expect(b.shape == (6,) and b.dtype == np.float64, f"box3d shape/dtype {b.shape} {b.dtype}")
+    expect(np.all(np.isfinite(b)), f"box3d not finite: {b}")
+    if points is None or not exact:
+        expect(np.all(b[3:] > 0), f"box3d size not positive: {b}")
+    if points is None:
+        return
+    p = np.asarray(points, dtype=np.float64)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    if exact:
+        expect(np.array_equal(b, np.concatenate([(lo + hi) / 2.0, hi - lo])),
+               f"baseline box {b} is not the enclosing box of its points")
+        return
+    L = max(float((hi - lo).max()), 1.0)
+    off = float(np.max(np.maximum(lo - b[:3], b[:3] - hi)))
+    expect(off <= k * L and float(b[3:].max()) <= k * L, f"box {b} far from points spanning {L:.3g} m")
+
+
+def check_track_result(res, statuses, min_points: int) -> None:
+    expect(res.status in statuses, f"status {res.status!r}")
+    expect(res.box2d.shape == (4,) and np.all(np.isfinite(res.box2d)), f"box2d {res.box2d}")
+    expect(res.box3d.shape == (6,), "box3d shape")
+    if res.status == "tracking":
+        check_box3d(res.box3d)
+        expect(res.num_points >= min_points, f"tracking on {res.num_points} points")
+
+
+def check_tracker_output(out) -> None:
+    expect(isinstance(out, tuple) and len(out) == 2, "update must return (ok, box)")
+    ok, box = out
+    expect(isinstance(ok, bool), f"ok is {type(ok).__name__}")
+    b = np.asarray(box)
+    expect(b.shape == (4,) and b.dtype == np.float64, f"box {b.shape} {b.dtype}")
+    if ok:
+        expect(np.all(np.isfinite(b)) and b[2] > 0 and b[3] > 0, f"ok with box {b}")
+
+
+# --- random inputs ------------------------------------------------------------------------------
+
+SPECIALS = np.array([np.nan, np.inf, -np.inf, 0.0, -0.0, 1e-30, 1e30, -1e30, 3.4e38, -3.4e38, 1e5, -1e5,
+                     1.0, 45.0, 45.000004, 0.99999994])
+
+
+def rand_cloud(rng, max_n=2000, near=True) -> np.ndarray:
+    n = int(rng.choice([0, 1, 2, 15, 16, 17, int(rng.integers(0, max_n))]))
+    kind = int(rng.integers(0, 5))
+    if kind == 0:   # a body in front of the camera
+        p = rng.normal([0, 0, rng.uniform(2, 40)], rng.uniform(0.001, 5), (n, 3))
+    elif kind == 1:  # anywhere
+        p = rng.uniform(-100, 100, (n, 3))
+    elif kind == 2:  # huge / tiny scales
+        p = rng.normal(0, 10.0 ** rng.uniform(-6, 38), (n, 3))
+    elif kind == 3:  # quantised / stuck
+        p = np.repeat(rng.normal([0, 0, 10], 1, (1, 3)), n, axis=0)
+    else:
+        p = rng.normal([0, 0, 10], 2, (n, 3))
+    if n and rng.random() < 0.5:
+        m = rng.random((n, 3)) < rng.uniform(0, 0.3)
+        p[m] = rng.choice(SPECIALS, int(m.sum()))
+    with np.errstate(over="ignore", invalid="ignore"):
+        return p.astype(rng.choice([np.float32, np.float32, np.float64]))
+
+
+def rand_box(rng, w=160, h=120) -> list:
+    kind = int(rng.integers(0, 6))
+    if kind == 0:
+        return [float(v) for v in rng.uniform([-20, -20, 0.5, 0.5], [w + 20, h + 20, w, h])]
+    if kind == 1:  # tiny
+        return [float(rng.uniform(-2, w)), float(rng.uniform(-2, h)), float(rng.choice([0.5, 1, 2, 3, 4, 5])),
+                float(rng.choice([1, 2, 3, 40]))]
+    if kind == 2:  # touching a border, fractional
+        return [w - rng.uniform(0.5, 30), -rng.uniform(0, 30), rng.uniform(1, 80), rng.uniform(1, 80)]
+    if kind == 3:  # specials
+        return [float(v) for v in rng.choice(SPECIALS, 4)]
+    if kind == 4:  # huge
+        return [0.0, 0.0, float(10 ** rng.uniform(2, 200)), float(10 ** rng.uniform(2, 200))]
+    return [float(rng.integers(0, w)), float(rng.integers(0, h)), float(rng.integers(1, w)), float(rng.integers(1, h))]
+
+
+def rand_category(rng):
+    return rng.choice(np.array([-1, 0, 1, 2, 5, 13, -2, 14, 10 ** 20, 1.5, 2.0, True, "1", None, np.nan,
+                                np.int64(3)], dtype=object))
+
+
+def rand_image(rng, w=160, h=120) -> np.ndarray:
+    img = np.zeros((h, w, 3), np.uint8)
+    x, y = int(rng.integers(0, w - 10)), int(rng.integers(0, h - 10))
+    img[y:y + int(rng.integers(5, 60)), x:x + int(rng.integers(5, 60))] = rng.integers(0, 255, 3, dtype=np.uint8)
+    return img + rng.integers(0, 20, img.shape, dtype=np.uint8)
+
+
+# --- targets: each draws one case and runs it; returns "ok" or raises --------------------------
+
+class Env:
+    """Objects built once per worker (models load once)."""
+
+    def __init__(self, tmp: Path):
+        from track3d import Camera
+
+        self.tmp = tmp
+        self.cam = Camera.from_fov(160, 120, 60.0)
+        self._est = {}
+        self._data = None
+
+    def estimator(self, name):
+        from track3d.estimators import create_estimator
+
+        if name not in self._est:
+            self._est[name] = create_estimator(name)
+        return self._est[name]
+
+    def dataset(self) -> Path:
+        if self._data is None:
+            sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+            from test_loop import make_synthetic_dataset
+
+            self._data = make_synthetic_dataset(self.tmp / "good", {"a": 4, "b": 3})
+        return self._data
+
+
+def t_frustum(rng, env):
+    from track3d.frustum import extract_frustum_bounds, extract_frustum_bounds_numpy
+
+    pts, box = rand_cloud(rng), rand_box(rng)
+    z0, z1 = sorted(rng.choice([0.0, 1.0, 1.0, 45.0, 45.0, 100.0, 1e30], 2))
+    try:
+        a, ab = extract_frustum_bounds(pts, box, env.cam.M, z0, z1)
+    except ValueError as e:
+        with contextlib.suppress(ValueError):
+            extract_frustum_bounds_numpy(pts, box, env.cam.M, z0, z1)
+            raise Wrong(f"C++ raised {e}, numpy did not")
+        return "clean_error"
+    b, bb = extract_frustum_bounds_numpy(pts, box, env.cam.M, z0, z1)
+    expect(np.array_equal(a, b) and np.array_equal(ab, bb), "C++ and numpy frustums differ")
+    expect(np.all(np.isfinite(a)) and (len(a) == 0 or (a[:, 2].min() >= z0 and a[:, 2].max() <= z1)),
+           "frustum points not finite / outside the crop")
+    if len(a):
+        expect(np.array_equal(ab, np.stack([a.min(0), a.max(0)]).astype(np.float64)), "bounds wrong")
+    return "ok"
+
+
+def t_sampling(rng, env):
+    from track3d.frustum import sample_points, sample_points_numpy
+
+    n = int(rng.choice([0, 1, 2, 5, int(rng.integers(0, 600))]))
+    pts = rng.normal(0, 1, (n, 3)).astype(np.float32)
+    num = rng.choice(np.array([0, 1, 2, 7, 512, int(rng.integers(-3, 700)), 2.5, 2.0, True, "3", None, 10 ** 20],
+                              dtype=object))
+    seed = rng.choice(np.array([0, 1, -1, 2 ** 64 - 1, int(rng.integers(0, 2 ** 62)), 0.5, None], dtype=object))
+    outs = []
+    for f in (sample_points, sample_points_numpy):
+        try:
+            outs.append(f(pts, num, seed))
+        except ValueError:
+            outs.append(None)
+    if outs[0] is None or outs[1] is None:
+        expect(outs[0] is None and outs[1] is None, f"only one implementation raised (num={num!r}, seed={seed!r})")
+        return "clean_error"
+    expect(np.array_equal(outs[0], outs[1]) and outs[0].shape == (int(num), 3), "C++ and numpy samples differ")
+    return "ok"
+
+
+def _t_estimator(name):
+    def run(rng, env):
+        est = env.estimator(name)
+        pts = rand_cloud(rng, 1500)
+        if rng.random() < 0.05:
+            odd = [np.zeros((5, 4)), np.zeros(9), [[1, 2, 3]] * 20, "points", np.zeros((3, 3), bool), [[1, 2], [3]]]
+            pts = odd[int(rng.integers(0, len(odd)))]
+        cat = rand_category(rng)
+        try:
+            box = est.estimate(pts, cat)
+        except ValueError:
+            return "clean_error"
+        p = np.asarray(pts, dtype=np.float64)
+        check_box3d(box, p, exact=(name == "baseline"))
+        return "ok"
+    return run
+
+
+class _Scripted:
+    def __init__(self, rng):
+        self.rng = rng
+
+    def init(self, image, box):
+        pass
+
+    def update(self, image):
+        r = self.rng.random()
+        return (bool(r > 0.1), np.asarray(rand_box(self.rng), dtype=np.float64) if r > 0.05 else np.zeros(3))
+
+
+def _t_loop(name):
+    def run(rng, env):
+        from track3d.tracker import STATUSES, Track3D
+
+        t = Track3D(env.cam, _Scripted(rng), env.estimator(name), z_range=(1.0, float(rng.choice([45.0, 1e6]))))
+        img = rand_image(rng)
+        try:
+            t.init(img, rand_box(rng), rand_category(rng), points=rand_cloud(rng) if rng.random() < 0.5 else None)
+        except ValueError:
+            return "clean_error"
+        for _ in range(3):
+            check_track_result(t.update(img, rand_cloud(rng)), STATUSES, t.min_points)
+        return "ok"
+    return run
+
+
+def _t_tracker(name):
+    def run(rng, env):
+        from track3d.trackers2d import create_tracker
+
+        tr = create_tracker(name) if rng.random() < 0.7 else create_tracker(name, correct="reinit")
+        img = rand_image(rng)
+        try:
+            tr.init(img, rand_box(rng))
+        except ValueError:
+            return "clean_error"
+        for _ in range(2):
+            check_tracker_output(tr.update(rand_image(rng)))
+            if hasattr(tr, "correct") and rng.random() < 0.5:
+                try:
+                    tr.correct(rand_box(rng))
+                except ValueError:
+                    pass
+        return "ok"
+    return run
+
+
+def t_track3d_siamfc(rng, env):
+    from track3d.tracker import STATUSES, Track3D
+
+    if "siamfc" not in env._est:
+        env._est["siamfc"] = Track3D.create(env.cam, tracker="siamfc-edge", estimator="baseline")
+    t = env._est["siamfc"]
+    img = rand_image(rng)
+    try:
+        t.init(img, rand_box(rng), rand_category(rng))
+    except ValueError:
+        return "clean_error"
+    for _ in range(2):
+        res = t.update(rand_image(rng), rand_cloud(rng))
+        check_track_result(res, STATUSES, t.min_points)
+        expect(np.all(res.box2d_raw[2:] <= 10 * 160 + 1e-6), f"SiamFC box {res.box2d_raw} beyond 10x the image")
+    return "ok"
+
+
+DATA_FILES = ("dataset.json", "test/a/groundtruth_2d.txt", "test/a/groundtruth_3d.txt", "test/a/absence.label",
+              "test/a/cut_by_image.label", "test/a/meta.json", "test/a/left/000002.png", "test/a/depth/000001.png",
+              "test/b/groundtruth_2d.txt")
+
+
+def t_dataset(rng, env):
+    from track3d.dataset import Dataset, DatasetError
+
+    root = env.tmp / "damaged"
+    shutil.rmtree(root, ignore_errors=True)
+    shutil.copytree(env.dataset(), root)
+    for _ in range(int(rng.integers(1, 3))):
+        f = root / DATA_FILES[int(rng.integers(0, len(DATA_FILES)))]
+        kind = int(rng.integers(0, 5))
+        if not f.exists():
+            continue
+        data = f.read_bytes()
+        if kind == 0:
+            f.unlink()
+        elif kind == 1:
+            f.write_bytes(data[:int(rng.integers(0, max(len(data), 1)))])
+        elif kind == 2:
+            f.write_bytes(rng.integers(0, 256, int(rng.integers(0, 200)), dtype=np.uint8).tobytes())
+        elif kind == 3 and f.suffix in (".txt", ".label"):
+            lines = data.decode(errors="replace").splitlines()
+            i = int(rng.integers(0, max(len(lines), 1)))
+            lines[i:i + 1] = [rng.choice(["nan,nan,nan,nan", "1,2", "", "inf,0,0,1,1,1", "2", "-1", "0,0,0,0,0,0,0"])]
+            f.write_text("\n".join(lines) + "\n")
+        elif kind == 4 and f.suffix == ".json":
+            f.write_text(rng.choice(["[]", "{}", '{"format": "track3d-dataset", "version": 1}', '"x"', "1",
+                                     '{"format": "track3d-dataset", "version": 1, "camera": {}, "splits": {}}']))
+    try:
+        ds = Dataset(root)
+        seqs = [s for split in ds.splits for s in ds.sequences(split)]
+        for s in seqs:
+            n = len(s)
+            images = len(list((s.path / "left").glob("*.png")))
+            expect(n == images, f"{s.name}: {n} labels for {images} images")
+            expect(np.all(np.isfinite(s.gt2d)) and np.all(np.isfinite(s.gt3d)), "non-finite labels read")
+            expect(len(s.absent) == n and len(s.cut) == n, "flags of another length")
+            if n:
+                s.frame(0)
+    except DatasetError:
+        return "clean_error"
+    return "ok"
+
+
+def _cli_ok(rc, err: str) -> str:
+    if rc == 0:
+        return "ok"
+    expect(rc == 2, f"exit code {rc}")
+    # one error line (argparse prints its usage above it)
+    lines = err.strip().splitlines()
+    expect("Traceback" not in err and lines and "error" in lines[-1], f"not a one-line error: {err[-300:]}")
+    return "clean_error"
+
+
+def t_cli(rng, env):
+    from track3d.cli import main
+
+    data = env.dataset()
+    afile = env.tmp / "afile"
+    afile.write_text("x")
+    pool = [["--tracker", str(rng.choice(["oracle", "kcf", "mosse", "nope", "siamfc-edge"]))],
+            ["--estimator", str(rng.choice(["baseline", "nope"]))],
+            ["--frames", str(rng.choice(["1", "2", "0", "-5", "x", "99999"]))],
+            ["--tracker-option", str(rng.choice(["foo=1", "correct=reinit", "oops", "correct=maybe"]))],
+            ["--estimator-option", str(rng.choice(["foo=1", "threads=1", "threads=0"]))],
+            ["--results", str(rng.choice([str(afile), str(env.tmp / "res")]))],
+            ["--split", str(rng.choice(["test", "train", ""]))], ["--sequence", str(rng.choice(["a", "zzz"]))],
+            ["--weight-3d", str(rng.choice(["0.3", "nan", "2", "-1"]))], ["--threads", str(rng.choice(["1", "0"]))],
+            ["--restart-skip", str(rng.choice(["1", "0", "-3"]))], ["--no-fusion"], ["--no-restart"]]
+    argv = ["track", "--data", str(rng.choice([str(data), str(env.tmp / "missing"), str(afile)])),
+            "--quiet", "--video", "none", "--frames", "2"]
+    for i in rng.permutation(len(pool))[:int(rng.integers(0, 5))]:
+        argv += pool[int(i)]
+    if "--results" not in argv:
+        argv += ["--results", str(env.tmp / "res")]
+    if rng.random() < 0.15:
+        argv = ["eval", "--data", str(data), "--results", str(rng.choice([str(env.tmp / "res"), str(afile)])),
+                "--out", str(env.tmp / "rep"), "--no-plots", "--quiet"] + (["--frames", "0"] if rng.random() < .3 else [])
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            rc = main(argv)
+        except SystemExit as e:  # argparse
+            rc = e.code
+    return _cli_ok(rc, err.getvalue())
+
+
+def t_sim_cli(rng, env):
+    from track3d_sim.cli import main
+
+    mesh = env.tmp / f"m.{rng.choice(['obj', 'ply', 'stl'])}"
+    mesh.write_bytes(rng.integers(0, 256, int(rng.integers(0, 300)), dtype=np.uint8).tobytes())
+    size = str(rng.choice(["0", "-1", "nan", "inf", "x", "2.5", "1e400"]))
+    argv = ["generate", "--preset", "tiny", "--mesh", f"{mesh}:{size}", "--out", str(env.tmp / "sim"),
+            "--test", "0", "--train", "0"]
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            rc = main(argv)
+        except SystemExit as e:
+            rc = e.code
+    return _cli_ok(0 if rc is None else rc, err.getvalue())
+
+
+def t_mesh_loader(rng, env):
+    from track3d_sim.errors import SimError
+    from track3d_sim.shapes import load_user_mesh
+
+    r = rng.random()
+    ext = "obj" if r < 0.4 else str(rng.choice(["obj", "ply", "stl", "off"]))
+    f = env.tmp / f"mesh.{ext}"
+    if r < 0.4:  # a readable mesh: random finite vertices, some degenerate
+        v = rng.normal(0, 10.0 ** rng.uniform(-4, 4), (int(rng.integers(3, 12)), 3))
+        if rng.random() < 0.2:
+            v[:, int(rng.integers(0, 3))] = 0.0  # flat
+        faces = rng.integers(1, len(v) + 1, (int(rng.integers(1, 24)), 3))
+        f.write_text("".join(f"v {a} {b} {c}\n" for a, b, c in v) + "".join(f"f {a} {b} {c}\n" for a, b, c in faces))
+    elif r < 0.7 and ext == "obj":
+        v = rng.choice(SPECIALS, (int(rng.integers(0, 8)), 3))
+        faces = rng.integers(0, 10, (int(rng.integers(0, 6)), 3)) + 1
+        f.write_text("".join(f"v {a} {b} {c}\n" for a, b, c in v) + "".join(f"f {a} {b} {c}\n" for a, b, c in faces))
+    else:
+        f.write_bytes(rng.integers(0, 256, int(rng.integers(0, 400)), dtype=np.uint8).tobytes())
+    try:
+        shape = load_user_mesh(f, float(rng.choice([1.0, 0.5, 100.0])))
+    except (SimError, ValueError):
+        return "clean_error"
+    expect(np.all(np.isfinite(shape.vertices)) and len(shape.faces) > 0, "mesh with non-finite vertices or no faces")
+    return "ok"
+
+
+# name -> (function, weight: share of the cases)
+TARGETS = {
+    "frustum": (t_frustum, 22), "sampling": (t_sampling, 12),
+    "estimate_baseline": (_t_estimator("baseline"), 14), "estimate_a3boxnet": (_t_estimator("a3boxnet"), 12),
+    "loop_baseline": (_loop := _t_loop("baseline"), 12), "loop_a3boxnet": (_t_loop("a3boxnet"), 8),
+    "track3d_siamfc": (t_track3d_siamfc, 4),
+    **{f"tracker_{n}": (_t_tracker(n), w) for n, w in
+       (("kcf", 2), ("csrt", 1), ("mosse", 2), ("medianflow", 2), ("mil", 1), ("boosting", 1))},
+    "dataset": (t_dataset, 3), "cli": (t_cli, 1), "sim_cli": (t_sim_cli, 0.3), "mesh_loader": (t_mesh_loader, 1.7),
+}
+
+
+def run_case(target: str, seed: int, case: int, env: Env) -> tuple[str, str]:
+    rng = np.random.default_rng([seed, case, sum(map(ord, target))])
+    try:
+        with np.errstate(all="ignore"):
+            return TARGETS[target][0](rng, env), ""
+    except Wrong as e:
+        return "wrong", str(e)[:300]
+    except Exception as e:  # noqa: BLE001 - any other escape is a crash by definition
+        return "crash", f"{type(e).__name__}: {e}"[:300]
+
+
+# --- worker / parent ---------------------------------------------------------------------------
+
+def worker(target: str, seed: int, start: int, stop: int) -> None:
+    import cv2
+
+    cv2.setNumThreads(1)
+    with tempfile.TemporaryDirectory(prefix="track3d-fuzz-") as tmp:
+        env = Env(Path(tmp))
+        for case in range(start, stop):
+            out, detail = run_case(target, seed, case, env)
+            sys.stdout.write(json.dumps([case, out, detail]) + "\n")
+            sys.stdout.flush()
+
+
+def plan(cases: int) -> dict[str, int]:
+    total = sum(w for _, w in TARGETS.values())
+    return {t: max(1, int(round(cases * w / total))) for t, (_, w) in TARGETS.items()}
+
+
+def run_range(target: str, start: int, stop: int, seed: int, timeout: float, deadline: float, counts: dict,
+              examples: list) -> int:
+    """Run cases start..stop-1 of `target` in worker processes; returns the next case to run."""
+    case = start
+    while case < stop and time.time() < deadline:
+        proc = subprocess.Popen([sys.executable, __file__, "--worker", target, "--seed", str(seed),
+                                 "--start", str(case), "--stop", str(stop)], stdout=subprocess.PIPE,
+                                stderr=subprocess.DEVNULL, text=True, preexec_fn=lambda: os.nice(5))
+        while True:
+            if time.time() > deadline:
+                proc.kill()
+                proc.wait()
+                return case
+            r, _, _ = select.select([proc.stdout], [], [], timeout)
+            if not r:  # no case finished within the timeout: a hang
+                proc.kill()
+                proc.wait()
+                counts[target]["hang"] += 1
+                examples.append({"target": target, "case": case, "outcome": "hang"})
+                case += 1
+                break
+            line = proc.stdout.readline()
+            if not line:  # the worker died: the case it was on crashed the process
+                rc = proc.wait()
+                if case < stop:
+                    counts[target]["crash"] += 1
+                    examples.append({"target": target, "case": case, "outcome": "crash", "detail": f"exit {rc}"})
+                    case += 1
+                break
+            c, out, detail = json.loads(line)
+            counts[target][out] += 1
+            case = c + 1
+            if out in ("wrong", "crash", "hang") and len(examples) < 200:
+                examples.append({"target": target, "case": c, "outcome": out, "detail": detail})
+            if case >= stop:
+                proc.wait()
+                break
+    return case
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--cases", type=int, default=100_000, help="total cases over all targets (default 100000)")
+    ap.add_argument("--seed", type=int, default=0, help="fuzz seed (default 0)")
+    ap.add_argument("--minutes", type=float, default=20.0, help="stop after this long, reporting the count reached (20)")
+    ap.add_argument("--timeout", type=float, default=20.0, help="seconds one case may take before it is a hang (20)")
+    ap.add_argument("--targets", nargs="+", choices=sorted(TARGETS), help="only these targets (default all)")
+    ap.add_argument("--rounds", type=int, default=10, help="targets are interleaved in this many rounds (10)")
+    ap.add_argument("--out", type=Path, help="also write the counts as JSON here (default: print only)")
+    ap.add_argument("--worker", help=argparse.SUPPRESS)
+    ap.add_argument("--start", type=int, default=0, help=argparse.SUPPRESS)
+    ap.add_argument("--stop", type=int, default=0, help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.worker:
+        worker(a.worker, a.seed, a.start, a.stop)
+        return 0
+    shares = plan(a.cases)
+    if a.targets:
+        shares = {t: shares[t] for t in a.targets}
+    counts = {t: dict.fromkeys(OUTCOMES, 0) for t in shares}
+    examples: list = []
+    t0 = time.time()
+    deadline = t0 + 60 * a.minutes
+    nxt = dict.fromkeys(shares, 0)
+    rounds = max(1, int(a.rounds))
+    for r in range(1, rounds + 1):  # interleaved, so that a time limit cuts every target alike
+        for t, n in shares.items():
+            stop = n * r // rounds
+            if nxt[t] < stop and time.time() < deadline:
+                nxt[t] = run_range(t, nxt[t], stop, a.seed, a.timeout, deadline, counts, examples)
+        done = sum(sum(c.values()) for c in counts.values())
+        print(f"round {r}/{rounds}: {done} cases, {time.time() - t0:.0f} s", file=sys.stderr, flush=True)
+    for t, n in shares.items():
+        print(f"{t:20s} {sum(counts[t].values()):7d}/{n:<7d} " + " ".join(f"{o}={counts[t][o]}" for o in OUTCOMES))
+    total = {o: sum(c[o] for c in counts.values()) for o in OUTCOMES}
+    n_done = sum(total.values())
+    print(f"TOTAL {n_done} cases in {time.time() - t0:.0f} s: " + " ".join(f"{o}={total[o]}" for o in OUTCOMES))
+    for e in examples[:20]:
+        print("example:", json.dumps(e))
+    if a.out:
+        a.out.write_text(json.dumps({"seed": a.seed, "cases_planned": a.cases, "cases_run": n_done, "total": total,
+                                     "per_target": counts, "seconds": time.time() - t0, "examples": examples},
+                                    indent=1))
+    return 1 if total["wrong"] or total["crash"] or total["hang"] else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,284 @@
+"""Regression tests of the flight-grade issue: each crash and silent wrong answer it lists.
+
+Third-party code that crashed the process (OpenCV Boosting) or hung (MIL / Boosting on tiny
+boxes) runs in a subprocess with a timeout, so a regression fails the test instead of the suite.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from test_loop import CAM, make_synthetic_dataset
+from track3d import dataset as D
+from track3d.boxnet import one_hot
+from track3d.cli import main
+from track3d.estimators import create_estimator
+from track3d.frustum import extract_frustum, sample_points, sample_points_numpy
+from track3d.tracker import NO_POINTS, Track3D
+from track3d.trackers2d import available_trackers
+
+EMPTY = np.zeros((0, 3), np.float32)
+
+
+def _run(code: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+# --- 1. speed: the frustum pass gives the bounds; numpy reference bit-identical ---------------
+
+def test_frustum_bounds_match_numpy_and_the_points():
+    from track3d.frustum import extract_frustum_bounds, extract_frustum_bounds_numpy
+
+    rng = np.random.default_rng(3)
+    pts = rng.normal([0, 0, 10], [3, 3, 4], (5000, 3)).astype(np.float32)
+    pts[::13] = np.nan
+    pts[::17, 1] = np.inf
+    box = [40.0, 30.0, 80.0, 60.0]
+    fr, bounds = extract_frustum_bounds(pts, box, CAM.M)
+    fr_np, bounds_np = extract_frustum_bounds_numpy(pts, box, CAM.M)
+    assert np.array_equal(fr, extract_frustum(pts, box, CAM.M)) and np.array_equal(fr, fr_np)
+    assert np.array_equal(bounds, bounds_np) and bounds.dtype == np.float64 and bounds.shape == (2, 3)
+    np.testing.assert_array_equal(bounds, [fr.min(axis=0), fr.max(axis=0)])
+    _, empty = extract_frustum_bounds(EMPTY, box, CAM.M)
+    assert np.all(empty[0] == np.inf) and np.all(empty[1] == -np.inf)
+    assert np.array_equal(empty, extract_frustum_bounds_numpy(EMPTY, box, CAM.M)[1])
+
+
+# --- 2. crashes ---------------------------------------------------------------------------------
+
+def test_boosting_fractional_box_at_the_border_does_not_segfault():
+    r = _run("""
+        import numpy as np
+        from track3d import Camera
+        from track3d.tracker import Track3D
+        cam = Camera.from_fov(640, 480, 45.0)
+        img = np.random.default_rng(0).integers(0, 255, (480, 640, 3), dtype=np.uint8)
+        t = Track3D.create(cam, tracker="boosting", estimator="baseline")
+        t.init(img, [530.5, -104.5, 219.0, 209.0], 0)
+        print(t.update(img, np.zeros((0, 3), np.float32)).status)
+    """)
+    assert r.returncode == 0, r.stderr[-500:]
+    assert r.stdout.strip() in ("no_points", "lost")
+
+
+@pytest.mark.parametrize("name", ["mil", "boosting"])
+def test_opencv_trackers_return_on_tiny_boxes(name):
+    r = _run(f"""
+        import numpy as np
+        from track3d.trackers2d import create_tracker
+        img = np.random.default_rng(0).integers(0, 255, (120, 160, 3), dtype=np.uint8)
+        for box in ([10, 10, 1, 1], [10, 10, 2, 2], [10, 10, 3, 3], [10, 10, 1, 40], [158.5, 118.5, 4, 4]):
+            t = create_tracker("{name}")
+            t.init(img, box)
+            ok, b = t.update(img)
+            assert ok is False, box
+        print("ok")
+    """, timeout=30)
+    assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr[-500:]
+
+
+def test_tld_is_not_registered():
+    assert "tld" not in available_trackers()
+
+
+def test_siamfc_init_with_a_huge_box_is_a_value_error():
+    t = Track3D.create(CAM, tracker="siamfc-edge", estimator="baseline")
+    img = np.zeros((CAM.height, CAM.width, 3), np.uint8)
+    for box in ([0, 0, 1e160, 1e160], [0, 0, 2e6, 2e6]):
+        with pytest.raises(ValueError, match="10x"):
+            t.init(img, box, 0)
+        with pytest.raises(ValueError, match="10x"):
+            t.tracker2d.init(img, box)
+
+
+def test_a3boxnet_huge_category_is_a_value_error():
+    est = create_estimator("a3boxnet")
+    pts = np.random.default_rng(0).normal([0, 0, 10], 1, (100, 3)).astype(np.float32)
+    for cat in (10 ** 20, -10 ** 20):
+        with pytest.raises(ValueError, match="category"):
+            est.estimate(pts, cat)
+    with pytest.raises(ValueError, match="category"):
+        one_hot(10 ** 20, 3)
+
+
+@pytest.fixture(scope="module")
+def synth(tmp_path_factory):
+    return make_synthetic_dataset(tmp_path_factory.mktemp("rel") / "ds", {"a": 4})
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--tracker", "kcf", "--tracker-option", "foo=1"], "foo"),
+    (["--tracker", "siamfc-edge", "--tracker-option", "foo=1"], "foo"),
+    (["--estimator-option", "foo=1"], "foo"),
+    (["--results", "{file}"], "is a file"),
+])
+def test_cli_bad_options_are_one_line_errors(synth, tmp_path, capsys, argv, message):
+    f = tmp_path / "afile"
+    f.write_text("x")
+    argv = ["track", "--data", str(synth), "--quiet", "--video", "none", "--results", str(tmp_path / "r")] + \
+        [a.format(file=f) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "error:" in err and message in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("frames", ["0", "-5", "x"])
+def test_cli_frames_must_be_positive(synth, tmp_path, capsys, frames):
+    with pytest.raises(SystemExit) as e:
+        main(["track", "--data", str(synth), "--frames", frames, "--results", str(tmp_path), "--quiet"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "--frames" in err and "integer >= 1" in err and "negative dimensions" not in err
+
+
+def _dataset_json(root, info):
+    (root / D.DATASET_JSON).write_text(json.dumps(info))
+
+
+@pytest.mark.parametrize("info, message", [
+    ([1, 2], "not a JSON object"),
+    ({"format": D.FORMAT, "version": 1, "camera": CAM.to_dict(), "splits": ["test"]}, "splits"),
+    ({"format": D.FORMAT, "version": 1, "splits": {"test": ["a"]}}, "camera"),
+    ({"format": D.FORMAT, "version": 1, "camera": {"width": 4}, "splits": {}}, "camera"),
+    ({"format": D.FORMAT, "version": "x", "camera": CAM.to_dict()}, "version"),
+])
+def test_malformed_dataset_json_is_a_dataset_error(tmp_path, info, message):
+    _dataset_json(tmp_path, info)
+    with pytest.raises(D.DatasetError, match=message):
+        D.Dataset(tmp_path)
+
+
+# --- 3. silent wrong answers --------------------------------------------------------------------
+
+def test_siamfc_init_box_off_the_image_is_a_value_error_and_size_stays_bounded():
+    t = Track3D.create(CAM, tracker="siamfc-edge", estimator="baseline")
+    img = np.random.default_rng(1).integers(0, 255, (CAM.height, CAM.width, 3), dtype=np.uint8)
+    for box in ([CAM.width + 5, 0, 10, 10], [-50, 0, 10, 10], [0, CAM.height, 5, 5]):
+        with pytest.raises(ValueError, match="overlap"):
+            t.init(img, box, 0)
+    t.init(img, [0, 0, 9 * CAM.width, 9 * CAM.height], 0)
+    t.tracker2d.correct([0, 0, 1e20, 1e20])
+    for _ in range(20):
+        out = t.update(img, EMPTY)
+        assert np.all(out.box2d[2:] <= 10 * max(CAM.width, CAM.height))
+
+
+@pytest.mark.parametrize("name", ["baseline", "a3boxnet"])
+@pytest.mark.parametrize("category", [1.5, True, "1", -2, None])
+def test_estimators_refuse_bad_categories(name, category):
+    pts = np.random.default_rng(0).normal([0, 0, 10], 1, (100, 3)).astype(np.float32)
+    with pytest.raises(ValueError, match="category"):
+        create_estimator(name).estimate(pts, category)
+
+
+@pytest.mark.parametrize("name", ["baseline", "a3boxnet"])
+@pytest.mark.parametrize("centre", [1e30, -1e30, 3e38, -3e38, 2e5])
+def test_estimators_refuse_far_clouds(name, centre):
+    pts = np.random.default_rng(0).normal(0, 1, (100, 3)) + centre
+    with pytest.raises(ValueError, match="finite|within"):
+        create_estimator(name).estimate(pts.astype(np.float32), 0)
+
+
+def test_loop_with_a_far_cloud_is_no_points_not_a_huge_box():
+    t = Track3D(CAM, _Fixed([10.0, 10.0, 60.0, 60.0]), create_estimator("baseline"), z_range=(1.0, 1e9))
+    img = np.zeros((CAM.height, CAM.width, 3), np.uint8)
+    t.init(img, [10, 10, 60, 60], 0)
+    pts = np.random.default_rng(0).normal([0, 0, 1], 0.1, (200, 3)) * 1e6
+    out = t.update(img, pts.astype(np.float32))
+    assert out.status == NO_POINTS
+
+
+class _Fixed:
+    def __init__(self, box):
+        self.box = np.asarray(box, float)
+
+    def init(self, image, box):
+        pass
+
+    def update(self, image):
+        return True, self.box.copy()
+
+
+def test_baseline_init_refuses_category_below_minus_one():
+    t = Track3D.create(CAM, tracker="kcf", estimator="baseline")
+    with pytest.raises(ValueError, match="category"):
+        t.init(np.zeros((CAM.height, CAM.width, 3), np.uint8), [10, 10, 20, 20], -2)
+
+
+@pytest.mark.parametrize("num", [2.5, 2.0, "3", True, 0, 10 ** 20])
+def test_sampling_num_must_be_an_integer_in_both_implementations(num):
+    pts = np.ones((5, 3), np.float32)
+    for f in (sample_points, sample_points_numpy):
+        with pytest.raises(ValueError, match="num"):
+            f(pts, num, 0)
+
+
+def _write_good(root):
+    return make_synthetic_dataset(root, {"a": 5})
+
+
+@pytest.mark.parametrize("damage, message", [
+    ("short_labels", "images"),
+    ("no_absence", "absence.label"),
+    ("no_cut", "cut_by_image.label"),
+    ("no_meta", "meta.json"),
+    ("nan_gt3d", "groundtruth_3d.txt"),
+    ("bad_flags", "absence.label"),
+])
+def test_damaged_datasets_are_refused(tmp_path, capsys, damage, message):
+    root = _write_good(tmp_path / "ds")
+    seq = root / "test" / "a"
+    if damage == "short_labels":
+        for name in (D.GT2D, D.GT3D, D.ABSENCE, D.CUT):
+            lines = (seq / name).read_text().splitlines()
+            (seq / name).write_text("\n".join(lines[:4]) + "\n")
+    elif damage == "no_absence":
+        (seq / D.ABSENCE).unlink()
+    elif damage == "no_cut":
+        (seq / D.CUT).unlink()
+    elif damage == "no_meta":
+        (seq / D.META).unlink()
+    elif damage == "nan_gt3d":
+        lines = (seq / D.GT3D).read_text().splitlines()
+        lines[2] = "nan,nan,nan,nan,nan,nan"
+        (seq / D.GT3D).write_text("\n".join(lines) + "\n")
+    elif damage == "bad_flags":
+        (seq / D.ABSENCE).write_text("0\n2\n0\n0\n0\n")
+    with pytest.raises(D.DatasetError, match=message):
+        D.Dataset(root).sequences("test")
+    assert main(["track", "--data", str(root), "--results", str(tmp_path / "r"), "--quiet", "--video", "none"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_sim_mesh_size_zero_is_refused(capsys):
+    pytest.importorskip("track3d_sim")
+    from track3d_sim.cli import main as sim_main
+
+    for spec in ("m.obj:0", "m.obj:-1", "m.obj:nan", "m.obj:inf"):
+        with pytest.raises(SystemExit) as e:
+            sim_main(["generate", "--preset", "tiny", "--mesh", spec, "--out", "unused"])
+        assert e.value.code == 2
+        assert "mesh size" in capsys.readouterr().err
+
+
+def test_a3boxnet_refuses_point_sets_wider_than_it_answers_for():
+    """Measured before: a 200 m wide Gaussian blob gave boxes 200-3000x its extent."""
+    from track3d.boxnet import MAX_EXTENT_M
+
+    pts = np.random.default_rng(0).normal([0, 0, 30], 50, (500, 3)).astype(np.float32)
+    assert np.ptp(pts, axis=0).max() > MAX_EXTENT_M
+    with pytest.raises(ValueError, match="span"):
+        create_estimator("a3boxnet").estimate(pts, 0)
+    t = Track3D(CAM, _Fixed([0.0, 0.0, CAM.width, CAM.height]), create_estimator("a3boxnet"), z_range=(1.0, 1e4))
+    img = np.zeros((CAM.height, CAM.width, 3), np.uint8)
+    t.init(img, [0, 0, 20, 20], 0)
+    pts[:, 2] = np.abs(pts[:, 2]) * 20 + 1
+    out = t.update(img, pts)
+    assert out.status == NO_POINTS and out.num_points >= t.min_points
