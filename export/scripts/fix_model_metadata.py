@@ -35,6 +35,11 @@ def fixed(meta: dict) -> dict:
         m["normalisation"] = NORMALISATION[m.get("size_norm", "points")]
         if isinstance(m.get("train_data"), str) and m["train_data"].startswith("/"):
             m["train_data"] = Path(m["train_data"]).name
+    elif str(m.get("kind", "")).startswith("edgetrack") and "train_data" not in m:
+        m["train_data"] = m.get("training", {}).get("data", "unknown")
+        m["train_data_hash"] = None
+        m["train_data_hash_note"] = ("not recorded by the exporter of this short-run model; train_data "
+                                     "names the deterministic recipe of its data")
     elif str(m.get("kind", "")).startswith("siamfc"):
         m.setdefault("train_data", SIAMFC_DATA)
         if "train_data_hash" not in m:
