@@ -39,6 +39,12 @@ def _parsers():
         out += [("boxnet", bp()), ("siamfc", sp())]
     except ImportError:
         pass
+    try:
+        from track3d_sim.cli import build_parser as simp
+        from track3d_train.edgetrack.cli import build_parser as ep
+        out += [("track3d-sim", simp()), ("edgetrack", ep())]
+    except ImportError:
+        pass
     return out
 
 
