@@ -199,6 +199,7 @@ def _stereo_dataset(root: Path, cam: Camera, n: int = 4) -> Path:
     np.savetxt(d / "groundtruth_2d.txt", np.array([f[2] for f in frames]), fmt="%.4f", delimiter=",")
     np.savetxt(d / "groundtruth_3d.txt", np.array([f[3] for f in frames]), fmt="%.6f", delimiter=",")
     np.savetxt(d / "absence.label", np.zeros(n), fmt="%d")
+    np.savetxt(d / "cut_by_image.label", np.zeros(n), fmt="%d")
     (d / "meta.json").write_text(json.dumps({"family_index": 0}))
     (root / "dataset.json").write_text(json.dumps({"format": FORMAT, "version": FORMAT_VERSION,
                                                    "camera": cam.to_dict(), "splits": {"test": ["s1"]}}))

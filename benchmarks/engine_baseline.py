@@ -1,0 +1,70 @@
+"""Collect `track3d eval` reports of the data engine's evaluation sets into one JSON and one
+markdown table: per depth sensor, split (test / test_unseen) and protocol (restart / one pass).
+
+The reports come from (per sensor S, split P, protocol M; see benchmarks/README.md):
+
+    track3d-sim generate --preset small --train 0 --test 9 --test-unseen 9 --frames 60 --sensors S \\
+        --seed 0 --out data/engine-S
+    track3d track --data data/engine-S --split P --tracker T --estimator a3boxnet \\
+        --results RESULTS/engine-S/P-M [--no-restart]
+    track3d eval --data data/engine-S --split P --results RESULTS/engine-S/P-M --out RESULTS/engine-S/P-M-report
+
+    python benchmarks/engine_baseline.py --results RESULTS --out benchmarks/results/engine_baseline
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("AO_bev", "ao_bev", "{:.3f}"), ("AO_3d", "ao_3d", "{:.3f}"),
+           ("ACE_3d (m)", "ace_3d", "{:.3f}"), ("restarts", "restarts", "{:d}"), ("frames", "frames", "{:d}"))
+SENSOR_ORDER = ("ideal", "flash-lidar", "tof", "stereo")
+
+
+def collect(results: Path) -> list[dict]:
+    """One row per (sensor, split, protocol, tracker) from RESULTS/engine-*/*-report/report.json."""
+    rows = []
+    for rep in sorted(results.glob("engine-*/*-report/report.json")):
+        sensor = rep.parents[1].name.removeprefix("engine-")
+        split, _, protocol = rep.parent.name.removesuffix("-report").rpartition("-")
+        r = json.loads(rep.read_text())
+        for name, t in r["trackers"].items():
+            ov = t["overall"]
+            rows.append({"sensor": sensor, "split": split, "protocol": protocol, "tracker": name,
+                         "dataset": Path(r["dataset"]).name, "cpu": r.get("cpu"),
+                         **{k: ov.get(k) for _, k, _ in COLUMNS}})
+    key = {s: i for i, s in enumerate(SENSOR_ORDER)}
+    rows.sort(key=lambda x: (key.get(x["sensor"], 99), x["split"], x["protocol"], x["tracker"]))
+    return rows
+
+
+def markdown(rows: list[dict]) -> str:
+    head = ["sensor", "split", "protocol", "tracker"] + [c[0] for c in COLUMNS]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = [r["sensor"], r["split"], r["protocol"], r["tracker"]]
+        cells += ["-" if r[k] is None else fmt.format(r[k]) for _, k, fmt in COLUMNS]
+        out.append("| " + " | ".join(cells) + " |")
+    return "\n".join(out) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--results", required=True, type=Path, help="folder holding engine-<sensor>/ result folders")
+    ap.add_argument("--out", required=True, type=Path, help="folder for engine_baseline.json / .md")
+    a = ap.parse_args(argv)
+    rows = collect(a.results)
+    if not rows:
+        print(f"engine_baseline: error: no engine-*/*-report/report.json under {a.results}", file=sys.stderr)
+        return 2
+    a.out.mkdir(parents=True, exist_ok=True)
+    (a.out / "engine_baseline.json").write_text(json.dumps({"rows": rows}, indent=1))
+    (a.out / "engine_baseline.md").write_text(markdown(rows))
+    print(markdown(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
