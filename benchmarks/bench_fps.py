@@ -48,7 +48,7 @@ UNAVAILABLE = ("TrackerUnavailable", "EstimatorUnavailable", "ModelError")  # a 
 
 
 from track3d.machine import affinity_of_all_threads, pin  # noqa: E402  (one implementation)
-from track3d.machine import cpu_name as cpu_model  # noqa: E402
+from track3d.machine import cpu_name as cpu_model, isa_flags  # noqa: E402
 
 
 class EquivalenceError(RuntimeError):
@@ -465,7 +465,7 @@ def main(argv=None) -> int:
     add_ratios(results)
     import cv2
     import onnxruntime
-    out = {"benchmark": "track3d end-to-end FPS", "cpu": cpu_model(), "machine": platform.node(),
+    out = {"benchmark": "track3d end-to-end FPS", "cpu": cpu_model(), "isa_flags": isa_flags(), "machine": platform.node(),
            "logical_cpus": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
            "onnxruntime": onnxruntime.__version__, "opencv": cv2.__version__,
            "torch": torch_nets.torch.__version__ if torch_nets else None,

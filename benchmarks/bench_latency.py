@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from track3d import machine
 from track3d.dataset import Dataset
 from track3d.tracker import STAGES, Track3D
 
@@ -125,7 +126,7 @@ def main(argv=None) -> int:
     q = np.percentile(npts_a, [25, 50, 75])
     bins = np.digitize(npts_a, q)
     report = {
-        "machine": {"cpu": platform.processor() or platform.machine(), "pinned_cpu": cpu,
+        "machine": {"cpu": machine.cpu_name(), "isa_flags": machine.isa_flags(), "pinned_cpu": cpu,
                     "loadavg": os.getloadavg(), "python": platform.python_version()},
         "config": {"tracker": "siamfc-edge", "estimator": "a3boxnet", "threads": 1, "frames": len(total),
                    "gc_freeze": a.gc_freeze, "data": Path(a.data).name, "split": a.split},

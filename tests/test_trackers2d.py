@@ -94,9 +94,16 @@ def test_nano_with_missing_files_is_a_clear_error(tmp_path):
         T.create_tracker("nano", backbone=tmp_path / "a.onnx", neckhead=tmp_path / "b.onnx")
 
 
-@pytest.mark.skipif(not (T.NANOTRACK_DIR / "nanotrack_backbone_sim.onnx").is_file(), reason="peer models absent")
+@pytest.mark.skipif(T.nanotrack_dir() is None or not (T.nanotrack_dir() / "nanotrack_backbone_sim.onnx").is_file(),
+                    reason="peer models absent (set TRACK3D_NANOTRACK_DIR)")
 def test_nano_peer_runs():
     tr = T.create_tracker("nano")
     tr.init(_image(), np.array([50, 40, 40, 30]))
     ok, box = tr.update(_image(x=52))
     assert box.shape == (4,)
+
+
+def test_nanotrack_without_its_peer_models_is_unavailable(monkeypatch):
+    monkeypatch.delenv(T.NANOTRACK_ENV, raising=False)
+    with pytest.raises(T.TrackerUnavailable, match="TRACK3D_NANOTRACK_DIR"):
+        T.create_tracker("nano")

@@ -21,7 +21,7 @@ Built-in names (:func:`available_trackers`):
   seconds per frame on small boxes (11 s for one update on 3x3 px) and reports boxes far
   outside the image, which no input check can make safe.
 - ``"nano"``: OpenCV's NanoTrack with ``backbone=`` / ``neckhead=`` ONNX paths (default: the
-  peer models in ``shared/peers/nanotrack-v2`` next to the repository; benchmarks only).
+  peer models in the folder named by ``$TRACK3D_NANOTRACK_DIR``; benchmarks only, never shipped).
 - ``"siamfc"``, ``"siamfc-edge"``: this project's SiamFC (``track3d.siamfc``), loaded lazily.
 - ``"edgetrack"``: the fast edge tracker (``track3d.edgetrack``); ``model=<dir>/<name>`` picks an
   exported pair instead of the shipped one; it exposes ``score`` (0..1) and reports ok=False when lost.
@@ -34,6 +34,7 @@ with the corrected box instead.
 from __future__ import annotations
 
 import importlib
+import os
 from pathlib import Path
 from typing import Callable, Protocol, runtime_checkable
 
@@ -44,11 +45,19 @@ from .frames import check_image
 
 __all__ = [
     "Tracker2D", "OpenCVTracker", "OracleTracker", "TrackerUnavailable", "MIN_SIDE",
-    "create_tracker", "available_trackers", "register_tracker", "NANOTRACK_DIR",
+    "create_tracker", "available_trackers", "register_tracker", "NANOTRACK_ENV", "nanotrack_dir",
 ]
 
 # runtime/track3d/trackers2d.py -> the repository root is two folders up from the package.
-NANOTRACK_DIR = Path(__file__).resolve().parents[2] / ".." / "shared" / "peers" / "nanotrack-v2"
+# NanoTrack v2 is a peer's model, never shipped: its folder (nanotrack_backbone_sim.onnx,
+# nanotrack_head_sim.onnx) comes from this environment variable or the factory's options.
+NANOTRACK_ENV = "TRACK3D_NANOTRACK_DIR"
+
+
+def nanotrack_dir() -> Path | None:
+    """The NanoTrack peer-model folder named by $TRACK3D_NANOTRACK_DIR, or None."""
+    d = os.environ.get(NANOTRACK_ENV)
+    return Path(d) if d else None
 
 
 class TrackerUnavailable(RuntimeError):
@@ -256,7 +265,9 @@ MIN_SIDE = {"mil": 8, "boosting": 8}
 
 
 def _opencv(name: str) -> Callable[..., OpenCVTracker]:
-    def factory(correct: str = "none") -> OpenCVTracker:
+    def factory(correct: str = "none", threads: int = 1) -> OpenCVTracker:
+        # threads: OpenCV's own pool is set process-wide (track3d.cli.set_threads); accepted
+        # here so that every factory takes the same `threads` option
         found = _cv_constructor(_OPENCV[name])
         if found is None:
             raise TrackerUnavailable(f"this OpenCV build ({cv2.__version__}) has no {name} tracker "
@@ -267,10 +278,14 @@ def _opencv(name: str) -> Callable[..., OpenCVTracker]:
 
 
 def _nano(backbone: str | Path | None = None, neckhead: str | Path | None = None,
-          correct: str = "none") -> OpenCVTracker:
+          correct: str = "none", threads: int = 1) -> OpenCVTracker:
     """NanoTrack v2 through OpenCV (peer model, for benchmarks only: never shipped)."""
-    backbone = Path(backbone) if backbone else NANOTRACK_DIR / "nanotrack_backbone_sim.onnx"
-    neckhead = Path(neckhead) if neckhead else NANOTRACK_DIR / "nanotrack_head_sim.onnx"
+    d = nanotrack_dir()
+    if (not backbone or not neckhead) and d is None:
+        raise TrackerUnavailable(f"NanoTrack needs its peer models: set {NANOTRACK_ENV} to their folder "
+                                 "(nanotrack_backbone_sim.onnx, nanotrack_head_sim.onnx) or pass backbone= and neckhead=")
+    backbone = Path(backbone) if backbone else d / "nanotrack_backbone_sim.onnx"
+    neckhead = Path(neckhead) if neckhead else d / "nanotrack_head_sim.onnx"
     for p in (backbone, neckhead):
         if not p.is_file():
             raise TrackerUnavailable(f"NanoTrack model file {p} not found (pass backbone= and neckhead=)")
