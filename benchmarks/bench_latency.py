@@ -1,6 +1,6 @@
 """Latency distribution of the Track3D loop: median, p99, p99.9, max per update, and where the tail is.
 
-    python benchmarks/bench_latency.py --data data/small --frames 10000 --out /tmp/latency.json
+    python benchmarks/bench_latency.py --data data/small --frames 10000 --out latency.json
 
 Runs the default tracker (shipped SiamFC edge + A3BoxNet, one thread) over preloaded frames of a
 split (I/O excluded), re-initialising at each sequence start, pinned to one core (every thread of

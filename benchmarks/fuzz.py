@@ -1,6 +1,6 @@
 """Seeded fuzz run of every public entry point; prints counts per outcome.
 
-    python benchmarks/fuzz.py --cases 100000 --minutes 20 --out /tmp/fuzz.json
+    python benchmarks/fuzz.py --cases 100000 --minutes 20 --out fuzz.json
 
 Each case draws a random input (seeded: case i of target T always draws the same input) and is
 classified as one of
