@@ -14,7 +14,7 @@ preloaded) at 1 thread (process pinned to one core) and 2 threads (on the first
     python benchmarks/bench_2d.py --data data/small --sweep --ratio
 
 Writes <out>/bench_2d.json, bench_2d_success.png, bench_2d_precision.png, bench_2d_tradeoff.png
-and bench_2d.md (the table). Default out: benchmarks/results/siamfc/.
+and bench_2d.md (the table). Default out: ./bench-results/siamfc/ (the committed results: --out benchmarks/results/siamfc).
 """
 from __future__ import annotations
 
@@ -33,7 +33,10 @@ from track3d.boxes import center_error_2d, iou_2d
 from track3d.dataset import Dataset
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = Path(__file__).resolve().parent / "results" / "siamfc"
+# Benchmarks never write into the repository unless asked: by default their output goes to
+# ./bench-results under the current folder; pass --out benchmarks/results/... to update the committed files.
+OUT_ROOT = Path("bench-results")
+RESULTS = OUT_ROOT / "siamfc"
 MODELS = ROOT / "runtime" / "track3d" / "models"
 DEFAULT_TRACKERS = ("siamfc-edge", "siamfc", "nano", "kcf", "csrt", "mosse", "mil")
 IOU_T = np.linspace(0.0, 1.0, 101)

@@ -30,7 +30,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = Path(__file__).resolve().parent / "results"
+# Benchmarks never write into the repository unless asked: by default their output goes to
+# ./bench-results under the current folder; pass --out benchmarks/results/... to update the committed files.
+OUT_ROOT = Path("bench-results")
+RESULTS = OUT_ROOT
 PAPER = {"AO_bev": 0.798, "AO_3d": 0.721, "ACE_3d": 0.345, "FPS": 281.5,
          "baseline_AO_bev": 0.309, "baseline_AO_3d": 0.165, "baseline_ACE_3d": 0.876,
          "no_category": {"AO_3d": 0.715, "AO_bev": 0.792, "ACE_3d": 0.316}}

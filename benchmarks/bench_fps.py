@@ -40,7 +40,10 @@ from track3d.tracker import Track3D
 
 STAGES = ("crop", "net2d", "post2d", "frustum", "boxnet_other", "net3d", "fusion", "overhead", "end_to_end")
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = Path(__file__).resolve().parent / "results"
+# Benchmarks never write into the repository unless asked: by default their output goes to
+# ./bench-results under the current folder; pass --out benchmarks/results/... to update the committed files.
+OUT_ROOT = Path("bench-results")
+RESULTS = OUT_ROOT
 SIAMFC_STEMS = {"siamfc-edge": "siamfc_edge", "siamfc": "siamfc_faithful"}  # tracker name -> shipped stem
 RATIO_STAGES = ("net2d", "net3d", "end_to_end")
 EQUIV_RTOL = 1e-3

@@ -9,7 +9,7 @@ Two clouds, both 640x480:
 Also times the sampling to 1024 / 512 points (C++ vs the pure-Python reference of the same
 algorithm). Reports median / min / p90 milliseconds over --repeat runs (after a warm-up), with
 the CPU model and the load average (the machine is shared: read the minimum as the
-undisturbed cost). Writes benchmarks/results/frustum_<tag>.json.
+undisturbed cost). Writes ./bench-results/frustum_<tag>.json.
 
     nice python benchmarks/bench_frustum.py [--data data/small] [--repeat 200] [--tag cpu]
 """
@@ -29,7 +29,10 @@ from track3d.evaluation.experiment import cpu_name
 from track3d.frustum import (HAVE_EXTENSION, extract_frustum, extract_frustum_numpy, sample_points,
                              sample_points_numpy)
 
-RESULTS = Path(__file__).resolve().parent / "results"
+# Benchmarks never write into the repository unless asked: by default their output goes to
+# ./bench-results under the current folder; pass --out benchmarks/results/... to update the committed files.
+OUT_ROOT = Path("bench-results")
+RESULTS = OUT_ROOT
 
 
 def dense_cloud(cam: Camera) -> tuple[np.ndarray, np.ndarray]:

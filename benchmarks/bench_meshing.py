@@ -3,7 +3,7 @@
 The same signed distance grids (the generators' own, captured just before meshing) are meshed by
 scikit-image (`measure.marching_cubes`, Lewiner), PyMCubes (`mcubes.marching_cubes`) and
 manifold3d (`Manifold.level_set`, marching tetrahedra, sampling the grid through a Python
-callback). Writes results/meshing_<tag>.json and prints a table.
+callback). Writes ./bench-results/meshing_<tag>.json and prints a table.
 
     .venv/bin/pip install pymcubes manifold3d   # the two candidates not in the sim extra
     nice .venv/bin/python benchmarks/bench_meshing.py --tag cpu
@@ -77,7 +77,7 @@ def _manifold(v):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--tag", default="cpu", help="results/meshing_<tag>.json (default cpu)")
+    ap.add_argument("--tag", default="cpu", help="./bench-results/meshing_<tag>.json (default cpu)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the bodies (default 0)")
     ap.add_argument("--manifold-detail", type=int, default=4,
                     help="detail for manifold3d, whose per-point Python callback is slow (default 4)")
@@ -102,7 +102,7 @@ def main():
                          "faces_median": int(np.median(faces)), "closed": f"{sum(closed)}/{len(closed)}"})
             print(f"{lib:13s} detail {detail}  {rows[-1]['ms_median']:8.1f} ms (max {rows[-1]['ms_max']:8.1f})"
                   f"  faces {rows[-1]['faces_median']:6d}  closed+consistent {rows[-1]['closed']}")
-    out = Path(__file__).parent / "results" / f"meshing_{args.tag}.json"
+    out = Path("bench-results") / f"meshing_{args.tag}.json"  # never into the repository unless copied there
     out.parent.mkdir(exist_ok=True)
     out.write_text(json.dumps({"cpu": platform.processor() or platform.machine(), "bodies": names,
                                "rows": rows}, indent=1))

@@ -286,7 +286,7 @@ def main(argv=None) -> int:
                     help="merge the accuracy verdicts into runtime/track3d/models/accuracy.json (read by auto)")
     ap.add_argument("--no-speed", action="store_true", help="skip the speed rows (accuracy only)")
     ap.add_argument("--tag", default=None, help="result file tag (default: the host name)")
-    ap.add_argument("--out-dir", type=Path, default=RESULTS, help="output folder (default: benchmarks/results)")
+    ap.add_argument("--out-dir", type=Path, default=RESULTS, help="output folder (default: ./bench-results)")
     a = ap.parse_args(argv)
     if a.rounds < 1 or a.frames < 1:
         ap.error("--rounds and --frames must be >= 1")

@@ -29,7 +29,7 @@ Writes <out>/table2.json (CPU model, dataset size, every row's metrics), <out>/t
 (the tables, also printed), <out>/fig15_sweep.png, <out>/fig16_3d_vs_2d.png, the
 Experiment's results (<out>/results, <out>/results_ope) and reports (<out>/report*/:
 report.json, success / precision curves, 3D trajectories). Default out:
-benchmarks/results/table2. Missing models (no shipped SiamFC / A3BoxNet ONNX, no NanoTrack
+./bench-results/table2 (--out benchmarks/results/table2 for the committed tables). Missing models (no shipped SiamFC / A3BoxNet ONNX, no NanoTrack
 peer model) make their rows "skipped" with the reason, unless --no-skip-missing.
 """
 from __future__ import annotations
@@ -47,7 +47,10 @@ from pathlib import Path
 
 import numpy as np
 
-RESULTS = Path(__file__).resolve().parent / "results" / "table2"
+# Benchmarks never write into the repository unless asked: by default their output goes to
+# ./bench-results under the current folder; pass --out benchmarks/results/... to update the committed files.
+OUT_ROOT = Path("bench-results")
+RESULTS = OUT_ROOT / "table2"
 DEFAULT_TRACKERS = ("siamfc-edge", "siamfc", "nano", "kcf", "csrt", "mosse", "mil")
 VARIANTS = (("edge", "siamfc-edge"), ("faithful", "siamfc"))
 OPENCV_LIKE = ("kcf", "csrt", "mosse", "mil", "medianflow", "boosting", "tld", "nano")
@@ -409,7 +412,7 @@ def parse_args(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", required=True, help="dataset root (the folder with dataset.json)")
     ap.add_argument("--split", default="test", help="dataset split (default: test)")
-    ap.add_argument("--out", default=str(RESULTS), help="output folder (default: benchmarks/results/table2)")
+    ap.add_argument("--out", default=str(RESULTS), help="output folder (default: ./bench-results/table2; the committed tables: benchmarks/results/table2)")
     ap.add_argument("--threads", type=int, default=1,
                     help="CPU threads of the ONNX models and OpenCV (default 1: the process is pinned to one core)")
     ap.add_argument("--max-seqs", type=int, default=0, help="only the first N sequences of the split (0: all)")
