@@ -32,7 +32,8 @@ for d in engine-train-po engine-train-stereo; do
       --jitters 3 --out "$OUT/cache/$d.npz" --quiet
 done
 
-# 3. training (the shipped recipe, without the category input)
+# 3. training (the shipped recipe, without the category input; an "epoch" of 4000 samples
+#    so that a checkpoint lands every few minutes)
 "$BIN/track3d-train" boxnet train --cache "$OUT/cache/engine-train-po.npz" "$OUT/cache/engine-train-stereo.npz" \
-    --out "$OUT/nocat" --num-points 512 --epochs 100 --max-minutes "$MINUTES" --flip-y --scale-aug 0.15 \
+    --out "$OUT/nocat" --num-points 512 --epochs 100 --epoch-samples 4000 --max-minutes "$MINUTES" --flip-y --scale-aug 0.15 \
     --size-norm extent --no-category --threads "$THREADS" --quiet
