@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from track3d.boxes import SIZE_TEMPLATES, size_class_of
-from track3d.boxnet import (OUTPUTS, decode, decode_batch, normalise, one_hot, remap_length, size_labels)
+from track3d.boxnet import (decode, decode_batch, normalise, one_hot, remap_length, size_labels)
 
 torch = pytest.importorskip("torch")
 

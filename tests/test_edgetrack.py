@@ -16,7 +16,7 @@ torch = pytest.importorskip("torch")
 
 from track3d.boxes import iou_2d  # noqa: E402
 from track3d.onnxmodel import OnnxModel  # noqa: E402
-from track3d_train.edgetrack.model import (EdgeTrack, EdgeTrackConfig, _iou_loss, cell_centres,  # noqa: E402
+from track3d_train.edgetrack.model import (EdgeTrackConfig, _iou_loss, cell_centres,  # noqa: E402
                                            edgetrack_loss, make_targets)
 from track3d_train.edgetrack.train import fit_platt  # noqa: E402
 

@@ -63,7 +63,6 @@ def test_exporter_writes_the_normalisation_of_its_coding():
 
 
 def _tiny_model():
-    import onnx
     from onnx import TensorProto, helper
 
     x = helper.make_tensor_value_info("x", TensorProto.FLOAT, [1])

@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from .frames import MAX_BOX_SCALE, check_image, check_init_box
-from .onnxmodel import ModelError, OnnxModel, shipped_model
+from .onnxmodel import OnnxModel, shipped_model
 
 __all__ = ["SiamFCTracker", "create", "crop_square", "model_paths", "VARIANT_FILES", "TUNABLE"]
 

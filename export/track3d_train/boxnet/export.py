@@ -129,7 +129,7 @@ def export_checkpoint(ckpt: str | Path, out: str | Path, check: bool = True, log
     meta = json.loads(json.dumps(model_metadata(model, extra)))
     if check:
         worst = parity_check(model, path)
-        log(f"parity torch vs onnxruntime: max |diff| " + ", ".join(f"{k} {v:.2e}" for k, v in worst.items()))
+        log("parity torch vs onnxruntime: max |diff| " + ", ".join(f"{k} {v:.2e}" for k, v in worst.items()))
         meta["parity"] = worst
     log(f"wrote {path} ({Path(path).stat().st_size / 1e6:.2f} MB)")
     return meta

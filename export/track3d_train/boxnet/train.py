@@ -56,7 +56,6 @@ def _split_val(cache, every: int, seed: int):
 
 def load_checkpoint(path: str | Path):
     """-> (model in eval mode, checkpoint dict)."""
-    import torch
 
     from .model import A3BoxNet, BoxNetConfig
 

@@ -110,7 +110,6 @@ def _export(a) -> int:
 
 
 def _eval(a) -> int:
-    import numpy as np
 
     from track3d.dataset import Dataset
     from track3d.siamfc import create

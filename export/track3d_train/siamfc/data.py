@@ -70,7 +70,6 @@ def build_cache(sequences, out_dir, exemplar_size: int = 127, cache_size: int = 
     crops = np.lib.format.open_memmap(out / "crops.npy.tmp", mode="w+", dtype=np.uint8,
                                       shape=(n, cache_size, cache_size, 3))
     seq_of, frame_of, sizes = [], [], []
-    it = plan
     bar = None
     if progress:
         from tqdm import tqdm

@@ -11,7 +11,7 @@ inside, so the runtime never converts images to float itself.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import torch
 import torch.nn as nn
