@@ -60,3 +60,32 @@ def test_clear_errors(tmp_path):
         ds.sequences("train")
     with pytest.raises(D.DatasetError, match="sequence 'nope'"):
         ds.sequence("test", "nope")
+
+
+def test_writer_and_reader_round_trip(tmp_path):
+    """write_labels / write_dataset_json are the reader's counterpart: what one writes, the other
+    reads back exactly (integers stay integers, 3D labels to the stated decimals)."""
+    import numpy as np
+    from track3d.camera import Camera
+
+    seq = tmp_path / "test" / "0001"
+    (seq / D.LEFT_DIR).mkdir(parents=True)
+    (seq / D.DEPTH_DIR).mkdir()
+    n = 3
+    for i in range(n):
+        D.write_rgb(seq / D.LEFT_DIR / D.frame_name(i), np.zeros((8, 10, 3), np.uint8))
+        D.write_depth_png(seq / D.DEPTH_DIR / D.frame_name(i), np.full((8, 10), 2.0))
+    gt2d = np.array([[1, 2, 3, 4], [0, 0, 0, 0], [2, 2, 5, 5]])
+    gt3d = np.array([[0.1, 0.2, 5.0, 1.0, 1.0, 1.0]] * n)
+    D.write_labels(seq, gt2d, gt3d, [0, 1, 0], [0, 0, 1], {"family_index": 1, "z": [1, 2]})
+    D.write_dataset_json(tmp_path, {"format": D.FORMAT, "version": D.FORMAT_VERSION,
+                                    "camera": Camera.from_fov(10, 8, 45.0).to_dict(), "splits": {"test": ["0001"]}})
+    assert (seq / D.GT2D).read_text().splitlines()[0] == "1,2,3,4"
+    s = D.Dataset(tmp_path).sequence("test", "0001")
+    np.testing.assert_array_equal(s.gt2d, gt2d)
+    np.testing.assert_allclose(s.gt3d, gt3d, atol=5e-5)
+    assert s.absent.tolist() == [False, True, False] and s.cut.tolist() == [False, False, True]
+    assert s.category == 1 and s.meta["z"] == [1, 2]
+    with pytest.raises(ValueError, match="gt3d"):
+        D.write_labels(seq, gt2d, gt3d[:2], [0, 1, 0], [0, 0, 1], {})
+    assert not list(tmp_path.glob(".dataset.json.tmp-*"))

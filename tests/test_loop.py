@@ -12,7 +12,7 @@ import pytest
 
 from track3d import Camera
 from track3d.boxes import box3d_from_points, iou_3d
-from track3d.dataset import FORMAT, FORMAT_VERSION, frame_name, write_depth_png, write_rgb
+from track3d.dataset import FORMAT, FORMAT_VERSION, frame_name, write_depth_png, write_labels, write_rgb
 from track3d.estimators import create_estimator
 from track3d.frustum import extract_frustum
 from track3d.fusion import fuse
@@ -81,11 +81,8 @@ def make_synthetic_dataset(root: Path, sequences: dict[str, int] | None = None, 
             gt2d.append(b2)
             gt3d.append(b3)
             flags.append(int(gone))
-        np.savetxt(d / "groundtruth_2d.txt", np.array(gt2d), fmt="%.4f", delimiter=",")
-        np.savetxt(d / "groundtruth_3d.txt", np.array(gt3d), fmt="%.6f", delimiter=",")
-        np.savetxt(d / "absence.label", np.array(flags), fmt="%d")
-        np.savetxt(d / "cut_by_image.label", np.zeros(n), fmt="%d")
-        (d / "meta.json").write_text(json.dumps({"family_index": 0}))
+        write_labels(d, np.array(gt2d, dtype=np.float64), np.array(gt3d), np.array(flags), np.zeros(n),
+                     {"family_index": 0}, decimals_3d=6)
     info = {"format": FORMAT, "version": FORMAT_VERSION, "camera": CAM.to_dict(),
             "splits": {split: list(sequences)}}
     (root / "dataset.json").write_text(json.dumps(info))

@@ -12,7 +12,7 @@ import pytest
 
 from track3d import Camera
 from track3d.boxes import iou_3d
-from track3d.dataset import FORMAT, FORMAT_VERSION, frame_name, write_depth_png, write_rgb
+from track3d.dataset import FORMAT, FORMAT_VERSION, frame_name, write_depth_png, write_labels, write_rgb
 from track3d.estimators import create_estimator
 from track3d.stereo import StereoCloud, StereoMatcher, StereoParams
 from track3d.tracker import TRACKING, Track3D
@@ -196,11 +196,8 @@ def _stereo_dataset(root: Path, cam: Camera, n: int = 4) -> Path:
         write_rgb(d / "left" / frame_name(i), left)
         write_rgb(d / "right" / frame_name(i), right)
         write_depth_png(d / "depth" / frame_name(i), z)
-    np.savetxt(d / "groundtruth_2d.txt", np.array([f[2] for f in frames]), fmt="%.4f", delimiter=",")
-    np.savetxt(d / "groundtruth_3d.txt", np.array([f[3] for f in frames]), fmt="%.6f", delimiter=",")
-    np.savetxt(d / "absence.label", np.zeros(n), fmt="%d")
-    np.savetxt(d / "cut_by_image.label", np.zeros(n), fmt="%d")
-    (d / "meta.json").write_text(json.dumps({"family_index": 0}))
+    write_labels(d, np.array([f[2] for f in frames], dtype=np.float64), np.array([f[3] for f in frames]),
+                 np.zeros(n), np.zeros(n), {"family_index": 0}, decimals_3d=6)
     (root / "dataset.json").write_text(json.dumps({"format": FORMAT, "version": FORMAT_VERSION,
                                                    "camera": cam.to_dict(), "splits": {"test": ["s1"]}}))
     return root

@@ -26,6 +26,7 @@ from .camera import Camera
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "DATASET_JSON", "LEFT_DIR", "RIGHT_DIR", "DEPTH_DIR", "GT2D", "GT3D",
     "ABSENCE", "CUT", "META", "frame_name", "write_depth_png", "read_depth_png", "read_rgb", "write_rgb",
+    "write_labels", "write_dataset_json",
     "DatasetError", "Dataset", "Sequence", "Frame",
 ]
 
@@ -80,6 +81,38 @@ def read_rgb(path: str | Path) -> np.ndarray:
     if bgr is None:
         raise DatasetError(f"cannot read image {path}")
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def write_labels(seq_dir: str | Path, gt2d: np.ndarray, gt3d: np.ndarray, absent, cut, meta: dict,
+                 decimals_3d: int = 4) -> None:
+    """Write a sequence's label files and meta.json, the counterpart of `Sequence`'s reader.
+
+    gt2d (N, 4) [x, y, w, h] pixels (integers are written as integers), gt3d (N, 6) metres
+    with `decimals_3d` decimals (4: 0.1 mm, finer than the 1 mm depth maps), absent / cut (N,)
+    0/1 flags, meta a JSON-able dict (sorted keys: deterministic bytes)."""
+    d = Path(seq_dir)
+    g2, g3 = np.asarray(gt2d), np.asarray(gt3d, dtype=np.float64)
+    a, c = np.asarray(absent).astype(np.int64).reshape(-1), np.asarray(cut).astype(np.int64).reshape(-1)
+    n = len(g2)
+    if g2.shape != (n, 4) or g3.shape != (n, 6) or a.shape != (n,) or c.shape != (n,):
+        raise ValueError(f"labels must be gt2d (N, 4), gt3d (N, 6), absent (N,), cut (N,); got "
+                         f"{g2.shape}, {g3.shape}, {a.shape}, {c.shape}")
+    np.savetxt(d / GT2D, g2, fmt="%d" if np.issubdtype(g2.dtype, np.integer) else "%.4f", delimiter=",")
+    np.savetxt(d / GT3D, g3, fmt=f"%.{int(decimals_3d)}f", delimiter=",")
+    np.savetxt(d / ABSENCE, a, fmt="%d")
+    np.savetxt(d / CUT, c, fmt="%d")
+    (d / META).write_text(json.dumps(meta, indent=1, sort_keys=True))
+
+
+def write_dataset_json(root: str | Path, info: dict) -> None:
+    """Write <root>/dataset.json atomically (a temporary file renamed): its presence means the
+    dataset is complete, so it is written last and never half."""
+    import os
+
+    path = Path(root) / DATASET_JSON
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(json.dumps(info, indent=1, sort_keys=True))
+    os.replace(tmp, path)
 
 
 def _read_table(path: Path, cols: int) -> np.ndarray:

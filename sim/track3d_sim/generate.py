@@ -387,7 +387,7 @@ def _generate(settings, out: Path, workers, overwrite, progress, log, ray, ray_m
     finally:
         if bar:
             bar.close()
-    _atomic_write(out / ds.DATASET_JSON, json.dumps(info, indent=1, sort_keys=True))
+    ds.write_dataset_json(out, info)
     dt = time.time() - t0
     if todo:
         how = f"Ray at {ray}" if ray is not None else f"{workers} worker(s)"

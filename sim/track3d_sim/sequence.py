@@ -9,7 +9,6 @@ registered later appears in the plan, the fine categories and the splits without
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import shutil
@@ -351,11 +350,7 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
         "frames": len(gt2d), "fps": FPS, "frame_data": frames_meta,
     }
     if out_dir is not None:
-        np.savetxt(out_dir / ds.GT2D, gt2d, fmt="%d", delimiter=",")
-        np.savetxt(out_dir / ds.GT3D, gt3d, fmt="%.4f", delimiter=",")
-        np.savetxt(out_dir / ds.ABSENCE, absent, fmt="%d")
-        np.savetxt(out_dir / ds.CUT, cut, fmt="%d")
-        (out_dir / ds.META).write_text(json.dumps(meta, indent=1, sort_keys=True))
+        ds.write_labels(out_dir, gt2d, gt3d, absent, cut, meta)
     result = {"gt2d": gt2d, "gt3d": gt3d, "absent": absent, "cut": cut, "meta": meta, "shape": shape}
     if keep_depth:
         result["depth"] = depths
