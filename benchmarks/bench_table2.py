@@ -78,7 +78,7 @@ def log(msg: str, quiet: bool = False) -> None:
 
 def pin(threads: int) -> str:
     """1 thread: pin the process to one core (the project's target); OpenCV follows --threads."""
-    from track3d.cli import set_threads
+    from track3d.threads import set_threads
 
     set_threads(threads)
     if threads != 1 or not hasattr(os, "sched_setaffinity"):

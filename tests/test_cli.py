@@ -56,8 +56,10 @@ def test_trackers_lists_names(capsys):
 
 def test_demo_on_a_tiny_simulation(tmp_path, capsys):
     pytest.importorskip("track3d_sim")
+    from track3d_sim.cli import main as sim_main
+
     out = tmp_path / "demo"
-    rc = main(["demo", "--out", str(out), "--preset", "tiny", "--sequences", "1", "--frames", "4",
+    rc = sim_main(["demo", "--out", str(out), "--preset", "tiny", "--sequences", "1", "--frames", "4",
                "--tracker", "kcf", "--estimator", "baseline", "--quiet"])
     assert rc == 0
     summary = json.loads((out / "summary.json").read_text())
@@ -66,3 +68,22 @@ def test_demo_on_a_tiny_simulation(tmp_path, capsys):
     assert "AO_2d" in text and "overlay:" in text
     assert list((out / "results").rglob("*_overlay.gif"))
     assert (out / "report" / "success_3d.png").is_file()
+
+
+def test_runtime_demo_points_to_the_simulator(tmp_path, capsys):
+    """The runtime never imports the simulator: `track3d demo` says where the demo is, in one line."""
+    assert main(["demo", "--out", str(tmp_path / "d")]) == 2
+    err = capsys.readouterr().err
+    assert "track3d-sim demo" in err and err.count("\n") == 1
+    assert not (tmp_path / "d").exists()
+
+
+def test_runtime_never_imports_the_simulator_or_torch():
+    import subprocess
+    import sys
+
+    code = ("import sys, track3d, track3d.cli, track3d.tracker, track3d.evaluation, track3d.bench, track3d.stereo; "
+            "bad = [m for m in sys.modules if m.split('.')[0] in ('track3d_sim', 'track3d_train', 'torch')]; "
+            "print(bad); sys.exit(1 if bad else 0)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr

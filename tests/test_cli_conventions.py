@@ -138,10 +138,12 @@ def test_gif_without_pillow_says_so(tmp_path, capsys, monkeypatch):
 
 
 def test_demo_without_the_sim_extra_names_it(tmp_path, capsys, monkeypatch):
-    from track3d import demo
+    pytest.importorskip("track3d_sim")
+    from track3d_sim import demo
+    from track3d_sim.cli import main as sim_main
 
     monkeypatch.setattr(demo, "missing_demo_modules", lambda: ["tqdm", "trimesh"])
-    assert main(["demo", "--out", str(tmp_path / "d")]) == 2
+    assert sim_main(["demo", "--out", str(tmp_path / "d")]) == 2
     _one_line(capsys, "pip install 'track3d[sim]'", "tqdm")
 
 

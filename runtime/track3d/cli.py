@@ -1,8 +1,8 @@
-"""The `track3d` command: track, eval, demo, trackers.
+"""The `track3d` command: track, eval, bench, trackers.
 
     track3d track --data data/small --split test --tracker kcf --estimator baseline
     track3d eval  --data data/small --split test --results results --out reports
-    track3d demo  --out track3d-demo
+    track3d-sim demo --out track3d-demo   # simulate, track, evaluate (the sim extra)
     track3d trackers                       # the registered 2D trackers and box estimators
     track3d bench                          # FPS of the shipped models on this CPU (no dataset needed)
 """
@@ -14,35 +14,10 @@ from pathlib import Path
 
 from .argparsing import apply_formatter, hidden_alias
 
-__all__ = ["main", "summary_table", "set_threads", "TABLE_COLUMNS"]
+__all__ = ["main"]
 
-TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
-                 ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
-                 ("restarts", "restarts", "{:d}"), ("frames", "frames", "{:d}"), ("FPS", "fps", "{:.1f}"),
-                 ("FPS_e2e", "fps_e2e", "{:.1f}"))
-
-
-def summary_table(report: dict) -> str:
-    """A Table-2-style text table of a report's overall scores (one row per tracker)."""
-    rows = [["name"] + [c[0] for c in TABLE_COLUMNS]]
-    for name, t in report["trackers"].items():
-        ov = t["overall"]
-        row = [name]
-        for _, key, fmt in TABLE_COLUMNS:
-            v = ov.get(key)
-            row.append("-" if v is None or (isinstance(v, float) and v != v) else fmt.format(v))
-        rows.append(row)
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    return "\n".join("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
-                     for r in rows)
-
-
-def set_threads(threads: int) -> None:
-    """OpenCV's own thread pool follows --threads too, so that FPS at 1 thread means one thread."""
-    import cv2
-
-    cv2.setNumThreads(int(threads))
-
+from .evaluation.tables import summary_table  # noqa: E402  (the one table of a report)
+from .threads import set_threads  # noqa: E402
 
 def _options(pairs: list[str] | None) -> dict:
     """key=value pairs -> dict, values parsed as int / float / bool when they look like one."""
@@ -146,10 +121,9 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--no-plots", action="store_true", help="skip the plots (no matplotlib needed)")
     e.add_argument("--trajectories", type=int, default=4, help="sequences with a 3D trajectory plot")
 
-    d = sub.add_parser("demo", help="simulate a small test set, track, evaluate, write plots and an overlay")
-    from .demo import add_arguments
-
-    add_arguments(d)
+    # The demo simulates its data, so it lives with the simulator (`track3d-sim demo`): the
+    # runtime never imports the simulator. This entry only says where it went.
+    sub.add_parser("demo", help="moved: run `track3d-sim demo` (needs pip install 'track3d[sim]')")
 
     tr = sub.add_parser("trackers", help="list the registered 2D trackers and 3D box estimators (plug-ins included)")
     _add_plugin_arg(tr)
@@ -289,7 +263,15 @@ def _cmd_trackers(a) -> int:
     return 0
 
 
+DEMO_MOVED = ("the demo simulates its data and lives with the simulator: run `track3d-sim demo` "
+              "(pip install 'track3d[sim]')")
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["demo"]:  # whatever its flags: one line saying where the demo went
+        print(f"track3d demo: error: {DEMO_MOVED}", file=sys.stderr)
+        return 2
     args = _parser().parse_args(argv)
     from .dataset import DatasetError
     from .estimators import EstimatorUnavailable
@@ -308,9 +290,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "bench":
             return _cmd_bench(args)
         if args.command == "demo":
-            from .demo import run_demo
-
-            return run_demo(args)
+            raise RuntimeError(DEMO_MOVED)
         return _cmd_trackers(args)
     except (DatasetError, TrackerUnavailable, EstimatorUnavailable, ModelError, OSError,
             ValueError, RuntimeError) as e:

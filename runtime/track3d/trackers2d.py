@@ -266,7 +266,7 @@ MIN_SIDE = {"mil": 8, "boosting": 8}
 
 def _opencv(name: str) -> Callable[..., OpenCVTracker]:
     def factory(correct: str = "none", threads: int = 1) -> OpenCVTracker:
-        # threads: OpenCV's own pool is set process-wide (track3d.cli.set_threads); accepted
+        # threads: OpenCV's own pool is set process-wide (track3d.threads.set_threads); accepted
         # here so that every factory takes the same `threads` option
         found = _cv_constructor(_OPENCV[name])
         if found is None:

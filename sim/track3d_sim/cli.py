@@ -36,7 +36,7 @@ def _mesh(text: str):
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="track3d-sim", description="3D asteroid tracking dataset simulator "
                                 "(headless CPU ray casting; writes the layout of docs/dataset.md).")
-    sub = p.add_subparsers(dest="cmd", required=True, metavar="{generate,stats,preview,ply,shapes}")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="{generate,stats,preview,ply,shapes,demo}")
     g = sub.add_parser("generate", help="render a dataset (resumable, deterministic for a seed)",
                        description="Render a dataset into --out. A killed run continues where it stopped "
                        "when started again with the same arguments; dataset.json is written last.")
@@ -96,6 +96,10 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--frames", type=int, default=12, help="frames in the contact sheet (default 12)")
     v.add_argument("--gain", type=float, default=1.0, help="brightness gain for viewing dark images (default 1)")
     v.add_argument("--right", action="store_true", help="add the right image beside the left")
+    dm = sub.add_parser("demo", help="simulate a small test set, run Track3D with the shipped models, evaluate, "
+                                      "write plots and an overlay (the README's main job)")
+    from .demo import add_arguments
+    add_arguments(dm)
     e = sub.add_parser("ply", help="export a frame's back-projected point cloud (with colours) as PLY")
     e.add_argument("sequence", help="sequence folder, e.g. DATA/train/0001")
     e.add_argument("--frame", type=int, default=1, help="1-based frame number (default 1)")
@@ -137,6 +141,14 @@ def main(argv=None) -> int:
         elif args.cmd == "ply":
             from .preview import export_ply
             export_ply(args.sequence, args.frame, args.out)
+        elif args.cmd == "demo":
+            from track3d.dataset import DatasetError
+            from track3d.onnxmodel import ModelError
+            from .demo import run_demo
+            try:
+                return run_demo(args)
+            except (DatasetError, ModelError, ValueError, RuntimeError, OSError) as e:
+                raise SimError(str(e)) from None
         elif args.cmd == "shapes":
             from .contact_sheet import contact_sheet
             contact_sheet(args.out, args.generator or None, count=args.count, seed=args.seed, detail=args.detail,

@@ -1,7 +1,8 @@
-"""`track3d demo`: simulate a small test set, track it, evaluate, write everything, say where.
+"""`track3d-sim demo`: simulate a small test set, track it, evaluate, write everything, say where.
 
-Steps: (1) render a test-only dataset with the simulator (the `sim` extra; the demo is the
-one part of the runtime that uses it, imported lazily); (2) run Track3D with the shipped
+It lives in the simulator's package because it simulates its data (the runtime never imports
+the simulator; this module imports both). Steps: (1) render a test-only dataset
+(`generate`); (2) run Track3D with the shipped
 models (SiamFC edge + A3BoxNet), or, if a model cannot be loaded (a broken install), the
 OpenCV CSRT tracker / the baseline box estimator in its place, with a warning that says so; (3) evaluate under the restart protocol and
 print a Table-2-style summary; (4) write report.json, summary.json, success / precision
@@ -10,7 +11,6 @@ plots, 3D trajectory plots and an overlay GIF of the first sequence.
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import sys
 import time
@@ -29,12 +29,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--estimator", help="3D box estimator (default: the shipped A3BoxNet, else baseline)")
     p.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
-    from .argparsing import hidden_alias
+    from track3d.argparsing import hidden_alias
 
     hidden_alias(p, "--no-progress", "quiet", action="store_true")
 
 
-# What `track3d demo` imports beyond the runtime (module -> the extra that installs it).
+# What `track3d-sim demo` imports beyond the runtime (module -> the extra that installs it).
 DEMO_NEEDS = {"trimesh": "sim", "PIL": "sim", "scipy": "sim", "tqdm": "sim", "matplotlib": "plot"}
 
 
@@ -47,8 +47,8 @@ def missing_demo_modules() -> list[str]:
 
 def pick_models(tracker: str | None, estimator: str | None, threads: int) -> tuple[str, str, list[str]]:
     """The tracker and estimator names to use, and warnings for every fallback taken."""
-    from .estimators import create_estimator
-    from .trackers2d import create_tracker
+    from track3d.estimators import create_estimator
+    from track3d.trackers2d import create_tracker
 
     warnings = []
     if tracker is None:
@@ -78,24 +78,18 @@ def _simulate(data: Path, a) -> None:
     if missing:
         raise RuntimeError(f"the demo simulates its data and needs the sim extra: pip install 'track3d[sim]' "
                            f"(missing: {', '.join(missing)})")
-    try:
-        sim_cli = importlib.import_module("track3d_sim.cli")
-    except ImportError as e:
-        raise RuntimeError(f"the demo needs the simulator: pip install 'track3d[sim]' ({e})") from None
+    from .generate import generate, make_settings
+
     print(f"[demo] simulating {a.sequences} test sequence(s) x {a.frames} frames ({a.preset} preset) "
           f"into {data} ...", file=sys.stderr)
-    argv = ["generate", "--preset", a.preset, "--out", str(data), "--seed", str(a.seed), "--train", "0",
-            "--test", str(a.sequences), "--frames", str(a.frames), "--workers", "1"]
-    if a.quiet:
-        argv.append("--no-progress")
-    rc = sim_cli.main(argv)
-    if rc not in (0, None):
-        raise RuntimeError(f"the simulator failed (exit {rc}); see its message above")
+    settings = make_settings(a.preset, a.seed, train=0, test=a.sequences, frames=a.frames)
+    generate(settings, data, workers=1, progress=not a.quiet)
 
 
 def run_demo(a) -> int:
-    from .cli import set_threads, summary_table
-    from .evaluation import Experiment, TrackerSpec
+    from track3d.evaluation import Experiment, TrackerSpec
+    from track3d.evaluation.tables import summary_table
+    from track3d.threads import set_threads
 
     if a.sequences < 1 or a.frames < 2:
         raise ValueError("--sequences must be >= 1 and --frames >= 2")

@@ -1,0 +1,24 @@
+"""The Table-2-style text table of an evaluation report (`track3d eval`, the demo)."""
+from __future__ import annotations
+
+__all__ = ["TABLE_COLUMNS", "summary_table"]
+
+TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
+                 ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
+                 ("restarts", "restarts", "{:d}"), ("frames", "frames", "{:d}"), ("FPS", "fps", "{:.1f}"),
+                 ("FPS_e2e", "fps_e2e", "{:.1f}"))
+
+
+def summary_table(report: dict) -> str:
+    """A Table-2-style text table of a report's overall scores (one row per tracker)."""
+    rows = [["name"] + [c[0] for c in TABLE_COLUMNS]]
+    for name, t in report["trackers"].items():
+        ov = t["overall"]
+        row = [name]
+        for _, key, fmt in TABLE_COLUMNS:
+            v = ov.get(key)
+            row.append("-" if v is None or (isinstance(v, float) and v != v) else fmt.format(v))
+        rows.append(row)
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
+                     for r in rows)
