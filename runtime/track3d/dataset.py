@@ -26,7 +26,7 @@ from .camera import Camera
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "DATASET_JSON", "LEFT_DIR", "RIGHT_DIR", "DEPTH_DIR", "GT2D", "GT3D",
     "ABSENCE", "CUT", "META", "frame_name", "write_depth_png", "read_depth_png", "read_rgb", "write_rgb",
-    "write_labels", "write_dataset_json",
+    "write_labels", "write_dataset_json", "COARSE_CATEGORIES",
     "DatasetError", "Dataset", "Sequence", "Frame",
 ]
 
@@ -37,6 +37,9 @@ LEFT_DIR, RIGHT_DIR, DEPTH_DIR = "left", "right", "depth"
 GT2D, GT3D = "groundtruth_2d.txt", "groundtruth_3d.txt"
 ABSENCE, CUT, META = "absence.label", "cut_by_image.label", "meta.json"
 DEPTH_MAX_M = 65.535  # uint16 millimetres
+# The paper's coarse categories (shape families), in the order of `family_index` in meta.json
+# and of A3BoxNet's one-hot category input; kept for the paper's comparison only.
+COARSE_CATEGORIES = ("contact_binary", "spinning_top", "irregular")
 
 
 class DatasetError(Exception):

@@ -24,8 +24,9 @@ import math
 
 import numpy as np
 
+from track3d.frustum import Z_MAX as Z_FAR, Z_MIN as Z_NEAR  # stated once
+
 FPS = 10.0          # frames per second of the simulated cameras
-Z_NEAR, Z_FAR = 1.0, 45.0
 
 
 def rotvec_to_matrix(rv: np.ndarray) -> np.ndarray:

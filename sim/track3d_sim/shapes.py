@@ -18,10 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
+from track3d.dataset import COARSE_CATEGORIES as FAMILIES  # stated once
+
 from .errors import SimError
 from .noise import fft_noise, trilinear
 
-FAMILIES = ("contact_binary", "spinning_top", "irregular")
 
 # Axis-aligned box volume range of the paper (section III-B), m^3.
 VOLUME_RANGE = (16.0, 1600.0)

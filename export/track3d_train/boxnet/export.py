@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from track3d.boxes import SIZE_TEMPLATES
+from track3d.dataset import COARSE_CATEGORIES
 from track3d.boxnet import INPUT_CATEGORY, INPUT_POINTS, KIND, OUTPUTS
 
 from ..onnx_meta import attach_metadata
@@ -22,7 +23,7 @@ __all__ = ["MODEL_VERSION", "OPSET", "export_onnx", "parity_check", "model_metad
 
 MODEL_VERSION = "1.0"
 OPSET = 17
-FAMILIES = ["contact_binary", "spinning_top", "irregular"]
+FAMILIES = list(COARSE_CATEGORIES)
 
 
 # The decoding each size coding implies (track3d.boxnet is the implementation), for the metadata.

@@ -23,6 +23,7 @@ from typing import Callable
 import numpy as np
 
 from ..boxes import iou_3d
+from ..fusion import WEIGHT_3D
 from ..dataset import RIGHT_DIR, Dataset, DatasetError, Sequence, read_rgb
 from ..machine import cpu_name
 from ..progress import Progress
@@ -48,7 +49,7 @@ class TrackerSpec:
     tracker: str = "kcf"
     estimator: str = "baseline"
     fusion: bool = True
-    weight_3d: float = 0.3
+    weight_3d: float = WEIGHT_3D
     threads: int = 1
     tracker_options: dict = field(default_factory=dict)
     estimator_options: dict = field(default_factory=dict)
