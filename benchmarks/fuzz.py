@@ -295,22 +295,25 @@ def _t_tracker(name):
     return run
 
 
-def t_track3d_siamfc(rng, env):
-    from track3d.tracker import STATUSES, Track3D
+def _t_track3d(tracker: str):
+    """The loop with a learned 2D tracker (their crops see any box and image the caller sends)."""
+    def run(rng, env):
+        from track3d.tracker import STATUSES, Track3D
 
-    if "siamfc" not in env._est:
-        env._est["siamfc"] = Track3D.create(env.cam, tracker="siamfc-edge", estimator="baseline")
-    t = env._est["siamfc"]
-    img = rand_image(rng)
-    try:
-        t.init(img, rand_box(rng), rand_category(rng))
-    except ValueError:
-        return "clean_error"
-    for _ in range(2):
-        res = t.update(rand_image(rng), rand_cloud(rng))
-        check_track_result(res, STATUSES, t.min_points)
-        expect(np.all(res.box2d_raw[2:] <= 10 * 160 + 1e-6), f"SiamFC box {res.box2d_raw} beyond 10x the image")
-    return "ok"
+        if tracker not in env._est:
+            env._est[tracker] = Track3D.create(env.cam, tracker=tracker, estimator="baseline")
+        t = env._est[tracker]
+        img = rand_image(rng)
+        try:
+            t.init(img, rand_box(rng), rand_category(rng))
+        except ValueError:
+            return "clean_error"
+        for _ in range(2):
+            res = t.update(rand_image(rng), rand_cloud(rng))
+            check_track_result(res, STATUSES, t.min_points)
+            expect(np.all(res.box2d_raw[2:] <= 10 * 160 + 1e-6), f"{tracker} box {res.box2d_raw} beyond 10x the image")
+        return "ok"
+    return run
 
 
 DATA_FILES = ("dataset.json", "test/a/groundtruth_2d.txt", "test/a/groundtruth_3d.txt", "test/a/absence.label",
@@ -452,7 +455,7 @@ TARGETS = {
     "frustum": (t_frustum, 22), "sampling": (t_sampling, 12),
     "estimate_baseline": (_t_estimator("baseline"), 14), "estimate_a3boxnet": (_t_estimator("a3boxnet"), 12),
     "loop_baseline": (_loop := _t_loop("baseline"), 12), "loop_a3boxnet": (_t_loop("a3boxnet"), 8),
-    "track3d_siamfc": (t_track3d_siamfc, 4),
+    "track3d_siamfc": (_t_track3d("siamfc-edge"), 4), "track3d_edgetrack": (_t_track3d("edgetrack"), 4),
     **{f"tracker_{n}": (_t_tracker(n), w) for n, w in
        (("kcf", 2), ("csrt", 1), ("mosse", 2), ("medianflow", 2), ("mil", 1), ("boosting", 1))},
     "dataset": (t_dataset, 3), "cli": (t_cli, 1), "sim_cli": (t_sim_cli, 0.3), "mesh_loader": (t_mesh_loader, 1.7),

@@ -130,27 +130,27 @@ def test_mil_and_boosting_in_subprocesses(capsys):
     assert "crash=0" in out and "hang=0" in out and "wrong=0" in out
 
 
-@pytest.fixture(scope="module")
-def siamfc():
-    return Track3D.create(CAM, tracker="siamfc-edge", estimator="baseline")
+@pytest.fixture(scope="module", params=["siamfc-edge", "edgetrack"])
+def learned(request):
+    return Track3D.create(CAM, tracker=request.param, estimator="baseline")
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=list(HealthCheck))
 @given(init_box=boxes, corrections=st.lists(boxes, max_size=2), seed=st.integers(0, 2 ** 32 - 1))
-def test_siamfc_in_the_loop(siamfc, init_box, corrections, seed):
+def test_learned_tracker_in_the_loop(learned, init_box, corrections, seed):
     rng = np.random.default_rng(seed)
     try:
-        siamfc.init(fuzz.rand_image(rng), init_box, 0)
+        learned.init(fuzz.rand_image(rng), init_box, 0)
     except ValueError:
         return
     for b in corrections + [None]:
         if b is not None:
             try:
-                siamfc.tracker2d.correct(b)
+                learned.tracker2d.correct(b)
             except ValueError:
                 pass
-        res = siamfc.update(fuzz.rand_image(rng), fuzz.rand_cloud(rng))
-        fuzz.check_track_result(res, STATUSES, siamfc.min_points)
+        res = learned.update(fuzz.rand_image(rng), fuzz.rand_cloud(rng))
+        fuzz.check_track_result(res, STATUSES, learned.min_points)
         assert np.all(res.box2d_raw[2:] <= 10 * max(CAM.width, CAM.height))
 
 
