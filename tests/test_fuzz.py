@@ -173,3 +173,15 @@ def test_seeded_targets(env, target, examples):
         assert out in ("ok", "clean_error"), detail
 
     run()
+
+
+@pytest.mark.parametrize("cases", [100000, 99999, 1234, 1000003])
+def test_plan_runs_exactly_the_cases_asked(cases):
+    """Rounding each target's share alone planned 99,998 of 100,000 cases."""
+    counts = fuzz.plan(cases)
+    assert sum(counts.values()) == cases
+    assert min(counts.values()) >= 1
+
+
+def test_plan_gives_every_target_a_case():
+    assert set(fuzz.plan(3)) == set(fuzz.TARGETS) and min(fuzz.plan(3).values()) == 1
