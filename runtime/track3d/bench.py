@@ -140,9 +140,9 @@ def _dataset_frames(root: str, split: str, max_frames: int):
 # --- timing -----------------------------------------------------------------------------------
 
 def _onnx_models(obj) -> list:
-    from .onnxmodel import OnnxModel
+    from .onnxmodel import models_of
 
-    return [v for v in (vars(obj).values() if hasattr(obj, "__dict__") else ()) if isinstance(v, OnnxModel)]
+    return list(models_of(obj).values())
 
 
 class _NetTimer:
@@ -266,8 +266,7 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
     try:
         for threads in cfg.threads:
             cpus = allowed[:threads]
-            pinned = machine.pin(cpus)
-            cv2.setNumThreads(threads)
+            pinned = bool(machine.pin_threads(threads, allowed))
             t3d = _build(cfg, camera, threads)
             described = described or t3d.describe()
             say(f"{t3d.tracker_name}+{t3d.estimator_name} at {threads} thread(s) on CPU(s) {cpus} ...")
@@ -346,12 +345,3 @@ def format_table(report: dict) -> str:
     for w in report["warnings"]:
         lines.append(f"WARNING: {w}")
     return "\n".join(lines)
-
-
-def write_json(report: dict, path: str | Path) -> Path:
-    import json
-
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(report, indent=1))
-    return p

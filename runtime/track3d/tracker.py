@@ -365,11 +365,11 @@ _SHA: dict = {}
 
 def _models_of(part) -> list[dict]:
     """The OnnxModel attributes of a tracker or estimator, described (sha256 cached per file)."""
-    from .onnxmodel import OnnxModel
+    from .onnxmodel import OnnxModel, models_of
 
     out = []
-    for attr, v in sorted(vars(part).items()) if hasattr(part, "__dict__") else []:
-        if isinstance(v, OnnxModel):
+    for attr, v in models_of(part).items():
+        if isinstance(v, OnnxModel):   # files to describe (a stand-in has none)
             import hashlib
 
             f = getattr(v, "file", v.path)  # the variant that runs (fp32, int8 twin ...)

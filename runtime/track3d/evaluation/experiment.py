@@ -19,8 +19,6 @@ same code on the same threshold grids (metrics).
 """
 from __future__ import annotations
 
-import json
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,6 +28,7 @@ import numpy as np
 
 from ..boxes import iou_3d
 from ..fusion import WEIGHT_3D
+from ..jsonable import write_json
 from ..dataset import RIGHT_DIR, Dataset, DatasetError, Sequence, read_rgb
 from ..machine import cpu_name
 from ..progress import Progress
@@ -219,18 +218,6 @@ def _comparison_warnings(names: list[str], runs: dict, lengths: dict) -> list[st
     return out
 
 
-def _json_float(x):
-    if isinstance(x, (float, np.floating)):
-        return None if not math.isfinite(float(x)) else round(float(x), 6)
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, dict):
-        return {k: _json_float(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple, np.ndarray)):
-        return [_json_float(v) for v in (x.tolist() if isinstance(x, np.ndarray) else x)]
-    return x
-
-
 class Experiment:
     """One benchmark: a dataset split, its result and report folders (GOT-10k's Experiment)."""
 
@@ -414,7 +401,7 @@ class Experiment:
             seq_names = [s.name for s in self.sequences[:trajectories]]
             files += P.trajectory_plots(self, names, seq_names, self.report_dir)
             report["plots"] = [str(f) for f in files]
-        (self.report_dir / "report.json").write_text(json.dumps(_json_float(report), indent=1))
+        write_json(self.report_dir / "report.json", report)
         return report
 
     def _stage_means(self, name: str) -> dict:
