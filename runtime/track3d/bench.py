@@ -17,7 +17,6 @@ ONNX network alone, fed the inputs it saw in the loop (like onnxruntime_perf_tes
 from __future__ import annotations
 
 import gc
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +26,7 @@ import numpy as np
 
 from . import machine
 from .camera import Camera
+from .table_text import cell
 
 __all__ = ["BenchConfig", "run_bench", "format_table", "synthetic_frames", "percentiles", "BUSY_THRESHOLD"]
 
@@ -311,7 +311,7 @@ def _pct(x) -> str:
 
 
 def _f(v) -> str:
-    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.2f}"
+    return cell(v, "{:.2f}")
 
 
 def format_table(report: dict) -> str:

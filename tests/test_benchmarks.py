@@ -1,0 +1,47 @@
+"""Benchmarks as thin wirings of library calls: their library (benchlib) and a smoke run of a
+script on the tiny dataset (no timed assertion: only that the wiring holds together)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+
+def test_bench_2d_scores_are_the_toolkits(tiny_dataset, tmp_path):
+    import bench_2d
+
+    from track3d.evaluation import Experiment, TrackerSpec, average_scores
+
+    out = tmp_path / "b2d"
+    assert bench_2d.main(["--data", str(tiny_dataset), "--trackers", "kcf", "--max-seqs", "2", "--speed-seqs", "1",
+                          "--out", str(out)]) == 0
+    row = json.loads((out / "bench_2d.json").read_text())["trackers"]["kcf"]
+    exp = Experiment(tiny_dataset, "test", tmp_path / "r", tmp_path / "p", restart=False, max_sequences=2)
+    exp.run(TrackerSpec("kcf", "none"), quiet=True)
+    ov = average_scores(exp.score("kcf"))
+    assert row["AO_2d"] == pytest.approx(ov.values["ao_2d"], abs=1e-6)
+    assert row["ACE_2d"] == pytest.approx(ov.values["ace_2d"], abs=1e-6)
+    assert len(row["success_curve"]) == 101 and row["frames"] == ov.frames
+    assert "| kcf |" in (out / "bench_2d.md").read_text() and (out / "success_2d.png").is_file()
+
+
+def test_the_papers_fusion_gain_is_computed_from_its_table():
+    from benchlib.paper import TABLE2, fusion_gain
+
+    gain, pct = fusion_gain("3D Tracking Baseline")
+    assert gain == pytest.approx(0.568 - 0.513) and pct == pytest.approx(10.72, abs=0.01)
+    assert fusion_gain("Track3D")[1] == pytest.approx(5.46, abs=0.01)
+    assert TABLE2["A3BoxNet"]["AO_3d"] == 0.721
+
+
+def test_json_numbers_and_table_cells(tmp_path):
+    from track3d.jsonable import jsonable, write_json
+    from track3d.table_text import cell, markdown_table
+
+    v = jsonable({"a": np.float32(0.1234567891), "b": float("nan"), "c": np.arange(2), "d": (np.int64(3), True),
+                  "e": np.bool_(False), "f": float("inf")})
+    assert v == {"a": 0.123457, "b": None, "c": [0, 1], "d": [3, True], "e": False, "f": None}
+    assert json.loads(write_json(tmp_path / "x" / "r.json", {"n": np.nan}).read_text()) == {"n": None}
+    assert (cell(None), cell(float("nan")), cell(0.5), cell(3, "{:d}")) == ("-", "-", "0.500", "3")
+    assert markdown_table(["a", "b"], [["1", "2"]]) == "| a | b |\n|---|---|\n| 1 | 2 |"
