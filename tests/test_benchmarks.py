@@ -45,3 +45,46 @@ def test_json_numbers_and_table_cells(tmp_path):
     assert json.loads(write_json(tmp_path / "x" / "r.json", {"n": np.nan}).read_text()) == {"n": None}
     assert (cell(None), cell(float("nan")), cell(0.5), cell(3, "{:d}")) == ("-", "-", "0.500", "3")
     assert markdown_table(["a", "b"], [["1", "2"]]) == "| a | b |\n|---|---|\n| 1 | 2 |"
+
+
+def test_bench_fps_times_the_networks_it_passes_in(tiny_dataset, tmp_path):
+    """Stage timers read the models' own counters: the SiamFC / A3BoxNet configuration has
+    network time, the KCF + baseline one none (no wrapping, no swapping of models)."""
+    import bench_fps
+
+    from track3d.onnxmodel import MODELS_DIR
+
+    if not (MODELS_DIR / "siamfc_edge_search.onnx").is_file() or not (MODELS_DIR / "a3boxnet.onnx").is_file():
+        pytest.skip("no shipped models")
+    out = tmp_path / "fps"
+    assert bench_fps.main(["--data", str(tiny_dataset), "--frames", "5", "--preload", "40", "--threads", "1",
+                           "--config", "siamfc-edge:a3boxnet", "--config", "kcf:baseline", "--tag", "t",
+                           "--out-dir", str(out)]) == 0
+    rows = {r["config"]: r for r in json.loads((out / "fps_t.json").read_text())["results"]}
+    assert rows["siamfc-edge:a3boxnet"]["stages"]["net2d"]["median_ms"] > 0
+    assert rows["siamfc-edge:a3boxnet"]["stages"]["net3d"]["median_ms"] > 0
+    assert rows["kcf:baseline"]["stages"]["net2d"]["median_ms"] == 0 == rows["kcf:baseline"]["stages"]["net3d"]["median_ms"]
+    assert "| kcf:baseline |" in (out / "fps_t.md").read_text()
+
+
+def test_torch_stand_ins_are_passed_to_the_tracker_and_checked(tmp_path):
+    """A torch module of the same weights, behind OnnxModel's interface, given to SiamFCTracker
+    as its models: it tracks, counts its time and checks itself against onnxruntime once."""
+    torch = pytest.importorskip("torch")
+    from benchlib.torch_models import TorchModel
+    from track3d_train.siamfc.export import ExemplarGraph, SearchGraph, export_onnx
+    from track3d_train.siamfc.model import SiamFC, config_for
+
+    from track3d.onnxmodel import OnnxModel
+    from track3d.siamfc import SiamFCTracker
+
+    torch.manual_seed(0)
+    net = SiamFC(config_for("edge")).eval()
+    pz, px = export_onnx(net, tmp_path / "s")
+    z = TorchModel(torch, ExemplarGraph(net), OnnxModel(pz), tmp_path / "ckpt.pt")
+    x = TorchModel(torch, SearchGraph(net), OnnxModel(px), tmp_path / "ckpt.pt")
+    t = SiamFCTracker(z, x)
+    img = np.random.default_rng(0).integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    t.init(img, np.array([100.0, 80, 40, 30]))
+    t.update(img)
+    assert t.exemplar is z and z.check["ok"] and x.check["ok"] and x.run_ms > 0
