@@ -88,3 +88,15 @@ def test_torch_stand_ins_are_passed_to_the_tracker_and_checked(tmp_path):
     t.init(img, np.array([100.0, 80, 40, 30]))
     t.update(img)
     assert t.exemplar is z and z.check["ok"] and x.check["ok"] and x.run_ms > 0
+
+
+def test_the_readme_tables_are_the_committed_results(tmp_path):
+    import readme_tables
+
+    assert readme_tables.main(["--check"]) == 0
+    readme = tmp_path / "README.md"
+    text = readme_tables.REPO.joinpath("README.md").read_text()
+    assert text.count("<!-- readme_tables.py: ") == len(readme_tables.TABLES)
+    readme.write_text(text.replace("| **8.08 / 10.25** |", "| **8.00 / 10.25** |"))   # a number edited by hand
+    assert readme_tables.main(["--check", "--readme", str(readme)]) == 1
+    assert readme_tables.main(["--write", "--readme", str(readme)]) == 0 and readme.read_text() == text

@@ -21,6 +21,7 @@ def cell(value, fmt: str = "{:.3f}") -> str:
 
 def markdown_table(header: list[str], rows: list[list[str]]) -> str:
     """A markdown table of already formatted cells (no trailing newline)."""
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
+    def line(cells) -> str:   # an empty cell is "| |", as people write it
+        return "|" + "|".join(f" {c} " if c else " " for c in cells) + "|"
+
+    return "\n".join([line(header), "|" + "---|" * len(header)] + [line(r) for r in rows])
