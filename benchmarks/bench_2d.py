@@ -165,9 +165,9 @@ def main(argv=None) -> int:
     rec = start_record("2D trackers (paper Fig. 14)", data=a.data, split=a.split, protocol=PROTOCOL)
 
     exp = Experiment(a.data, a.split, out / "results", out / "report", restart=False, max_sequences=a.max_seqs or None)
-    first = exp.sequences[: a.speed_seqs]
+    first = exp.sequences[: max(a.speed_seqs, 0)]
     exp2 = Experiment(a.data, a.split, out / "results_2t", out / "report_2t", restart=False,
-                      sequences=[s.name for s in first])
+                      sequences=[s.name for s in first]) if first else None
     specs, skipped = {}, {}
     for n in (t for t in a.trackers.split(",") if t):
         why = spec_2d(n).unavailable(exp.sequences[0])
@@ -182,14 +182,14 @@ def main(argv=None) -> int:
     for spec in list(specs.values()) + [v["spec"] for v in sweep.values()]:
         exp.run(spec)
     pin_threads(2)
-    for n in specs:
+    for n in specs if exp2 else ():
         exp2.run(spec_2d(n, threads=2))
     results, overall = {}, {}
     for n in specs:
         results[n], overall[n] = summary(exp, n)
         scores = exp.score(n)
         results[n]["fps_1t_subset"] = fps_of(scores[: len(first)])
-        results[n]["fps_2t"] = fps_of(exp2.score(n))
+        results[n]["fps_2t"] = fps_of(exp2.score(n)) if exp2 else float("nan")
     sweep_res = {}
     for k, v in sweep.items():
         r, _ = summary(exp, k)

@@ -100,3 +100,19 @@ def test_the_readme_tables_are_the_committed_results(tmp_path):
     readme.write_text(text.replace("| **8.08 / 10.25** |", "| **8.00 / 10.25** |"))   # a number edited by hand
     assert readme_tables.main(["--check", "--readme", str(readme)]) == 1
     assert readme_tables.main(["--write", "--readme", str(readme)]) == 0 and readme.read_text() == text
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "sched_setaffinity"), reason="no CPU affinity here")
+def test_pin_threads_pins_every_thread_and_widens_again():
+    import cv2
+
+    from track3d.machine import START_CPUS, affinity_of_all_threads, pin_threads
+
+    before = cv2.getNumThreads()
+    try:
+        assert pin_threads(1) == [START_CPUS[0]]
+        assert affinity_of_all_threads() == [START_CPUS[0]] and cv2.getNumThreads() == 1
+        assert pin_threads(len(START_CPUS)) == list(START_CPUS) and affinity_of_all_threads() == list(START_CPUS)
+    finally:
+        pin_threads(len(START_CPUS))
+        cv2.setNumThreads(before)
