@@ -32,20 +32,42 @@ def _walk(parser):
 
 
 def _parsers():
+    """Every parser of the three commands: track3d, track3d-sim and each `track3d-train`
+    command (taken from its COMMANDS table, so a new one cannot be left out)."""
     out = [("track3d", _parser())]
     try:
-        from track3d_train.boxnet.cli import build_parser as bp
-        from track3d_train.siamfc.cli import build_parser as sp
-        out += [("boxnet", bp()), ("siamfc", sp())]
+        from track3d_sim.cli import build_parser as simp
+        out.append(("track3d-sim", simp()))
     except ImportError:
         pass
     try:
-        from track3d_sim.cli import build_parser as simp
-        from track3d_train.edgetrack.cli import build_parser as ep
-        out += [("track3d-sim", simp()), ("edgetrack", ep())]
+        import importlib
+
+        import torch  # noqa: F401  (the train extra)
+        from track3d_train.cli import COMMANDS
+        out += [(f"track3d-train {n}", importlib.import_module(m).build_parser()) for n, (m, _) in COMMANDS.items()]
     except ImportError:
         pass
     return out
+
+
+def _visible_flags(parser):
+    for p in _walk(parser):
+        for a in p._actions:
+            if a.option_strings and a.help != argparse.SUPPRESS:
+                yield p.prog, a
+
+
+def test_every_command_of_the_three_clis_is_covered():
+    names = [n for n, _ in _parsers()]
+    pytest.importorskip("track3d_sim")
+    pytest.importorskip("torch")
+    assert names == ["track3d", "track3d-sim", "track3d-train boxnet", "track3d-train siamfc",
+                     "track3d-train quantize", "track3d-train edgetrack"]
+    progs = {p.prog for _, parser in _parsers() for p in _walk(parser)}
+    for sub in ("track3d track", "track3d bench", "track3d-sim generate", "track3d-sim shapes",
+                "track3d-train edgetrack export", "track3d-train quantize"):
+        assert sub in progs
 
 
 @pytest.mark.parametrize("name,parser", _parsers())
@@ -63,6 +85,48 @@ def test_every_flag_has_help_and_shows_its_default(name, parser):
         assert "==SUPPRESS==" not in text
 
 
+# One name per flag across the CLIs; the older spellings parse (scripts keep working) but are
+# never shown.
+OLD_SPELLINGS = {"--ckpt": "--checkpoint", "--steps": "--max-steps", "--no-progress": "--quiet",
+                 "--max-minutes": "--time-budget-min", "--stride": "--frame-step"}
+
+
+@pytest.mark.parametrize("name,parser", _parsers())
+def test_no_command_shows_an_old_flag_spelling(name, parser):
+    shown = [(prog, o) for prog, a in _visible_flags(parser) for o in a.option_strings if o in OLD_SPELLINGS]
+    assert not shown, f"{name}: {shown} (show {[OLD_SPELLINGS[o] for _, o in shown]}; keep the old as hidden_alias)"
+
+
+@pytest.mark.parametrize("cli,argv,dest,value", [
+    ("track3d-sim", ["generate", "--out", "x", "--no-progress"], "no_progress", True),
+    ("track3d-sim", ["generate", "--out", "x", "--quiet"], "no_progress", True),
+    ("track3d-sim", ["shapes", "--out", "x.png", "--no-progress"], "no_progress", True),
+    ("track3d-train edgetrack", ["train", "--cache", "c", "--out", "o", "--steps", "7"], "steps", 7),
+    ("track3d-train edgetrack", ["train", "--cache", "c", "--out", "o", "--max-steps", "7"], "steps", 7),
+    ("track3d-train edgetrack", ["train", "--cache", "c", "--out", "o", "--no-progress"], "quiet", True),
+    ("track3d-train edgetrack", ["prepare", "--out", "o", "--no-progress"], "quiet", True),
+    ("track3d-train edgetrack", ["export", "--ckpt", "k.pt", "--out", "o"], "checkpoint", "k.pt"),
+    ("track3d-train boxnet", ["train", "--cache", "c", "--max-minutes", "3"], "max_minutes", 3.0),
+    ("track3d-train boxnet", ["train", "--cache", "c", "--time-budget-min", "3"], "max_minutes", 3.0),
+    ("track3d-train siamfc", ["prepare", "--out", "o", "--stride", "2"], "stride", 2),
+    ("track3d-train siamfc", ["prepare", "--out", "o", "--frame-step", "2"], "stride", 2),
+])
+def test_old_and_new_spellings_parse_alike(cli, argv, dest, value):
+    parsers = dict(_parsers())
+    if cli not in parsers:
+        pytest.skip(f"{cli} not installed")
+    assert getattr(parsers[cli].parse_args(argv), dest) == value
+
+
+@pytest.mark.parametrize("name,parser", _parsers())
+def test_a_command_line_mistake_is_one_line(name, parser, capsys):
+    with pytest.raises(SystemExit) as e:
+        parser.parse_args(["--no-such-flag"])
+    assert e.value.code == 2
+    line = _one_line(capsys, "error: ", "--help)")
+    assert "usage:" not in line
+
+
 def test_version(capsys):
     with pytest.raises(SystemExit) as e:
         main(["--version"])
@@ -73,22 +137,45 @@ def test_version(capsys):
     assert train_main(["--version"]) == 0 and capsys.readouterr().out.startswith("track3d-train ")
 
 
+def _checkpoints(tmp_path, torch):
+    """One checkpoint file per network, with the config each trainer really writes (SiamFC's
+    and EdgeTrack's both sit under "config")."""
+    from track3d_train.edgetrack.model import EdgeTrackConfig
+    from track3d_train.siamfc.model import SiamFCConfig
+
+    ck = {"siam.pt": {"config": SiamFCConfig().to_dict(), "model": {}},
+          "edge.pt": {"config": EdgeTrackConfig().to_dict(), "model": {}},
+          "box.pt": {"model_config": {}, "model": {}}}
+    for name, d in ck.items():
+        torch.save(d, tmp_path / name)
+    return [tmp_path / n for n in ck]
+
+
 def test_checkpoint_mixups_are_one_line(tmp_path, capsys):
     torch = pytest.importorskip("torch")
     from track3d_train.cli import main as train_main
 
-    siam, box, junk = tmp_path / "siam.pt", tmp_path / "box.pt", tmp_path / "junk.pt"
-    torch.save({"config": {}, "model": {}}, siam)
-    torch.save({"model_config": {}, "model": {}}, box)
+    siam, edge, box = _checkpoints(tmp_path, torch)
+    junk = tmp_path / "junk.pt"
     junk.write_text("not a checkpoint")
     assert train_main(["boxnet", "export", "--checkpoint", str(siam), "--out", str(tmp_path / "a.onnx")]) == 2
     _one_line(capsys, "is a SiamFC checkpoint", "track3d-train siamfc export")
     assert train_main(["siamfc", "export", "--ckpt", str(box), "--out", str(tmp_path / "s")]) == 2   # hidden alias
-    _one_line(capsys, "is a A3BoxNet checkpoint", "track3d-train boxnet export")
+    _one_line(capsys, "is an A3BoxNet checkpoint", "track3d-train boxnet export")
     assert train_main(["boxnet", "export", "--ckpt", str(junk), "--out", str(tmp_path / "a.onnx")]) == 2
     _one_line(capsys, "not a PyTorch checkpoint")
     assert train_main(["boxnet", "export", "--out", str(tmp_path / "a.onnx")]) == 2
     _one_line(capsys, "--checkpoint")
+    # EdgeTrack's exporter used to end in a KeyError (A3BoxNet) or a state-dict RuntimeError (SiamFC)
+    assert train_main(["edgetrack", "export", "--checkpoint", str(siam), "--out", str(tmp_path / "e")]) == 2
+    _one_line(capsys, "is a SiamFC checkpoint, not an EdgeTrack one", "track3d-train siamfc export")
+    assert train_main(["edgetrack", "export", "--ckpt", str(box), "--out", str(tmp_path / "e")]) == 2
+    _one_line(capsys, "is an A3BoxNet checkpoint", "track3d-train boxnet export")
+    assert train_main(["siamfc", "export", "--checkpoint", str(edge), "--out", str(tmp_path / "s")]) == 2
+    _one_line(capsys, "is an EdgeTrack checkpoint", "track3d-train edgetrack export")
+    assert train_main(["edgetrack", "export", "--out", str(tmp_path / "e")]) == 2
+    _one_line(capsys, "--checkpoint")
+    assert not list(tmp_path.glob("*.onnx"))
 
 
 def test_export_never_overwrites_a_shipped_model(tmp_path, capsys):
@@ -104,6 +191,26 @@ def test_export_never_overwrites_a_shipped_model(tmp_path, capsys):
     assert train_main(["siamfc", "export", "--checkpoint", str(box), "--out", str(MODELS_DIR / "siamfc_edge")]) == 2
     _one_line(capsys, "shipped model")
     assert (MODELS_DIR / "a3boxnet.onnx").read_bytes() == before
+
+
+@pytest.mark.parametrize("argv,stem", [
+    (["edgetrack", "export", "--checkpoint", "{edge}", "--out", "{models}/edgetrack"], "edgetrack_template.onnx"),
+    (["quantize", "--data", "{data}"], "a3boxnet_int8.onnx"),   # the default --out-dir is the shipped folder
+    (["quantize", "--data", "{data}", "--models", "a3boxnet", "--out-dir", "{models}"], "a3boxnet_int8.onnx"),
+])
+def test_edgetrack_export_and_quantize_never_overwrite_a_shipped_model(tmp_path, capsys, argv, stem):
+    torch = pytest.importorskip("torch")
+    from track3d.onnxmodel import MODELS_DIR
+    from track3d_train.cli import main as train_main
+
+    _, edge, _ = _checkpoints(tmp_path, torch)
+    if not (MODELS_DIR / stem).is_file():
+        pytest.skip(f"{stem} is not shipped in this checkout")
+    before = {p.name: p.stat().st_mtime_ns for p in MODELS_DIR.iterdir()}
+    fill = {"edge": str(edge), "models": str(MODELS_DIR), "data": str(tmp_path / "no-data")}
+    assert train_main([a.format(**fill) for a in argv]) == 2
+    _one_line(capsys, f"{stem} is a shipped model", "--force")
+    assert {p.name: p.stat().st_mtime_ns for p in MODELS_DIR.iterdir()} == before
 
 
 def test_folder_kinds_are_named(tmp_path, capsys):

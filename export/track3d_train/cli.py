@@ -29,13 +29,14 @@ def main(argv: list[str] | None = None) -> int:
         except PackageNotFoundError:
             print("track3d-train unknown")
         return 0
-    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
+    if argv and argv[0] not in COMMANDS and argv[0] not in ("-h", "--help"):  # one line, as argparse's
+        print(f"track3d-train: error: unknown command {argv[0]!r}, choose from {', '.join(COMMANDS)} "
+              f"(see track3d-train --help)", file=sys.stderr)
+        return 2
+    if not argv or argv[0] in ("-h", "--help"):
         print(__doc__.strip())
         for name, (_, text) in COMMANDS.items():
             print(f"  {name:8s} {text}")
-        if argv and argv[0] not in ("-h", "--help"):
-            print(f"\nerror: unknown command {argv[0]!r}", file=sys.stderr)
-            return 2
         return 0 if argv else 2
     module = importlib.import_module(COMMANDS[argv[0]][0])
     from track3d.dataset import DatasetError

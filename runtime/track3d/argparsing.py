@@ -4,7 +4,9 @@
   where the help text does not already say it);
 - one name per flag across CLIs (``--checkpoint``, ``--max-steps``, ``--quiet``); older names
   stay as hidden aliases (:func:`hidden_alias`);
-- a user's mistake is one line on stderr and exit 2 (:func:`run_main`), never a traceback.
+- a user's mistake is one line on stderr and exit 2 (:func:`run_main`), never a traceback;
+  a command-line mistake too (:class:`ArgumentParser`: the error and where the help is, not
+  the whole usage block).
 """
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ import argparse
 import sys
 from typing import Callable
 
-__all__ = ["HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS"]
+__all__ = ["ArgumentParser", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS"]
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
@@ -27,6 +29,20 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
                 or action.option_strings == [] or d == []:
             return h
         return f"{h} (default: %(default)s)"
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with the conventions: HelpFormatter by default, and a usage mistake printed as
+    one line (``prog: error: ... (see prog --help)``), exit 2. argparse's default prints the
+    whole usage block first, a dozen lines for the bigger commands, burying the error.
+    Sub-command parsers are of the same class (argparse makes them with type(parent))."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str):  # argparse's hook; must not return
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def apply_formatter(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:

@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from track3d.argparsing import ArgumentParser, apply_formatter, hidden_alias
+
 from .errors import SimError
 from .generate import PRESETS
 from .generators import GENERATORS
@@ -34,7 +36,7 @@ def _mesh(text: str):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="track3d-sim", description="3D asteroid tracking dataset simulator "
+    p = ArgumentParser(prog="track3d-sim", description="3D asteroid tracking dataset simulator "
                                 "(headless CPU ray casting; writes the layout of docs/dataset.md).")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="{generate,stats,preview,ply,shapes,demo}")
     g = sub.add_parser("generate", help="render a dataset (resumable, deterministic for a seed)",
@@ -81,8 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="use every mesh file of DIR that trimesh reads (cycled over the sequences, in name order) "
                         "as the bodies, scaled to the sampled box volume (default: procedural generators)")
     g.add_argument("--overwrite", action="store_true", help="delete an existing track3d-sim output folder first")
-    g.add_argument("--no-progress", action="store_true", help="no progress bar")
-    g.add_argument("--quiet", dest="no_progress", action="store_true", help=argparse.SUPPRESS)  # the other CLIs' name
+    g.add_argument("--quiet", dest="no_progress", action="store_true", help="no progress bar")
+    hidden_alias(g, "--no-progress", "no_progress", action="store_true")  # the name before --quiet
 
     s = sub.add_parser("stats", help="the paper's Fig. 4 plots (size classes, box volumes, speeds, illumination)")
     s.add_argument("root", help="dataset folder (with dataset.json)")
@@ -93,7 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
     v = sub.add_parser("preview", help="contact sheet (PNG) or animation (GIF) of a sequence with its boxes")
     v.add_argument("sequence", help="sequence folder, e.g. DATA/train/0001")
     v.add_argument("--out", required=True, help="output .png (contact sheet) or .gif (animation)")
-    v.add_argument("--frames", type=int, default=12, help="frames in the contact sheet (default 12)")
+    v.add_argument("--frames", type=int, default=12, help="frames in the contact sheet, >= 1 (default 12)")
     v.add_argument("--gain", type=float, default=1.0, help="brightness gain for viewing dark images (default 1)")
     v.add_argument("--right", action="store_true", help="add the right image beside the left")
     dm = sub.add_parser("demo", help="simulate a small test set, run Track3D with the shipped models, evaluate, "
@@ -111,9 +113,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--count", type=int, default=6, help="bodies per generator (default 6)")
     c.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     c.add_argument("--detail", type=int, default=5, help="mesh detail 1..8 (default 5; the datasets use 6)")
-    c.add_argument("--cell", type=int, default=192, help="pixels per body image (default 192)")
-    c.add_argument("--no-progress", action="store_true", help="no progress bar")
-    return p
+    c.add_argument("--cell", type=int, default=192, help="pixels per body image, >= 16 (default 192)")
+    c.add_argument("--quiet", dest="no_progress", action="store_true", help="no progress bar")
+    hidden_alias(c, "--no-progress", "no_progress", action="store_true")
+    return apply_formatter(p)
 
 
 def main(argv=None) -> int:

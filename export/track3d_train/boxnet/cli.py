@@ -1,11 +1,11 @@
 """`track3d-train boxnet`: prepare the frustum caches, train, export and evaluate A3BoxNet.
 
-Typical run (the shipped model; see docs/a3boxnet.md):
+Typical run (the shipped model; see docs/models.md):
 
     track3d-train boxnet prepare --data data/small --split train --jitters 5 --out runs/boxnet/cache
     track3d-train boxnet prepare --data data/small --split test --jitters 0 --out runs/boxnet/cache
     track3d-train boxnet train --cache runs/boxnet/cache/boxnet_train_*.npz --out runs/boxnet/main
-    track3d-train boxnet export --checkpoint runs/boxnet/main/best.pt --out runtime/track3d/models/a3boxnet.onnx
+    track3d-train boxnet export --checkpoint runs/boxnet/main/best.pt --out runtime/track3d/models/a3boxnet.onnx --force
     track3d-train boxnet eval --model runtime/track3d/models/a3boxnet.onnx --cache runs/boxnet/cache/boxnet_test_*.npz
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from track3d.argparsing import apply_formatter, hidden_alias
+from track3d.argparsing import ArgumentParser, apply_formatter, hidden_alias
 
 
 def _log(msg: str) -> None:
@@ -93,7 +93,7 @@ def _eval(a) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="track3d-train boxnet", description=__doc__,
+    p = ArgumentParser(prog="track3d-train boxnet", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="cmd", required=True)
 
@@ -143,7 +143,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--val-every", type=int, default=8, help="every k-th train sequence is validation (0: none)")
     t.add_argument("--seed", type=int, default=0, help="seed")
     t.add_argument("--threads", type=int, default=1, help="torch threads")
-    t.add_argument("--max-minutes", type=float, default=0.0, help="time budget: the cosine LR spans it and training stops when it is spent (resume-aware)")
+    t.add_argument("--time-budget-min", dest="max_minutes", type=float, default=0.0,
+                   help="time budget in minutes (0: none): the cosine LR spans it and training stops when it "
+                        "is spent (resume-aware)")
+    hidden_alias(t, "--max-minutes", "max_minutes", type=float)  # the name before --time-budget-min
     t.add_argument("--max-steps", type=int, default=0, help="stop after this many steps")
     t.add_argument("--no-resume", action="store_true", help="start over even if <out>/last.pt exists")
     t.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -2,7 +2,7 @@
 
     track3d-train siamfc prepare --data data/small --out data/cache/siamfc
     track3d-train siamfc train   --variant edge --cache data/cache/siamfc --out runs/siamfc_edge
-    track3d-train siamfc export  --checkpoint runs/siamfc_edge/ckpt.pt --out runtime/track3d/models/siamfc_edge
+    track3d-train siamfc export  --checkpoint runs/siamfc_edge/ckpt.pt --out runtime/track3d/models/siamfc_edge --force
     track3d-train siamfc eval    --model runtime/track3d/models/siamfc_edge --data data/small --split test
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from track3d.argparsing import apply_formatter, hidden_alias
+from track3d.argparsing import ArgumentParser, apply_formatter, hidden_alias
 
 
 def _prepare(a) -> int:
@@ -131,7 +131,7 @@ def _eval(a) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="track3d-train siamfc", description=__doc__,
+    p = ArgumentParser(prog="track3d-train siamfc", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="cmd", required=True)
 
@@ -139,7 +139,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--data", help="dataset root (dataset.json)")
     q.add_argument("--split", default="train", help="split name")
     q.add_argument("--out", required=True, help="cache folder")
-    q.add_argument("--stride", type=int, default=1, help="use every k-th frame")
+    q.add_argument("--frame-step", dest="stride", type=int, default=1, help="use every k-th frame")
+    hidden_alias(q, "--stride", "stride", type=int)  # the name before --frame-step
     q.add_argument("--max-frames", type=int, default=2000, help="bound on cached crops (~195 kB each)")
     q.add_argument("--synthetic", type=int, default=0, help="N synthetic sequences instead of a dataset")
     q.add_argument("--synthetic-frames", type=int, default=60, help="frames per synthetic sequence")
