@@ -68,9 +68,7 @@ class Camera:
     @classmethod
     def from_K(cls, width: int, height: int, K, dist=None, baseline_m: float = 0.4) -> "Camera":
         """A calibrated camera from its (3, 3) intrinsic matrix (no skew)."""
-        k = np.asarray(K, dtype=np.float64)
-        if k.shape != (3, 3) or not np.all(np.isfinite(k)):
-            raise ValueError(f"K must be a finite 3x3 matrix, got shape {k.shape}")
+        k = _matrix3(K)
         if abs(k[0, 1]) > 1e-9 or np.any(np.abs(k[2] - [0, 0, 1]) > 1e-9) or abs(k[1, 0]) > 1e-9:
             raise ValueError("K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)")
         return cls.from_intrinsics(width, height, k[0, 0], k[1, 1], k[0, 2], k[1, 2], dist, baseline_m)
@@ -106,6 +104,8 @@ class Camera:
     @classmethod
     def from_fov(cls, width: int, height: int, fov_x_deg: float, baseline_m: float = 0.4) -> "Camera":
         """Square pixels: the vertical perspective angle follows from the horizontal one."""
+        if int(width) <= 0 or int(height) <= 0:  # before the division below
+            raise ValueError(f"camera resolution must be positive, got {width}x{height}")
         fy_half = math.atan(height / width * math.tan(math.radians(fov_x_deg) / 2.0))
         return cls(int(width), int(height), float(fov_x_deg), math.degrees(2.0 * fy_half), baseline_m)
 
@@ -233,16 +233,39 @@ class Camera:
         otherwise the angles define K (eq. 1) and a K given next to them must agree."""
         if "K" in d and (d.get("calibrated") or "fov_x_deg" not in d or d.get("dist")):
             try:
-                return cls.from_K(int(d["width"]), int(d["height"]), d["K"], d.get("dist"),
+                return cls.from_K(_pixels(d, "width"), _pixels(d, "height"), d["K"], d.get("dist"),
                                   float(d.get("baseline_m", 0.4)))
             except KeyError as e:
                 raise ValueError(f"camera description lacks the key {e.args[0]!r}") from None
         try:
-            cam = cls(int(d["width"]), int(d["height"]), float(d["fov_x_deg"]), float(d["fov_y_deg"]),
+            cam = cls(_pixels(d, "width"), _pixels(d, "height"), float(d["fov_x_deg"]), float(d["fov_y_deg"]),
                       float(d.get("baseline_m", 0.4)))
         except KeyError as e:
             raise ValueError(f"camera description lacks the key {e.args[0]!r}") from None
-        if "K" in d and not np.allclose(np.asarray(d["K"], dtype=np.float64), cam.K, rtol=1e-9, atol=1e-6):
+        if "K" in d and not np.allclose(_matrix3(d["K"]), cam.K, rtol=1e-9, atol=1e-6):
             raise ValueError("camera K in the file disagrees with its perspective angles and resolution "
                              "(a calibrated K needs \"calibrated\": true)")
         return cam
+
+
+def _pixels(d: dict, key: str) -> int:
+    """d[key] as a whole number of pixels: 160.7 or "160" would otherwise be truncated or
+    parsed without a word (a camera one pixel off puts every frustum in the wrong place)."""
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(v) or v != int(v):
+        raise ValueError(f"camera {key} must be a whole number of pixels, got {v!r}")
+    return int(v)
+
+
+def _matrix3(K) -> np.ndarray:
+    """K as a finite (3, 3) float64 array, or ValueError saying what it is instead."""
+    try:
+        k = np.asarray(K, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"K must be a finite 3x3 matrix of numbers, got {K!r:.80}") from None
+    if k.shape != (3, 3):
+        raise ValueError(f"K must be a finite 3x3 matrix, got shape {k.shape}")
+    if not np.all(np.isfinite(k)):
+        raise ValueError("K must be a finite 3x3 matrix, it holds NaN or inf")
+    return k
