@@ -258,3 +258,34 @@ def test_benchmark_scripts_missing_data_is_one_line(tmp_path):
     r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_fps.py"), "--data", str(tmp_path / "no")],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "no dataset" in r.stderr
+
+
+@pytest.mark.parametrize("cli,argv,module,extra", [
+    ("track3d-sim", ["generate", "--preset", "tiny", "--out", "{tmp}/g"], "tqdm", "sim"),
+    ("track3d-sim", ["shapes", "--out", "{tmp}/s.png", "--count", "1"], "PIL", "sim"),
+    ("track3d-sim", ["stats", "{data}", "--out", "{tmp}/s.png"], "matplotlib", "sim"),
+    ("track3d-train", ["boxnet", "export", "--checkpoint", "{tmp}/x.pt", "--out", "{tmp}/a.onnx"], "torch", "train"),
+    ("track3d-train", ["boxnet", "train", "--cache", "{tmp}/c.npz", "--out", "{tmp}/run"], "torch", "train"),
+])
+def test_a_missing_extra_is_named_not_a_traceback(tmp_path, capsys, monkeypatch, cli, argv, module, extra):
+    """The base install has all three commands; without the extras they used to end in a
+    ModuleNotFoundError traceback (tqdm, torch, PIL, matplotlib)."""
+    pytest.importorskip("track3d_sim")
+    pytest.importorskip("torch")
+    from test_loop import make_synthetic_dataset
+    from track3d_sim.cli import main as sim_main
+    from track3d_train.cli import main as train_main
+
+    data = make_synthetic_dataset(tmp_path / "ds", {"a": 3})
+    monkeypatch.setitem(sys.modules, module, None)   # `import module` now raises ModuleNotFoundError
+    run = sim_main if cli == "track3d-sim" else train_main
+    assert run([a.format(tmp=tmp_path, data=data) for a in argv]) == 2
+    _one_line(capsys, f"pip install 'track3d[{extra}]'", f"(missing: {module})")
+
+
+def test_a_missing_module_of_no_extra_keeps_its_traceback(monkeypatch):
+    from track3d.argparsing import missing_extra
+
+    e = ModuleNotFoundError("No module named 'track3d_nonexistent'", name="track3d_nonexistent")
+    assert missing_extra(e, {"tqdm": "sim"}) is None
+    assert "track3d[sim]" in missing_extra(ModuleNotFoundError("x", name="tqdm.auto"), {"tqdm": "sim"})

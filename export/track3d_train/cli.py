@@ -19,6 +19,11 @@ COMMANDS = {
 }
 
 
+# What training imports beyond the runtime (top-level module -> the extra installing it): the
+# base install also has the track3d-train command, which must say so, not end in a traceback.
+EXTRA_MODULES = {"torch": "train", "onnx": "train", "tqdm": "train", "matplotlib": "train", "openvino": "openvino"}
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "--version":
@@ -38,14 +43,21 @@ def main(argv: list[str] | None = None) -> int:
         for name, (_, text) in COMMANDS.items():
             print(f"  {name:8s} {text}")
         return 0 if argv else 2
-    module = importlib.import_module(COMMANDS[argv[0]][0])
+    from track3d.argparsing import missing_extra
     from track3d.dataset import DatasetError
     from track3d.onnxmodel import ModelError
 
     try:
+        module = importlib.import_module(COMMANDS[argv[0]][0])
         return int(module.main(argv[1:]) or 0)
     except (DatasetError, ModelError, FileNotFoundError, ValueError) as e:  # a user's mistake: one line
         print(f"track3d-train {argv[0]}: error: {e}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as e:
+        hint = missing_extra(e, EXTRA_MODULES)
+        if hint is None:
+            raise
+        print(f"track3d-train {argv[0]}: error: {hint}", file=sys.stderr)
         return 2
 
 

@@ -14,7 +14,8 @@ import argparse
 import sys
 from typing import Callable
 
-__all__ = ["ArgumentParser", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS"]
+__all__ = ["ArgumentParser", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS",
+           "missing_extra"]
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
@@ -58,6 +59,17 @@ def apply_formatter(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
 def hidden_alias(parser: argparse.ArgumentParser, flag: str, dest: str, **kwargs) -> None:
     """An old flag name that still works but is not shown in --help."""
     parser.add_argument(flag, dest=dest, help=argparse.SUPPRESS, default=argparse.SUPPRESS, **kwargs)
+
+
+def missing_extra(e: ModuleNotFoundError, extras: dict[str, str]) -> str | None:
+    """The one-line reason for a module that an extra installs (`extras`: top-level module ->
+    extra name): "needs the sim extra: pip install 'track3d[sim]' (missing: tqdm)". None for
+    any other module: that is a bug, not the user's install, and keeps its traceback."""
+    top = (e.name or "").split(".")[0]
+    extra = extras.get(top)
+    if extra is None:
+        return None
+    return f"needs the {extra} extra: pip install 'track3d[{extra}]' (missing: {top})"
 
 
 def _user_errors() -> tuple:

@@ -4,12 +4,18 @@ from __future__ import annotations
 import argparse
 import sys
 
-from track3d.argparsing import ArgumentParser, apply_formatter, hidden_alias
+from track3d.argparsing import ArgumentParser, apply_formatter, hidden_alias, missing_extra
 
 from .errors import SimError
 from .generate import PRESETS
 from .generators import GENERATORS
 from .sensors import DEPTH_SENSORS
+
+
+# What the simulator imports beyond the runtime (top-level module -> the extra installing it):
+# the base install also has the track3d-sim command, which must say so, not end in a traceback.
+EXTRA_MODULES = {**{m: "sim" for m in ("trimesh", "embreex", "PIL", "tqdm", "matplotlib", "scipy", "skimage")},
+                 "ray": "cluster"}
 
 
 def _resolution(text: str):
@@ -158,6 +164,12 @@ def main(argv=None) -> int:
                           cell=args.cell, progress=not args.no_progress)
     except SimError as e:
         print(f"track3d-sim: error: {e}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as e:
+        hint = missing_extra(e, EXTRA_MODULES)
+        if hint is None:
+            raise
+        print(f"track3d-sim {args.cmd}: error: {hint}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("track3d-sim: interrupted (run the same command again to resume)", file=sys.stderr)
