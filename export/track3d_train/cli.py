@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
         for name, (_, text) in COMMANDS.items():
             print(f"  {name:8s} {text}")
         return 0 if argv else 2
-    from track3d.argparsing import missing_extra
+    from track3d.argparsing import exit_for_missing_extra
     from track3d.dataset import DatasetError
     from track3d.onnxmodel import ModelError
 
@@ -54,11 +54,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"track3d-train {argv[0]}: error: {e}", file=sys.stderr)
         return 2
     except ModuleNotFoundError as e:
-        hint = missing_extra(e, EXTRA_MODULES)
-        if hint is None:
-            raise
-        print(f"track3d-train {argv[0]}: error: {hint}", file=sys.stderr)
-        return 2
+        return exit_for_missing_extra(e, EXTRA_MODULES, f"track3d-train {argv[0]}")
 
 
 if __name__ == "__main__":

@@ -15,7 +15,7 @@ import sys
 from typing import Callable
 
 __all__ = ["ArgumentParser", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS",
-           "missing_extra"]
+           "missing_extra", "exit_for_missing_extra"]
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
@@ -70,6 +70,16 @@ def missing_extra(e: ModuleNotFoundError, extras: dict[str, str]) -> str | None:
     if extra is None:
         return None
     return f"needs the {extra} extra: pip install 'track3d[{extra}]' (missing: {top})"
+
+
+def exit_for_missing_extra(e: ModuleNotFoundError, extras: dict[str, str], prog: str) -> int:
+    """In a command's `except ModuleNotFoundError`: print `prog: error: needs the X extra ...`
+    and return exit code 2, or re-raise `e` when no extra installs the module."""
+    hint = missing_extra(e, extras)
+    if hint is None:
+        raise e
+    print(f"{prog}: error: {hint}", file=sys.stderr)
+    return 2
 
 
 def _user_errors() -> tuple:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from track3d.argparsing import ArgumentParser, apply_formatter, hidden_alias, missing_extra
+from track3d.argparsing import ArgumentParser, apply_formatter, exit_for_missing_extra, hidden_alias
 
 from .errors import SimError
 from .generate import PRESETS
@@ -166,11 +166,7 @@ def main(argv=None) -> int:
         print(f"track3d-sim: error: {e}", file=sys.stderr)
         return 2
     except ModuleNotFoundError as e:
-        hint = missing_extra(e, EXTRA_MODULES)
-        if hint is None:
-            raise
-        print(f"track3d-sim {args.cmd}: error: {hint}", file=sys.stderr)
-        return 2
+        return exit_for_missing_extra(e, EXTRA_MODULES, f"track3d-sim {args.cmd}")
     except KeyboardInterrupt:
         print("track3d-sim: interrupted (run the same command again to resume)", file=sys.stderr)
         return 130
