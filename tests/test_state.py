@@ -143,3 +143,10 @@ def test_describe_lists_models_with_hashes():
     roles = {m["kind"] for m in d["models"]}
     assert roles == {"siamfc-exemplar", "siamfc-search", "a3boxnet"}
     assert all(len(m["sha256"]) == 64 for m in d["models"])
+
+
+def test_pickling_a_tracker_points_to_get_state():
+    """pickle.dumps(t) used to end inside onnxruntime: "cannot pickle 'InferenceSession' object"."""
+    t = Track3D.create(CAM, tracker="kcf", estimator="baseline")   # no onnxruntime session at all
+    with pytest.raises(TypeError, match=r"get_state\(\)"):
+        pickle.dumps(t)

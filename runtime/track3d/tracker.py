@@ -323,6 +323,12 @@ class Track3D:
         self.box3d = np.asarray(st["box3d"], dtype=np.float64).reshape(6).copy()
         self.bad_frames, self.held_frames = int(st["bad_frames"]), int(st["held_frames"])
 
+    def __getstate__(self):
+        # pickle / copy would stop inside onnxruntime ("cannot pickle InferenceSession"), a
+        # message that does not say what to do instead.
+        raise TypeError("a Track3D holds onnxruntime sessions and OpenCV trackers and cannot be pickled: "
+                        "checkpoint it with state = t.get_state() (plain data) and t2.set_state(state)")
+
     def describe(self) -> dict:
         """What this tracker is, as a plain dict: names, options, and every ONNX model file it
         runs (path name, sha256, kind, metadata version). Result folders record it."""
