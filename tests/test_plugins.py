@@ -121,3 +121,8 @@ def test_factory_errors_name_the_accepted_options():
         trackers2d.create_tracker("kcf", nope=1)
     with pytest.raises(ValueError, match="missing a required argument: 'gt'"):
         trackers2d.create_tracker("oracle")
+    from track3d.estimators import create_estimator
+
+    # A3BoxNet's registry wrapper took **options: the list of what it takes was missing
+    with pytest.raises(ValueError, match="takes: model, threads, num_points, seed, precision, engine"):
+        create_estimator("a3boxnet", nope=1)
