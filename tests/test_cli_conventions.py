@@ -135,6 +135,12 @@ def test_version(capsys):
     from track3d_train.cli import main as train_main
 
     assert train_main(["--version"]) == 0 and capsys.readouterr().out.startswith("track3d-train ")
+    pytest.importorskip("track3d_sim")
+    from track3d_sim.cli import main as sim_main
+
+    with pytest.raises(SystemExit) as e:
+        sim_main(["--version"])
+    assert e.value.code == 0 and capsys.readouterr().out.startswith("track3d-sim ")
 
 
 def _checkpoints(tmp_path, torch):

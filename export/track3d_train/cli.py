@@ -27,12 +27,9 @@ EXTRA_MODULES = {"torch": "train", "onnx": "train", "tqdm": "train", "matplotlib
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "--version":
-        from importlib.metadata import PackageNotFoundError, version
+        from track3d.argparsing import package_version
 
-        try:
-            print(f"track3d-train {version('track3d')}")
-        except PackageNotFoundError:
-            print("track3d-train unknown")
+        print(f"track3d-train {package_version()}")
         return 0
     if argv and argv[0] not in COMMANDS and argv[0] not in ("-h", "--help"):  # one line, as argparse's
         print(f"track3d-train: error: unknown command {argv[0]!r}, choose from {', '.join(COMMANDS)} "

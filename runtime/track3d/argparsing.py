@@ -15,7 +15,7 @@ import sys
 from typing import Callable
 
 __all__ = ["ArgumentParser", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS",
-           "missing_extra", "exit_for_missing_extra"]
+           "missing_extra", "exit_for_missing_extra", "package_version"]
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
@@ -44,6 +44,17 @@ class ArgumentParser(argparse.ArgumentParser):
 
     def error(self, message: str):  # argparse's hook; must not return
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def package_version() -> str:
+    """The installed track3d version (`--version` of all three commands); "unknown" in a bare
+    checkout without installed metadata."""
+    try:
+        from importlib.metadata import version
+
+        return version("track3d")
+    except Exception:
+        return "unknown"
 
 
 def apply_formatter(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:

@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .argparsing import ArgumentParser, apply_formatter, hidden_alias
+from .argparsing import ArgumentParser, apply_formatter, hidden_alias, package_version
 
 __all__ = ["main"]
 
@@ -61,15 +61,6 @@ def _add_data_args(p: argparse.ArgumentParser) -> None:
     hidden_alias(p, "--no-progress", "quiet", action="store_true")
 
 
-def _version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("track3d")
-    except Exception:  # a bare checkout without installed metadata
-        return "unknown"
-
-
 def _add_plugin_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plugin", action="append", dest="plugins", metavar="MODULE", default=[],
                    help="import this module (dotted name or .py file) first: it registers its trackers "
@@ -80,7 +71,7 @@ def _add_plugin_arg(p: argparse.ArgumentParser) -> None:
 def _parser() -> argparse.ArgumentParser:
     ap = ArgumentParser(prog="track3d", description="Track3D: 3D asteroid tracking runtime "
                                  "(2D tracker -> frustum -> 3D box estimator -> 2D-3D fusion).")
-    ap.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    ap.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
     ap.add_argument("--plugin", action="append", dest="plugins_top", metavar="MODULE", default=[],
                     help="import this module (dotted name or .py file) first: it registers its trackers or "
                          "estimators (repeatable; also accepted after the command)")

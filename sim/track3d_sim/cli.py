@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from track3d.argparsing import ArgumentParser, apply_formatter, exit_for_missing_extra, hidden_alias
+from track3d.argparsing import ArgumentParser, apply_formatter, exit_for_missing_extra, hidden_alias, package_version
 
 from .errors import SimError
 from .generate import PRESETS
@@ -44,6 +44,7 @@ def _mesh(text: str):
 def build_parser() -> argparse.ArgumentParser:
     p = ArgumentParser(prog="track3d-sim", description="3D asteroid tracking dataset simulator "
                                 "(headless CPU ray casting; writes the layout of docs/dataset.md).")
+    p.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="{generate,stats,preview,ply,shapes,demo}")
     g = sub.add_parser("generate", help="render a dataset (resumable, deterministic for a seed)",
                        description="Render a dataset into --out. A killed run continues where it stopped "
