@@ -51,6 +51,19 @@ def _int_at_least(low: int):
     return parse
 
 
+def _result_name(text: str) -> str:
+    """argparse type: a result name is one folder under <results>/<split>/; "a/b" or "../x"
+    would write beside or outside the results, where `track3d eval` never looks."""
+    if not text or text in (".", "..") or "/" in text or "\\" in text:
+        raise argparse.ArgumentTypeError(f"a result name is one folder name (no '/', '\\', '.' or '..'), got {text!r}")
+    return text
+
+
+def _unique(names: list[str] | None) -> list[str] | None:
+    """Names in their order, each once (`--sequence a a` is one sequence, not two runs of it)."""
+    return None if names is None else list(dict.fromkeys(names))
+
+
 def _add_data_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, help="dataset root (the folder with dataset.json)")
     p.add_argument("--split", default="test", help="dataset split (default: test)")
@@ -93,7 +106,7 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--engine", choices=("onnxruntime", "openvino", "auto"), default=None,
                    help="inference engine of the networks; openvino needs track3d[openvino] (default onnxruntime)")
     t.add_argument("--results", default="results", help="result folder (default ./results)")
-    t.add_argument("--name", help="result name (default <tracker>+<estimator>, tagged @<model>-<hash> for "
+    t.add_argument("--name", type=_result_name, help="result name (default <tracker>+<estimator>, tagged @<model>-<hash> for "
                                   "non-shipped model files)")
     t.add_argument("--replace", action="store_true",
                    help="replace results of another configuration under the same name (default: refuse)")
@@ -181,7 +194,7 @@ def _cmd_track(a) -> int:
                        tracker_options=topts, estimator_options=eopts, name=a.name)
     if a.depth == "stereo" and not a.name:
         spec.name = spec.label + "-stereo"   # keep the depth-map results of the same pair
-    exp = Experiment(a.data, a.split, a.results, sequences=a.sequences, max_frames=a.frames,
+    exp = Experiment(a.data, a.split, a.results, sequences=_unique(a.sequences), max_frames=a.frames,
                      restart=not a.no_restart, restart_skip=a.restart_skip, depth=a.depth)
     results = Path(a.results)
     if results.exists() and not results.is_dir():
@@ -221,14 +234,14 @@ def _cmd_eval(a) -> int:
 
     split_dir = Path(a.results) / a.split
     if a.trackers:
-        names = list(a.trackers)
+        names = _unique(a.trackers)
     elif split_dir.is_dir():
         names = sorted(p.name for p in split_dir.iterdir() if p.is_dir())
     else:
         names = []
     if not names:
         raise FileNotFoundError(f"no results in {split_dir} (run `track3d track` first)")
-    exp = Experiment(a.data, a.split, a.results, a.out, sequences=a.sequences, max_frames=a.frames)
+    exp = Experiment(a.data, a.split, a.results, a.out, sequences=_unique(a.sequences), max_frames=a.frames)
     if not a.sequences:
         # Default: the sequences every named tracker has results for.
         have = [s for s in exp.sequences
