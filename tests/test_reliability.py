@@ -311,3 +311,27 @@ def test_sim_bad_counts_are_one_line(synth, tmp_path, capsys, argv, message):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
     assert not list(tmp_path.glob("*.png"))
+
+
+@pytest.mark.parametrize("gain", ["0", "-1", "nan"])
+def test_sim_preview_gain_must_be_positive(synth, tmp_path, capsys, gain):
+    """A gain <= 0 wrote a black contact sheet, NaN one with a numpy warning, both exit 0."""
+    pytest.importorskip("PIL")
+    from track3d_sim.cli import main as sim_main
+
+    seq = next(p for p in (synth / "test").iterdir() if p.is_dir())
+    assert sim_main(["preview", str(seq), "--out", str(tmp_path / "p.png"), "--gain", gain]) == 2
+    assert "--gain must be a positive number" in capsys.readouterr().err
+    assert not (tmp_path / "p.png").exists()
+
+
+def test_sim_demo_checks_names_before_simulating(tmp_path, capsys, monkeypatch):
+    """`track3d-sim demo --tracker nope` simulated the whole test set before saying so."""
+    pytest.importorskip("track3d_sim")
+    from track3d_sim import demo
+    from track3d_sim.cli import main as sim_main
+
+    monkeypatch.setattr(demo, "_simulate", lambda *a: pytest.fail("simulated before checking the names"))
+    for flag, message in (("--tracker", "unknown 2D tracker 'nope'"), ("--estimator", "unknown 3D box estimator 'nope'")):
+        assert sim_main(["demo", "--out", str(tmp_path / "d"), flag, "nope", "--quiet"]) == 2
+        assert message in capsys.readouterr().err
