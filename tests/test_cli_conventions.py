@@ -295,3 +295,42 @@ def test_a_missing_module_of_no_extra_keeps_its_traceback(monkeypatch):
     e = ModuleNotFoundError("No module named 'track3d_nonexistent'", name="track3d_nonexistent")
     assert missing_extra(e, {"tqdm": "sim"}) is None
     assert "track3d[sim]" in missing_extra(ModuleNotFoundError("x", name="tqdm.auto"), {"tqdm": "sim"})
+
+
+def test_every_number_of_the_training_commands_has_bounds():
+    """A plain int / float flag takes 0, -5 or nan: boxnet prepare --jitters -1 wrote a cache,
+    train --batch 0 ended in a ZeroDivisionError, --threads 0 in torch's RuntimeError. (The
+    eval sub-commands are left to their own refactoring.)"""
+    pytest.importorskip("torch")
+    plain = [(p.prog, a.option_strings) for name, parser in _parsers() if name.startswith("track3d-train")
+             for p in _walk(parser) if not p.prog.endswith(" eval")
+             for a in p._actions if a.option_strings and a.type in (int, float)]
+    assert not plain, f"give these a track3d.argparsing.bounded type: {plain}"
+
+
+@pytest.mark.parametrize("argv", [
+    ["boxnet", "prepare", "--data", "d", "--jitters", "-1"],          # wrote a cache named j-1
+    ["boxnet", "prepare", "--data", "d", "--max-points", "0"],        # wrote empty frustums
+    ["boxnet", "prepare", "--data", "d", "--frame-step", "0"],        # range() arg 3 must not be zero
+    ["boxnet", "train", "--cache", "c", "--batch", "0"],              # ZeroDivisionError
+    ["boxnet", "train", "--cache", "c", "--threads", "0"],            # torch RuntimeError traceback
+    ["boxnet", "train", "--cache", "c", "--epochs", "0"],             # "done: 0 epochs", exit 0
+    ["boxnet", "train", "--cache", "c", "--lr", "nan"],
+    ["siamfc", "prepare", "--out", "o", "--frame-step", "0"],
+    ["siamfc", "train", "--cache", "c", "--out", "o", "--steps", "0"],
+    ["siamfc", "export", "--out", "o", "--scale-penalty", "2"],
+    ["edgetrack", "prepare", "--out", "o", "--synthetic", "-2"],      # an empty cache, exit 0
+    ["edgetrack", "train", "--cache", "c", "--out", "o", "--val-every", "0"],
+    ["edgetrack", "export", "--out", "o", "--instance-size", "-5"],   # written into the model's metadata
+    ["edgetrack", "time", "--model", "m", "--repeats", "2"],          # median of an empty list
+    ["quantize", "--data", "d", "--samples", "0"],
+    ["boxnet", "prepare", "--data", "d", "--seed", "-1"],
+])
+def test_bad_numbers_of_the_training_commands_are_one_line(argv, capsys):
+    pytest.importorskip("torch")
+    from track3d_train.cli import main as train_main
+
+    with pytest.raises(SystemExit) as e:
+        train_main(argv)
+    assert e.value.code == 2
+    _one_line(capsys, "error: argument", "expected ")

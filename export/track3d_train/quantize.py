@@ -34,7 +34,7 @@ import numpy as np
 
 from track3d.onnxmodel import META_KEY, MODELS_DIR, variant_path
 
-from track3d.argparsing import ArgumentParser
+from track3d.argparsing import ArgumentParser, bounded
 
 from .onnx_meta import attach_metadata, file_hash, refuse_shipped
 
@@ -216,8 +216,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--out-dir", type=Path, default=None, help="where the *_int8.onnx go (default: --models-dir)")
     ap.add_argument("--models", nargs="+", default=["a3boxnet", "siamfc_edge", "siamfc_faithful"],
                     help="stems to quantise (default: a3boxnet siamfc_edge siamfc_faithful)")
-    ap.add_argument("--samples", type=int, default=300, help="calibration samples per network (default 300)")
-    ap.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
+    ap.add_argument("--samples", type=bounded(int, 1), default=300, help="calibration samples per network (default 300)")
+    ap.add_argument("--seed", type=bounded(int, 0), default=0, help="sampling seed (default 0)")
     ap.add_argument("--force", action="store_true", help="overwrite shipped int8 models in track3d/models")
     return ap
 
@@ -225,8 +225,6 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     a = ap.parse_args(argv)
-    if a.samples < 1:
-        ap.error("--samples must be >= 1")
     unknown = [m for m in a.models if m != "a3boxnet" and m not in SIAMFC_STEMS]
     if unknown:
         ap.error(f"unknown model stem(s) {', '.join(unknown)} (known: a3boxnet, {', '.join(SIAMFC_STEMS)})")

@@ -15,7 +15,7 @@ import sys
 from typing import Callable
 
 __all__ = ["ArgumentParser", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS",
-           "missing_extra", "exit_for_missing_extra", "package_version"]
+           "missing_extra", "exit_for_missing_extra", "package_version", "bounded"]
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
@@ -44,6 +44,28 @@ class ArgumentParser(argparse.ArgumentParser):
 
     def error(self, message: str):  # argparse's hook; must not return
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def bounded(kind: type = int, low: float | None = None, above: float | None = None,
+            high: float | None = None) -> Callable[[str], float]:
+    """argparse type: an int or float that is >= low, > above and <= high (each optional; NaN
+    never passes). A count of 0 or -5 or a learning rate of -1 used to run and write a wrong or
+    empty result, or end in a ZeroDivisionError deep inside."""
+    what = "an integer" if kind is int else "a number"
+    rule = " and ".join(r for r in (low is not None and f">= {low}", above is not None and f"> {above}",
+                                     high is not None and f"<= {high}") if r)
+
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what} {rule}, got {text!r}") from None
+        if v != v or (low is not None and v < low) or (above is not None and v <= above) \
+                or (high is not None and v > high):
+            raise argparse.ArgumentTypeError(f"expected {what} {rule}, got {text!r}")
+        return v
+    parse.__name__ = f"{what} {rule}"
+    return parse
 
 
 def package_version() -> str:

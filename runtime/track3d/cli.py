@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .argparsing import ArgumentParser, apply_formatter, hidden_alias, package_version
+from .argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias, package_version
 
 __all__ = ["main"]
 
@@ -37,20 +37,6 @@ def _options(pairs: list[str] | None) -> dict:
     return out
 
 
-def _int_at_least(low: int):
-    """argparse type: an integer >= low (a count of frames, sequences or plots)."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}") from None
-        if v < low:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {v}")
-        return v
-    parse.__name__ = f"integer >= {low}"  # argparse names the type in its messages
-    return parse
-
-
 def _result_name(text: str) -> str:
     """argparse type: a result name is one folder under <results>/<split>/; "a/b" or "../x"
     would write beside or outside the results, where `track3d eval` never looks."""
@@ -69,7 +55,7 @@ def _add_data_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--split", default="test", help="dataset split (default: test)")
     p.add_argument("--sequence", "--sequences", dest="sequences", nargs="+", metavar="NAME",
                    help="only these sequences of the split")
-    p.add_argument("--frames", type=_int_at_least(1), help="only the first N (>= 1) frames of each sequence (default: all)")
+    p.add_argument("--frames", type=bounded(int, 1), help="only the first N (>= 1) frames of each sequence (default: all)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     hidden_alias(p, "--no-progress", "quiet", action="store_true")
 
@@ -118,7 +104,7 @@ def _parser() -> argparse.ArgumentParser:
                         "left/right images by semi-global matching around the 2D box (stereo)")
     t.add_argument("--video", choices=("auto", "gif", "mp4", "none"), default="auto",
                    help="overlay format (default auto: gif when pillow is installed, else mp4; gif needs pillow)")
-    t.add_argument("--video-sequences", type=_int_at_least(0), default=1, help="how many sequences get an overlay")
+    t.add_argument("--video-sequences", type=bounded(int, 0), default=1, help="how many sequences get an overlay")
 
     e = sub.add_parser("eval", help="results vs ground truth -> report.json, table and plots")
     _add_data_args(e)
@@ -126,7 +112,7 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--trackers", nargs="+", help="result names to compare (default: all in the folder)")
     e.add_argument("--out", default="reports", help="report folder (default ./reports)")
     e.add_argument("--no-plots", action="store_true", help="skip the plots (no matplotlib needed)")
-    e.add_argument("--trajectories", type=_int_at_least(0), default=4, help="sequences with a 3D trajectory plot")
+    e.add_argument("--trajectories", type=bounded(int, 0), default=4, help="sequences with a 3D trajectory plot")
 
     # The demo simulates its data, so it lives with the simulator (`track3d-sim demo`): the
     # runtime never imports the simulator. This entry only says where it went.

@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from track3d.argparsing import ArgumentParser, apply_formatter, hidden_alias
+from track3d.argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias
 
 
 def _prepare(a) -> int:
@@ -146,11 +146,11 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--data", nargs="+", help="dataset root(s) (dataset.json); several are concatenated")
     q.add_argument("--split", default="train", help="dataset split")
     q.add_argument("--out", required=True, help="cache folder")
-    q.add_argument("--max-frames", type=int, default=3000, help="bound on target crops (442 kB each)")
-    q.add_argument("--max-background", type=int, default=1000, help="bound on background crops")
-    q.add_argument("--synthetic", type=int, default=0, help="N synthetic sequences instead of a dataset")
-    q.add_argument("--synthetic-frames", type=int, default=60, help="frames per synthetic sequence")
-    q.add_argument("--seed", type=int, default=0, help="random seed")
+    q.add_argument("--max-frames", type=bounded(int, 1), default=3000, help="bound on target crops (442 kB each)")
+    q.add_argument("--max-background", type=bounded(int, 0), default=1000, help="bound on background crops")
+    q.add_argument("--synthetic", type=bounded(int, 0), default=0, help="N synthetic sequences instead of a dataset")
+    q.add_argument("--synthetic-frames", type=bounded(int, 2), default=60, help="frames per synthetic sequence")
+    q.add_argument("--seed", type=bounded(int, 0), default=0, help="random seed")
     q.add_argument("--quiet", action="store_true", help="no progress bar")
     hidden_alias(q, "--no-progress", "quiet", action="store_true")
     q.set_defaults(fn=_prepare)
@@ -158,17 +158,17 @@ def build_parser() -> argparse.ArgumentParser:
     t = sub.add_parser("train", help="train (resumes from <out>/ckpt.pt)", formatter_class=d)
     t.add_argument("--cache", required=True, help="cache folder from `prepare`")
     t.add_argument("--out", required=True, help="run folder: ckpt.pt, log.jsonl, curves.json/png")
-    t.add_argument("--max-steps", dest="steps", type=int, default=20000,
+    t.add_argument("--max-steps", dest="steps", type=bounded(int, 1), default=20000,
                    help="step cap; the cosine LR ends here or at the time budget, whichever comes first")
-    hidden_alias(t, "--steps", "steps", type=int)  # the name before --max-steps
-    t.add_argument("--batch", type=int, default=32, help="pairs per step")
-    t.add_argument("--lr", type=float, default=3e-3, help="peak AdamW learning rate")
-    t.add_argument("--max-gap", type=int, default=50, help="max frame gap of a pair")
-    t.add_argument("--val-every", type=int, default=200, help="steps between validations")
-    t.add_argument("--ckpt-every-min", type=float, default=3.0, help="minutes between atomic checkpoints")
-    t.add_argument("--seed", type=int, default=0, help="random seed")
-    t.add_argument("--threads", type=int, default=1, help="torch threads")
-    t.add_argument("--time-budget-min", type=float, default=None, help="stop (and checkpoint) after this much training time")
+    hidden_alias(t, "--steps", "steps", type=bounded(int, 1))  # the name before --max-steps
+    t.add_argument("--batch", type=bounded(int, 1), default=32, help="pairs per step")
+    t.add_argument("--lr", type=bounded(float, above=0), default=3e-3, help="peak AdamW learning rate")
+    t.add_argument("--max-gap", type=bounded(int, 1), default=50, help="max frame gap of a pair")
+    t.add_argument("--val-every", type=bounded(int, 1), default=200, help="steps between validations")
+    t.add_argument("--ckpt-every-min", type=bounded(float, above=0), default=3.0, help="minutes between atomic checkpoints")
+    t.add_argument("--seed", type=bounded(int, 0), default=0, help="random seed")
+    t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
+    t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None, help="stop (and checkpoint) after this much training time")
     t.add_argument("--init-from", help="start from another run's checkpoint (fine-tuning)")
     t.add_argument("--no-resume", action="store_true", help="start over even if <out>/ckpt.pt exists")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -181,8 +181,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--out", required=True, help="path prefix")
     e.add_argument("--force", action="store_true", help="overwrite the shipped models in track3d/models")
     e.add_argument("--data-note", default=None, help="what the model was trained on (metadata)")
-    for k, ty in (("window-influence", float), ("penalty-k", float), ("size-lr", float), ("score-threshold", float),
-                  ("instance-size", int), ("lost-instance-size", int)):
+    # bounds: a value the runtime cannot use must not be written into a model file
+    unit = bounded(float, 0, high=1)
+    for k, ty in (("window-influence", unit), ("penalty-k", bounded(float, 0)), ("size-lr", unit),
+                  ("score-threshold", unit), ("instance-size", bounded(int, 1)), ("lost-instance-size", bounded(int, 1))):
         e.add_argument(f"--{k}", type=ty, default=None, help="tracking default stored in the metadata (default: the config's)")
     e.set_defaults(fn=_export)
 
@@ -199,8 +201,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     m = sub.add_parser("time", help="median ms of the nets and crops vs SiamFC-edge, interleaved", formatter_class=d)
     m.add_argument("--model", required=True, help="prefix of <name>_template/_search.onnx")
-    m.add_argument("--threads", type=int, default=1, help="onnxruntime threads")
-    m.add_argument("--repeats", type=int, default=200, help="calls of each, interleaved")
+    m.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
+    m.add_argument("--repeats", type=bounded(int, 4), default=200, help="calls of each, interleaved (>= 4: the first 3 are warm-up)")
     m.add_argument("--pin", action="store_true", help="pin the process to one core")
     m.set_defaults(fn=_time)
     return apply_formatter(p)
