@@ -175,7 +175,7 @@ def _build(cfg: BenchConfig, camera: Camera, threads: int):
 
     topt: dict = dict(cfg.extra.get("tracker_options", {}))
     eopt: dict = dict(cfg.extra.get("estimator_options", {}))
-    if cfg.tracker.startswith("siamfc") or cfg.tracker_model:
+    if cfg.tracker in NETWORK_TRACKERS or cfg.tracker_model:  # EdgeTrack was timed at 1 thread in every row
         topt["threads"] = threads
         if cfg.tracker_model:
             topt["model"] = cfg.tracker_model
@@ -185,6 +185,10 @@ def _build(cfg: BenchConfig, camera: Camera, threads: int):
             eopt["model"] = cfg.boxnet_model
     return Track3D.create(camera, cfg.tracker, cfg.estimator, tracker_options=topt, estimator_options=eopt)
 
+
+# Built-in 2D trackers that run networks: they get the row's thread count as intra-op threads
+# (OpenCV's trackers get it through cv2.setNumThreads).
+NETWORK_TRACKERS = ("siamfc", "siamfc-edge", "edgetrack")
 
 STAGE_NAMES = ("track2d", "net2d", "frustum", "box3d", "net3d", "fusion", "end_to_end")
 
@@ -270,6 +274,9 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
             cv2.setNumThreads(threads)
             t3d = _build(cfg, camera, threads)
             described = described or t3d.describe()
+            if cfg.models_only and not (_onnx_models(t3d.tracker2d) or _onnx_models(t3d.estimator)):
+                raise ValueError(f"--models-only: {cfg.tracker} + {cfg.estimator} run no ONNX network "
+                                 f"(time the loop without --models-only)")
             say(f"{t3d.tracker_name}+{t3d.estimator_name} at {threads} thread(s) on CPU(s) {cpus} ...")
             wall0, cpu0 = time.perf_counter(), time.process_time()
             stages, statuses, feeds = _time_loop(t3d, passes, min(cfg.frames, 200) if cfg.models_only else cfg.frames)

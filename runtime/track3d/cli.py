@@ -156,6 +156,8 @@ def _cmd_bench(a) -> int:
     for p in (a.tracker_model and Path(a.tracker_model).parent, a.boxnet_model):
         if p and not Path(p).exists():
             raise FileNotFoundError(f"no such model path: {p}")
+    if a.out and Path(a.out).is_dir():  # before the timing, not after minutes of it
+        raise ValueError(f"--out {a.out} is a folder: give the JSON file to write")
     report = run_bench(cfg, log=None if a.quiet else (lambda s: print(f"[bench] {s}", file=sys.stderr)))
     print(json.dumps(report, indent=1) if a.json else format_table(report))
     if a.out:
