@@ -99,6 +99,12 @@ def test_bench_on_a_dataset(tmp_path, capsys):
     assert rep["source"]["kind"] == "dataset" and rep["results"][0]["frames"] == 6
     assert main(["bench", "--data", str(tmp_path / "none"), "--frames", "2"]) == 2
     assert "no dataset" in capsys.readouterr().err
+    # a sequence folder as --data names `--sequence`, which bench now takes too
+    assert main(["bench", "--data", str(root / "test" / "a"), "--frames", "2"]) == 2
+    assert "--sequence a" in capsys.readouterr().err
+    assert main(["bench", "--tracker", "kcf", "--estimator", "baseline", "--data", str(root), "--sequence", "a",
+                 "--frames", "3", "--threads", "1", "--json", "--quiet"]) == 0
+    assert json.loads(capsys.readouterr().out)["source"]["sequences"] == ["a"]
 
 
 def test_edgetrack_gets_the_rows_thread_count():

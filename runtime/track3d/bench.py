@@ -47,6 +47,7 @@ class BenchConfig:
     threads: tuple[int, ...] = (1, 2)
     data: str | None = None
     split: str = "test"
+    sequences: tuple[str, ...] | None = None      # with data: these sequences, else the split's first
     synthetic_frames: int = 60
     models_only: bool = False
     busy_seconds: float = 0.5
@@ -114,12 +115,13 @@ def synthetic_frames(camera: Camera, n: int = 60, seed: int = 0):
     return out
 
 
-def _dataset_frames(root: str, split: str, max_frames: int):
-    """(camera, category, frames) of the first sequences of a dataset split, preloaded."""
+def _dataset_frames(root: str, split: str, max_frames: int, names: tuple[str, ...] | None = None):
+    """(camera, category, frames) of the first sequences of a dataset split (or of `names`),
+    preloaded."""
     from .dataset import Dataset
 
     ds = Dataset(root)
-    seqs = ds.sequences(split)
+    seqs = [ds.sequence(split, n) for n in dict.fromkeys(names)] if names else ds.sequences(split)
     if not seqs:
         raise ValueError(f"split {split!r} of {root} has no sequences")
     passes = []
@@ -255,8 +257,9 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
         raise ValueError(f"threads must be >= 1, got {cfg.threads}")
     say = log or (lambda s: None)
     if cfg.data:
-        camera, passes = _dataset_frames(cfg.data, cfg.split, max(cfg.synthetic_frames, 100))
-        source = {"kind": "dataset", "data": str(cfg.data), "split": cfg.split}
+        camera, passes = _dataset_frames(cfg.data, cfg.split, max(cfg.synthetic_frames, 100), cfg.sequences)
+        source = {"kind": "dataset", "data": str(cfg.data), "split": cfg.split,
+                  **({"sequences": list(cfg.sequences)} if cfg.sequences else {})}
     else:
         camera = Camera.from_fov(640, 480, 45.0)
         say(f"synthesising {cfg.synthetic_frames} frames (640x480 sphere) ...")

@@ -135,6 +135,8 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--threads", type=int, nargs="+", default=[1, 2], help="thread counts to time")
     b.add_argument("--data", help="time on this dataset's first sequences instead of synthetic frames")
     b.add_argument("--split", default="test", help="dataset split with --data")
+    b.add_argument("--sequence", "--sequences", dest="sequences", nargs="+", metavar="NAME",
+                   help="with --data: only these sequences (default: the split's first)")
     b.add_argument("--models-only", action="store_true",
                    help="time each network alone on the inputs it gets in the loop (onnxruntime_perf_test style)")
     b.add_argument("--out", metavar="JSON", help="also write the report as JSON here")
@@ -152,7 +154,8 @@ def _cmd_bench(a) -> int:
 
     cfg = BenchConfig(tracker=a.tracker, estimator=a.estimator, tracker_model=a.tracker_model,
                       boxnet_model=a.boxnet_model, frames=a.frames, threads=tuple(a.threads), data=a.data,
-                      split=a.split, models_only=a.models_only)
+                      split=a.split, sequences=tuple(a.sequences) if a.sequences else None,
+                      models_only=a.models_only)
     for p in (a.tracker_model and Path(a.tracker_model).parent, a.boxnet_model):
         if p and not Path(p).exists():
             raise FileNotFoundError(f"no such model path: {p}")
