@@ -334,3 +334,36 @@ def test_bad_numbers_of_the_training_commands_are_one_line(argv, capsys):
         train_main(argv)
     assert e.value.code == 2
     _one_line(capsys, "error: argument", "expected ")
+
+
+def _script_commands(text: str):
+    """(command, argv) of every track3d-sim / track3d-train call in a shell script: lines
+    joined at backslashes, shell variables given a dummy value, redirections dropped."""
+    import re
+    import shlex
+
+    text = re.sub(r"\\\n\s*", " ", text)
+    for line in text.splitlines():
+        m = re.search(r'"\$BIN/(track3d-sim|track3d-train)"(.*)', line)
+        if not m:
+            continue
+        rest = re.sub(r'"\$@"', "", m.group(2))          # the caller's extra flags
+        rest = re.sub(r'"?\$\(\([^)]*\)\)"?|"?\$\{CACHES\[@\]\}"?|"?\$\{\w+(:-[^}]*)?\}"?|\$\w+', "1", rest)
+        words = shlex.split(re.split(r"\s(?:>>?|2>&1|&|;|\|\|)(?:\s|$)", " " + rest)[0])
+        yield m.group(1), [w for w in words if w]
+
+
+def test_the_scripts_in_export_scripts_parse():
+    """The recipes keep working with the renamed flags (and use the shown spellings)."""
+    pytest.importorskip("torch")
+    pytest.importorskip("track3d_sim")
+    parsers = dict(_parsers())
+    seen = 0
+    for script in sorted((ROOT / "export" / "scripts").glob("*.sh")):
+        for cmd, argv in _script_commands(script.read_text()):
+            parser = parsers["track3d-sim"] if cmd == "track3d-sim" else parsers[f"track3d-train {argv.pop(0)}"]
+            parser.parse_args(argv)          # exits 2 on an unknown flag or a bad value
+            old = [w for w in argv if w in OLD_SPELLINGS]
+            assert not old, f"{script.name}: {cmd} {' '.join(argv)} uses the old spelling(s) {old}"
+            seen += 1
+    assert seen >= 20
