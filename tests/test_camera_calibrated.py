@@ -102,3 +102,15 @@ def test_from_dict_names_a_bad_resolution_or_K(change, message):
 def test_from_fov_refuses_an_empty_image(w, h):
     with pytest.raises(ValueError, match="resolution must be positive"):   # was ZeroDivisionError for w = 0
         Camera.from_fov(w, h, 40.0)
+
+
+@pytest.mark.parametrize("make", [
+    lambda w: Camera(w, 100, 45.0, 30.0),                           # kept 640.5 as the width
+    lambda w: Camera.from_fov(w, 100, 45.0),                        # truncated to 640
+    lambda w: Camera.from_intrinsics(w, 100, 100.0, 50.0, 60.0, 30.0),
+])
+@pytest.mark.parametrize("width", [640.5, "640", True])
+def test_every_constructor_wants_whole_pixels(make, width):
+    with pytest.raises(ValueError, match="whole number of pixels"):
+        make(width)
+    assert make(np.int64(640)).width == 640 and type(make(640.0).width) is int
