@@ -242,8 +242,13 @@ class Track3D:
         ms: dict[str, float] = dict.fromkeys(STAGES, 0.0)
         t0 = time.perf_counter()
         image = self.camera.undistort_image(check_image(image, self._size))
-        ok, raw = self.tracker2d.update(image)
-        raw = np.asarray(raw, dtype=np.float64).reshape(-1)
+        res = self.tracker2d.update(image)
+        try:
+            ok, raw = res
+            raw = np.asarray(raw, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):  # a plug-in's bug, named as such (not numpy's message)
+            raise ValueError(f"the 2D tracker {self.tracker_name or self.tracker2d!r} returned {res!r:.80} from "
+                             f"update(image); the protocol is (ok: bool, box: [x, y, w, h])") from None
         t1 = time.perf_counter()
         ms["track2d"] = (t1 - t0) * 1e3
         if not ok or raw.shape != (4,) or not _valid_box2d(raw):
