@@ -103,7 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("sequence", help="sequence folder, e.g. DATA/train/0001")
     v.add_argument("--out", required=True, help="output .png (contact sheet) or .gif (animation)")
     v.add_argument("--frames", type=int, default=12, help="frames in the contact sheet, >= 1 (default 12)")
-    v.add_argument("--gain", type=float, default=1.0, help="brightness gain for viewing dark images (default 1)")
+    v.add_argument("--gain", type=float, default=1.0, help="brightness gain (> 0) for viewing dark images (default 1)")
     v.add_argument("--right", action="store_true", help="add the right image beside the left")
     dm = sub.add_parser("demo", help="simulate a small test set, run Track3D with the shipped models, evaluate, "
                                       "write plots and an overlay (the README's main job)")
