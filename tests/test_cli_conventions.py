@@ -326,8 +326,9 @@ def test_every_number_of_the_training_commands_has_bounds():
     ["quantize", "--data", "d", "--samples", "0"],
     ["boxnet", "prepare", "--data", "d", "--seed", "-1"],
 ])
-def test_bad_numbers_of_the_training_commands_are_one_line(argv, capsys):
+def test_bad_numbers_of_the_training_commands_are_one_line(argv, capsys, tmp_path, monkeypatch):
     pytest.importorskip("torch")
+    monkeypatch.chdir(tmp_path)       # the relative paths above: a regression writes there, not here
     from track3d_train.cli import main as train_main
 
     with pytest.raises(SystemExit) as e:
