@@ -1,143 +1,87 @@
 """2D tracker benchmark (paper Fig. 14): accuracy and speed in one run.
 
-On a dataset split (default: the test split of data/small), one-pass evaluation (init on the
-first frame with the target present, no restart, absent frames not scored) of
+On a dataset split, the evaluation toolkit's one-pass 2D protocol (`track3d.evaluation`:
+restart=False, the null estimator "none"; init on the first frame with the target present,
+absent frames not scored) of
 
     siamfc-edge, siamfc (faithful), nano (NanoTrack v2, peer model), kcf, csrt, mosse, mil
 
-with AO_2d, SR@0.5, ACE_2d from the full 1-thread pass, and FPS (tracker time only, frames
-preloaded) at 1 thread (process pinned to one core) and 2 threads (on the first
---speed-seqs sequences, the same frames for every tracker). Also:
+with AO_2d, SR@0.5, ACE_2d and FPS (tracker time, I/O excluded) at 1 thread (pinned to one
+core), and FPS at 2 threads on the first --speed-seqs sequences. Also:
   --sweep      the edge design sweep: width x search size x scales x int8 -> AO vs ms plot
   --ratio      onnxruntime vs torch eager speed of the SiamFC search graph (needs torch)
 
     python benchmarks/bench_2d.py --data data/small --sweep --ratio
 
-Writes <out>/bench_2d.json, bench_2d_success.png, bench_2d_precision.png, bench_2d_tradeoff.png
-and bench_2d.md (the table). Default out: ./bench-results/siamfc/ (the committed results: --out benchmarks/results/siamfc).
+Writes <out>/bench_2d.json, bench_2d.md (the table), success_2d.png / precision_2d.png (the
+toolkit's plots), bench_2d_tradeoff.png (--sweep) and the toolkit's result files
+(<out>/results, <out>/results_2t).
 """
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import sys
-import time
 from pathlib import Path
 
-import cv2
 import numpy as np
+from benchlib.output import add_out_argument
+from benchlib.paper import TABLE2
+from benchlib.record import finish_record, start_record
 
-from track3d.boxes import center_error_2d, iou_2d
-from track3d.dataset import Dataset
+from track3d.evaluation import Experiment, TrackerSpec, average_scores
+from track3d.jsonable import write_json
+from track3d.machine import pin_threads
+from track3d.table_text import cell, markdown_table
+from track3d.tracker import STAGES
 
-ROOT = Path(__file__).resolve().parents[1]
-# Benchmarks never write into the repository unless asked: by default their output goes to
-# ./bench-results under the current folder; pass --out benchmarks/results/... to update the committed files.
-OUT_ROOT = Path("bench-results")
-RESULTS = OUT_ROOT / "siamfc"
-MODELS = ROOT / "runtime" / "track3d" / "models"
 DEFAULT_TRACKERS = ("siamfc-edge", "siamfc", "nano", "kcf", "csrt", "mosse", "mil")
-IOU_T = np.linspace(0.0, 1.0, 101)
-CE_T = np.linspace(0.0, 50.0, 51)
-PAPER = {"SiamFC (paper, RTX 2080Ti)": {"AO_2d": 0.513, "ACE_2d": 29.986, "fps": 101.3}}
+PROTOCOL = ("one pass (track3d.evaluation, restart=False, estimator 'none'): init on the first present frame, "
+            "no restart, absent frames not scored; FPS = tracker time (I/O excluded); 1 thread pinned to one core")
 
 
-from track3d.evaluation.experiment import cpu_name as cpu_model  # noqa: E402  (one implementation)
+def spec_2d(tracker: str, threads: int = 1, options: dict | None = None, name: str | None = None) -> TrackerSpec:
+    """A 2D tracker alone (the null estimator), named `name` (default: the tracker)."""
+    return TrackerSpec(tracker, "none", threads=threads, tracker_options=dict(options or {}), name=name or tracker)
 
 
-def pin(threads: int) -> None:
-    """1 thread: pin the process to one core (the project's target); more: all cores."""
-    if not hasattr(os, "sched_setaffinity"):
-        return
-    cores = sorted(os.sched_getaffinity(0) | set(range(os.cpu_count() or 1)))
-    os.sched_setaffinity(0, {cores[-1]} if threads == 1 else set(cores))
-    cv2.setNumThreads(threads)
+def sweep_specs(folders: list[str], sizes: list[int], scales: list[int]) -> dict[str, dict]:
+    """Edge design points: every <name>_search.onnx in `folders` x search size x scales ->
+    {label: {"spec", "prefix", "instance_size", "scale_num"}}."""
+    out = {}
+    for d in folders:
+        for p in sorted(Path(d).glob("*_search.onnx")):
+            pre = p.parent / p.name[: -len("_search.onnx")]
+            for n in sizes:
+                for s in scales:
+                    label = f"{pre.name}@{s}x{n}"
+                    out[label] = {"spec": spec_2d("siamfc-edge", 1, {"model": str(pre), "instance_size": n,
+                                                                     "scale_num": s}, label),
+                                  "prefix": pre.name, "instance_size": n, "scale_num": s}
+    return out
 
 
-def make_factory(name: str, spec: dict | None = None):
-    """name -> callable(threads) building a fresh tracker."""
-    spec = spec or {}
-    if name.startswith("siamfc"):
-        from track3d.siamfc import create
-
-        def f(threads):
-            kw = dict(spec.get("options", {}))
-            if "model" in spec:
-                kw["model"] = spec["model"]
-            else:
-                kw["variant"] = "edge" if name == "siamfc-edge" else "faithful"
-            return create(threads=threads, **kw)
-        return f
-    from track3d.trackers2d import create_tracker
-
-    return lambda threads: create_tracker(name)
+def summary(exp: Experiment, name: str) -> tuple[dict, object]:
+    """(the JSON row of one tracker: toolkit scores under this benchmark's keys, the OverallScore)."""
+    ov = average_scores(exp.score(name))
+    ms = exp.stage_ms(name)[:, STAGES.index("total")]
+    med = float(np.median(ms)) if len(ms) else float("nan")
+    v = ov.values
+    return ({"sequences": ov.sequences, "frames": ov.frames, "AO_2d": v["ao_2d"], "SR_0.5": v["sr50_2d"],
+             "SR_0.75": v["sr75_2d"], "ACE_2d": v["ace_2d"], "fps_1t": ov.fps, "fps_1t_from_median": 1e3 / med,
+             "ms_median_1t": med, "ms_p90_1t": float(np.percentile(ms, 90)) if len(ms) else float("nan"),
+             "success_curve": ov.curves.get("success_2d"), "precision_curve": ov.curves.get("precision_2d")}, ov)
 
 
-def run_one(tracker, frames, gt, valid) -> dict:
-    first = int(np.argmax(valid))
-    tracker.init(frames[first], gt[first].copy())
-    n = len(gt)
-    pred = np.full((n, 4), np.nan)
-    pred[first] = gt[first]
-    times = np.zeros(n - first - 1)
-    for i in range(first + 1, n):
-        t0 = time.perf_counter()
-        ok, box = tracker.update(frames[i])
-        times[i - first - 1] = time.perf_counter() - t0
-        b = np.asarray(box, np.float64).reshape(-1)
-        good = bool(ok) and b.shape == (4,) and np.all(np.isfinite(b)) and b[2] > 0 and b[3] > 0
-        pred[i] = b if good else pred[i - 1]     # a reported failure holds the last box
-    sc = valid.copy()
-    sc[: first + 1] = False
-    iou = iou_2d(pred[sc], gt[sc])
-    ce = center_error_2d(pred[sc], gt[sc])
-    return {"iou": iou, "ce": ce, "time_s": float(times.sum()), "frames": len(times),
-            "frame_ms": times * 1e3}
-
-
-def summarise(per_seq: list[dict]) -> dict:
-    rs = [r for r in per_seq if len(r["iou"])]
-    if not rs:
-        return {}
-    frame_ms = np.concatenate([r["frame_ms"] for r in rs])
-    t = sum(r["time_s"] for r in rs)
-    n = sum(r["frames"] for r in rs)
-    return {"sequences": len(rs), "frames": int(sum(len(r["iou"]) for r in rs)),
-            "AO_2d": float(np.mean([r["iou"].mean() for r in rs])),
-            "SR_0.5": float(np.mean([(r["iou"] > 0.5).mean() for r in rs])),
-            "SR_0.75": float(np.mean([(r["iou"] > 0.75).mean() for r in rs])),
-            "ACE_2d": float(np.mean([r["ce"].mean() for r in rs])),
-            "fps_1t": n / t if t > 0 else float("nan"), "fps_1t_from_median": float(1e3 / np.median(frame_ms)),
-            "ms_median_1t": float(np.median(frame_ms)), "ms_p90_1t": float(np.percentile(frame_ms, 90)),
-            "success_curve": np.mean([[(r["iou"] > x).mean() for x in IOU_T] for r in rs], axis=0).tolist(),
-            "precision_curve": np.mean([[(r["ce"] <= x).mean() for x in CE_T] for r in rs], axis=0).tolist()}
-
-
-def sweep_specs(args) -> dict:
-    """Edge design points: (model prefix, search size, scales) -> spec. Models: every
-    siamfc_*_search.onnx in --sweep-models (plus its _int8 twin when present)."""
-    specs = {}
-    dirs = [Path(d) for d in args.sweep_models]
-    prefixes = []
-    for d in dirs:
-        for p in sorted(d.glob("*_search.onnx")):
-            prefixes.append(p.parent / p.name[: -len("_search.onnx")])
-    for pre in prefixes:
-        for n in args.sweep_sizes:
-            for s in args.sweep_scales:
-                specs[f"{pre.name}@{s}x{n}"] = {"model": str(pre), "options": {"instance_size": n, "scale_num": s},
-                                               "prefix": pre.name, "instance_size": n, "scale_num": s}
-    return specs
+def fps_of(scores) -> float:
+    t = sum(s.tracker_seconds for s in scores)
+    return sum(s.timed_frames for s in scores) / t if t > 0 else float("nan")
 
 
 def ratio_ort_torch(threads_list) -> list[dict]:
-    sys.path.insert(0, str(ROOT / "export"))
+    """onnxruntime vs torch eager on the SiamFC search graph of an untrained network (speed only)."""
     import tempfile
 
     import torch
-
     from track3d_train.siamfc.export import export_onnx, time_backbone
     from track3d_train.siamfc.model import SiamFC, config_for
 
@@ -148,7 +92,7 @@ def ratio_ort_torch(threads_list) -> list[dict]:
             net = SiamFC(config_for(variant)).eval()
             _, px = export_onnx(net, Path(d) / variant)
             for th in threads_list:
-                pin(th)
+                pin_threads(th)
                 r = time_backbone(net, px, s, n, threads=th, repeats=20)
                 r["variant"] = variant
                 out.append(r)
@@ -157,68 +101,55 @@ def ratio_ort_torch(threads_list) -> list[dict]:
     return out
 
 
-def plots(results: dict, out: Path, sweep: dict) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def tradeoff_plot(sweep: dict, path: Path) -> None:
+    """AO_2d against median ms per frame, one line per model prefix."""
+    from track3d.evaluation.plots import pyplot
 
-    for kind, xs, key, xl, fn in (("success", IOU_T, "success_curve", "IoU threshold", "bench_2d_success.png"),
-                                  ("precision", CE_T, "precision_curve", "centre error threshold (px)",
-                                   "bench_2d_precision.png")):
-        fig, ax = plt.subplots(figsize=(6, 4.5))
-        items = sorted(results.items(), key=lambda kv: -kv[1].get("AO_2d" if kind == "success" else "SR_0.5", 0))
-        for name, r in items:
-            if key not in r:
-                continue
-            lab = (f"{name} [AO {r['AO_2d']:.3f}]" if kind == "success"
-                   else f"{name} [{np.interp(20, CE_T, r[key]):.3f} @20px]")
-            ax.plot(xs, r[key], label=lab)
-        ax.set_xlabel(xl)
-        ax.set_ylabel("success rate" if kind == "success" else "precision")
-        ax.set_title(f"{kind} plot, OPE on the test split")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(out / fn, dpi=110)
-        plt.close(fig)
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7, 5))
+    groups: dict[str, list] = {}
+    for r in sweep.values():
+        groups.setdefault(r["prefix"], []).append(r)
+    for g, rs in sorted(groups.items()):
+        rs = sorted(rs, key=lambda r: r["ms_median_1t"])
+        ax.plot([r["ms_median_1t"] for r in rs], [r["AO_2d"] for r in rs], "o-", label=g, alpha=0.8)
+        for r in rs:
+            ax.annotate(f"{r['scale_num']}x{r['instance_size']}", (r["ms_median_1t"], r["AO_2d"]), fontsize=7)
+    ax.axvline(1000 / 100, color="grey", ls=":", lw=1)
+    ax.text(1000 / 100, ax.get_ylim()[0], " whole 3D loop budget\n at 100 FPS", fontsize=7, va="bottom")
+    ax.set(xscale="log", xlabel="2D tracker ms / frame (median, 1 thread, pinned)", ylabel="AO_2d (test split)",
+           title="SiamFC design: accuracy vs speed")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def markdown(results: dict, sweep: dict, ratio: list[dict]) -> str:
+    paper = TABLE2["SiamFC"]
+    rows = [[n, cell(r["AO_2d"]), cell(r["SR_0.5"]), cell(r["ACE_2d"], "{:.1f}"), cell(r["fps_1t"], "{:.1f}"),
+             cell(r.get("fps_2t"), "{:.1f}"), cell(r.get("fps_1t_subset"), "{:.1f}")] for n, r in results.items()]
+    rows.append(["SiamFC (paper, RTX 2080Ti)", cell(paper["AO_2d"]), "-", cell(paper["ACE_2d(px)"], "{:.1f}"),
+                 cell(paper["FPS"], "{:.1f}") + " (GPU)", "-", "-"])
+    md = markdown_table(["tracker", "AO_2d", "SR@0.5", "ACE_2d (px)", "FPS 1 thread", "FPS 2 threads",
+                         "FPS 1 thread (same subset)"], rows)
     if sweep:
-        fig, ax = plt.subplots(figsize=(7, 5))
-        groups = {}
-        for name, r in sweep.items():
-            groups.setdefault(r["prefix"], []).append(r)
-        for g, rs in sorted(groups.items()):
-            rs = sorted(rs, key=lambda r: r["ms_median_1t"])
-            ax.plot([r["ms_median_1t"] for r in rs], [r["AO_2d"] for r in rs], "o-", label=g, alpha=0.8)
-            for r in rs:
-                ax.annotate(f"{r['scale_num']}x{r['instance_size']}", (r["ms_median_1t"], r["AO_2d"]), fontsize=7)
-        ax.axvline(1000 / 100, color="grey", ls=":", lw=1)
-        ax.text(1000 / 100, ax.get_ylim()[0], " whole 3D loop budget\n at 100 FPS", fontsize=7, va="bottom")
-        ax.set_xscale("log")
-        ax.set_xlabel("2D tracker ms / frame (median, 1 thread, pinned)")
-        ax.set_ylabel("AO_2d (test split)")
-        ax.set_title("SiamFC design: accuracy vs speed")
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(out / "bench_2d_tradeoff.png", dpi=110)
-        plt.close(fig)
-
-
-def table(results: dict, speed2: dict) -> str:
-    lines = ["| tracker | AO_2d | SR@0.5 | ACE_2d (px) | FPS 1 thread | FPS 2 threads | FPS 1 thread (same subset) |",
-             "|---|---|---|---|---|---|---|"]
-    for name, r in results.items():
-        s2 = speed2.get(name, {})
-        lines.append(f"| {name} | {r['AO_2d']:.3f} | {r['SR_0.5']:.3f} | {r['ACE_2d']:.1f} | {r['fps_1t']:.1f} | "
-                     f"{s2.get('fps_2t', float('nan')):.1f} | {s2.get('fps_1t_subset', float('nan')):.1f} |")
-    for name, r in PAPER.items():
-        lines.append(f"| {name} | {r['AO_2d']:.3f} | - | {r['ACE_2d']:.1f} | {r['fps']:.1f} (GPU) | - | - |")
-    return "\n".join(lines)
+        md += "\n\n" + markdown_table(
+            ["design", "AO_2d", "SR@0.5", "ms/frame (median, 1t)", "FPS 1t"],
+            [[k, cell(r["AO_2d"]), cell(r["SR_0.5"]), cell(r["ms_median_1t"], "{:.2f}"), cell(r["fps_1t"], "{:.0f}")]
+             for k, r in sorted(sweep.items(), key=lambda kv: kv[1]["ms_median_1t"])])
+    if ratio:
+        md += "\n\n" + markdown_table(
+            ["search graph", "threads", "torch eager ms", "onnxruntime ms", "torch / ORT"],
+            [[f"{r['variant']} {r['scales']}x{r['size']}", str(r["threads"]), cell(r["torch_ms"], "{:.1f}"),
+              cell(r["ort_ms"], "{:.1f}"), cell(r["ratio_torch_over_ort"], "{:.2f}")] for r in ratio])
+    return md
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", default=str(ROOT / "data" / "small"))
+    ap.add_argument("--data", default="data/small", help="dataset root (default: data/small)")
     ap.add_argument("--split", default="test")
     ap.add_argument("--trackers", default=",".join(DEFAULT_TRACKERS))
     ap.add_argument("--max-seqs", type=int, default=0, help="0: all")
@@ -228,96 +159,63 @@ def main(argv=None) -> int:
     ap.add_argument("--sweep-sizes", type=int, nargs="*", default=[143, 159, 191, 255])
     ap.add_argument("--sweep-scales", type=int, nargs="*", default=[1, 3])
     ap.add_argument("--ratio", action="store_true", help="onnxruntime vs torch eager (needs torch)")
-    ap.add_argument("--out", default=str(RESULTS))
+    add_out_argument(ap, "siamfc", committed="benchmarks/results/siamfc")
     a = ap.parse_args(argv)
     out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
+    rec = start_record("2D trackers (paper Fig. 14)", data=a.data, split=a.split, protocol=PROTOCOL)
 
-    ds = Dataset(a.data)
-    seqs = ds.sequences(a.split)[: a.max_seqs or None]
-    names = [t for t in a.trackers.split(",") if t]
-    factories, skipped = {}, {}
-    for n in names:
-        try:
-            f = make_factory(n)
-            f(1)  # fail early when a model is missing
-            factories[n] = f
-        except Exception as e:
-            skipped[n] = f"{type(e).__name__}: {e}"
-            print(f"skip {n}: {skipped[n]}", flush=True)
-    sweep = sweep_specs(a) if a.sweep else {}
-    sweep_f = {k: make_factory("siamfc", v) for k, v in sweep.items()}
-    per = {n: [] for n in list(factories) + list(sweep_f)}
-    speed = {n: {"t1": 0.0, "t2": 0.0, "n": 0} for n in factories}
-    t_start = time.perf_counter()
-    load_before = os.getloadavg()
-    for si, seq in enumerate(seqs):
-        frames = np.stack([seq.image(i) for i in range(len(seq))])
-        gt = seq.gt2d
-        valid = (~seq.absent) & np.all(np.isfinite(gt), axis=1) & (gt[:, 2] > 0) & (gt[:, 3] > 0)
-        if valid.sum() < 2:
-            continue
-        pin(1)
-        for n, f in list(factories.items()) + list(sweep_f.items()):
-            r = run_one(f(1), frames, gt, valid)
-            per[n].append(r)
-            if n in speed and si < a.speed_seqs:
-                speed[n]["t1"] += r["time_s"]
-                speed[n]["n"] += r["frames"]
-        if si < a.speed_seqs:
-            pin(2)
-            for n, f in factories.items():
-                speed[n]["t2"] += run_one(f(2), frames, gt, valid)["time_s"]
-            pin(1)
-        done = {n: np.mean([x["iou"].mean() for x in per[n] if len(x["iou"])]) for n in factories}
-        print(f"[{si + 1}/{len(seqs)}] {seq.name} {time.perf_counter() - t_start:.0f}s  " +
-              "  ".join(f"{n} {v:.3f}" for n, v in done.items()), flush=True)
-    results = {n: summarise(per[n]) for n in factories}
-    speed2 = {n: {"fps_2t": s["n"] / s["t2"] if s["t2"] else float("nan"),
-                  "fps_1t_subset": s["n"] / s["t1"] if s["t1"] else float("nan"), "frames": s["n"]}
-              for n, s in speed.items()}
-    for n in results:
-        results[n]["fps_2t"] = speed2[n]["fps_2t"]
-        results[n]["fps_1t_subset"] = speed2[n]["fps_1t_subset"]
+    exp = Experiment(a.data, a.split, out / "results", out / "report", restart=False, max_sequences=a.max_seqs or None)
+    first = exp.sequences[: max(a.speed_seqs, 0)]
+    exp2 = Experiment(a.data, a.split, out / "results_2t", out / "report_2t", restart=False,
+                      sequences=[s.name for s in first]) if first else None
+    specs, skipped = {}, {}
+    for n in (t for t in a.trackers.split(",") if t):
+        why = spec_2d(n).unavailable(exp.sequences[0])
+        if why:
+            skipped[n] = why
+            print(f"skip {n}: {why}", flush=True)
+        else:
+            specs[n] = spec_2d(n)
+    sweep = sweep_specs(a.sweep_models, a.sweep_sizes, a.sweep_scales) if a.sweep else {}
+
+    pin_threads(1)
+    for spec in list(specs.values()) + [v["spec"] for v in sweep.values()]:
+        exp.run(spec)
+    pin_threads(2)
+    for n in specs if exp2 else ():
+        exp2.run(spec_2d(n, threads=2))
+    results, overall = {}, {}
+    for n in specs:
+        results[n], overall[n] = summary(exp, n)
+        scores = exp.score(n)
+        results[n]["fps_1t_subset"] = fps_of(scores[: len(first)])
+        results[n]["fps_2t"] = fps_of(exp2.score(n)) if exp2 else float("nan")
     sweep_res = {}
     for k, v in sweep.items():
-        r = summarise(per[k])
-        r.pop("success_curve", None)
-        r.pop("precision_curve", None)
+        r, _ = summary(exp, k)
+        r.pop("success_curve")
+        r.pop("precision_curve")
         sweep_res[k] = {**r, **{kk: v[kk] for kk in ("prefix", "instance_size", "scale_num")}}
     ratio = ratio_ort_torch([1, 2]) if a.ratio else []
-    pin(2)
+    pin_threads(2)
     meta = {}
-    for n in factories:
+    for n in specs:
         if n.startswith("siamfc"):
-            tr = factories[n](1)
+            tr = specs[n].build(exp.sequences[0]).tracker2d
             meta[n] = {"instance_size": tr.instance_size, "scale_num": tr.scale_num,
                        "channels": tr.meta.get("channels"), "training": tr.meta.get("training")}
-    import onnxruntime
-    rec = {"cpu": cpu_model(), "machine": platform.machine(), "python": platform.python_version(),
-           "onnxruntime": onnxruntime.__version__, "opencv": cv2.__version__,
-           "data": str(Path(a.data).resolve()), "split": a.split, "sequences": len(seqs),
-           "protocol": "OPE, init on the first present frame, no restart, absent frames not scored; "
-                       "FPS = tracker update time only (frames preloaded); 1 thread pinned to one core",
-           "trackers": results, "siamfc_models": meta, "skipped": skipped, "sweep": sweep_res,
-           "ort_vs_torch": ratio, "paper": PAPER, "wall_s": time.perf_counter() - t_start,
-           "loadavg_before": load_before, "loadavg_after": os.getloadavg(),
-           "note": "the 2 cores are shared with other jobs: timings are noisy; medians are more robust",
-           "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())}
-    (out / "bench_2d.json").write_text(json.dumps(rec, indent=1))
-    md = table(results, speed2)
-    if sweep_res:
-        md += "\n\n| design | AO_2d | SR@0.5 | ms/frame (median, 1t) | FPS 1t |\n|---|---|---|---|---|\n"
-        md += "\n".join(f"| {k} | {r['AO_2d']:.3f} | {r['SR_0.5']:.3f} | {r['ms_median_1t']:.2f} | {r['fps_1t']:.0f} |"
-                        for k, r in sorted(sweep_res.items(), key=lambda kv: kv[1]["ms_median_1t"]))
-    if ratio:
-        md += "\n\n| search graph | threads | torch eager ms | onnxruntime ms | torch / ORT |\n|---|---|---|---|---|\n"
-        md += "\n".join(f"| {r['variant']} {r['scales']}x{r['size']} | {r['threads']} | {r['torch_ms']:.1f} | "
-                        f"{r['ort_ms']:.1f} | {r['ratio_torch_over_ort']:.2f} |" for r in ratio)
+    rec.update(sequences=len(exp.sequences), trackers=results, siamfc_models=meta, skipped=skipped, sweep=sweep_res,
+               ort_vs_torch=ratio, paper={"SiamFC": TABLE2["SiamFC"]})
+    write_json(out / "bench_2d.json", finish_record(rec))
+    md = markdown(results, sweep_res, ratio)
     (out / "bench_2d.md").write_text(f"CPU: {rec['cpu']}\n\n" + md + "\n")
     try:
-        plots(results, out, sweep_res)
-    except ImportError as e:
+        from track3d.evaluation.plots import curve_plots
+
+        curve_plots(overall, out)
+        if sweep_res:
+            tradeoff_plot(sweep_res, out / "bench_2d_tradeoff.png")
+    except RuntimeError as e:  # no matplotlib
         print(f"no plots: {e}")
     print(md)
     return 0

@@ -21,31 +21,26 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from benchlib.output import add_out_argument
+from benchlib.paper import TABLE2, TABLE3_NO_CATEGORY
+from benchlib.record import finish_record, start_record
 
-ROOT = Path(__file__).resolve().parents[1]
-# Benchmarks never write into the repository unless asked: by default their output goes to
-# ./bench-results under the current folder; pass --out benchmarks/results/... to update the committed files.
-OUT_ROOT = Path("bench-results")
-RESULTS = OUT_ROOT
-PAPER = {"AO_bev": 0.798, "AO_3d": 0.721, "ACE_3d": 0.345, "FPS": 281.5,
-         "baseline_AO_bev": 0.309, "baseline_AO_3d": 0.165, "baseline_ACE_3d": 0.876,
-         "no_category": {"AO_3d": 0.715, "AO_bev": 0.792, "ACE_3d": 0.316}}
+from track3d.jsonable import write_json
+from track3d.machine import START_CPUS, pin_threads
+from track3d.onnxmodel import MODELS_DIR
 
-
-_START_CPUS = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+PAPER_A3BOXNET, PAPER_BASELINE = TABLE2["A3BoxNet"], TABLE2["3D Tracking Baseline"]
 
 
 def _pin(one_core: bool) -> None:
     """One core: the first of the cores this process was started on (so `taskset` chooses it)."""
-    if _START_CPUS:
-        os.sched_setaffinity(0, {_START_CPUS[0]} if one_core else set(_START_CPUS))
+    pin_threads(1 if one_core else len(START_CPUS))
 
 
 def _timeit(fn, items, repeat: int = 1, warmup: int = 10):
@@ -197,8 +192,8 @@ def plot(res: dict, path: Path) -> None:
 
 
 def markdown(res: dict) -> str:
-    o, b, p = res["oracle"]["a3boxnet"], res["oracle"]["baseline"], PAPER
-    lines = [f"# A3BoxNet benchmark ({res['machine']})", "",
+    o, b, p, q = res["oracle"]["a3boxnet"], res["oracle"]["baseline"], PAPER_A3BOXNET, PAPER_BASELINE
+    lines = [f"# A3BoxNet benchmark ({res['cpu']})", "",
              f"Test split `{res['data']}` ({o['sequences']} sequences, {o['frames']} frames, oracle 2D boxes).", "",
              "| estimator | AO_bev | AO_3d | ACE_3d (m) | SR@0.5 3d | FPS 1 thr | FPS 2 thr |", "|---|---|---|---|---|---|---|"]
     s = {t["threads"]: t for t in res.get("speed", [])}
@@ -212,9 +207,8 @@ def markdown(res: dict) -> str:
                  f"{o['SR50_3d']:.3f} | {fps(f1)} | {fps(f2)} |")
     lines.append(f"| baseline (enclosing box) | {b['AO_bev']:.3f} | {b['AO_3d']:.3f} | {b['ACE_3d']:.3f} | "
                  f"{b['SR50_3d']:.3f} | {fps(g1)} | |")
-    lines.append(f"| paper A3BoxNet (GPU) | {p['AO_bev']} | {p['AO_3d']} | {p['ACE_3d']} | | {p['FPS']} | |")
-    lines.append(f"| paper baseline (in the loop) | {p['baseline_AO_bev']} | {p['baseline_AO_3d']} | "
-                 f"{p['baseline_ACE_3d']} | | | |")
+    lines.append(f"| paper A3BoxNet (GPU) | {p['AO_bev']} | {p['AO_3d']} | {p['ACE_3d(m)']} | | {p['FPS']} | |")
+    lines.append(f"| paper baseline (in the loop) | {q['AO_bev']} | {q['AO_3d']} | {q['ACE_3d(m)']} | | | |")
     for key, title in (("ablation_points_trained", "Input points, retrained per N"),
                        ("test_time_points", "Input points at test time only (shipped model)"),
                        ("ablation_other", "Category vector, size coding, width")):
@@ -253,9 +247,9 @@ def _category_groups(res: dict) -> list[tuple]:
             if rows:
                 g = _group(rows, lambda r: 0)[0]
                 out.append((label, g[1], g[2], g[3], ", ".join(r["name"] for r in rows)))
-    p, q = PAPER, PAPER["no_category"]
-    out.append(("paper N=1024, with", p["AO_3d"], p["AO_bev"], p["ACE_3d"], "paper Table 3"))
-    out.append(("paper N=1024, without", q["AO_3d"], q["AO_bev"], q["ACE_3d"], "paper Table 3"))
+    p, q = PAPER_A3BOXNET, TABLE3_NO_CATEGORY
+    out.append(("paper N=1024, with", p["AO_3d"], p["AO_bev"], p["ACE_3d(m)"], "paper Table 3"))
+    out.append(("paper N=1024, without", q["AO_3d"], q["AO_bev"], q["ACE_3d(m)"], "paper Table 3"))
     return out
 
 
@@ -278,7 +272,7 @@ def main(argv=None) -> int:
     ap.add_argument("--data", default="data/small", help="dataset root")
     ap.add_argument("--split", default="test")
     ap.add_argument("--cache", required=True, help="oracle frustum cache of the split (`boxnet prepare --jitters 0`)")
-    ap.add_argument("--model", default=str(ROOT / "runtime/track3d/models/a3boxnet.onnx"), help="shipped model")
+    ap.add_argument("--model", default=str(MODELS_DIR / "a3boxnet.onnx"), help="A3BoxNet ONNX (default: the shipped one)")
     ap.add_argument("--ckpt", default=None, help="its torch checkpoint (for the ORT vs torch ratio)")
     ap.add_argument("--ablation", nargs="*", default=[], metavar="NAME=MODEL.onnx",
                     help="retrained models; names p<N> (or p<N>_s<seed> for another seed of the same "
@@ -287,22 +281,21 @@ def main(argv=None) -> int:
     ap.add_argument("--test-time-points", nargs="*", type=int, default=[256, 512, 1024, 2048],
                     help="N sweep of the shipped model at test time")
     ap.add_argument("--speed-frames", type=int, default=300, help="frames for the timing runs")
-    ap.add_argument("--out", default=str(RESULTS), help="output folder")
+    add_out_argument(ap)
     ap.add_argument("--name", default="boxnet", help="output file stem")
     ap.add_argument("--no-speed", action="store_true")
     a = ap.parse_args(argv)
 
-    from track3d.evaluation.experiment import cpu_name
     from track3d_train.boxnet.data import PointCache
     from track3d_train.boxnet.evaluate import oracle_metrics
 
     out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
     cache = PointCache(a.cache)
     cache = cache.subset(np.nonzero(cache.jittered == 0)[0])
-    res = {"machine": cpu_name(), "cpus": os.cpu_count(), "data": a.data, "split": a.split, "cache": a.cache,
-           "data_hash": cache.info.get("data_hash"), "model": a.model, "paper": PAPER,
-           "when": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    res = start_record("A3BoxNet: oracle row, ablations, speed", data=a.data, split=a.split, cache=a.cache,
+                       data_hash=cache.info.get("data_hash"), model=a.model,
+                       paper={"A3BoxNet": PAPER_A3BOXNET, "3D Tracking Baseline": PAPER_BASELINE,
+                              "A3BoxNet without category (Table 3)": TABLE3_NO_CATEGORY})
     t0 = time.time()
     res["oracle"] = {"a3boxnet": oracle_row(a.model, cache),
                      "baseline": oracle_metrics(cache.field("baseline"), cache.field("gt3d"), cache.field("seq"))}
@@ -331,7 +324,7 @@ def main(argv=None) -> int:
         if a.ckpt:
             res["torch_ratio"] = torch_ratio(a.ckpt, a.model, res["oracle"]["a3boxnet"]["num_points"])
         _pin(False)
-    (out / f"{a.name}.json").write_text(json.dumps(res, indent=1))
+    write_json(out / f"{a.name}.json", finish_record(res))
     (out / f"{a.name}.md").write_text(markdown(res))
     plot(res, out / f"{a.name}_ablation.png")
     print(markdown(res))

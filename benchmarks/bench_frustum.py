@@ -16,23 +16,16 @@ undisturbed cost). Writes ./bench-results/frustum_<tag>.json.
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import time
-from pathlib import Path
 
 import numpy as np
+from benchlib.output import add_out_argument
+from benchlib.record import finish_record, start_record
 
 from track3d import Camera
-from track3d.evaluation.experiment import cpu_name
 from track3d.frustum import (HAVE_EXTENSION, extract_frustum, extract_frustum_numpy, sample_points,
                              sample_points_numpy)
-
-# Benchmarks never write into the repository unless asked: by default their output goes to
-# ./bench-results under the current folder; pass --out benchmarks/results/... to update the committed files.
-OUT_ROOT = Path("bench-results")
-RESULTS = OUT_ROOT
+from track3d.jsonable import write_json
 
 
 def dense_cloud(cam: Camera) -> tuple[np.ndarray, np.ndarray]:
@@ -83,13 +76,12 @@ def main(argv=None) -> int:
     ap.add_argument("--split", default="test")
     ap.add_argument("--repeat", type=int, default=200)
     ap.add_argument("--tag", default="cpu", help="results file tag (default cpu)")
+    add_out_argument(ap)
     a = ap.parse_args(argv)
     if not HAVE_EXTENSION:
         raise SystemExit("the C++ extension is not built: pip install -e .")
     cam = Camera.from_fov(640, 480, 45.0)
-    out = {"benchmark": "frustum", "cpu": cpu_name(), "machine": platform.machine(), "python": platform.python_version(),
-           "numpy": np.__version__, "load_average": list(os.getloadavg()), "time_utc":
-           time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "clouds": {}}
+    out = start_record("frustum", clouds={})
     pts, box = dense_cloud(cam)
     out["clouds"]["dense"] = bench_cloud("dense", pts, box, cam.M, a.repeat)
     if a.data:
@@ -104,10 +96,7 @@ def main(argv=None) -> int:
         i = min(present, key=lambda k: abs(k - len(seq) // 2))
         out["clouds"]["frame"] = bench_cloud("frame", seq.points(i), seq.gt2d[i], ds.camera.M, a.repeat)
         out["clouds"]["frame"]["source"] = f"{a.data}/{a.split}/{seq.name} frame {i + 1}"
-    out["load_average_after"] = list(os.getloadavg())
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    path = RESULTS / f"frustum_{a.tag}.json"
-    path.write_text(json.dumps(out, indent=1))
+    path = write_json(a.out / f"frustum_{a.tag}.json", finish_record(out))
     for name, row in out["clouds"].items():
         print(f"{name:6s} {row['points']:7d} pts -> {row['frustum_points']:6d}: "
               f"C++ {row['cpp']['median_ms']:.3f} ms (min {row['cpp']['min_ms']:.3f}), "

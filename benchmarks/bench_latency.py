@@ -30,15 +30,8 @@ import numpy as np
 
 from track3d import machine
 from track3d.dataset import Dataset
+from track3d.jsonable import write_json
 from track3d.tracker import STAGES, Track3D
-
-
-def pin_all(cpu: int) -> None:
-    for tid in os.listdir("/proc/self/task"):
-        try:
-            os.sched_setaffinity(int(tid), {cpu})
-        except OSError:
-            pass
 
 
 def load(data: Path, split: str, max_frames: int):
@@ -78,16 +71,13 @@ def main(argv=None) -> int:
     if a.frames < 1 or a.warmup < 0:
         ap.error("--frames must be >= 1 and --warmup >= 0")
 
-    import cv2
-
-    cv2.setNumThreads(1)
     camera, seqs = load(a.data, a.split, a.preload)
     if not seqs:
         print(f"no trackable sequence in {a.data}/{a.split}", file=sys.stderr)
         return 2
     t3d = Track3D.from_default(camera, threads=1)
-    cpu = min(os.sched_getaffinity(0)) if a.cpu is None else a.cpu
-    pin_all(cpu)
+    cpu = min(machine.START_CPUS) if a.cpu is None else a.cpu
+    machine.pin_threads(1, [cpu])
 
     gc_events: list[float] = []
     gc.callbacks.append(lambda phase, info: gc_events.append(time.perf_counter()) if phase == "start" else None)
@@ -156,7 +146,7 @@ def main(argv=None) -> int:
           + ", ".join(f"<= {b['num_points_upto']:.0f}: {b['median_ms']:.2f}" for b in report["by_frustum_quartile"]
                       if b["median_ms"] is not None))
     if a.out:
-        a.out.write_text(json.dumps(report, indent=1))
+        write_json(a.out, report)
         print(f"wrote {a.out}")
     return 0
 

@@ -11,16 +11,17 @@ callback). Writes ./bench-results/meshing_<tag>.json and prints a table.
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import time
-from pathlib import Path
 
 import numpy as np
+from benchlib.output import DEFAULT_OUT
+from benchlib.record import finish_record, start_record
 
 from track3d_sim import bodies
 from track3d_sim.generators import make_body
 from track3d_sim.noise import trilinear
+
+from track3d.jsonable import write_json
 
 
 def _closed(f: np.ndarray) -> bool:
@@ -82,6 +83,7 @@ def main():
     ap.add_argument("--manifold-detail", type=int, default=4,
                     help="detail for manifold3d, whose per-point Python callback is slow (default 4)")
     args = ap.parse_args()
+    rec = start_record("meshing")
     names = ["bilobate", "elongated", "top_shape", "rubble_pile", "giant_craters", "fragment"]
     libs = {"scikit-image": _skimage, "PyMCubes": _mcubes, "manifold3d": _manifold}
     rows = []
@@ -102,10 +104,8 @@ def main():
                          "faces_median": int(np.median(faces)), "closed": f"{sum(closed)}/{len(closed)}"})
             print(f"{lib:13s} detail {detail}  {rows[-1]['ms_median']:8.1f} ms (max {rows[-1]['ms_max']:8.1f})"
                   f"  faces {rows[-1]['faces_median']:6d}  closed+consistent {rows[-1]['closed']}")
-    out = Path("bench-results") / f"meshing_{args.tag}.json"  # never into the repository unless copied there
-    out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps({"cpu": platform.processor() or platform.machine(), "bodies": names,
-                               "rows": rows}, indent=1))
+    out = write_json(DEFAULT_OUT / f"meshing_{args.tag}.json",
+                     finish_record({**rec, "bodies": names, "rows": rows}))
     print(f"wrote {out}")
 
 

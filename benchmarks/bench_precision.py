@@ -21,19 +21,19 @@ from __future__ import annotations
 import argparse
 import gc
 import json
-import os
 import platform
 import sys
 from pathlib import Path
 
 import numpy as np
+from benchlib.loop_timing import build, load_frames, time_loop
+from benchlib.output import add_out_argument
+from benchlib.record import finish_record, start_record
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_fps import RESULTS, load_frames, pin, run_config  # noqa: E402  (the loop machinery, not a copy)
-
-from track3d.cpu_features import cpu_model, isa_flags  # noqa: E402
-from track3d.onnxmodel import MODELS_DIR, ModelError, OnnxModel, openvino_version, variant_path  # noqa: E402
-from track3d.variant_choice import example_feeds, measure  # noqa: E402
+from track3d.jsonable import write_json
+from track3d.machine import START_CPUS, pin_threads
+from track3d.onnxmodel import MODELS_DIR, ModelError, OnnxModel, openvino_version, variant_path
+from track3d.variant_choice import example_feeds, measure
 
 VARIANTS = (("onnxruntime", "fp32"), ("onnxruntime", "int8"), ("openvino", "fp32"), ("openvino", "bf16"))
 NETWORKS = {"a3boxnet": "a3boxnet.onnx", "siamfc_edge_search": "siamfc_edge_search.onnx",
@@ -113,7 +113,7 @@ def bench_loop(data: Path, split: str, frames: int, rounds: int, preload: int, s
             if cfg["label"] in skipped:
                 continue
             try:
-                res = run_config(camera, seqs, cfg, 1, per)
+                res = time_loop(build(camera, cfg, 1), seqs, per)
             except (ModelError, RuntimeError) as e:  # e.g. OpenVINO not installed (Tracker/EstimatorUnavailable)
                 skipped[cfg["label"]] = str(e)
                 continue
@@ -228,8 +228,8 @@ def write_verdicts(acc: dict, models_dir: Path = MODELS_DIR) -> Path:
 
 
 def markdown(res: dict) -> str:
-    lines = [f"Precision benchmark, {res['cpu']} (ISA: {', '.join(res['isa_flags'])}), onnxruntime "
-             f"{res['onnxruntime']}, OpenVINO {res['openvino'] or 'not installed'}; 1 thread; medians, ms "
+    lines = [f"Precision benchmark, {res['cpu']} (ISA: {', '.join(res['machine']['isa'])}), onnxruntime "
+             f"{res['machine']['versions']['onnxruntime']}, OpenVINO {res['openvino'] or 'not installed'}; 1 thread; medians, ms "
              f"(x = speed-up vs onnxruntime fp32 in the same run)", "",
              "| network | " + " | ".join(label(v) for v in VARIANTS) + " |", "|---" * (len(VARIANTS) + 1) + "|"]
     for name, r in res["networks"].items():
@@ -286,18 +286,13 @@ def main(argv=None) -> int:
                     help="merge the accuracy verdicts into runtime/track3d/models/accuracy.json (read by auto)")
     ap.add_argument("--no-speed", action="store_true", help="skip the speed rows (accuracy only)")
     ap.add_argument("--tag", default=None, help="result file tag (default: the host name)")
-    ap.add_argument("--out-dir", type=Path, default=RESULTS, help="output folder (default: ./bench-results)")
+    add_out_argument(ap, flag="--out-dir")
     a = ap.parse_args(argv)
     if a.rounds < 1 or a.frames < 1:
         ap.error("--rounds and --frames must be >= 1")
-    all_cpus = os.sched_getaffinity(0)
-    pin({min(all_cpus)})  # one thread, one core (as bench_fps --threads 1)
-    import onnxruntime
-
-    res = {"benchmark": "track3d precision x engine", "cpu": cpu_model(), "isa_flags": sorted(isa_flags()),
-           "machine": platform.machine(), "python": platform.python_version(), "onnxruntime": onnxruntime.__version__,
-           "openvino": openvino_version(), "threads": 1,
-           "networks": {} if a.no_speed else bench_networks(a.net_seconds)}
+    pin_threads(1)  # one thread, one core (as bench_fps --threads 1)
+    res = start_record("track3d precision x engine", openvino=openvino_version(), threads=1)
+    res["networks"] = {} if a.no_speed else bench_networks(a.net_seconds)
     if a.data is not None and not a.no_speed:
         res["loop"] = bench_loop(a.data, a.split, a.frames, a.rounds, a.preload, a.sequences)
         res["data_split"] = a.split
@@ -313,11 +308,9 @@ def main(argv=None) -> int:
     trk = siamfc("edge", precision="auto", engine="auto")
     res["auto"] = [trk.exemplar.describe(), trk.search.describe(),
                    A3BoxNetEstimator(precision="auto", engine="auto").model.describe()]
-    pin(all_cpus)
-    a.out_dir.mkdir(parents=True, exist_ok=True)
+    pin_threads(len(START_CPUS))
     tag = a.tag or platform.node()
-    path = a.out_dir / f"precision_{tag}.json"
-    path.write_text(json.dumps(res, indent=2))
+    path = write_json(a.out_dir / f"precision_{tag}.json", finish_record(res))
     md = markdown(res)
     path.with_suffix(".md").write_text(md)
     print(md)

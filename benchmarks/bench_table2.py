@@ -35,40 +35,27 @@ peer model) make their rows "skipped" with the reason, unless --no-skip-missing.
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import os
-import platform
 import sys
-import time
 import traceback
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from benchlib.output import add_out_argument
+from benchlib.paper import COLUMNS as PAPER_COLUMNS
+from benchlib.paper import TABLE2 as PAPER
+from benchlib.paper import fusion_gain
+from benchlib.record import finish_record, start_record
 
-# Benchmarks never write into the repository unless asked: by default their output goes to
-# ./bench-results under the current folder; pass --out benchmarks/results/... to update the committed files.
-OUT_ROOT = Path("bench-results")
-RESULTS = OUT_ROOT / "table2"
+from track3d.evaluation.tables import columns
+from track3d.jsonable import write_json
+from track3d.machine import pin_threads
+from track3d.table_text import cell as _f
+
 DEFAULT_TRACKERS = ("siamfc-edge", "siamfc", "nano", "kcf", "csrt", "mosse", "mil")
 VARIANTS = (("edge", "siamfc-edge"), ("faithful", "siamfc"))
 OPENCV_LIKE = ("kcf", "csrt", "mosse", "mil", "medianflow", "boosting", "tld", "nano")
-
-# Paper Table 2 (i9-9900K + RTX 2080Ti). None: the paper gives no number. The 3D tracking
-# baseline row is SiamFC + minimum enclosing box + fusion (paper V-A); bench_boxnet.py's
-# PAPER["baseline_*"] holds the same AO_bev / AO_3d / ACE_3d values.
-PAPER_COLUMNS = ("AO_2d", "ACE_2d(px)", "AO_bev", "AO_3d", "ACE_3d(m)", "FPS")
-PAPER = {
-    "SiamFC": {"AO_2d": 0.513, "ACE_2d(px)": 29.986, "AO_bev": None, "AO_3d": None, "ACE_3d(m)": None,
-               "FPS": 101.3},
-    "A3BoxNet": {"AO_2d": None, "ACE_2d(px)": None, "AO_bev": 0.798, "AO_3d": 0.721, "ACE_3d(m)": 0.345,
-                 "FPS": 281.5},
-    "3D Tracking Baseline": {"AO_2d": 0.568, "ACE_2d(px)": 23.767, "AO_bev": 0.309, "AO_3d": 0.165,
-                             "ACE_3d(m)": 0.876, "FPS": 103.1},
-    "Track3D": {"AO_2d": 0.541, "ACE_2d(px)": 26.741, "AO_bev": 0.756, "AO_3d": 0.669, "ACE_3d(m)": 0.570,
-                "FPS": 77.0},
-}
 
 
 def log(msg: str, quiet: bool = False) -> None:
@@ -77,15 +64,9 @@ def log(msg: str, quiet: bool = False) -> None:
 
 
 def pin(threads: int) -> str:
-    """1 thread: pin the process to one core (the project's target); OpenCV follows --threads."""
-    from track3d.threads import set_threads
-
-    set_threads(threads)
-    if threads != 1 or not hasattr(os, "sched_setaffinity"):
-        return "not pinned"
-    core = sorted(os.sched_getaffinity(0))[-1]
-    os.sched_setaffinity(0, {core})
-    return f"pinned to core {core}"
+    """1 thread: the process pinned to one core (the project's target); OpenCV follows --threads."""
+    cpus = pin_threads(threads)
+    return f"pinned to CPU(s) {', '.join(map(str, cpus))}" if threads == 1 and cpus else "not pinned"
 
 
 # --- the plan ------------------------------------------------------------------------------------
@@ -163,34 +144,6 @@ def plan(args):
 
 # --- running --------------------------------------------------------------------------------------
 
-def availability(spec, seq) -> str | None:
-    """None when the spec builds here, else why not (a missing model or module)."""
-    from track3d.estimators import EstimatorUnavailable
-    from track3d.onnxmodel import ModelError
-    from track3d.trackers2d import TrackerUnavailable
-
-    try:
-        spec.build(seq)
-    except (TrackerUnavailable, EstimatorUnavailable, ModelError, ImportError) as e:
-        return f"{type(e).__name__}: {e}"
-    return None
-
-
-def raw_scores(exp, name: str) -> dict:
-    """AO_2d / ACE_2d of the 2D tracker's own boxes (before fusion), same frames as the report."""
-    from track3d.evaluation.metrics import average_scores, score_sequence
-    from track3d.evaluation.results import INIT, read_result
-
-    scores = []
-    for seq in exp.sequences:
-        res = read_result(exp.folder(name, seq.name), seq.name)
-        n = len(res)
-        scored = ~seq.absent[:n] & (res.status != INIT)
-        scores.append(score_sequence(seq.name, res.box2d_raw, res.box3d, seq.gt2d[:n], seq.gt3d[:n], scored))
-    v = average_scores(scores).values
-    return {"ao_2d_raw": v["ao_2d"], "ace_2d_raw": v["ace_2d"], "sr50_2d_raw": v["sr50_2d"]}
-
-
 def fps_row(kind: str, summary: dict, stage_ms: dict) -> tuple[float, str]:
     """The FPS a row is compared on: the module's own stage for module rows, else the loop."""
     if kind == "2d":
@@ -202,29 +155,10 @@ def fps_row(kind: str, summary: dict, stage_ms: dict) -> tuple[float, str]:
     return (1e3 / ms if ms and math.isfinite(ms) and ms > 0 else float("nan")), basis
 
 
-def _num(x):
-    if isinstance(x, (float, np.floating)):
-        return None if not math.isfinite(float(x)) else round(float(x), 6)
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, dict):
-        return {k: _num(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_num(v) for v in x]
-    return x
-
-
 # --- tables ---------------------------------------------------------------------------------------
 
-def _f(v, fmt: str = "{:.3f}") -> str:
-    if v is None or (isinstance(v, float) and not math.isfinite(v)):
-        return "-"
-    return fmt.format(v)
-
-
-TABLE_COLS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d (px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
-              ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d (m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
-              ("restarts", "restarts", "{:d}"), ("FPS", "fps_row", "{:.1f}"))
+# the evaluation table's columns, FPS as the row's own basis (fps_row)
+TABLE_COLS = columns("ao_2d", "ace_2d", "ao_bev", "ao_3d", "ace_3d", "sr50_3d", "restarts") + (("FPS", "fps_row", "{:.1f}"),)
 SHOWN = {"2d": {"ao_2d", "ace_2d", "restarts", "fps_row"},
          "oracle": {"ao_bev", "ao_3d", "ace_3d", "sr50_3d", "restarts", "fps_row"}}
 
@@ -265,10 +199,14 @@ def fusion_md(fusion_rows: list[dict]) -> str:
                      f"{_f(off['ace_2d'], '{:.2f}')} | {_f(on['ace_2d'], '{:.2f}')} | "
                      f"{_f(off['ao_3d']) if f['off_estimator'] == f['estimator'] else '-'} | "
                      f"{_f(on['ao_3d'])} | {off['restarts']} | {on['restarts']} |")
-    lines.append("| *paper: SiamFC -> 3D baseline* | baseline | ? | *0.513* | *0.568* | *+0.055* | *+10.7* "
-                 "| - | *29.99* | *23.77* | - | *0.165* | - | - |")
-    lines.append("| *paper: SiamFC -> Track3D* | a3boxnet | ? | *0.513* | *0.541* | *+0.028* | *+5.5* "
-                 "| - | *29.99* | *26.74* | - | *0.669* | - | - |")
+    siamfc = PAPER["SiamFC"]
+    for row, est in (("3D Tracking Baseline", "baseline"), ("Track3D", "a3boxnet")):
+        p = PAPER[row]
+        gain, pct = fusion_gain(row)
+        cells = [f"*{siamfc['AO_2d']:.3f}*", f"*{p['AO_2d']:.3f}*", f"*{gain:+.3f}*", f"*{pct:+.1f}*", "-",
+                 f"*{siamfc['ACE_2d(px)']:.2f}*", f"*{p['ACE_2d(px)']:.2f}*", "-", f"*{p['AO_3d']:.3f}*", "-", "-"]
+        label = "3D baseline" if est == "baseline" else "Track3D"
+        lines.append(f"| *paper: SiamFC -> {label}* | {est} | ? | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -412,7 +350,7 @@ def parse_args(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", required=True, help="dataset root (the folder with dataset.json)")
     ap.add_argument("--split", default="test", help="dataset split (default: test)")
-    ap.add_argument("--out", default=str(RESULTS), help="output folder (default: ./bench-results/table2; the committed tables: benchmarks/results/table2)")
+    add_out_argument(ap, "table2", committed="benchmarks/results/table2")
     ap.add_argument("--threads", type=int, default=1,
                     help="CPU threads of the ONNX models and OpenCV (default 1: the process is pinned to one core)")
     ap.add_argument("--max-seqs", type=int, default=0, help="only the first N sequences of the split (0: all)")
@@ -447,58 +385,37 @@ def parse_args(argv=None):
     return a
 
 
-def main(argv=None) -> int:
-    a = parse_args(argv)
-    from track3d.dataset import DatasetError
+def unknown_names(a) -> str | None:
+    """The error text when a --trackers or --sweep-estimators name is not registered."""
     from track3d.estimators import available_estimators
-    from track3d.evaluation import Experiment
-    from track3d.evaluation.experiment import cpu_name
     from track3d.trackers2d import available_trackers
 
     for t in a.trackers:
         if t.lower() not in available_trackers():
-            print(f"bench_table2: error: unknown 2D tracker {t!r} (known: {', '.join(available_trackers())})",
-                  file=sys.stderr)
-            return 2
+            return f"unknown 2D tracker {t!r} (known: {', '.join(available_trackers())})"
     for e in a.sweep_estimators:
         if e.lower() not in available_estimators():
-            print(f"bench_table2: error: unknown estimator {e!r} (known: {', '.join(available_estimators())})",
-                  file=sys.stderr)
-            return 2
-    out = Path(a.out)
-    max_frames = a.max_frames or None
-    try:
-        exps = {"main": Experiment(a.data, a.split, out / "results", out / "report", max_frames=max_frames,
-                                   restart=True, restart_skip=a.restart_skip)}
-    except DatasetError as e:
-        print(f"bench_table2: error: {e}", file=sys.stderr)
-        return 2
-    if a.max_seqs:
-        exps["main"].sequences = exps["main"].sequences[: a.max_seqs]
-    names = [s.name for s in exps["main"].sequences]
-    if a.ope:
-        exps["ope"] = Experiment(a.data, a.split, out / "results_ope", out / "report_ope", sequences=names,
-                                 max_frames=max_frames, restart=False)
-    seqs = exps["main"].sequences
-    n_frames = sum(len(s) if max_frames is None else min(len(s), max_frames) for s in seqs)
-    pinned = pin(a.threads)
-    runs, rows, fusion_cmp, sweep = plan(a)
-    log(f"{len(seqs)} sequences, {n_frames} frames of {a.data}/{a.split}; {len(runs)} distinct runs; "
-        f"{a.threads} thread(s), {pinned}", a.quiet)
+            return f"unknown estimator {e!r} (known: {', '.join(available_estimators())})"
+    return None
 
-    # Availability first: a missing model is known before any work.
-    status: dict[tuple[str, str], str] = {}   # ok | skipped | failed
-    reason: dict[tuple[str, str], str] = {}
-    for key, spec in runs.items():
-        why = availability(spec, seqs[0])
-        if why is not None:
-            if not a.skip_missing:
-                print(f"bench_table2: error: {spec.label}: {why}", file=sys.stderr)
-                return 2
-            status[key], reason[key] = "skipped", why
-            log(f"skip {key[1]} ({key[0]}): {why}", a.quiet)
-    t_start = time.perf_counter()
-    load_before = os.getloadavg()
+
+def experiments(a, out: Path) -> dict:
+    """{"main": restarts, "ope": one pass (with --ope)} on the same sequences and frames."""
+    from track3d.evaluation import Experiment
+
+    max_frames = a.max_frames or None
+    exps = {"main": Experiment(a.data, a.split, out / "results", out / "report", max_frames=max_frames,
+                               restart=True, restart_skip=a.restart_skip, max_sequences=a.max_seqs or None)}
+    if a.ope:
+        exps["ope"] = Experiment(a.data, a.split, out / "results_ope", out / "report_ope", max_frames=max_frames,
+                                 sequences=[s.name for s in exps["main"].sequences], restart=False)
+    return exps
+
+
+def run_all(runs: dict, exps: dict, status: dict, reason: dict, a) -> dict:
+    """Run every available configuration (status / reason filled in); -> wall seconds per run."""
+    import time
+
     todo = [k for k in runs if k not in status]
     wall = {}
     for i, key in enumerate(todo):
@@ -514,13 +431,15 @@ def main(argv=None) -> int:
         wall[key] = time.perf_counter() - t0
         log(f"[{i + 1}/{len(todo)}] {name}: {status[key]} in {wall[key]:.1f} s"
             + (f" ({reason[key]})" if key in reason else ""), a.quiet)
+    return wall
 
-    # Scores: one report per experiment (report.json), plus the raw (pre-fusion) 2D scores.
+
+def score_all(runs: dict, exps: dict, status: dict, wall: dict) -> tuple[dict, dict, dict]:
+    """One report per experiment (report.json) plus the 2D tracker's own (pre-fusion) scores:
+    -> (metrics, OverallScore, report paths), keyed by (experiment, run name)."""
     from track3d.evaluation.metrics import average_scores
 
-    metrics: dict[tuple[str, str], dict] = {}
-    overall: dict[tuple[str, str], object] = {}
-    reports = {}
+    metrics, overall, reports = {}, {}, {}
     for exp_key, exp in exps.items():
         done = [k[1] for k in runs if k[0] == exp_key and status[k] == "ok"]
         if not done:
@@ -529,13 +448,16 @@ def main(argv=None) -> int:
         reports[exp_key] = str(exp.report_dir / "report.json")
         for name in done:
             t = rep["trackers"][name]
-            m = dict(t["overall"])
-            m.update(raw_scores(exp, name))
-            m["stage_ms_mean"] = t["stage_ms_mean"]
-            m["wall_s"] = wall.get((exp_key, name))
-            metrics[(exp_key, name)] = m
+            raw = average_scores(exp.score(name, raw=True)).values
+            metrics[(exp_key, name)] = {**t["overall"], "ao_2d_raw": raw["ao_2d"], "ace_2d_raw": raw["ace_2d"],
+                                        "sr50_2d_raw": raw["sr50_2d"], "stage_ms_mean": t["stage_ms_mean"],
+                                        "wall_s": wall.get((exp_key, name))}
             overall[(exp_key, name)] = average_scores(exp.score(name))
-    row_records = []
+    return metrics, overall, reports
+
+
+def row_records(rows: list[Row], status: dict, reason: dict, metrics: dict) -> list[dict]:
+    out = []
     for r in rows:
         key = (r.exp, r.run)
         rec = {"row": r.label, "group": r.group, "run": r.run, "protocol": "restarts" if r.exp == "main" else
@@ -545,8 +467,12 @@ def main(argv=None) -> int:
             m = dict(metrics[key])
             m["fps_row"], m["fps_basis"] = fps_row(r.kind, m, m["stage_ms_mean"])
             rec["metrics"] = m
-        row_records.append(rec)
-    fusion_rows = []
+        out.append(rec)
+    return out
+
+
+def fusion_records(fusion_cmp: list[dict], runs: dict, status: dict, reason: dict, metrics: dict) -> list[dict]:
+    out = []
     for f in fusion_cmp:
         rec = {k: f[k] for k in ("tracker", "estimator", "protocol")}
         rec["off"], rec["on"] = f["off"][1], f["on"][1]
@@ -560,17 +486,14 @@ def main(argv=None) -> int:
             gain = on["ao_2d"] - off["ao_2d"] if _ok(on["ao_2d"]) and _ok(off["ao_2d"]) else float("nan")
             rec["ao_2d_gain"] = gain
             rec["ao_2d_gain_pct"] = 100 * gain / off["ao_2d"] if _ok(gain) and off["ao_2d"] > 0 else float("nan")
-        fusion_rows.append(rec)
-    sweep_rows = []
-    for (t, e), name in sweep.items():
-        key = ("main", name)
-        sweep_rows.append({"tracker": t, "estimator": e, "run": name, "status": status[key],
-                           "reason": reason.get(key), "metrics": metrics.get(key)})
+        out.append(rec)
+    return out
 
-    # Tables.
-    md_t2 = table2_md(rows, row_records)
-    subtitle = f"{a.split}: {len(seqs)} seq, {n_frames} frames"
-    header = (f"CPU: {cpu_name()}; {a.threads} thread(s), {pinned}. Data: {Path(a.data).resolve()} split "
+
+def markdown(a, seqs, n_frames: int, pinned: str, rows, row_recs, fusion_rows, sweep_rows, status, reason) -> str:
+    from track3d.machine import cpu_name
+
+    header = (f"CPU: {cpu_name()}; {a.threads} thread(s), {pinned}. Data: {a.data} split "
               f"`{a.split}`: {len(seqs)} sequences, {n_frames} frames"
               + (f" (first {a.max_frames} per sequence)" if a.max_frames else "")
               + f". Protocol: restart {a.restart_skip} frame(s) after a zero 3D IoU (paper III-C); "
@@ -583,7 +506,7 @@ def main(argv=None) -> int:
              f"fused box (correct={a.opencv_correct!r}); SiamFC takes it as its next state.")
     md = "\n\n".join([
         "# Table 2 reproduction", header,
-        "## Table 2: ours beside the paper", md_t2, notes,
+        "## Table 2: ours beside the paper", table2_md(rows, row_recs), notes,
         "## Fusion on vs off: does 2D-3D fusion improve AO_2d?", fusion_md(fusion_rows),
         "'AO_2d raw (on)': the 2D tracker's own box in the fused run (for SiamFC it follows the fused state). "
         "Under restarts the two runs restart on different frames, so their AO_2d also differ by the restarts; "
@@ -596,53 +519,88 @@ def main(argv=None) -> int:
     if why_runs:
         md += "\n\nSkipped or failed runs:\n\n" + "\n".join(
             f"- {why}: {', '.join(sorted(ns))}" for why, ns in sorted(why_runs.items()))
+    return md
 
-    # Plots.
+
+def all_plots(a, out: Path, main_exp, seqs, rows, overall: dict, sweep_rows, subtitle: str) -> list[Path]:
+    """The toolkit's curve and trajectory plots of the table rows and the sweep, and Fig. 15 / 16."""
+    from track3d.evaluation import plots as P
+
+    plots = []
+    curve_set = {r.short: overall[(r.exp, r.run)] for r in rows if r.short and (r.exp, r.run) in overall}
+    if curve_set:
+        plots += P.curve_plots(curve_set, out / "report" / "table2_plots")
+    # 3D trajectories (Fig. 12): Track3D against the 3D baseline, first SiamFC variant.
+    traj = list(dict.fromkeys(r.run for r in rows if r.short and (r.exp, r.run) in overall and r.kind == "full"
+                              and a.variants[0] in r.short))
+    if traj and a.trajectories > 0:
+        plots += P.trajectory_plots(main_exp, traj, [s.name for s in seqs[: a.trajectories]],
+                                    out / "report" / "table2_plots")
+    ok = [s for s in sweep_rows if s["status"] == "ok"]
+    sw = {s["tracker"] + (f"+{s['estimator']}" if len(a.sweep_estimators) > 1 else ""): overall[("main", s["run"])]
+          for s in ok}
+    if sw:
+        plots += P.curve_plots(sw, out / "report" / "sweep_plots")
+    return plots + sweep_plots(sweep_rows, {s["run"]: overall[("main", s["run"])] for s in ok}, out, subtitle)
+
+
+def main(argv=None) -> int:
+    a = parse_args(argv)
+    from track3d.dataset import DatasetError
+
+    bad = unknown_names(a)
+    if bad:
+        print(f"bench_table2: error: {bad}", file=sys.stderr)
+        return 2
+    out = Path(a.out)
+    try:
+        exps = experiments(a, out)
+    except DatasetError as e:
+        print(f"bench_table2: error: {e}", file=sys.stderr)
+        return 2
+    seqs = exps["main"].sequences
+    n_frames = sum(len(s) if not a.max_frames else min(len(s), a.max_frames) for s in seqs)
+    pinned = pin(a.threads)
+    runs, rows, fusion_cmp, sweep = plan(a)
+    log(f"{len(seqs)} sequences, {n_frames} frames of {a.data}/{a.split}; {len(runs)} distinct runs; "
+        f"{a.threads} thread(s), {pinned}", a.quiet)
+    rec = start_record("paper Table 2, fusion on/off, Fig. 15/16 sweep", threads=a.threads, pinning=pinned,
+                       data=a.data, split=a.split)
+
+    # Availability first: a missing model is known before any work.
+    status: dict[tuple[str, str], str] = {}   # ok | skipped | failed
+    reason: dict[tuple[str, str], str] = {}
+    for key, spec in runs.items():
+        why = spec.unavailable(seqs[0])
+        if why is not None:
+            if not a.skip_missing:
+                print(f"bench_table2: error: {spec.label}: {why}", file=sys.stderr)
+                return 2
+            status[key], reason[key] = "skipped", why
+            log(f"skip {key[1]} ({key[0]}): {why}", a.quiet)
+    wall = run_all(runs, exps, status, reason, a)
+    metrics, overall, reports = score_all(runs, exps, status, wall)
+    row_recs = row_records(rows, status, reason, metrics)
+    fusion_rows = fusion_records(fusion_cmp, runs, status, reason, metrics)
+    sweep_rows = [{"tracker": t, "estimator": e, "run": name, "status": status[("main", name)],
+                   "reason": reason.get(("main", name)), "metrics": metrics.get(("main", name))}
+                  for (t, e), name in sweep.items()]
+    md = markdown(a, seqs, n_frames, pinned, rows, row_recs, fusion_rows, sweep_rows, status, reason)
     plots = []
     try:
-        from track3d.evaluation import plots as P
-
-        main_exp = exps["main"]
-        curve_set = {r.short: overall[(r.exp, r.run)] for r in rows if r.short and (r.exp, r.run) in overall}
-        if curve_set:
-            plots += P.curve_plots(curve_set, out / "report" / "table2_plots")
-        # 3D trajectories (Fig. 12): Track3D against the 3D baseline, first SiamFC variant.
-        traj = [r.run for r in rows if r.short and (r.exp, r.run) in overall and r.kind == "full"
-                and a.variants[0] in r.short]
-        traj = list(dict.fromkeys(traj))
-        if traj and a.trajectories > 0:
-            plots += P.trajectory_plots(main_exp, traj, [s.name for s in seqs[: a.trajectories]],
-                                        out / "report" / "table2_plots")
-        sw = {f"{s['tracker']}" + (f"+{s['estimator']}" if len(a.sweep_estimators) > 1 else ""):
-              overall[("main", s["run"])] for s in sweep_rows if s["status"] == "ok"}
-        if sw:
-            plots += P.curve_plots(sw, out / "report" / "sweep_plots")
-        plots += sweep_plots(sweep_rows, {s["run"]: overall[("main", s["run"])] for s in sweep_rows
-                                          if s["status"] == "ok"}, out, subtitle)
+        plots = all_plots(a, out, exps["main"], seqs, rows, overall, sweep_rows,
+                          f"{a.split}: {len(seqs)} seq, {n_frames} frames")
     except RuntimeError as e:  # no matplotlib
         log(f"no plots: {e}", a.quiet)
-
-    import cv2
-    import onnxruntime
-
-    rec = {"benchmark": "paper Table 2, fusion on/off, Fig. 15/16 sweep", "cpu": cpu_name(),
-           "machine": platform.machine(), "logical_cpus": os.cpu_count(), "threads": a.threads, "pinning": pinned,
-           "python": platform.python_version(), "numpy": np.__version__, "onnxruntime": onnxruntime.__version__,
-           "opencv": cv2.__version__, "data": str(Path(a.data).resolve()), "split": a.split,
-           "dataset": {"sequences": len(seqs), "frames": n_frames, "max_frames": a.max_frames or None,
-                       "sequence_names": [s.name for s in seqs]},
-           "protocol": {"restart": True, "restart_skip": a.restart_skip, "ope_runs": a.ope,
-                        "opencv_correct": a.opencv_correct},
-           "paper": PAPER, "paper_columns": PAPER_COLUMNS,
-           "rows": row_records, "fusion": fusion_rows, "sweep": sweep_rows,
-           "runs": {f"{k[0]}/{k[1]}": {"spec": _spec_dict(runs[k]), "status": status[k], "reason": reason.get(k),
-                                          "wall_s": wall.get(k)}
-                    for k in runs},
-           "reports": reports, "plots": [str(p) for p in plots],
-           "wall_s": time.perf_counter() - t_start, "loadavg_before": load_before, "loadavg_after": os.getloadavg(),
-           "date": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())}
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "table2.json").write_text(json.dumps(_num(rec), indent=1))
+    rec.update(dataset={"sequences": len(seqs), "frames": n_frames, "max_frames": a.max_frames or None,
+                        "sequence_names": [s.name for s in seqs]},
+               protocol={"restart": True, "restart_skip": a.restart_skip, "ope_runs": a.ope,
+                         "opencv_correct": a.opencv_correct},
+               paper=PAPER, paper_columns=PAPER_COLUMNS, rows=row_recs, fusion=fusion_rows, sweep=sweep_rows,
+               runs={f"{k[0]}/{k[1]}": {"spec": _spec_dict(runs[k]), "status": status[k], "reason": reason.get(k),
+                                         "wall_s": wall.get(k)} for k in runs},
+               reports=reports, plots=[str(p) for p in plots])
+    write_json(out / "table2.json", finish_record(rec))
     (out / "table2.md").write_text(md + "\n")
     print(md)
     log(f"wrote {out / 'table2.json'}, {out / 'table2.md'}" + "".join(f", {p}" for p in plots

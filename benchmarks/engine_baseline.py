@@ -18,8 +18,11 @@ import json
 import sys
 from pathlib import Path
 
-COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("AO_bev", "ao_bev", "{:.3f}"), ("AO_3d", "ao_3d", "{:.3f}"),
-           ("ACE_3d (m)", "ace_3d", "{:.3f}"), ("restarts", "restarts", "{:d}"), ("frames", "frames", "{:d}"))
+from track3d.evaluation.tables import columns
+from track3d.jsonable import write_json
+from track3d.table_text import cell, markdown_table
+
+COLUMNS = columns("ao_2d", "ao_bev", "ao_3d", "ace_3d", "restarts", "frames")   # the evaluation table's
 SENSOR_ORDER = ("ideal", "flash-lidar", "tof", "stereo")
 
 
@@ -42,12 +45,8 @@ def collect(results: Path) -> list[dict]:
 
 def markdown(rows: list[dict]) -> str:
     head = ["sensor", "split", "protocol", "tracker"] + [c[0] for c in COLUMNS]
-    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for r in rows:
-        cells = [r["sensor"], r["split"], r["protocol"], r["tracker"]]
-        cells += ["-" if r[k] is None else fmt.format(r[k]) for _, k, fmt in COLUMNS]
-        out.append("| " + " | ".join(cells) + " |")
-    return "\n".join(out) + "\n"
+    return markdown_table(head, [[r["sensor"], r["split"], r["protocol"], r["tracker"]]
+                                 + [cell(r[k], fmt) for _, k, fmt in COLUMNS] for r in rows]) + "\n"
 
 
 def main(argv=None) -> int:
@@ -59,8 +58,7 @@ def main(argv=None) -> int:
     if not rows:
         print(f"engine_baseline: error: no engine-*/*-report/report.json under {a.results}", file=sys.stderr)
         return 2
-    a.out.mkdir(parents=True, exist_ok=True)
-    (a.out / "engine_baseline.json").write_text(json.dumps({"rows": rows}, indent=1))
+    write_json(a.out / "engine_baseline.json", {"rows": rows})
     (a.out / "engine_baseline.md").write_text(markdown(rows))
     print(markdown(rows))
     return 0

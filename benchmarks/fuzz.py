@@ -488,8 +488,15 @@ def worker(target: str, seed: int, start: int, stop: int) -> None:
 
 
 def plan(cases: int) -> dict[str, int]:
+    """Cases per target in proportion to the weights, summing to exactly `cases` (largest
+    remainders; at least one each): rounding each share alone fell short of the total asked."""
     total = sum(w for _, w in TARGETS.values())
-    return {t: max(1, int(round(cases * w / total))) for t, (_, w) in TARGETS.items()}
+    exact = {t: cases * w / total for t, (_, w) in TARGETS.items()}
+    counts = {t: max(1, int(x)) for t, x in exact.items()}
+    by_remainder = sorted(exact, key=lambda t: (int(exact[t]) - exact[t], t))
+    for t in by_remainder[: max(0, cases - sum(counts.values()))]:
+        counts[t] += 1
+    return counts
 
 
 def run_range(target: str, start: int, stop: int, seed: int, timeout: float, deadline: float, counts: dict,

@@ -2,13 +2,7 @@
 category vector with the one trained with it at the same N (paper Table 3)."""
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
-spec = importlib.util.spec_from_file_location(
-    "bench_boxnet", Path(__file__).resolve().parents[1] / "benchmarks" / "bench_boxnet.py")
-bench = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(bench)
+import bench_boxnet as bench
 
 
 def _row(name, n, ao3d, use_category=True):
@@ -18,7 +12,7 @@ def _row(name, n, ao3d, use_category=True):
 
 def _res():
     oracle = {"AO_bev": 0.85, "AO_3d": 0.79, "ACE_3d": 0.35, "SR50_3d": 0.98, "sequences": 2, "frames": 10}
-    return {"machine": "test cpu", "data": "d", "oracle": {"a3boxnet": oracle, "baseline": dict(oracle)},
+    return {"cpu": "test cpu", "data": "d", "oracle": {"a3boxnet": oracle, "baseline": dict(oracle)},
             "ablation_points_trained": [_row("p512", 512, 0.70), _row("p1024", 1024, 0.72)],
             "ablation_other": [_row("nocat512", 512, 0.69, use_category=False), _row("w05", 512, 0.6)],
             "test_time_points": []}

@@ -65,17 +65,6 @@ def test_platt_fit_recovers_a_known_calibration():
     assert 0 < a < 20 and abs(b) < 5
 
 
-def test_lost_scores_hand_case():
-    from track3d_train.edgetrack.evaluate import lost_scores
-
-    absent = np.array([0, 1, 1, 0, 0], bool)
-    oks = np.array([True, False, True, False, True])
-    gt = np.tile([10.0, 10, 10, 10], (5, 1))
-    pred = gt.copy()
-    s = lost_scores(oks, absent, pred, gt, reacquire_frames=3)
-    assert s == {"lost_true": 1, "lost_reported": 2, "absent_frames": 2, "returns": 1, "reacquired": 1}
-
-
 # -- training, export, runtime -------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
@@ -230,9 +219,8 @@ def test_cli_errors_are_one_line(tmp_path):
 
 def test_shipped_edgetrack_carries_its_metadata_and_tracks_the_tiny_split(tiny_dataset):
     from track3d.dataset import Dataset
+    from track3d.evaluation import TrackerSpec, evaluate_2d
     from track3d.onnxmodel import MODELS_DIR
-    from track3d.trackers2d import create_tracker
-    from track3d_train.edgetrack.evaluate import evaluate_tracker
 
     if not (MODELS_DIR / "edgetrack_search.onnx").is_file():
         pytest.skip("no EdgeTrack model shipped")
@@ -240,8 +228,8 @@ def test_shipped_edgetrack_carries_its_metadata_and_tracks_the_tiny_split(tiny_d
     assert meta["exemplar_size"] == 128 and meta["total_stride"] == 16 and meta["training"]["steps"] > 0
     assert OnnxModel(MODELS_DIR / "edgetrack_template.onnx", 1, "edgetrack-template").meta["config"] == meta["config"]
     seqs = Dataset(tiny_dataset).sequences("test")
-    r = evaluate_tracker(lambda: create_tracker("edgetrack"), seqs)
-    assert r["sequences"] == len(seqs) and r["AO_2d"] > 0.3, r
+    r = evaluate_2d(tiny_dataset, "test", [TrackerSpec("edgetrack", "none")])["edgetrack"]
+    assert r["sequences"] == len(seqs) and r["ao_2d"] > 0.3 and r["lost_reported"] >= 0, r
 
 
 def test_cli_eval_and_time_run_on_an_exported_model(trained, tiny_dataset, tmp_path, capsys):
@@ -251,7 +239,7 @@ def test_cli_eval_and_time_run_on_an_exported_model(trained, tiny_dataset, tmp_p
     assert main(["eval", "--model", prefix, "--data", str(tiny_dataset), "--max-seqs", "1", "--quiet",
                  "--out", str(tmp_path / "e.json")]) == 0
     rows = json.loads((tmp_path / "e.json").read_text())["trackers"]
-    assert rows["model et"]["sequences"] == 1 and 0.0 <= rows["model et"]["AO_2d"] <= 1.0
+    assert rows["model et"]["sequences"] == 1 and 0.0 <= rows["model et"]["ao_2d"] <= 1.0
     assert main(["time", "--model", prefix, "--repeats", "5"]) == 0
     assert "edgetrack search 256" in capsys.readouterr().out
 

@@ -11,6 +11,7 @@ from track3d.boxes import iou_3d
 from track3d.dataset import DatasetError
 from track3d.estimators import BaselineEstimator
 from track3d.evaluation import Experiment, TrackerSpec
+from track3d.evaluation.metrics import LostScore
 from track3d.evaluation.results import read_result
 from track3d.tracker import Track3D
 from track3d.trackers2d import OracleTracker
@@ -124,3 +125,75 @@ def test_oracle_baseline_on_the_tiny_simulated_dataset(tiny_dataset, tmp_path):
     r = read_result(exp.folder("oracle+baseline", seq.name))
     present = r.tracked & ~seq.absent[:len(r)]
     np.testing.assert_allclose(r.box2d_raw[present], seq.gt2d[:len(r)][present], atol=1e-4)
+
+
+def _one_pass_by_hand(seq, tracker):
+    """The 2D one-pass protocol written out: init on the first present frame, a failed update
+    holds the last box, mean 2D IoU over the later present frames."""
+    from track3d.boxes import iou_2d
+
+    first = int(np.argmax(~seq.absent))
+    tracker.init(seq.image(first), seq.gt2d[first].copy())
+    pred = seq.gt2d[first].copy()
+    ious = []
+    for i in range(first + 1, len(seq)):
+        ok, box = tracker.update(seq.image(i))
+        if ok:
+            pred = np.asarray(box, float)
+        if not seq.absent[i]:
+            ious.append(iou_2d(pred[None], seq.gt2d[i][None])[0])
+    return float(np.mean(ious))
+
+
+def test_two_d_only_one_pass_is_the_2d_protocol_and_reads_no_depth(tiny_dataset, tmp_path, monkeypatch):
+    from track3d.dataset import Sequence
+    from track3d.evaluation import average_scores
+    from track3d.trackers2d import create_tracker
+
+    exp = Experiment(tiny_dataset, "test", tmp_path / "r", tmp_path / "p", restart=False, max_sequences=2)
+    by_hand = [_one_pass_by_hand(seq, create_tracker("kcf")) for seq in exp.sequences]
+
+    def no_depth(self, i):
+        raise AssertionError("a 2D-only run read a depth map")
+
+    monkeypatch.setattr(Sequence, "points", no_depth)
+    spec = TrackerSpec("kcf", "none")
+    assert spec.label == "kcf" and spec.unavailable(exp.sequences[0]) is None
+    exp.run(spec, quiet=True)
+    res = read_result(exp.folder("kcf", exp.sequences[0].name), exp.sequences[0].name)
+    assert np.isnan(res.box3d).all() and set(res.status) <= {"init", "tracking", "lost", "skipped"}
+    scores = exp.score("kcf")
+    assert all(s.two_d_only for s in scores)
+    # result files keep 4 decimals of a pixel: the same IoU to far below the printed precision
+    np.testing.assert_allclose([s.ao_2d for s in scores], by_hand, atol=1e-5)
+    ov = average_scores(scores)
+    assert ov.two_d_only and "ao_3d" not in ov.summary()
+    rep = exp.report(["kcf"], plots=False)
+    assert "ao_3d" not in rep["trackers"]["kcf"]["overall"]
+
+
+def test_lost_is_scored_from_the_results(synth, tmp_path):
+    exp = Experiment(synth, "test", tmp_path / "r", tmp_path / "p", restart=False)
+    exp.run(TrackerSpec("oracle", "none"), quiet=True)
+    # s0001: absent at frame 3, where the oracle says lost; it returns at 4 with the true box.
+    assert exp.score_lost("oracle") == LostScore(lost_true=1, lost_reported=1, absent_frames=1, returns=1,
+                                                 reacquired=1)
+
+
+def test_raw_scores_are_the_2d_trackers_own_boxes(synth, tmp_path):
+    exp = Experiment(synth, "test", tmp_path / "r", tmp_path / "p")
+    exp.run(TrackerSpec("oracle", "baseline", fusion=True), quiet=True)
+    name = "oracle+baseline"
+    # the oracle's own box is the ground truth; the fused box is not (the baseline box is loose)
+    assert all(s.ao_2d == pytest.approx(1.0) for s in exp.score(name, raw=True) if s.frames)
+    assert any(s.ao_2d < 1.0 - 1e-6 for s in exp.score(name) if s.frames)
+
+
+def test_null_estimator_loop_reports_the_2d_box_and_no_3d_box(synth):
+    from track3d.dataset import Dataset
+
+    seq = Dataset(synth).sequences("test")[0]
+    t = Track3D.create(seq.camera, "oracle", "none", tracker_options={"gt": seq.gt2d, "absent": seq.absent})
+    t.init(seq.image(0), seq.gt2d[0], seq.category, points=None)
+    out = t.update(seq.image(1), None)
+    assert out.status == "tracking" and np.array_equal(out.box2d, seq.gt2d[1]) and np.isnan(out.box3d).all()

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from track3d.evaluation.metrics import (CE2D_THRESHOLDS, IOU_THRESHOLDS, average_scores, precision_curve,
-                                        score_sequence, success_curve)
+from track3d.evaluation.metrics import (CE2D_THRESHOLDS, IOU_THRESHOLDS, LostScore, average_scores,
+                                        precision_curve, score_lost, score_sequence, success_curve)
 
 
 def test_success_curve_hand_case():
@@ -99,3 +99,46 @@ def test_length_mismatch_is_an_error():
     p2, p3, g2, g3, sc = _seq()
     with pytest.raises(ValueError, match="differ in length"):
         score_sequence("bad", p2[:3], p3, g2, g3, sc)
+
+
+def test_two_d_only_scores_have_no_3d_values_and_the_same_2d_values():
+    pred2d, pred3d, gt2d, gt3d, scored = _seq()
+    full = score_sequence("a", pred2d, pred3d, gt2d, gt3d, scored)
+    s = score_sequence("a", pred2d, None, gt2d, None, scored)
+    assert s.two_d_only and not full.two_d_only
+    assert (s.ao_2d, s.sr50_2d, s.sr75_2d, s.ace_2d) == (full.ao_2d, full.sr50_2d, full.sr75_2d, full.ace_2d)
+    assert np.isnan([s.ao_bev, s.ao_3d, s.sr50_3d, s.ace_3d]).all()
+    assert sorted(s.curves) == ["precision_2d", "success_2d"]
+    assert "ao_3d" not in s.summary() and s.summary()["ao_2d"] == full.ao_2d
+    ov = average_scores([s, s])
+    assert ov.two_d_only and "ace_3d" not in ov.summary() and ov.values["ao_2d"] == pytest.approx(s.ao_2d)
+    assert not average_scores([full]).two_d_only and "ao_3d" in average_scores([full]).summary()
+
+
+def test_score_lost_hand_case():
+    # frames 0..4: absent at 1, 2; the tracker says lost at 1 (right) and 3 (wrong); the target
+    # returns at 3, and frame 4 (within 3 frames, not lost, IoU 1) re-acquires it.
+    absent = np.array([0, 1, 1, 0, 0], bool)
+    lost = np.array([False, True, False, True, False])
+    gt = np.tile([10.0, 10, 10, 10], (5, 1))
+    s = score_lost(lost, absent, gt.copy(), gt, reacquire_frames=3)
+    assert s == LostScore(lost_true=1, lost_reported=2, absent_frames=2, returns=1, reacquired=1)
+    assert (s.precision, s.recall, s.reacquired_share) == (0.5, 0.5, 1.0)
+    # Only 1 frame of window: frame 3 is lost, so the return is not re-acquired.
+    assert score_lost(lost, absent, gt.copy(), gt, reacquire_frames=1).reacquired == 0
+    # A box beside the target: IoU 20 / 180 = 0.11 <= 0.3, not re-acquired; 5 px off, IoU 1/3: it is.
+    far = gt.copy()
+    far[:, 0] += 8
+    near = gt.copy()
+    near[:, 0] += 5
+    assert score_lost(lost, absent, near, gt, reacquire_frames=3).reacquired == 1
+    assert score_lost(lost, absent, far, gt, reacquire_frames=3).reacquired == 0
+
+
+def test_lost_scores_add_up_and_say_nan_without_a_denominator():
+    a = LostScore(lost_true=1, lost_reported=2, absent_frames=4, returns=1, reacquired=0)
+    b = LostScore(lost_true=2, lost_reported=2, absent_frames=0, returns=1, reacquired=1)
+    t = a + b
+    assert t == LostScore(3, 4, 4, 2, 1) and t.precision == 0.75 and t.recall == 0.75 and t.reacquired_share == 0.5
+    assert np.isnan(LostScore().precision) and np.isnan(LostScore().recall) and np.isnan(LostScore().reacquired_share)
+    assert t.summary()["lost_precision"] == 0.75 and t.summary()["returns"] == 2

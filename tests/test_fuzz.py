@@ -7,7 +7,6 @@ or a hang must fail a test, not kill the suite). The full run: `python benchmark
 """
 from __future__ import annotations
 
-import importlib.util
 import tempfile
 from pathlib import Path
 
@@ -17,6 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+import fuzz
 from test_loop import CAM
 from track3d.estimators import create_estimator
 from track3d.frustum import (extract_frustum_bounds, extract_frustum_bounds_numpy, sample_points,
@@ -24,9 +24,6 @@ from track3d.frustum import (extract_frustum_bounds, extract_frustum_bounds_nump
 from track3d.tracker import STATUSES, Track3D
 from track3d.trackers2d import create_tracker
 
-_spec = importlib.util.spec_from_file_location("fuzz", Path(__file__).resolve().parents[1] / "benchmarks" / "fuzz.py")
-fuzz = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fuzz)
 
 FAST = settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
 coord = st.one_of(st.floats(-100, 100, width=32), st.sampled_from([np.nan, np.inf, -np.inf, 0.0, 1e30, -3e38, 1.0,
@@ -173,3 +170,15 @@ def test_seeded_targets(env, target, examples):
         assert out in ("ok", "clean_error"), detail
 
     run()
+
+
+@pytest.mark.parametrize("cases", [100000, 99999, 1234, 1000003])
+def test_plan_runs_exactly_the_cases_asked(cases):
+    """Rounding each target's share alone planned 99,998 of 100,000 cases."""
+    counts = fuzz.plan(cases)
+    assert sum(counts.values()) == cases
+    assert min(counts.values()) >= 1
+
+
+def test_plan_gives_every_target_a_case():
+    assert set(fuzz.plan(3)) == set(fuzz.TARGETS) and min(fuzz.plan(3).values()) == 1

@@ -250,4 +250,25 @@ def test_cli_prepare_train_export_eval_on_tiny_data(tiny_dataset, tmp_path, caps
     assert main(["siamfc", "eval", "--model", str(prefix), "--data", str(tiny_dataset), "--split", "test",
                  "--max-seqs", "1"]) == 0
     res = json.loads(capsys.readouterr().out)
-    assert res["sequences"] == 1 and 0.0 <= res["AO_2d"] <= 1.0
+    assert res["sequences"] == 1 and 0.0 <= res["ao_2d"] <= 1.0 and "ao_3d" not in res
+
+
+def test_models_are_parameters_and_count_their_own_time():
+    """A tracker takes built model objects (benchmarks pass torch stand-ins or timed models
+    this way); each model sums its run time, so nothing needs to wrap or replace run()."""
+    from track3d.onnxmodel import models_of
+    from track3d.siamfc import SiamFCTracker, model_paths
+
+    try:
+        z, x = (OnnxModel(p) for p in model_paths("edge"))
+    except ModelError:
+        pytest.skip("no shipped SiamFC-edge model")
+    t = SiamFCTracker(z, x)
+    assert t.exemplar is z and t.search is x and models_of(t) == {"exemplar": z, "search": x}
+    img = np.random.default_rng(0).integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    assert z.run_ms == 0.0
+    t.init(img, np.array([100.0, 80, 40, 30]))
+    t.update(img)
+    assert z.run_ms > 0.0 and x.run_ms > 0.0
+    with pytest.raises(ModelError, match="siamfc-exemplar"):
+        SiamFCTracker(x, z)

@@ -17,7 +17,6 @@ ONNX network alone, fed the inputs it saw in the loop (like onnxruntime_perf_tes
 from __future__ import annotations
 
 import gc
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +26,7 @@ import numpy as np
 
 from . import machine
 from .camera import Camera
+from .table_text import cell
 
 __all__ = ["BenchConfig", "run_bench", "format_table", "synthetic_frames", "percentiles", "BUSY_THRESHOLD"]
 
@@ -142,9 +142,9 @@ def _dataset_frames(root: str, split: str, max_frames: int, names: tuple[str, ..
 # --- timing -----------------------------------------------------------------------------------
 
 def _onnx_models(obj) -> list:
-    from .onnxmodel import OnnxModel
+    from .onnxmodel import models_of
 
-    return [v for v in (vars(obj).values() if hasattr(obj, "__dict__") else ()) if isinstance(v, OnnxModel)]
+    return list(models_of(obj).values())
 
 
 class _NetTimer:
@@ -273,8 +273,7 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
     try:
         for threads in cfg.threads:
             cpus = allowed[:threads]
-            pinned = machine.pin(cpus)
-            cv2.setNumThreads(threads)
+            pinned = bool(machine.pin_threads(threads, allowed))
             t3d = _build(cfg, camera, threads)
             described = described or t3d.describe()
             if cfg.models_only and not (_onnx_models(t3d.tracker2d) or _onnx_models(t3d.estimator)):
@@ -322,7 +321,7 @@ def _pct(x) -> str:
 
 
 def _f(v) -> str:
-    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.2f}"
+    return cell(v, "{:.2f}")
 
 
 def format_table(report: dict) -> str:
@@ -356,12 +355,3 @@ def format_table(report: dict) -> str:
     for w in report["warnings"]:
         lines.append(f"WARNING: {w}")
     return "\n".join(lines)
-
-
-def write_json(report: dict, path: str | Path) -> Path:
-    import json
-
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(report, indent=1))
-    return p

@@ -35,7 +35,7 @@ import numpy as np
 
 from .boxes import NUM_SIZE_CLASSES, SIZE_TEMPLATES, decode_size, size_class_of
 from .frames import check_category, check_estimator_points, check_point_bounds, point_bounds
-from .onnxmodel import ModelError, OnnxModel, shipped_model
+from .onnxmodel import ModelError, load_model, shipped_model
 
 __all__ = [
     "KIND", "DEFAULT_MODEL", "SIZE_NORMS", "MAX_EXTENT_M", "INPUT_POINTS", "INPUT_CATEGORY", "OUTPUTS",
@@ -159,8 +159,10 @@ class A3BoxNetEstimator:
 
     def __init__(self, model: str | Path | None = None, threads: int = 1, num_points: int | None = None,
                  seed: int = 0, precision: str = "fp32", engine: str = "onnxruntime"):
-        path = Path(model) if model is not None else shipped_model(DEFAULT_MODEL)
-        self.model = OnnxModel(path, threads=threads, kind=KIND, precision=precision, engine=engine)
+        if model is None:
+            model = shipped_model(DEFAULT_MODEL)
+        # a path or a model object (onnxmodel.load_model)
+        self.model = load_model(model, threads, KIND, precision, engine)
         meta = self.model.meta
         try:
             self.num_points = int(num_points or meta["num_points"])

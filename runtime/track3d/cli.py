@@ -150,7 +150,8 @@ def _parser() -> argparse.ArgumentParser:
 def _cmd_bench(a) -> int:
     import json
 
-    from .bench import BenchConfig, format_table, run_bench, write_json
+    from .bench import BenchConfig, format_table, run_bench
+    from .jsonable import write_json
 
     cfg = BenchConfig(tracker=a.tracker, estimator=a.estimator, tracker_model=a.tracker_model,
                       boxnet_model=a.boxnet_model, frames=a.frames, threads=tuple(a.threads), data=a.data,
@@ -164,7 +165,7 @@ def _cmd_bench(a) -> int:
     report = run_bench(cfg, log=None if a.quiet else (lambda s: print(f"[bench] {s}", file=sys.stderr)))
     print(json.dumps(report, indent=1) if a.json else format_table(report))
     if a.out:
-        print(f"report: {write_json(report, a.out)}", file=sys.stderr)
+        print(f"report: {write_json(a.out, report)}", file=sys.stderr)
     return 0
 
 

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 
 from .frames import check_image
-from .onnxmodel import OnnxModel, shipped_model
+from .onnxmodel import load_model, shipped_model
 from .siamfc import crop_square
 
 __all__ = ["EdgeTracker", "create", "model_paths", "TUNABLE", "SHIPPED_NAME"]
@@ -63,8 +63,9 @@ class EdgeTracker:
     """
 
     def __init__(self, template_model: str | Path, search_model: str | Path, threads: int = 1, **overrides):
-        self.template_net = OnnxModel(template_model, threads, "edgetrack-template")
-        self.search_net = OnnxModel(search_model, threads, "edgetrack-search")
+        # each model a path or a model object (onnxmodel.load_model)
+        self.template_net = load_model(template_model, threads, "edgetrack-template")
+        self.search_net = load_model(search_model, threads, "edgetrack-search")
         meta = self.search_net.meta
         self.meta = meta
         unknown = set(overrides) - set(TUNABLE)

@@ -4,7 +4,9 @@
 
 Built-in names: ``"baseline"`` (the paper's 3D tracking baseline, section V-A: the minimum
 enclosing axis-aligned box of the frustum points, ``track3d.boxes.box3d_from_points``) and
-``"a3boxnet"`` (the shipped A3BoxNet ONNX model, ``track3d.boxnet``, loaded lazily).
+``"a3boxnet"`` (the shipped A3BoxNet ONNX model, ``track3d.boxnet``, loaded lazily) and
+``"none"`` (:class:`NoEstimator`: 2D only, the null estimator in the manner of the GOT-10k
+toolkit's IdentityTracker, so that a 2D tracker is evaluated by the same loop and toolkit).
 """
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ import numpy as np
 from .boxes import box3d_from_points
 from .frames import check_category, check_estimator_points, check_point_bounds, point_bounds
 
-__all__ = ["BoxEstimator", "BaselineEstimator", "EstimatorUnavailable", "create_estimator",
+__all__ = ["BoxEstimator", "BaselineEstimator", "NoEstimator", "EstimatorUnavailable", "create_estimator",
            "available_estimators", "register_estimator"]
 
 
@@ -56,6 +58,26 @@ class BaselineEstimator:
         return box3d_from_points(np.stack([lo, hi]))
 
 
+class NoEstimator:
+    """No 3D box: the loop runs the 2D tracker alone (no frustum, no fusion, no points read).
+
+    ``needs_points = False`` is what Track3D and the evaluation look at; an estimator without
+    the attribute needs points."""
+
+    name = "none"
+    needs_points = False
+
+    def __init__(self, threads: int = 1):  # threads: accepted for a uniform factory signature
+        del threads
+
+    def __repr__(self) -> str:
+        return "NoEstimator()"
+
+    def estimate(self, points: np.ndarray, category: int = -1) -> np.ndarray:
+        """Never called by Track3D; answers "no box" (nan) to anyone who calls it."""
+        return np.full(6, np.nan)
+
+
 def _a3boxnet(**options) -> BoxEstimator:
     try:
         mod = importlib.import_module("track3d.boxnet")
@@ -76,7 +98,8 @@ def _a3boxnet(**options) -> BoxEstimator:
         raise
 
 
-_REGISTRY: dict[str, Callable[..., BoxEstimator]] = {"baseline": BaselineEstimator, "a3boxnet": _a3boxnet}
+_REGISTRY: dict[str, Callable[..., BoxEstimator]] = {"baseline": BaselineEstimator, "a3boxnet": _a3boxnet,
+                                                         "none": NoEstimator}
 
 
 def register_estimator(name: str, factory: Callable[..., BoxEstimator]) -> None:

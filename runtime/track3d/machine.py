@@ -11,7 +11,8 @@ import platform
 import time
 from pathlib import Path
 
-__all__ = ["cpu_name", "isa_flags", "core_count", "allowed_cpus", "pin", "affinity_of_all_threads",
+__all__ = ["cpu_name", "isa_flags", "core_count", "allowed_cpus", "pin", "pin_threads", "START_CPUS",
+           "affinity_of_all_threads",
            "cpu_busy", "load_average", "versions", "machine_info", "INTERESTING_FLAGS"]
 
 # ISA extensions that matter to onnxruntime / OpenCV kernels (x86 and Arm spellings).
@@ -80,6 +81,21 @@ def pin(cpus) -> bool:
         except OSError:  # a thread that just exited
             pass
     return True
+
+
+START_CPUS = allowed_cpus()   # the CPUs this process was started on (`taskset` chooses them)
+
+
+def pin_threads(threads: int, cpus: list[int] | None = None) -> list[int]:
+    """Run on `threads` CPUs: every thread of the process pinned to the first `threads` of
+    `cpus` (default START_CPUS, so that a later call can widen again), OpenCV's pool set to
+    `threads` (so that 1 thread means one thread). Returns the CPUs pinned to ([] where
+    affinity is unsupported). The one pinning of benchmarks and `track3d bench`."""
+    from .threads import set_threads
+
+    chosen = list(START_CPUS if cpus is None else cpus)[: max(int(threads), 1)]
+    set_threads(threads)
+    return chosen if pin(chosen) else []
 
 
 def affinity_of_all_threads() -> list[int]:

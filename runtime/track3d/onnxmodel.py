@@ -16,12 +16,14 @@ which and why.
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
 import onnxruntime as ort
 
 __all__ = ["META_KEY", "MODELS_DIR", "OnnxModel", "ModelError", "EngineUnavailable", "shipped_model",
+           "is_model", "load_model", "models_of",
            "ENGINES", "PRECISIONS", "PARITY_TOLERANCE", "variant_path", "open_session"]
 
 META_KEY = "track3d"
@@ -215,6 +217,7 @@ class OnnxModel:
             raise ModelError(f"{self.file} is a {self.meta.get('kind')!r} model, expected {kind!r}")
         self.input_names = list(session.input_names)
         self.output_names = list(session.output_names)
+        self.run_ms = 0.0   # summed time of run(): benchmarks read it, nothing wraps run
 
     @property
     def session(self):
@@ -227,4 +230,31 @@ class OnnxModel:
         return {"model": self.path.name, "kind": self.meta.get("kind"), "threads": self.threads, **self.choice}
 
     def run(self, feeds: dict[str, np.ndarray], outputs: list[str] | None = None) -> list[np.ndarray]:
-        return self._session.run(feeds, outputs)
+        t = time.perf_counter()
+        try:
+            return self._session.run(feeds, outputs)
+        finally:
+            self.run_ms += (time.perf_counter() - t) * 1e3
+
+
+def is_model(obj) -> bool:
+    """An OnnxModel, or a stand-in with its interface (run(feeds, outputs), meta, input_names,
+    output_names, run_ms), e.g. a benchmark's torch module of the same graph."""
+    return callable(getattr(obj, "run", None)) and isinstance(getattr(obj, "meta", None), dict) \
+        and hasattr(obj, "input_names")
+
+
+def load_model(model, threads: int = 1, kind: str | None = None, precision: str = "fp32",
+               engine: str = "onnxruntime"):
+    """A path -> OnnxModel(path, ...); a model object (is_model) -> itself, its kind checked:
+    trackers and estimators take either, so a caller can pass the models it built."""
+    if not is_model(model):
+        return OnnxModel(model, threads, kind, precision=precision, engine=engine)
+    if kind is not None and model.meta.get("kind") != kind:
+        raise ModelError(f"a {model.meta.get('kind')!r} model was given where a {kind!r} model is expected")
+    return model
+
+
+def models_of(part) -> dict:
+    """{attribute: model} of the models (is_model) a tracker or estimator holds."""
+    return {k: v for k, v in sorted(vars(part).items()) if is_model(v)} if hasattr(part, "__dict__") else {}

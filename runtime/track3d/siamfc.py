@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from .frames import MAX_BOX_SCALE, check_image, check_init_box
-from .onnxmodel import OnnxModel, shipped_model
+from .onnxmodel import load_model, shipped_model
 
 __all__ = ["SiamFCTracker", "create", "crop_square", "model_paths", "VARIANT_FILES", "TUNABLE"]
 
@@ -101,8 +101,9 @@ class SiamFCTracker:
                  precision: str = "fp32", engine: str = "onnxruntime", **overrides):
         # precision / engine: "fp32" | "int8" | "bf16" | "auto", "onnxruntime" | "openvino" | "auto"
         # (track3d.onnxmodel); each graph makes its own choice (see .exemplar.choice / .search.choice)
-        self.exemplar = OnnxModel(exemplar_model, threads, "siamfc-exemplar", precision=precision, engine=engine)
-        self.search = OnnxModel(search_model, threads, "siamfc-search", precision=precision, engine=engine)
+        # each model a path or a model object (onnxmodel.load_model)
+        self.exemplar = load_model(exemplar_model, threads, "siamfc-exemplar", precision=precision, engine=engine)
+        self.search = load_model(search_model, threads, "siamfc-search", precision=precision, engine=engine)
         meta = self.search.meta
         self.meta = meta
         unknown = set(overrides) - set(TUNABLE)

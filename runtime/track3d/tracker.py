@@ -131,6 +131,8 @@ class Track3D:
         self._size = (camera.width, camera.height)
         self._M = camera.M
         self._correct = getattr(tracker2d, "correct", None)
+        # False for the null estimator ("none"): 2D only, the loop skips frustum, estimate, fusion.
+        self.needs_points = bool(getattr(estimator, "needs_points", True))
         self.category = -1
         self.box2d = np.full(4, np.nan)
         self.box3d = np.full(6, np.nan)
@@ -205,7 +207,7 @@ class Track3D:
         self.box3d = np.full(6, np.nan)
         self.bad_frames = 0
         self.held_frames = 0
-        if points is not None:
+        if points is not None and self.needs_points:
             est = self._estimate(*self._frustum(points, b))
             if est is not None:
                 self.box3d = est
@@ -230,11 +232,11 @@ class Track3D:
         return self._judge(r, estimated=False)
 
     def update(self, image: np.ndarray | None,
-               points: np.ndarray | Callable[[np.ndarray], np.ndarray]) -> TrackResult:
+               points: np.ndarray | Callable[[np.ndarray], np.ndarray] | None) -> TrackResult:
         """Track into the next frame: image (H, W, 3) uint8 RGB, points (N, 3) float32 cloud, or a
         callable box2d -> (N, 3) cloud that the loop calls with the 2D tracker's box (a stereo
         camera computes depth only there: `track3d.stereo.StereoCloud.bind`; its time counts in
-        the "frustum" stage).
+        the "frustum" stage); None with the null estimator ("none": 2D only).
 
         image None: a dropped frame, see :meth:`skip`."""
         if image is None:
@@ -258,6 +260,11 @@ class Track3D:
             r = TrackResult(self.box2d.copy(), raw, self.box3d.copy(), LOST, 0, ms, _tracker_score(self.tracker2d))
             return self._judge(r, estimated=False)
 
+        if not self.needs_points:   # 2D only: the tracker's box is the answer, no 3D box
+            self.box2d = raw.copy()
+            ms["total"] = (time.perf_counter() - t0) * 1e3
+            r = TrackResult(raw.copy(), raw.copy(), self.box3d.copy(), TRACKING, 0, ms, _tracker_score(self.tracker2d))
+            return self._judge(r, estimated=False)
         pts, bounds = self._frustum(points, raw)
         t2 = time.perf_counter()
         ms["frustum"] = (t2 - t1) * 1e3
@@ -384,11 +391,11 @@ _SHA: dict = {}
 
 def _models_of(part) -> list[dict]:
     """The OnnxModel attributes of a tracker or estimator, described (sha256 cached per file)."""
-    from .onnxmodel import OnnxModel
+    from .onnxmodel import OnnxModel, models_of
 
     out = []
-    for attr, v in sorted(vars(part).items()) if hasattr(part, "__dict__") else []:
-        if isinstance(v, OnnxModel):
+    for attr, v in models_of(part).items():
+        if isinstance(v, OnnxModel):   # files to describe (a stand-in has none)
             import hashlib
 
             f = getattr(v, "file", v.path)  # the variant that runs (fp32, int8 twin ...)

@@ -76,24 +76,18 @@ def _export(a) -> int:
 
 
 def _eval(a) -> int:
-    from track3d.dataset import Dataset
-    from track3d.trackers2d import create_tracker
+    """One pass of the model (and --compare trackers) through the runtime's evaluation toolkit."""
+    from track3d.evaluation import TrackerSpec, evaluate_2d
 
-    from .evaluate import evaluate_tracker
-
-    seqs = Dataset(a.data).sequences(a.split)[: a.max_seqs or None]
-    rows = {}
+    specs = [TrackerSpec(name, "none", threads=a.threads) for name in a.compare]
     if a.model:
-        from track3d.edgetrack import create
-
-        rows[f"model {Path(a.model).name}"] = evaluate_tracker(lambda: create(model=a.model, threads=a.threads), seqs,
-                                             progress=not a.quiet)
-    for name in a.compare:
-        opts = {"threads": a.threads} if name.startswith("siamfc") or name == "edgetrack" else {}
-        rows[name] = evaluate_tracker(lambda: create_tracker(name, **opts), seqs, progress=not a.quiet)
+        specs.insert(0, TrackerSpec("edgetrack", "none", threads=a.threads, tracker_options={"model": a.model},
+                                    name=f"model {Path(a.model).name}"))
+    rows = evaluate_2d(a.data, a.split, specs, max_sequences=a.max_seqs or None, quiet=a.quiet)
     print(json.dumps(rows, indent=1))
     if a.out:
-        Path(a.out).write_text(json.dumps({"data_split": a.split, "sequences": len(seqs), "trackers": rows}, indent=1))
+        sequences = next(iter(rows.values()))["sequences"] if rows else 0
+        Path(a.out).write_text(json.dumps({"data_split": a.split, "sequences": sequences, "trackers": rows}, indent=1))
     return 0
 
 

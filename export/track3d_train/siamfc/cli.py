@@ -110,23 +110,14 @@ def _export(a) -> int:
 
 
 def _eval(a) -> int:
-
-    from track3d.dataset import Dataset
-    from track3d.siamfc import create
-
-    from .evaluate import load_frames, run_sequence, summarise
+    """One pass of the model through the runtime's evaluation toolkit (2D only)."""
+    from track3d.evaluation import TrackerSpec, evaluate_2d
 
     over = {k: getattr(a, k) for k in ("instance_size", "scale_num", "window_influence", "scale_lr")
             if getattr(a, k) is not None}
-    tr = create(model=a.model, threads=a.threads, **over)
-    seqs = Dataset(a.data).sequences(a.split)[: a.max_seqs or None]
-    res = []
-    for s in seqs:
-        res.append(run_sequence(tr, load_frames(s), s.gt2d, s.absent))
-    out = summarise(res)
-    out.pop("success_curve", None)
-    out.pop("precision_curve", None)
-    print(json.dumps(out, indent=1))
+    spec = TrackerSpec("siamfc-edge", "none", threads=a.threads, tracker_options={"model": a.model, **over},
+                       name="model")
+    print(json.dumps(evaluate_2d(a.data, a.split, [spec], max_sequences=a.max_seqs or None)["model"], indent=1))
     return 0
 
 

@@ -10,11 +10,15 @@ is zero, the tracker is re-initialised from the ground truth ``restart_skip`` fr
 centre error). Every re-initialisation is a restart. Frames where the target is absent are
 never scored and never trigger a restart; an initialisation waits for a frame where the
 target is present. Initialisation frames report the ground truth and are not scored.
+
+One-pass evaluation (OPE, the 2D toolkits' protocol) is ``restart=False``: one initialisation
+on the first frame with the target present, no restarts. 2D only is the null estimator
+(``TrackerSpec(tracker, estimator="none")``): the loop runs the 2D tracker alone, reads no
+depth, and the scores have no 3D values; so a 2D tracker and a 3D tracker are scored by the
+same code on the same threshold grids (metrics).
 """
 from __future__ import annotations
 
-import json
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,17 +28,18 @@ import numpy as np
 
 from ..boxes import iou_3d
 from ..fusion import WEIGHT_3D
+from ..jsonable import write_json
 from ..dataset import RIGHT_DIR, Dataset, DatasetError, Sequence, read_rgb
 from ..machine import cpu_name
 from ..progress import Progress
-from ..tracker import STAGES, Track3D
+from ..tracker import LOST, STAGES, Track3D
 from .draw import OverlayWriter, draw_overlay
-from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, SequenceScore, average_scores,
-                      score_sequence)
+from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, LostScore, SequenceScore, average_scores,
+                      score_lost, score_sequence)
 from .results import (INIT, SKIPPED, SequenceResult, read_result, read_run_record, result_folder, run_config_key,
                       write_result, write_run_record)
 
-__all__ = ["TrackerSpec", "Experiment", "run_sequence", "cpu_name", "DEPTH_SOURCES"]
+__all__ = ["TrackerSpec", "Experiment", "run_sequence", "evaluate_2d", "cpu_name", "DEPTH_SOURCES"]
 
 DEPTH_SOURCES = ("map", "stereo")   # where the point clouds come from (run_sequence's depth)
 
@@ -43,7 +48,8 @@ DEPTH_SOURCES = ("map", "stereo")   # where the point clouds come from (run_sequ
 class TrackerSpec:
     """A Track3D configuration by registry names; builds one Track3D per sequence.
 
-    The oracle 2D tracker gets the sequence's ground truth (``gt``, ``absent``) automatically.
+    The oracle 2D tracker gets the sequence's ground truth (``gt``, ``absent``) automatically;
+    estimator "none" is 2D only (its runs are named after the tracker alone).
     """
 
     tracker: str = "kcf"
@@ -61,12 +67,14 @@ class TrackerSpec:
         it runs model files other than the shipped ones (so such a run never replaces those)."""
         if self.name:
             return self.name
+        if self.estimator == "none":
+            return f"{self.tracker}{_model_tag(self.tracker_options)}"
         return (f"{self.tracker}{_model_tag(self.tracker_options)}+{self.estimator}"
                 f"{_model_tag(self.estimator_options)}" + ("" if self.fusion else "-nofusion"))
 
     def _options(self, kind: str, options: dict) -> dict:
         o = dict(options)
-        if kind in ("siamfc", "siamfc-edge", "a3boxnet"):
+        if kind in ("siamfc", "siamfc-edge", "edgetrack", "a3boxnet"):
             o.setdefault("threads", self.threads)
         return o
 
@@ -77,6 +85,19 @@ class TrackerSpec:
         return Track3D.create(seq.camera, self.tracker, self.estimator, tracker_options=topts,
                               estimator_options=self._options(self.estimator, self.estimator_options),
                               fusion=self.fusion, weight_3d=self.weight_3d)
+
+    def unavailable(self, seq: Sequence) -> str | None:
+        """None when this configuration builds here, else why not (a missing model or module):
+        benchmarks report such a configuration as skipped instead of failing."""
+        from ..estimators import EstimatorUnavailable
+        from ..onnxmodel import ModelError
+        from ..trackers2d import TrackerUnavailable
+
+        try:
+            self.build(seq)
+        except (TrackerUnavailable, EstimatorUnavailable, ModelError, ImportError) as e:
+            return f"{type(e).__name__}: {e}"
+        return None
 
 
 _MODEL_OPTIONS = ("model", "exemplar_model", "search_model", "backbone", "neckhead")
@@ -133,12 +154,20 @@ def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, ma
     e2e = np.zeros(n)
     stage_ms = np.zeros((n, len(STAGES)))
     track = track_factory(seq)
+    needs_points = getattr(track, "needs_points", True)   # False: 2D only, no depth to read
+    if not needs_points:
+        stereo = None
     seek = getattr(track.tracker2d, "seek", None)
     pending: int | None = 0          # frame index from which to (re-)initialise
     for i in range(n):
         t0 = time.perf_counter()
         image = seq.image(i)
-        points = seq.points(i) if stereo is None else stereo.bind(image, read_rgb(seq.image_path(i, RIGHT_DIR)))
+        if not needs_points:
+            points = None
+        elif stereo is None:
+            points = seq.points(i)
+        else:
+            points = stereo.bind(image, read_rgb(seq.image_path(i, RIGHT_DIR)))
         t1 = time.perf_counter()
         if pending is not None:
             if i < pending or not _gt_ok(seq, i):
@@ -150,7 +179,9 @@ def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, ma
                 seek(i)
             track.init(image, seq.gt2d[i], seq.category, points=points)
             t2 = time.perf_counter()
-            box2d[i], raw[i], box3d[i], status[i] = seq.gt2d[i], seq.gt2d[i], seq.gt3d[i], INIT
+            box2d[i], raw[i], status[i] = seq.gt2d[i], seq.gt2d[i], INIT
+            if needs_points:   # a 2D-only run reports no 3D box, not even the ground truth's
+                box3d[i] = seq.gt3d[i]
             seconds[i], e2e[i] = t2 - t1, t2 - t0
             stage_ms[i, STAGES.index("total")] = (t2 - t1) * 1e3
             pending = None
@@ -187,25 +218,14 @@ def _comparison_warnings(names: list[str], runs: dict, lengths: dict) -> list[st
     return out
 
 
-def _json_float(x):
-    if isinstance(x, (float, np.floating)):
-        return None if not math.isfinite(float(x)) else round(float(x), 6)
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, dict):
-        return {k: _json_float(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple, np.ndarray)):
-        return [_json_float(v) for v in (x.tolist() if isinstance(x, np.ndarray) else x)]
-    return x
-
-
 class Experiment:
     """One benchmark: a dataset split, its result and report folders (GOT-10k's Experiment)."""
 
     def __init__(self, root: str | Path, split: str = "test", result_dir: str | Path = "results",
                  report_dir: str | Path = "reports", sequences: list[str] | None = None,
                  max_frames: int | None = None, restart: bool = True, restart_skip: int = 1,
-                 depth: str = "map"):
+                 depth: str = "map", max_sequences: int | None = None):
+        """sequences: names to run (default: the whole split); max_sequences: only the first N."""
         self.dataset = Dataset(root)
         self.split = split
         all_seqs = self.dataset.sequences(split)
@@ -216,6 +236,8 @@ class Experiment:
                 raise DatasetError(f"sequence(s) {', '.join(missing)} not in split {split!r} of {root} "
                                    f"(has: {', '.join(by_name) or 'none'})")
             all_seqs = [by_name[s] for s in sequences]
+        if max_sequences:
+            all_seqs = all_seqs[: int(max_sequences)]
         if not all_seqs:
             raise DatasetError(f"split {split!r} of {root} has no sequences")
         self.sequences = all_seqs
@@ -292,21 +314,52 @@ class Experiment:
                 "frames": {}}
 
     # --- evaluation ----------------------------------------------------------------------------
-    def score(self, name: str) -> list[SequenceScore]:
-        """Scores of one tracker's results against the ground truth, per sequence."""
+    def _read(self, name: str, seq: Sequence):
+        res = read_result(self.folder(name, seq.name), seq.name)
+        if len(res) > len(seq):
+            raise ValueError(f"{name}/{seq.name}: {len(res)} result rows for a {len(seq)}-frame sequence")
+        return res
+
+    def score(self, name: str, raw: bool = False) -> list[SequenceScore]:
+        """Scores of one tracker's results against the ground truth, per sequence.
+
+        raw: score the 2D tracker's own boxes (before fusion) instead of the reported ones.
+        Results without any 3D box (a 2D-only run) are scored in 2D only."""
         scores = []
         for seq in self.sequences:
-            res = read_result(self.folder(name, seq.name), seq.name)
+            res = self._read(name, seq)
             n = len(res)
-            if n > len(seq):
-                raise ValueError(f"{name}/{seq.name}: {n} result rows for a {len(seq)}-frame sequence")
             scored = ~seq.absent[:n] & (res.status != INIT)
             timed = res.tracked
+            pred3d = None if np.isnan(res.box3d).all() else res.box3d
             scores.append(score_sequence(
-                seq.name, res.box2d, res.box3d, seq.gt2d[:n], seq.gt3d[:n], scored, res.restarts,
+                seq.name, res.box2d_raw if raw else res.box2d, pred3d, seq.gt2d[:n], seq.gt3d[:n], scored,
+                res.restarts,
                 tracker_seconds=float(res.seconds[timed].sum()), e2e_seconds=float(res.e2e_seconds[timed].sum()),
                 timed_frames=int(timed.sum())))
         return scores
+
+    def score_lost(self, name: str, reacquire_frames: int = 10) -> LostScore:
+        """Lost detection (metrics.score_lost) over every sequence, summed: the frames after each
+        sequence's first initialisation (meant for one-pass runs, restart=False)."""
+        total = LostScore()
+        for seq in self.sequences:
+            res = self._read(name, seq)
+            inits = np.nonzero(res.status == INIT)[0]
+            if not len(inits):
+                continue
+            sl = slice(int(inits[0]) + 1, len(res))
+            total = total + score_lost(res.status[sl] == LOST, seq.absent[sl], res.box2d[sl], seq.gt2d[sl],
+                                       reacquire_frames)
+        return total
+
+    def stage_ms(self, name: str) -> np.ndarray:
+        """(frames, len(STAGES)) milliseconds of every tracked (timed) frame of all sequences."""
+        rows = []
+        for seq in self.sequences:
+            res = self._read(name, seq)
+            rows.append(res.stage_ms[res.tracked])
+        return np.concatenate(rows) if rows else np.zeros((0, len(STAGES)))
 
     def report(self, names: list[str], plots: bool = True, trajectories: int = 4) -> dict:
         """Scores, report.json and plots (success/precision curves, 3D trajectories) in report_dir."""
@@ -348,13 +401,33 @@ class Experiment:
             seq_names = [s.name for s in self.sequences[:trajectories]]
             files += P.trajectory_plots(self, names, seq_names, self.report_dir)
             report["plots"] = [str(f) for f in files]
-        (self.report_dir / "report.json").write_text(json.dumps(_json_float(report), indent=1))
+        write_json(self.report_dir / "report.json", report)
         return report
 
     def _stage_means(self, name: str) -> dict:
-        rows = []
-        for seq in self.sequences:
-            res = read_result(self.folder(name, seq.name), seq.name)
-            rows.append(res.stage_ms[res.tracked])
-        a = np.concatenate(rows) if rows else np.zeros((0, len(STAGES)))
+        a = self.stage_ms(name)
         return {k: float(a[:, j].mean()) if len(a) else float("nan") for j, k in enumerate(STAGES)}
+
+
+def evaluate_2d(root: str | Path, split: str, specs: list[TrackerSpec], result_dir: str | Path | None = None,
+                max_sequences: int | None = None, reacquire_frames: int = 10, quiet: bool = True) -> dict[str, dict]:
+    """One-pass 2D evaluation (restart=False, estimator "none") of 2D trackers on a split:
+    {label: overall summary (metrics.OverallScore.summary) + the median tracker ms per frame
+    (``ms_median``) + lost detection (metrics.LostScore.summary)}. The training CLIs' ``eval``
+    use it; result files go to `result_dir` (default: a temporary folder, removed)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(result_dir) if result_dir is not None else Path(tmp)
+        exp = Experiment(root, split, folder / "results", folder / "report", restart=False,
+                         max_sequences=max_sequences)
+        out = {}
+        for spec in specs:
+            if spec.estimator != "none":
+                raise ValueError(f"evaluate_2d runs 2D trackers alone (estimator 'none'), got {spec.estimator!r}")
+            exp.run(spec, quiet=quiet)
+            total_ms = exp.stage_ms(spec.label)[:, STAGES.index("total")]
+            out[spec.label] = {**average_scores(exp.score(spec.label)).summary(),
+                               "ms_median": float(np.median(total_ms)) if len(total_ms) else float("nan"),
+                               **exp.score_lost(spec.label, reacquire_frames).summary()}
+        return out

@@ -10,13 +10,22 @@ initialisation frame, whose result is the ground truth itself):
 - success curve: SR at IoU thresholds 0..1; precision curve: fraction of scored frames with
   centre error <= threshold (a frame without prediction counts as a miss).
 
+2D only (a run of the null estimator "none", or any run without 3D boxes): pred3d None, the
+3D scores are nan and there are no 3D curves; every protocol (restarts or one pass, 2D or 3D)
+uses these functions and these threshold grids.
+
+Lost detection (one-pass runs of a tracker that reports "lost"): precision and recall of the
+frames it calls lost against the frames where the target is absent, and re-acquisition: the
+share of the target's returns into view after which the tracker, within `reacquire_frames`
+frames, reports a box (not lost) with IoU > REACQUIRE_IOU (:func:`score_lost`).
+
 Over sequences: the mean of the per-sequence values (paper eq. for AO^3d and ACE^3d: every
 sequence weighs the same), curves averaged likewise; restarts are summed; FPS is frames over
 time summed over all sequences. IoU and centre error come from track3d.boxes (one formula).
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, astuple, dataclass, field
 
 import numpy as np
 
@@ -24,13 +33,15 @@ from ..boxes import center_error_2d, center_error_3d, iou_2d, iou_3d, iou_bev
 
 __all__ = [
     "IOU_THRESHOLDS", "CE2D_THRESHOLDS", "CE3D_THRESHOLDS", "success_curve", "precision_curve",
-    "SequenceScore", "OverallScore", "score_sequence", "average_scores", "KINDS",
+    "SequenceScore", "OverallScore", "score_sequence", "average_scores", "KINDS", "SCALARS", "SCALARS_2D",
+    "LostScore", "score_lost", "REACQUIRE_IOU",
 ]
 
 IOU_THRESHOLDS = np.linspace(0.0, 1.0, 101)
 CE2D_THRESHOLDS = np.linspace(0.0, 50.0, 51)     # pixels, as OTB's precision plot
 CE3D_THRESHOLDS = np.linspace(0.0, 4.0, 81)      # metres, 5 cm steps
 KINDS = ("2d", "bev", "3d")
+REACQUIRE_IOU = 0.3     # a return into view counts as re-acquired above this 2D IoU
 
 
 def success_curve(ious: np.ndarray, thresholds: np.ndarray = IOU_THRESHOLDS) -> np.ndarray:
@@ -76,6 +87,7 @@ class SequenceScore:
     tracker_seconds: float = 0.0    # tracker time of the timed frames (I/O excluded)
     e2e_seconds: float = 0.0        # the same frames end to end (image + depth reading included)
     timed_frames: int = 0
+    two_d_only: bool = False        # no 3D boxes were scored: the 3D values are nan
     curves: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -87,39 +99,49 @@ class SequenceScore:
         return self.timed_frames / self.e2e_seconds if self.e2e_seconds > 0 else float("nan")
 
     def summary(self) -> dict:
-        d = {k: v for k, v in asdict(self).items() if k != "curves"}
+        """Plain values (no curves); a 2D-only score leaves out the 3D values it does not have."""
+        d = {k: v for k, v in asdict(self).items()
+             if k not in ("curves", "two_d_only") and not (self.two_d_only and k in _SCALARS_3D)}
         d["fps"], d["fps_e2e"] = self.fps, self.fps_e2e
         return d
 
 
-def score_sequence(name: str, pred2d: np.ndarray, pred3d: np.ndarray, gt2d: np.ndarray, gt3d: np.ndarray,
-                   scored: np.ndarray, restarts: int = 0, tracker_seconds: float = 0.0,
+def score_sequence(name: str, pred2d: np.ndarray, pred3d: np.ndarray | None, gt2d: np.ndarray,
+                   gt3d: np.ndarray | None, scored: np.ndarray, restarts: int = 0, tracker_seconds: float = 0.0,
                    e2e_seconds: float = 0.0, timed_frames: int = 0) -> SequenceScore:
     """Score one sequence. pred2d/gt2d (T, 4), pred3d/gt3d (T, 6); scored (T,) bool marks the
-    frames that count (present target, not an init frame). Predictions may be nan (no output)."""
+    frames that count (present target, not an init frame). Predictions may be nan (no output).
+    pred3d None: 2D only (the 3D values are nan, no 3D curves; gt3d is then not needed)."""
+    two_d_only = pred3d is None
     pred2d = np.asarray(pred2d, np.float64).reshape(-1, 4)
-    pred3d = np.asarray(pred3d, np.float64).reshape(-1, 6)
     gt2d = np.asarray(gt2d, np.float64).reshape(-1, 4)
-    gt3d = np.asarray(gt3d, np.float64).reshape(-1, 6)
     scored = np.asarray(scored, bool).reshape(-1)
     n = len(scored)
+    if two_d_only:   # nan boxes of the right length: the 3D formulas are skipped below
+        pred3d = gt3d = np.full((n, 6), np.nan)
+    pred3d = np.asarray(pred3d, np.float64).reshape(-1, 6)
+    gt3d = np.asarray(gt3d, np.float64).reshape(-1, 6)
     if not (len(pred2d) == len(pred3d) == len(gt2d) == len(gt3d) == n):
         raise ValueError(f"sequence {name}: predictions, ground truth and flags differ in length "
                          f"({len(pred2d)}, {len(pred3d)}, {len(gt2d)}, {len(gt3d)}, {n})")
     p2, p3, g2, g3 = pred2d[scored], pred3d[scored], gt2d[scored], gt3d[scored]
-    ious = {"2d": iou_2d(p2, g2), "bev": iou_bev(p3, g3), "3d": iou_3d(p3, g3)}
+    kinds = ("2d",) if two_d_only else KINDS
+    ious = {"2d": iou_2d(p2, g2)}
+    if not two_d_only:
+        ious.update(bev=iou_bev(p3, g3), **{"3d": iou_3d(p3, g3)})
     with np.errstate(invalid="ignore"):
         ce2 = center_error_2d(p2, g2)
-        ce3 = center_error_3d(p3, g3)
-    curves = {f"success_{k}": success_curve(v) for k, v in ious.items()}
+        ce3 = np.full(len(p3), np.nan) if two_d_only else center_error_3d(p3, g3)
+    curves = {f"success_{k}": success_curve(ious[k]) for k in kinds}
     curves["precision_2d"] = precision_curve(ce2, CE2D_THRESHOLDS)
-    curves["precision_3d"] = precision_curve(ce3, CE3D_THRESHOLDS)
+    if not two_d_only:
+        curves["precision_3d"] = precision_curve(ce3, CE3D_THRESHOLDS)
 
     def ao(k):
-        return float(ious[k].mean()) if len(p2) else float("nan")
+        return float(ious[k].mean()) if len(p2) and k in ious else float("nan")
 
     def sr(k, t):
-        return float((ious[k] > t).mean()) if len(p2) else float("nan")
+        return float((ious[k] > t).mean()) if len(p2) and k in ious else float("nan")
 
     return SequenceScore(
         name=name, frames=int(scored.sum()), restarts=int(restarts),
@@ -127,11 +149,12 @@ def score_sequence(name: str, pred2d: np.ndarray, pred3d: np.ndarray, gt2d: np.n
         ao_bev=ao("bev"), sr50_bev=sr("bev", 0.5), sr75_bev=sr("bev", 0.75),
         ao_3d=ao("3d"), sr50_3d=sr("3d", 0.5), sr75_3d=sr("3d", 0.75), ace_3d=_mean_or_nan(ce3),
         tracker_seconds=float(tracker_seconds), e2e_seconds=float(e2e_seconds),
-        timed_frames=int(timed_frames), curves=curves)
+        timed_frames=int(timed_frames), two_d_only=two_d_only, curves=curves)
 
 
-SCALARS = ("ao_2d", "sr50_2d", "sr75_2d", "ace_2d", "ao_bev", "sr50_bev", "sr75_bev",
-           "ao_3d", "sr50_3d", "sr75_3d", "ace_3d")
+SCALARS_2D = ("ao_2d", "sr50_2d", "sr75_2d", "ace_2d")
+_SCALARS_3D = ("ao_bev", "sr50_bev", "sr75_bev", "ao_3d", "sr50_3d", "sr75_3d", "ace_3d")
+SCALARS = SCALARS_2D + _SCALARS_3D
 
 
 @dataclass
@@ -144,11 +167,14 @@ class OverallScore:
     values: dict[str, float]
     fps: float
     fps_e2e: float
+    two_d_only: bool = False
     curves: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     def summary(self) -> dict:
+        """Plain values (no curves); a 2D-only score leaves out the 3D values it does not have."""
+        values = {k: v for k, v in self.values.items() if not (self.two_d_only and k in _SCALARS_3D)}
         return {"sequences": self.sequences, "frames": self.frames, "restarts": self.restarts,
-                **self.values, "fps": self.fps, "fps_e2e": self.fps_e2e}
+                **values, "fps": self.fps, "fps_e2e": self.fps_e2e}
 
 
 def average_scores(scores: list[SequenceScore]) -> OverallScore:
@@ -168,4 +194,59 @@ def average_scores(scores: list[SequenceScore]) -> OverallScore:
     return OverallScore(sequences=len(used), frames=sum(s.frames for s in scores),
                         restarts=sum(s.restarts for s in scores), values=values,
                         fps=n / t if t > 0 else float("nan"), fps_e2e=n / e if e > 0 else float("nan"),
-                        curves=curves)
+                        two_d_only=bool(used) and all(s.two_d_only for s in used), curves=curves)
+
+
+@dataclass
+class LostScore:
+    """Lost-detection counts of one or more sequences (add them up with ``+``); see the module
+    docstring. The rates are nan when their denominator is zero."""
+
+    lost_true: int = 0          # frames reported lost where the target is absent
+    lost_reported: int = 0      # frames reported lost
+    absent_frames: int = 0      # frames where the target is absent
+    returns: int = 0            # absent -> present transitions
+    reacquired: int = 0         # returns followed by a good box within reacquire_frames
+
+    def __add__(self, other: "LostScore") -> "LostScore":
+        return LostScore(*(a + b for a, b in zip(astuple(self), astuple(other))))
+
+    @property
+    def precision(self) -> float:
+        return self.lost_true / self.lost_reported if self.lost_reported else float("nan")
+
+    @property
+    def recall(self) -> float:
+        return self.lost_true / self.absent_frames if self.absent_frames else float("nan")
+
+    @property
+    def reacquired_share(self) -> float:
+        return self.reacquired / self.returns if self.returns else float("nan")
+
+    def summary(self) -> dict:
+        return {**asdict(self), "lost_precision": self.precision, "lost_recall": self.recall,
+                "reacquired_share": self.reacquired_share}
+
+
+def score_lost(lost: np.ndarray, absent: np.ndarray, pred2d: np.ndarray, gt2d: np.ndarray,
+               reacquire_frames: int = 10) -> LostScore:
+    """Lost detection over the tracked frames of one sequence (init frame excluded, the caller
+    aligns them): lost (T,) bool, the tracker said "lost"; absent (T,) bool; pred2d / gt2d (T, 4).
+
+    A return is a frame whose target is present after an absent one; it is re-acquired when some
+    frame of the next `reacquire_frames` (the return included) is present, not lost, and has a
+    2D IoU > REACQUIRE_IOU."""
+    lost = np.asarray(lost, bool).reshape(-1)
+    absent = np.asarray(absent, bool).reshape(-1)
+    pred2d = np.asarray(pred2d, np.float64).reshape(-1, 4)
+    gt2d = np.asarray(gt2d, np.float64).reshape(-1, 4)
+    returns = reacquired = 0
+    for i in range(1, len(absent)):
+        if absent[i - 1] and not absent[i]:
+            returns += 1
+            window = np.arange(i, min(len(absent), i + reacquire_frames))
+            good = window[~absent[window] & ~lost[window]]
+            if len(good) and np.max(iou_2d(pred2d[good], gt2d[good])) > REACQUIRE_IOU:
+                reacquired += 1
+    return LostScore(lost_true=int(np.sum(lost & absent)), lost_reported=int(lost.sum()),
+                     absent_frames=int(absent.sum()), returns=returns, reacquired=reacquired)

@@ -41,13 +41,19 @@ _PRECISION = {"2d": ("precision_2d", "ace_2d", CE2D_THRESHOLDS, "centre error (p
 
 
 def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path) -> list[Path]:
-    """success_{2d,bev,3d}.png (legend: AO) and precision_{2d,3d}.png (legend: ACE)."""
+    """success_{2d,bev,3d}.png (legend: AO) and precision_{2d,3d}.png (legend: ACE); the 3D ones
+    only when some run has 3D curves."""
     plt = pyplot()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = []
     colour = _colours(overall)
+    def drawn(curve: str) -> bool:   # 2D-only runs have no 3D curves: no empty 3D plots
+        return any(curve in ov.curves for ov in overall.values())
+
     for kind, (curve, key, title) in _SUCCESS.items():
+        if not drawn(curve):
+            continue
         fig, ax = plt.subplots(figsize=(5, 4), dpi=100)
         order = sorted(overall, key=lambda n: -np.nan_to_num(overall[n].values[key], nan=-1))
         for name in order:
@@ -65,6 +71,8 @@ def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path) -> list[P
         plt.close(fig)
         files.append(f)
     for kind, (curve, key, thr, xlabel, unit) in _PRECISION.items():
+        if not drawn(curve):
+            continue
         fig, ax = plt.subplots(figsize=(5, 4), dpi=100)
         for name, ov in overall.items():
             if curve in ov.curves:

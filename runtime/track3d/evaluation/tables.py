@@ -1,12 +1,20 @@
 """The Table-2-style text table of an evaluation report (`track3d eval`, the demo)."""
 from __future__ import annotations
 
-__all__ = ["TABLE_COLUMNS", "summary_table"]
+from ..table_text import cell
+
+__all__ = ["TABLE_COLUMNS", "columns", "summary_table"]
 
 TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
                  ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
                  ("restarts", "restarts", "{:d}"), ("frames", "frames", "{:d}"), ("FPS", "fps", "{:.1f}"),
                  ("FPS_e2e", "fps_e2e", "{:.1f}"))
+
+
+def columns(*keys: str) -> tuple[tuple[str, str, str], ...]:
+    """The TABLE_COLUMNS entries of these score keys, in this order (a table of fewer columns)."""
+    by_key = {c[1]: c for c in TABLE_COLUMNS}
+    return tuple(by_key[k] for k in keys)
 
 
 def summary_table(report: dict) -> str:
@@ -16,8 +24,7 @@ def summary_table(report: dict) -> str:
         ov = t["overall"]
         row = [name]
         for _, key, fmt in TABLE_COLUMNS:
-            v = ov.get(key)
-            row.append("-" if v is None or (isinstance(v, float) and v != v) else fmt.format(v))
+            row.append(cell(ov.get(key), fmt))
         rows.append(row)
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     return "\n".join("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))

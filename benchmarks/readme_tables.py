@@ -1,0 +1,150 @@
+"""The README's result tables, generated from the committed result JSON (one command).
+
+    python benchmarks/readme_tables.py            # print the tables
+    python benchmarks/readme_tables.py --check    # exit 1 when README.md differs from the JSON
+    python benchmarks/readme_tables.py --write    # update the marked sections of README.md
+
+Each table sits in README.md between ``<!-- readme_tables.py: NAME -->`` and
+``<!-- /readme_tables.py -->``; its rows name the result file and the row (configuration,
+tracker) they come from, so no paragraph has to say which run made which number.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from pathlib import Path
+
+from benchlib.paper import TABLE2
+
+from track3d.table_text import cell, markdown_table
+
+REPO = Path(__file__).resolve().parents[1]
+RESULTS = Path("benchmarks") / "results"     # relative to the repository
+
+# (label, result file, configuration, bold)
+SPEED_ROWS = (
+    ("Track3D default: SiamFC-edge + A3BoxNet", "engine/fps_epyc_engine_1t.json", "siamfc-edge:a3boxnet", True),
+    ("EdgeTrack + A3BoxNet (new tracker, not yet the default: see below)", "engine/fps_epyc_engine_1t.json",
+     "edgetrack:a3boxnet", False),
+    ("NanoTrack v2 (peer) + A3BoxNet", "engine/fps_epyc_engine_1t.json", "nano:a3boxnet", False),
+    ("SiamFC-edge + baseline box", "engine/fps_epyc_engine_1t.json", "siamfc-edge:baseline", False),
+    ("SiamFC-edge + A3BoxNet, 2 threads (both cores)", "engine/fps_epyc_engine_2t.json", "siamfc-edge:a3boxnet", False),
+    ("EdgeTrack + A3BoxNet, 2 threads", "engine/fps_epyc_engine_2t.json", "edgetrack:a3boxnet", False),
+)
+ENGINE_SPLITS = (("ideal", "test"), ("ideal", "test_unseen"), ("flash-lidar", "test"), ("flash-lidar", "test_unseen"))
+# (label, source, row, kind, bold): source "table2*" -> <source>/table2.json's row; "bench_2d" -> its tracker
+TABLE2_ROWS = (
+    ("**Track3D, ours** (SiamFC-edge + A3BoxNet + fusion)", "table2_edge_current",
+     "Track3D: SiamFC-edge + A3BoxNet + fusion", "full", True),
+    ("Track3D with the faithful SiamFC (AlexNet, 3 scales; 5 FPS here)", "table2_faithful",
+     "Track3D: SiamFC-faithful + A3BoxNet + fusion", "full", False),
+    ("paper", "Track3D"),
+    ("A3BoxNet alone, oracle 2D box (ours)", "table2_edge_current", "A3BoxNet (oracle 2D)", "oracle", False),
+    ("paper", "A3BoxNet"),
+    ("3D baseline (SiamFC-edge + minimum enclosing box + fusion)", "table2", "3D baseline: SiamFC-edge + min box + fusion",
+     "full", False),
+    ("paper", "3D Tracking Baseline"),
+    ("SiamFC-edge alone, one pass (2D)", "bench_2d", "siamfc-edge", "2d", False),
+    ("SiamFC-faithful alone, one pass (2D)", "bench_2d", "siamfc", "2d", False),
+    ("paper", "SiamFC"),
+)
+PAPER_LABELS = {"Track3D": "Track3D", "A3BoxNet": "A3BoxNet", "3D Tracking Baseline": "3D tracking baseline",
+                "SiamFC": "SiamFC"}
+
+
+def _load(root: Path, rel: str) -> dict:
+    return json.loads((root / RESULTS / rel).read_text())
+
+
+def speed_table(root: Path) -> str:
+    rows = []
+    for label, rel, config, bold in SPEED_ROWS:
+        r = next(x for x in _load(root, rel)["results"] if x["config"] == config and x["backend"] == "onnxruntime"
+                 and x["precision"] == "fp32")
+        e = r["stages"]["end_to_end"]
+        cells = [label, f"{e['median_ms']:.2f} / {e['p99_ms']:.2f}", f"{r['fps_median']:.0f}"]
+        rows.append([f"**{c}**" for c in cells] if bold else cells)
+    rows.append(["*paper: Track3D (desktop GPU)*", "", f"*{TABLE2['Track3D']['FPS']:.0f}*"])
+    return markdown_table(["configuration", "ms (median / p99)", "FPS"], rows)
+
+
+def engine_table(root: Path) -> str:
+    by = {(r["sensor"], r["split"], r["protocol"], r["tracker"]): r
+          for r in _load(root, "engine_baseline/engine_baseline.json")["rows"]}
+
+    def pair(sensor, split, protocol, tracker):
+        r = by[(sensor, split, protocol, tracker)]
+        return f"{r['ao_3d']:.3f} / {r['ace_3d']:.3f}"
+
+    rows = [[s, sp, pair(s, sp, "restart", "oracle+a3boxnet"), pair(s, sp, "restart", "siamfc-edge+a3boxnet"),
+             pair(s, sp, "onepass", "siamfc-edge+a3boxnet")] for s, sp in ENGINE_SPLITS]
+    return markdown_table(["depth", "split", "A3BoxNet, oracle 2D: AO_3d / ACE_3d (m)",
+                           "Track3D (SiamFC-edge), restart: AO_3d / ACE_3d", "one pass: AO_3d / ACE_3d"], rows)
+
+
+def table2_table(root: Path) -> str:
+    fmts = (("ao_2d", "AO_2d", "{:.3f}"), ("ace_2d", "ACE_2d(px)", "{:.1f}"), ("ao_bev", "AO_bev", "{:.3f}"),
+            ("ao_3d", "AO_3d", "{:.3f}"), ("ace_3d", "ACE_3d(m)", "{:.3f}"))
+    shown = {"full": {"ao_2d", "ace_2d", "ao_bev", "ao_3d", "ace_3d"}, "oracle": {"ao_bev", "ao_3d", "ace_3d"},
+             "2d": {"ao_2d", "ace_2d"}}
+    rows = []
+    for spec in TABLE2_ROWS:
+        if spec[0] == "paper":
+            p = TABLE2[spec[1]]
+            rows.append([f"*paper: {PAPER_LABELS[spec[1]]}*"]
+                        + [f"*{cell(p[k], f)}*" if p[k] is not None else "-" for _, k, f in fmts] + [""])
+            continue
+        label, source, row, kind, bold = spec
+        if source == "bench_2d":   # the one-pass 2D benchmark: its own keys, no restarts by protocol
+            r = _load(root, "siamfc/bench_2d.json")["trackers"][row]
+            m = {"ao_2d": r["AO_2d"], "ace_2d": r["ACE_2d"], "restarts": 0}
+        else:
+            m = next(x for x in _load(root, f"{source}/table2.json")["rows"] if x["row"] == row)["metrics"]
+        cells = [cell(m[k], f) if k in shown[kind] else "-" for k, _, f in fmts]
+        if bold:
+            cells = [f"**{c}**" for c in cells]
+        rows.append([label] + cells + [str(m["restarts"])])
+    return markdown_table(["row", "AO_2d", "ACE_2d (px)", "AO_bev", "AO_3d", "ACE_3d (m)", "restarts"], rows)
+
+
+TABLES = {"speed": speed_table, "engine": engine_table, "table2": table2_table}
+
+
+def render(readme: str, root: Path) -> str:
+    """README text with every marked section replaced by its generated table."""
+    def section(m: re.Match) -> str:
+        return f"{m.group(1)}\n{TABLES[m.group(2)](root)}\n{m.group(3)}"
+
+    return re.sub(r"(<!-- readme_tables\.py: (\w+) -->)\n.*?\n(<!-- /readme_tables\.py -->)", section, readme,
+                  flags=re.S)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--readme", type=Path, default=REPO / "README.md", help="the README (default: the repository's)")
+    ap.add_argument("--root", type=Path, default=REPO, help="the repository holding benchmarks/results")
+    mode = ap.add_mutually_exclusive_group()
+    mode.add_argument("--check", action="store_true", help="exit 1 when the README's tables differ from the JSON")
+    mode.add_argument("--write", action="store_true", help="update the README's marked sections in place")
+    a = ap.parse_args(argv)
+    if not (a.check or a.write):
+        for name, fn in TABLES.items():
+            print(f"<!-- readme_tables.py: {name} -->\n{fn(a.root)}\n")
+        return 0
+    text = a.readme.read_text()
+    new = render(text, a.root)
+    if a.write:
+        a.readme.write_text(new)
+        print(f"updated {a.readme}" if new != text else f"{a.readme} was up to date")
+        return 0
+    if new != text:
+        print(f"{a.readme}: the result tables differ from benchmarks/results (run benchmarks/readme_tables.py --write)",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

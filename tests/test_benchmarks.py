@@ -1,0 +1,118 @@
+"""Benchmarks as thin wirings of library calls: their library (benchlib) and a smoke run of a
+script on the tiny dataset (no timed assertion: only that the wiring holds together)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+
+def test_bench_2d_scores_are_the_toolkits(tiny_dataset, tmp_path):
+    import bench_2d
+
+    from track3d.evaluation import Experiment, TrackerSpec, average_scores
+
+    out = tmp_path / "b2d"
+    assert bench_2d.main(["--data", str(tiny_dataset), "--trackers", "kcf", "--max-seqs", "2", "--speed-seqs", "1",
+                          "--out", str(out)]) == 0
+    row = json.loads((out / "bench_2d.json").read_text())["trackers"]["kcf"]
+    exp = Experiment(tiny_dataset, "test", tmp_path / "r", tmp_path / "p", restart=False, max_sequences=2)
+    exp.run(TrackerSpec("kcf", "none"), quiet=True)
+    ov = average_scores(exp.score("kcf"))
+    assert row["AO_2d"] == pytest.approx(ov.values["ao_2d"], abs=1e-6)
+    assert row["ACE_2d"] == pytest.approx(ov.values["ace_2d"], abs=1e-6)
+    assert len(row["success_curve"]) == 101 and row["frames"] == ov.frames
+    assert "| kcf |" in (out / "bench_2d.md").read_text() and (out / "success_2d.png").is_file()
+
+
+def test_the_papers_fusion_gain_is_computed_from_its_table():
+    from benchlib.paper import TABLE2, fusion_gain
+
+    gain, pct = fusion_gain("3D Tracking Baseline")
+    assert gain == pytest.approx(0.568 - 0.513) and pct == pytest.approx(10.72, abs=0.01)
+    assert fusion_gain("Track3D")[1] == pytest.approx(5.46, abs=0.01)
+    assert TABLE2["A3BoxNet"]["AO_3d"] == 0.721
+
+
+def test_json_numbers_and_table_cells(tmp_path):
+    from track3d.jsonable import jsonable, write_json
+    from track3d.table_text import cell, markdown_table
+
+    v = jsonable({"a": np.float32(0.1234567891), "b": float("nan"), "c": np.arange(2), "d": (np.int64(3), True),
+                  "e": np.bool_(False), "f": float("inf")})
+    assert v == {"a": 0.123457, "b": None, "c": [0, 1], "d": [3, True], "e": False, "f": None}
+    assert json.loads(write_json(tmp_path / "x" / "r.json", {"n": np.nan}).read_text()) == {"n": None}
+    assert (cell(None), cell(float("nan")), cell(0.5), cell(3, "{:d}")) == ("-", "-", "0.500", "3")
+    assert markdown_table(["a", "b"], [["1", "2"]]) == "| a | b |\n|---|---|\n| 1 | 2 |"
+
+
+def test_bench_fps_times_the_networks_it_passes_in(tiny_dataset, tmp_path):
+    """Stage timers read the models' own counters: the SiamFC / A3BoxNet configuration has
+    network time, the KCF + baseline one none (no wrapping, no swapping of models)."""
+    import bench_fps
+
+    from track3d.onnxmodel import MODELS_DIR
+
+    if not (MODELS_DIR / "siamfc_edge_search.onnx").is_file() or not (MODELS_DIR / "a3boxnet.onnx").is_file():
+        pytest.skip("no shipped models")
+    out = tmp_path / "fps"
+    assert bench_fps.main(["--data", str(tiny_dataset), "--frames", "5", "--preload", "40", "--threads", "1",
+                           "--config", "siamfc-edge:a3boxnet", "--config", "kcf:baseline", "--tag", "t",
+                           "--out-dir", str(out)]) == 0
+    rows = {r["config"]: r for r in json.loads((out / "fps_t.json").read_text())["results"]}
+    assert rows["siamfc-edge:a3boxnet"]["stages"]["net2d"]["median_ms"] > 0
+    assert rows["siamfc-edge:a3boxnet"]["stages"]["net3d"]["median_ms"] > 0
+    assert rows["kcf:baseline"]["stages"]["net2d"]["median_ms"] == 0 == rows["kcf:baseline"]["stages"]["net3d"]["median_ms"]
+    assert "| kcf:baseline |" in (out / "fps_t.md").read_text()
+
+
+def test_torch_stand_ins_are_passed_to_the_tracker_and_checked(tmp_path):
+    """A torch module of the same weights, behind OnnxModel's interface, given to SiamFCTracker
+    as its models: it tracks, counts its time and checks itself against onnxruntime once."""
+    torch = pytest.importorskip("torch")
+    from benchlib.torch_models import TorchModel
+    from track3d_train.siamfc.export import ExemplarGraph, SearchGraph, export_onnx
+    from track3d_train.siamfc.model import SiamFC, config_for
+
+    from track3d.onnxmodel import OnnxModel
+    from track3d.siamfc import SiamFCTracker
+
+    torch.manual_seed(0)
+    net = SiamFC(config_for("edge")).eval()
+    pz, px = export_onnx(net, tmp_path / "s")
+    z = TorchModel(torch, ExemplarGraph(net), OnnxModel(pz), tmp_path / "ckpt.pt")
+    x = TorchModel(torch, SearchGraph(net), OnnxModel(px), tmp_path / "ckpt.pt")
+    t = SiamFCTracker(z, x)
+    img = np.random.default_rng(0).integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    t.init(img, np.array([100.0, 80, 40, 30]))
+    t.update(img)
+    assert t.exemplar is z and z.check["ok"] and x.check["ok"] and x.run_ms > 0
+
+
+def test_the_readme_tables_are_the_committed_results(tmp_path):
+    import readme_tables
+
+    assert readme_tables.main(["--check"]) == 0
+    readme = tmp_path / "README.md"
+    text = readme_tables.REPO.joinpath("README.md").read_text()
+    assert text.count("<!-- readme_tables.py: ") == len(readme_tables.TABLES)
+    readme.write_text(text.replace("| **8.08 / 10.25** |", "| **8.00 / 10.25** |"))   # a number edited by hand
+    assert readme_tables.main(["--check", "--readme", str(readme)]) == 1
+    assert readme_tables.main(["--write", "--readme", str(readme)]) == 0 and readme.read_text() == text
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "sched_setaffinity"), reason="no CPU affinity here")
+def test_pin_threads_pins_every_thread_and_widens_again():
+    import cv2
+
+    from track3d.machine import START_CPUS, affinity_of_all_threads, pin_threads
+
+    before = cv2.getNumThreads()
+    try:
+        assert pin_threads(1) == [START_CPUS[0]]
+        assert affinity_of_all_threads() == [START_CPUS[0]] and cv2.getNumThreads() == 1
+        assert pin_threads(len(START_CPUS)) == list(START_CPUS) and affinity_of_all_threads() == list(START_CPUS)
+    finally:
+        pin_threads(len(START_CPUS))
+        cv2.setNumThreads(before)
