@@ -99,3 +99,36 @@ def test_bench_on_a_dataset(tmp_path, capsys):
     assert rep["source"]["kind"] == "dataset" and rep["results"][0]["frames"] == 6
     assert main(["bench", "--data", str(tmp_path / "none"), "--frames", "2"]) == 2
     assert "no dataset" in capsys.readouterr().err
+    # a sequence folder as --data names `--sequence`, which bench now takes too
+    assert main(["bench", "--data", str(root / "test" / "a"), "--frames", "2"]) == 2
+    assert "--sequence a" in capsys.readouterr().err
+    assert main(["bench", "--tracker", "kcf", "--estimator", "baseline", "--data", str(root), "--sequence", "a",
+                 "--frames", "3", "--threads", "1", "--json", "--quiet"]) == 0
+    assert json.loads(capsys.readouterr().out)["source"]["sequences"] == ["a"]
+
+
+def test_edgetrack_gets_the_rows_thread_count():
+    """`track3d bench --tracker edgetrack --threads 1 2` timed EdgeTrack's networks at 1 thread
+    in both rows (only SiamFC got the row's threads)."""
+    pytest.importorskip("track3d.edgetrack")
+    from track3d.camera import Camera
+    from track3d.trackers2d import TrackerUnavailable
+
+    try:
+        t3d = bench._build(bench.BenchConfig("edgetrack", "baseline"), Camera.from_fov(160, 120, 45.0), 2)
+    except TrackerUnavailable:
+        pytest.skip("no shipped EdgeTrack")
+    assert [m.threads for m in bench._onnx_models(t3d.tracker2d)] == [2, 2]
+
+
+def test_bench_mistakes_fail_before_timing(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(bench, "_time_loop", lambda *a: pytest.fail("timed before refusing"))
+    # a folder as --out used to fail only after the whole run
+    assert main(["bench", "--tracker", "kcf", "--estimator", "baseline", "--out", str(tmp_path), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is a folder" in err[0]
+    # --models-only of a pair without networks printed an empty table, exit 0
+    assert main(["bench", "--tracker", "kcf", "--estimator", "baseline", "--models-only", "--threads", "1",
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "run no ONNX network" in err[0]

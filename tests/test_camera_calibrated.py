@@ -82,3 +82,35 @@ def test_distortion_is_undone_on_images():
     t = Track3D.create(cam, "kcf", "baseline")
     t.init(img, [90, 40, 20, 20], 0)
     assert t.update(img, np.zeros((0, 3), np.float32)).status in ("no_points", "lost")
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"width": 200.7}, "whole number of pixels"),         # was truncated to 200 without a word
+    ({"height": "100"}, "whole number of pixels"),
+    ({"width": True}, "whole number of pixels"),
+    ({"K": [[100, 0], [0, 50]]}, r"3x3 matrix, got shape \(2, 2\)"),   # was numpy's broadcast message
+    ({"K": [[100, 0, 60], [0, 50]]}, "3x3 matrix of numbers"),
+    ({"K": [[100, 0, float("nan")], [0, 50, 30], [0, 0, 1]]}, "NaN or inf"),
+])
+def test_from_dict_names_a_bad_resolution_or_K(change, message):
+    for base in (CAM.to_dict(), Camera.from_fov(200, 100, 60.0).to_dict()):
+        with pytest.raises(ValueError, match=message):
+            Camera.from_dict({**base, **change})
+
+
+@pytest.mark.parametrize("w, h", [(0, 0), (0, 10), (10, 0), (-4, 3)])
+def test_from_fov_refuses_an_empty_image(w, h):
+    with pytest.raises(ValueError, match="resolution must be positive"):   # was ZeroDivisionError for w = 0
+        Camera.from_fov(w, h, 40.0)
+
+
+@pytest.mark.parametrize("make", [
+    lambda w: Camera(w, 100, 45.0, 30.0),                           # kept 640.5 as the width
+    lambda w: Camera.from_fov(w, 100, 45.0),                        # truncated to 640
+    lambda w: Camera.from_intrinsics(w, 100, 100.0, 50.0, 60.0, 30.0),
+])
+@pytest.mark.parametrize("width", [640.5, "640", True])
+def test_every_constructor_wants_whole_pixels(make, width):
+    with pytest.raises(ValueError, match="whole number of pixels"):
+        make(width)
+    assert make(np.int64(640)).width == 640 and type(make(640.0).width) is int

@@ -242,3 +242,25 @@ def test_cli_eval_and_time_run_on_an_exported_model(trained, tiny_dataset, tmp_p
     assert rows["model et"]["sequences"] == 1 and 0.0 <= rows["model et"]["ao_2d"] <= 1.0
     assert main(["time", "--model", prefix, "--repeats", "5"]) == 0
     assert "edgetrack search 256" in capsys.readouterr().out
+
+
+def test_cli_export_writes_a_new_prefix_and_refuses_a_shipped_one(trained, tmp_path, capsys, monkeypatch):
+    """The command line of the export: a fresh prefix is written (parity printed); the shipped
+    models' folder needs --force."""
+    import track3d.onnxmodel
+    from track3d_train.cli import main as train_main
+
+    ck = str(trained["root"] / "run" / "ckpt.pt")
+    assert train_main(["edgetrack", "export", "--checkpoint", ck, "--out", str(tmp_path / "m" / "et")]) == 0
+    assert (tmp_path / "m" / "et_template.onnx").is_file() and "parity" in capsys.readouterr().out
+    shipped = tmp_path / "shipped"          # a stand-in for track3d/models holding an EdgeTrack
+    shipped.mkdir()
+    for part in ("template", "search"):
+        (shipped / f"edgetrack_{part}.onnx").write_bytes((tmp_path / "m" / f"et_{part}.onnx").read_bytes())
+    monkeypatch.setattr(track3d.onnxmodel, "MODELS_DIR", shipped)
+    before = (shipped / "edgetrack_search.onnx").stat().st_mtime_ns
+    assert train_main(["edgetrack", "export", "--ckpt", ck, "--out", str(shipped / "edgetrack")]) == 2
+    assert "is a shipped model" in capsys.readouterr().err
+    assert (shipped / "edgetrack_search.onnx").stat().st_mtime_ns == before
+    assert train_main(["edgetrack", "export", "--checkpoint", ck, "--out", str(shipped / "edgetrack"), "--force"]) == 0
+    assert (shipped / "edgetrack_search.onnx").stat().st_mtime_ns != before

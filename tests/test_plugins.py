@@ -13,6 +13,7 @@ import pytest
 
 from test_loop import make_synthetic_dataset
 from track3d import estimators, plugins, trackers2d
+from track3d.camera import Camera
 from track3d.cli import main
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "tm_tracker.py"
@@ -121,3 +122,30 @@ def test_factory_errors_name_the_accepted_options():
         trackers2d.create_tracker("kcf", nope=1)
     with pytest.raises(ValueError, match="missing a required argument: 'gt'"):
         trackers2d.create_tracker("oracle")
+    from track3d.estimators import create_estimator
+
+    # A3BoxNet's registry wrapper took **options: the list of what it takes was missing
+    with pytest.raises(ValueError, match="takes: model, threads, num_points, seed, precision, engine"):
+        create_estimator("a3boxnet", nope=1)
+
+
+@pytest.mark.parametrize("returned", ["notabox", (True, "notabox"), (True, [1, 2, 3, 4], "extra"), None])
+def test_a_tracker_breaking_the_protocol_is_named(returned):
+    """A plug-in returning something other than (ok, box) ended in numpy's "could not convert
+    string to float" or an unpacking error, not naming the tracker or the protocol."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import Track3D
+
+    class Broken:
+        def init(self, image, box):
+            pass
+
+        def update(self, image):
+            return returned
+
+    cam = Camera.from_fov(64, 48, 45.0)
+    t = Track3D(cam, Broken(), create_estimator("baseline"))
+    img = np.zeros((48, 64, 3), np.uint8)
+    t.init(img, [10, 10, 8, 8])
+    with pytest.raises(ValueError, match=r"returned .* from update\(image\); the protocol is \(ok: bool, box"):
+        t.update(img, np.zeros((0, 3), np.float32))

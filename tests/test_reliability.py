@@ -282,3 +282,56 @@ def test_a3boxnet_refuses_point_sets_wider_than_it_answers_for():
     pts[:, 2] = np.abs(pts[:, 2]) * 20 + 1
     out = t.update(img, pts)
     assert out.status == NO_POINTS and out.num_points >= t.min_points
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["track", "--video-sequences", "-1"], "--video-sequences"),   # exited 0 having written no overlay
+    (["eval", "--trajectories", "-1"], "--trajectories"),
+])
+def test_cli_counts_cannot_be_negative(synth, tmp_path, capsys, argv, flag):
+    with pytest.raises(SystemExit) as e:
+        main(argv[:1] + ["--data", str(synth), "--results", str(tmp_path)] + argv[1:])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and flag in err[0] and "integer >= 0" in err[0]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["preview", "{seq}", "--out", "{tmp}/p.png", "--frames", "0"], "--frames must be >= 1"),  # was a 1-frame sheet, exit 0
+    (["preview", "{seq}", "--out", "{tmp}/p.png", "--frames", "-5"], "--frames must be >= 1"),
+    (["shapes", "--out", "{tmp}/s.png", "--cell", "0"], "--cell must be >= 16"),             # was a ZeroDivisionError
+])
+def test_sim_bad_counts_are_one_line(synth, tmp_path, capsys, argv, message):
+    pytest.importorskip("track3d_sim")
+    pytest.importorskip("PIL")
+    from track3d_sim.cli import main as sim_main
+
+    seq = next(p for p in (synth / "test").iterdir() if p.is_dir())
+    assert sim_main([a.format(seq=seq, tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+    assert not list(tmp_path.glob("*.png"))
+
+
+@pytest.mark.parametrize("gain", ["0", "-1", "nan"])
+def test_sim_preview_gain_must_be_positive(synth, tmp_path, capsys, gain):
+    """A gain <= 0 wrote a black contact sheet, NaN one with a numpy warning, both exit 0."""
+    pytest.importorskip("PIL")
+    from track3d_sim.cli import main as sim_main
+
+    seq = next(p for p in (synth / "test").iterdir() if p.is_dir())
+    assert sim_main(["preview", str(seq), "--out", str(tmp_path / "p.png"), "--gain", gain]) == 2
+    assert "--gain must be a positive number" in capsys.readouterr().err
+    assert not (tmp_path / "p.png").exists()
+
+
+def test_sim_demo_checks_names_before_simulating(tmp_path, capsys, monkeypatch):
+    """`track3d-sim demo --tracker nope` simulated the whole test set before saying so."""
+    pytest.importorskip("track3d_sim")
+    from track3d_sim import demo
+    from track3d_sim.cli import main as sim_main
+
+    monkeypatch.setattr(demo, "_simulate", lambda *a: pytest.fail("simulated before checking the names"))
+    for flag, message in (("--tracker", "unknown 2D tracker 'nope'"), ("--estimator", "unknown 3D box estimator 'nope'")):
+        assert sim_main(["demo", "--out", str(tmp_path / "d"), flag, "nope", "--quiet"]) == 2
+        assert message in capsys.readouterr().err

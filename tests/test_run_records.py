@@ -94,3 +94,20 @@ def test_iou_of_a_box_with_itself_is_exactly_one():
     boxes = rng.random((2000, 4)) * 100 + [0, 0, 1, 1]
     assert np.all(iou_2d(boxes, boxes) <= 1.0)
     assert success_curve(np.array([iou_2d(b2, b2)]))[-1] == 0.0     # IoU > 1.0 never succeeds
+
+
+@pytest.mark.parametrize("name", ["../escaped", "a/b", "..", ".", "x\\y"])
+def test_a_result_name_is_one_folder(synth, tmp_path, capsys, name):
+    """--name ../escaped wrote beside the results folder, a/b a folder eval never lists."""
+    res = tmp_path / "res"
+    with pytest.raises(SystemExit) as e:
+        _track(synth, res, "--tracker", "oracle", "--name", name)
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "one folder name" in err[0]
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_sequence_named_twice_runs_once(synth, tmp_path, capsys):
+    assert _track(synth, tmp_path, "--tracker", "oracle", "--sequence", "a", "a") == 0
+    assert "on 1 sequence(s)" in capsys.readouterr().out

@@ -143,3 +143,47 @@ def test_describe_lists_models_with_hashes():
     roles = {m["kind"] for m in d["models"]}
     assert roles == {"siamfc-exemplar", "siamfc-search", "a3boxnet"}
     assert all(len(m["sha256"]) == 64 for m in d["models"])
+
+
+def test_pickling_a_tracker_points_to_get_state():
+    """pickle.dumps(t) used to end inside onnxruntime: "cannot pickle 'InferenceSession' object"."""
+    t = Track3D.create(CAM, tracker="kcf", estimator="baseline")   # no onnxruntime session at all
+    with pytest.raises(TypeError, match=r"get_state\(\)"):
+        pickle.dumps(t)
+
+
+def test_state_of_another_camera_is_refused():
+    """Boxes are pixels of the state's camera: restoring them under another camera was silent."""
+    from track3d.camera import Camera
+
+    t = _make("kcf", "baseline")
+    img, pts, box = _frame(0)
+    t.init(img, box, 0)
+    other = Track3D.create(Camera.from_fov(CAM.width * 2, CAM.height * 2, 45.0), "kcf", "baseline")
+    with pytest.raises(ValueError, match="another camera"):
+        other.set_state(t.get_state())
+    old = t.get_state()
+    del old["camera"]                                   # a state written before cameras were recorded
+    _make("kcf", "baseline").set_state(old)
+
+
+@pytest.mark.parametrize("damage", [
+    lambda s: s.pop("tracker2d"),                        # was KeyError: 'tracker2d'
+    lambda s: s.pop("held_frames"),
+    lambda s: s.update(box2d="xx"),                      # was numpy's "could not convert string to float"
+    lambda s: s.update(box3d=[1, 2, 3]),
+    lambda s: s.update(category="x"),
+])
+def test_a_damaged_state_is_one_value_error_and_changes_nothing(damage):
+    t = _make("kcf", "baseline")
+    img, pts, box = _frame(0)
+    t.init(img, box, 0, points=pts)
+    t.update(*_frame(1)[:2])
+    st = json.loads(json.dumps(t.get_state()))
+    damage(st)
+    r = _make("kcf", "baseline")
+    r.init(img, box, 1, points=pts)
+    before = json.dumps(r.get_state())
+    with pytest.raises(ValueError, match="damaged Track3D state"):
+        r.set_state(st)
+    assert json.dumps(r.get_state()) == before

@@ -22,8 +22,8 @@ mkdir -p "$RUNS" "$MODELS"
 # 1. data: 36 train / 18 test sequences x 100 frames, 640x480 (the `small` preset, doubled), and
 #    for A3BoxNet 120 more train-only sequences x 25 frames (seed 1): more shapes beat more frames
 DIV=${DIV:-${DATA}_div}
-"$BIN/track3d-sim" generate --preset small --train 36 --test 18 --out "$DATA" --workers 2 --no-progress
-"$BIN/track3d-sim" generate --preset small --seed 1 --train 120 --test 0 --frames 25 --out "$DIV" --workers 2 --no-progress
+"$BIN/track3d-sim" generate --preset small --train 36 --test 18 --out "$DATA" --workers 2 --quiet
+"$BIN/track3d-sim" generate --preset small --seed 1 --train 120 --test 0 --frames 25 --out "$DIV" --workers 2 --quiet
 
 # 2. caches (the runtime's own frustum and crop code)
 "$BIN/track3d-train" boxnet prepare --data "$DATA" --split train --jitters 5 --out "$RUNS/boxnet/cache/train.npz" --quiet
@@ -33,7 +33,7 @@ DIV=${DIV:-${DATA}_div}
 
 # 3. training, one thread each, A3BoxNet and SiamFC-edge side by side, then SiamFC-faithful on both cores
 "$BIN/track3d-train" boxnet train --cache "$RUNS/boxnet/cache/train.npz" "$RUNS/boxnet/cache/div_train.npz" \
-    --out "$RUNS/boxnet/main" --num-points 512 --epochs 100 --max-minutes "$BOXNET_MIN" --flip-y --scale-aug 0.15 \
+    --out "$RUNS/boxnet/main" --num-points 512 --epochs 100 --time-budget-min "$BOXNET_MIN" --flip-y --scale-aug 0.15 \
     --size-norm extent --threads 1 --quiet > "$RUNS/boxnet_train.log" 2>&1 &
 "$BIN/track3d-train" siamfc train --variant edge --cache "$RUNS/siamfc/cache" --out "$RUNS/siamfc_edge" \
     --max-steps "${EDGE_STEPS:-4800}" --batch 16 --time-budget-min "$EDGE_MIN" --threads 1 --quiet > "$RUNS/siamfc_edge_train.log" 2>&1 &
@@ -42,7 +42,7 @@ wait
     --max-steps "${FAITHFUL_STEPS:-900}" --batch 8 --time-budget-min "$FAITHFUL_MIN" --threads 2 --quiet > "$RUNS/siamfc_faithful_train.log" 2>&1
 
 "$BIN/track3d-train" boxnet train --cache "$RUNS/boxnet/cache/train.npz" "$RUNS/boxnet/cache/div_train.npz" \
-    --out "$RUNS/boxnet/main" --num-points 512 --epochs 100 --max-minutes "$BOXNET_MIN2" --flip-y --scale-aug 0.15 \
+    --out "$RUNS/boxnet/main" --num-points 512 --epochs 100 --time-budget-min "$BOXNET_MIN2" --flip-y --scale-aug 0.15 \
     --size-norm extent --threads 2 --quiet >> "$RUNS/boxnet_train.log" 2>&1
 
 # 4. export with parity checks into the package

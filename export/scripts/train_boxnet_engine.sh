@@ -22,9 +22,9 @@ mkdir -p "$OUT/cache"
 # 1. points-only training data: 240 bodies x 25 frames, range sensors mixed (--test-unseen 1
 #    holds the unseen generators out of train); 36 stereo sequences need images
 "$BIN/track3d-sim" generate --preset small --seed 1 --train 240 --test 0 --test-unseen 1 --frames 25 \
-    --points-only --sensors ideal,flash-lidar,tof --out "$DATA/engine-train-po" --no-progress
+    --points-only --sensors ideal,flash-lidar,tof --out "$DATA/engine-train-po" --quiet
 "$BIN/track3d-sim" generate --preset small --seed 2 --train 36 --test 0 --test-unseen 1 --frames 25 \
-    --sensors stereo --out "$DATA/engine-train-stereo" --no-progress
+    --sensors stereo --out "$DATA/engine-train-stereo" --quiet
 
 # 2. frustum caches cut by the runtime's own code from jittered ground-truth boxes
 for d in engine-train-po engine-train-stereo; do
@@ -35,5 +35,5 @@ done
 # 3. training (the shipped recipe, without the category input; an "epoch" of 4000 samples
 #    so that a checkpoint lands every few minutes)
 "$BIN/track3d-train" boxnet train --cache "$OUT/cache/engine-train-po.npz" "$OUT/cache/engine-train-stereo.npz" \
-    --out "$OUT/nocat" --num-points 512 --epochs 100 --epoch-samples 4000 --max-minutes "$MINUTES" --flip-y --scale-aug 0.15 \
+    --out "$OUT/nocat" --num-points 512 --epochs 100 --epoch-samples 4000 --time-budget-min "$MINUTES" --flip-y --scale-aug 0.15 \
     --size-norm extent --no-category --threads "$THREADS" --quiet

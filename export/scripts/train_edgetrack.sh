@@ -31,9 +31,9 @@ mkdir -p "$OUT"
 #    holds the unseen generators out of train (its one sequence is not used). The evaluation
 #    sets are the README's engine sets (9 test + 9 test_unseen x 60 frames, seed 0): train
 #    and test share no fine category whatever the seeds.
-"$BIN/track3d-sim" generate --preset small --train 36 --test 0 --test-unseen 1 --out "$DATA" --workers 2 --no-progress
+"$BIN/track3d-sim" generate --preset small --train 36 --test 0 --test-unseen 1 --out "$DATA" --workers 2 --quiet
 "$BIN/track3d-sim" generate --preset small --seed 1 --train 120 --test 0 --test-unseen 1 --frames 25 \
-    --auto-exposure --motion-blur --out "$DIV" --workers 2 --no-progress
+    --auto-exposure --motion-blur --out "$DIV" --workers 2 --quiet
 
 # 2. one cache of both train splits: target crops (442 kB each, ~1.6 GB in all) and background
 #    crops (absent frames, empty sky); the last 2 sequences (of $DIV) are the validation set
@@ -41,13 +41,13 @@ mkdir -p "$OUT"
     --max-frames 3600 --max-background 1500 --out "$OUT/cache" --quiet
 
 # 3. training, one thread, ~3 h
-"$BIN/track3d-train" edgetrack train --cache "$OUT/cache" --out "$OUT/run" --steps "$STEPS" \
+"$BIN/track3d-train" edgetrack train --cache "$OUT/cache" --out "$OUT/run" --max-steps "$STEPS" \
     --batch "$BATCH" --time-budget-min "$MINUTES" --threads "$THREADS" --quiet >> "$OUT/train.log" 2>&1
 
 # 4. export (parity check printed) and one-pass evaluation against SiamFC-edge and the shipped EdgeTrack
 "$BIN/track3d-train" edgetrack export --checkpoint "$OUT/run/ckpt.pt" --out "$OUT/model/edgetrack"
 "$BIN/track3d-sim" generate --preset small --train 0 --test 9 --test-unseen 9 --frames 60 --sensors ideal \
-    --seed 0 --out "$EVAL" --no-progress
+    --seed 0 --out "$EVAL" --quiet
 for split in test test_unseen; do
   "$BIN/track3d-train" edgetrack eval --model "$OUT/model/edgetrack" --data "$EVAL" --split $split \
       --compare siamfc-edge edgetrack --out "$OUT/eval_$split.json" --quiet

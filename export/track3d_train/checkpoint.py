@@ -1,21 +1,39 @@
 """Reading a training checkpoint and telling the user which network it belongs to.
 
-A3BoxNet checkpoints hold ``model_config``; SiamFC checkpoints ``config``. Giving one to the
-other's exporter is a one-line ValueError that names the right command, not a KeyError.
+A3BoxNet checkpoints hold ``model_config``; SiamFC and EdgeTrack checkpoints both hold
+``config``, told apart by a key only their own config has (SiamFC's ``variant``, EdgeTrack's
+``widths``; both since the first version of each). Giving one to another's exporter is a
+one-line ValueError that names the right command, not a KeyError or a state-dict mismatch.
 """
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Callable
 
-__all__ = ["load_checkpoint_dict", "SIGNATURES"]
+__all__ = ["load_checkpoint_dict", "network_of", "SIGNATURES"]
 
-# network -> (the key only its checkpoints have, the command that exports it)
-SIGNATURES = {"A3BoxNet": ("model_config", "track3d-train boxnet export"),
-              "SiamFC": ("config", "track3d-train siamfc export")}
+
+def _config_with(key: str, config: str = "config") -> Callable[[dict], bool]:
+    return lambda ck: isinstance(ck.get(config), dict) and key in ck[config]
+
+
+# network -> (is a checkpoint dict one of it?, the command that exports it)
+SIGNATURES: dict[str, tuple[Callable[[dict], bool], str]] = {
+    "A3BoxNet": (lambda ck: "model_config" in ck, "track3d-train boxnet export"),
+    "SiamFC": (_config_with("variant"), "track3d-train siamfc export"),
+    "EdgeTrack": (_config_with("widths"), "track3d-train edgetrack export"),
+}
+
+
+def network_of(ck) -> str | None:
+    """The network a loaded checkpoint belongs to (a key of SIGNATURES), or None."""
+    if not isinstance(ck, dict) or "model" not in ck:
+        return None
+    return next((name for name, (match, _) in SIGNATURES.items() if match(ck)), None)
 
 
 def load_checkpoint_dict(path: str | Path, network: str) -> dict:
-    """torch.load a checkpoint of `network` ("A3BoxNet" / "SiamFC") and check it is one."""
+    """torch.load a checkpoint of `network` (a key of SIGNATURES) and check it is one."""
     import torch
 
     p = Path(path)
@@ -25,10 +43,13 @@ def load_checkpoint_dict(path: str | Path, network: str) -> dict:
         ck = torch.load(str(p), map_location="cpu", weights_only=False)
     except Exception as e:  # not a torch file at all
         raise ValueError(f"{p} is not a PyTorch checkpoint ({type(e).__name__}: {str(e).splitlines()[0][:120]})") from None
-    key = SIGNATURES[network][0]
-    if isinstance(ck, dict) and key in ck and "model" in ck:
+    found = network_of(ck)
+    if found == network:
         return ck
-    for other, (k, cmd) in SIGNATURES.items():
-        if other != network and isinstance(ck, dict) and k in ck and "model" in ck:
-            raise ValueError(f"{p} is a {other} checkpoint, not a {network} one: export it with `{cmd}`")
-    raise ValueError(f"{p} is not a {network} checkpoint (no '{key}' and 'model' entries)")
+    if found is not None:
+        raise ValueError(f"{p} is {_a(found)} checkpoint, not {_a(network)} one: export it with `{SIGNATURES[found][1]}`")
+    raise ValueError(f"{p} is not {_a(network)} checkpoint (nor a training checkpoint of another track3d network)")
+
+
+def _a(name: str) -> str:
+    return ("an " if name[0] in "AEIOU" else "a ") + name

@@ -19,33 +19,39 @@ COMMANDS = {
 }
 
 
+# What training imports beyond the runtime (top-level module -> the extra installing it): the
+# base install also has the track3d-train command, which must say so, not end in a traceback.
+EXTRA_MODULES = {"torch": "train", "onnx": "train", "tqdm": "train", "matplotlib": "train", "openvino": "openvino"}
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "--version":
-        from importlib.metadata import PackageNotFoundError, version
+        from track3d.argparsing import package_version
 
-        try:
-            print(f"track3d-train {version('track3d')}")
-        except PackageNotFoundError:
-            print("track3d-train unknown")
+        print(f"track3d-train {package_version()}")
         return 0
-    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
+    if argv and argv[0] not in COMMANDS and argv[0] not in ("-h", "--help"):  # one line, as argparse's
+        print(f"track3d-train: error: unknown command {argv[0]!r}, choose from {', '.join(COMMANDS)} "
+              f"(see track3d-train --help)", file=sys.stderr)
+        return 2
+    if not argv or argv[0] in ("-h", "--help"):
         print(__doc__.strip())
         for name, (_, text) in COMMANDS.items():
             print(f"  {name:8s} {text}")
-        if argv and argv[0] not in ("-h", "--help"):
-            print(f"\nerror: unknown command {argv[0]!r}", file=sys.stderr)
-            return 2
         return 0 if argv else 2
-    module = importlib.import_module(COMMANDS[argv[0]][0])
+    from track3d.argparsing import exit_for_missing_extra
     from track3d.dataset import DatasetError
     from track3d.onnxmodel import ModelError
 
     try:
+        module = importlib.import_module(COMMANDS[argv[0]][0])
         return int(module.main(argv[1:]) or 0)
     except (DatasetError, ModelError, FileNotFoundError, ValueError) as e:  # a user's mistake: one line
         print(f"track3d-train {argv[0]}: error: {e}", file=sys.stderr)
         return 2
+    except ModuleNotFoundError as e:
+        return exit_for_missing_extra(e, EXTRA_MODULES, f"track3d-train {argv[0]}")
 
 
 if __name__ == "__main__":

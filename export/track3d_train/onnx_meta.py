@@ -106,11 +106,12 @@ def hash_files(paths) -> str:
     return h.hexdigest()
 
 
-def refuse_shipped(paths, force: bool = False) -> None:
-    """ValueError when an export would overwrite a model shipped in track3d/models (unless force)."""
+def refuse_shipped(paths, force: bool = False, out_flag: str = "--out") -> None:
+    """ValueError when an export would overwrite a model shipped in track3d/models (unless force);
+    out_flag: the command's option that chooses where it writes."""
     from track3d.onnxmodel import MODELS_DIR
 
     shipped = MODELS_DIR.resolve()
     hit = [Path(p) for p in paths if Path(p).exists() and Path(p).resolve().parent == shipped]
     if hit and not force:
-        raise ValueError(f"{hit[0]} is a shipped model: write elsewhere with --out, or pass --force to replace it")
+        raise ValueError(f"{hit[0]} is a shipped model: write elsewhere with {out_flag}, or pass --force to replace it")

@@ -1,7 +1,10 @@
 """`track3d-train quantize`: int8 twins of the shipped networks (static QDQ, onnxruntime.quantization).
 
     track3d-train quantize --data DATASET [--models-dir runtime/track3d/models] [--out-dir DIR]
-                           [--models a3boxnet siamfc_edge siamfc_faithful] [--samples 300]
+                           [--models a3boxnet siamfc_edge siamfc_faithful] [--samples 300] [--force]
+
+Writing over a shipped int8 file (the default --out-dir is the shipped models' folder, which
+holds a3boxnet_int8.onnx) needs --force, as every export does.
 
 For each fp32 model ``<stem>.onnx`` writes ``<stem>_int8.onnx`` (the file the runtime's loader
 finds for ``precision="int8"``): static QDQ, uint8 activations, int8 per-channel weights
@@ -31,9 +34,11 @@ import numpy as np
 
 from track3d.onnxmodel import META_KEY, MODELS_DIR, variant_path
 
-from .onnx_meta import attach_metadata, file_hash
+from track3d.argparsing import ArgumentParser, bounded
 
-__all__ = ["QUANT_RECIPE", "calibration_boxnet", "calibration_siamfc", "quantize_file", "main"]
+from .onnx_meta import attach_metadata, file_hash, refuse_shipped
+
+__all__ = ["QUANT_RECIPE", "calibration_boxnet", "calibration_siamfc", "quantize_file", "build_parser", "main"]
 
 QUANT_RECIPE = {"format": "QDQ", "method": "MinMax", "activations": "uint8", "weights": "int8 per channel",
                 "reduce_range": False, "tool": "onnxruntime.quantization.quantize_static"}
@@ -196,9 +201,14 @@ def quantize_file(fp32: Path, out: Path, feeds: list[dict], op_types: list[str],
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="track3d-train quantize", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+def _outputs(stem: str, models_dir: Path, out_dir: Path) -> list[tuple[Path, Path]]:
+    """(fp32 file, int8 file it becomes) of a model stem."""
+    parts = ["a3boxnet"] if stem == "a3boxnet" else [f"{stem}_exemplar", f"{stem}_search"]
+    return [(models_dir / f"{p}.onnx", out_dir / variant_path(models_dir / f"{p}.onnx", "int8").name) for p in parts]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = ArgumentParser(prog="track3d-train quantize", description=__doc__)
     ap.add_argument("--data", required=True, help="dataset root (track3d-sim output) with a train split")
     ap.add_argument("--split", default="train", help="calibration split (default: train)")
     ap.add_argument("--models-dir", type=Path, default=MODELS_DIR,
@@ -206,34 +216,36 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out-dir", type=Path, default=None, help="where the *_int8.onnx go (default: --models-dir)")
     ap.add_argument("--models", nargs="+", default=["a3boxnet", "siamfc_edge", "siamfc_faithful"],
                     help="stems to quantise (default: a3boxnet siamfc_edge siamfc_faithful)")
-    ap.add_argument("--samples", type=int, default=300, help="calibration samples per network (default 300)")
-    ap.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
+    ap.add_argument("--samples", type=bounded(int, 1), default=300, help="calibration samples per network (default 300)")
+    ap.add_argument("--seed", type=bounded(int, 0), default=0, help="sampling seed (default 0)")
+    ap.add_argument("--force", action="store_true", help="overwrite shipped int8 models in track3d/models")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = build_parser()
     a = ap.parse_args(argv)
-    if a.samples < 1:
-        ap.error("--samples must be >= 1")
     unknown = [m for m in a.models if m != "a3boxnet" and m not in SIAMFC_STEMS]
     if unknown:
         ap.error(f"unknown model stem(s) {', '.join(unknown)} (known: a3boxnet, {', '.join(SIAMFC_STEMS)})")
+    out_dir = a.out_dir or a.models_dir
+    # Before any calibration work: a shipped file is only replaced when asked.
+    refuse_shipped([q for stem in a.models for _, q in _outputs(stem, a.models_dir, out_dir)], a.force, "--out-dir")
     from track3d.dataset import Dataset
 
     from .boxnet.data import split_hash
 
     data_hash = split_hash(Dataset(a.data), a.split)
-    out_dir = a.out_dir or a.models_dir
     for stem in a.models:
         if stem == "a3boxnet":
-            fp32 = a.models_dir / "a3boxnet.onnx"
+            [(fp32, q)] = _outputs(stem, a.models_dir, out_dir)
             feeds = calibration_boxnet(fp32, a.data, a.split, a.samples, a.seed)
-            out = quantize_file(fp32, out_dir / variant_path(fp32, "int8").name, feeds, ["Conv", "Gemm"],
-                                data_hash, a.split, float_heads=True)
+            out = quantize_file(fp32, q, feeds, ["Conv", "Gemm"], data_hash, a.split, float_heads=True)
             print(f"wrote {out} ({len(feeds)} calibration samples)")
-        elif stem in SIAMFC_STEMS:
-            pz, px = a.models_dir / f"{stem}_exemplar.onnx", a.models_dir / f"{stem}_search.onnx"
-            ex, se = calibration_siamfc(pz, px, a.data, a.split, a.samples, a.seed)
-            for fp32, feeds in ((pz, ex), (px, se)):
-                out = quantize_file(fp32, out_dir / variant_path(fp32, "int8").name, feeds, ["Conv"],
-                                    data_hash, a.split)
-                print(f"wrote {out} ({len(feeds)} calibration samples)")
         else:
-            raise ValueError(f"unknown model stem {stem!r} (known: a3boxnet, {', '.join(SIAMFC_STEMS)})")
+            (pz, qz), (px, qx) = _outputs(stem, a.models_dir, out_dir)
+            ex, se = calibration_siamfc(pz, px, a.data, a.split, a.samples, a.seed)
+            for fp32, q, feeds in ((pz, qz, ex), (px, qx, se)):
+                out = quantize_file(fp32, q, feeds, ["Conv"], data_hash, a.split)
+                print(f"wrote {out} ({len(feeds)} calibration samples)")
     return 0

@@ -4,7 +4,9 @@
   where the help text does not already say it);
 - one name per flag across CLIs (``--checkpoint``, ``--max-steps``, ``--quiet``); older names
   stay as hidden aliases (:func:`hidden_alias`);
-- a user's mistake is one line on stderr and exit 2 (:func:`run_main`), never a traceback.
+- a user's mistake is one line on stderr and exit 2 (:func:`run_main`), never a traceback;
+  a command-line mistake too (:class:`ArgumentParser`: the error and where the help is, not
+  the whole usage block).
 """
 from __future__ import annotations
 
@@ -12,7 +14,8 @@ import argparse
 import sys
 from typing import Callable
 
-__all__ = ["HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS"]
+__all__ = ["ArgumentParser", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS",
+           "missing_extra", "exit_for_missing_extra", "package_version", "bounded"]
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
@@ -29,6 +32,53 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
         return f"{h} (default: %(default)s)"
 
 
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with the conventions: HelpFormatter by default, and a usage mistake printed as
+    one line (``prog: error: ... (see prog --help)``), exit 2. argparse's default prints the
+    whole usage block first, a dozen lines for the bigger commands, burying the error.
+    Sub-command parsers are of the same class (argparse makes them with type(parent))."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str):  # argparse's hook; must not return
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def bounded(kind: type = int, low: float | None = None, above: float | None = None,
+            high: float | None = None) -> Callable[[str], float]:
+    """argparse type: an int or float that is >= low, > above and <= high (each optional; NaN
+    never passes). A count of 0 or -5 or a learning rate of -1 used to run and write a wrong or
+    empty result, or end in a ZeroDivisionError deep inside."""
+    what = "an integer" if kind is int else "a number"
+    rule = " and ".join(r for r in (low is not None and f">= {low}", above is not None and f"> {above}",
+                                     high is not None and f"<= {high}") if r)
+
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what} {rule}, got {text!r}") from None
+        if v != v or (low is not None and v < low) or (above is not None and v <= above) \
+                or (high is not None and v > high):
+            raise argparse.ArgumentTypeError(f"expected {what} {rule}, got {text!r}")
+        return v
+    parse.__name__ = f"{what} {rule}"
+    return parse
+
+
+def package_version() -> str:
+    """The installed track3d version (`--version` of all three commands); "unknown" in a bare
+    checkout without installed metadata."""
+    try:
+        from importlib.metadata import version
+
+        return version("track3d")
+    except Exception:
+        return "unknown"
+
+
 def apply_formatter(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Give `parser` and all its sub-command parsers the HelpFormatter."""
     parser.formatter_class = HelpFormatter
@@ -42,6 +92,27 @@ def apply_formatter(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
 def hidden_alias(parser: argparse.ArgumentParser, flag: str, dest: str, **kwargs) -> None:
     """An old flag name that still works but is not shown in --help."""
     parser.add_argument(flag, dest=dest, help=argparse.SUPPRESS, default=argparse.SUPPRESS, **kwargs)
+
+
+def missing_extra(e: ModuleNotFoundError, extras: dict[str, str]) -> str | None:
+    """The one-line reason for a module that an extra installs (`extras`: top-level module ->
+    extra name): "needs the sim extra: pip install 'track3d[sim]' (missing: tqdm)". None for
+    any other module: that is a bug, not the user's install, and keeps its traceback."""
+    top = (e.name or "").split(".")[0]
+    extra = extras.get(top)
+    if extra is None:
+        return None
+    return f"needs the {extra} extra: pip install 'track3d[{extra}]' (missing: {top})"
+
+
+def exit_for_missing_extra(e: ModuleNotFoundError, extras: dict[str, str], prog: str) -> int:
+    """In a command's `except ModuleNotFoundError`: print `prog: error: needs the X extra ...`
+    and return exit code 2, or re-raise `e` when no extra installs the module."""
+    hint = missing_extra(e, extras)
+    if hint is None:
+        raise e
+    print(f"{prog}: error: {hint}", file=sys.stderr)
+    return 2
 
 
 def _user_errors() -> tuple:

@@ -47,6 +47,7 @@ class BenchConfig:
     threads: tuple[int, ...] = (1, 2)
     data: str | None = None
     split: str = "test"
+    sequences: tuple[str, ...] | None = None      # with data: these sequences, else the split's first
     synthetic_frames: int = 60
     models_only: bool = False
     busy_seconds: float = 0.5
@@ -114,12 +115,13 @@ def synthetic_frames(camera: Camera, n: int = 60, seed: int = 0):
     return out
 
 
-def _dataset_frames(root: str, split: str, max_frames: int):
-    """(camera, category, frames) of the first sequences of a dataset split, preloaded."""
+def _dataset_frames(root: str, split: str, max_frames: int, names: tuple[str, ...] | None = None):
+    """(camera, category, frames) of the first sequences of a dataset split (or of `names`),
+    preloaded."""
     from .dataset import Dataset
 
     ds = Dataset(root)
-    seqs = ds.sequences(split)
+    seqs = [ds.sequence(split, n) for n in dict.fromkeys(names)] if names else ds.sequences(split)
     if not seqs:
         raise ValueError(f"split {split!r} of {root} has no sequences")
     passes = []
@@ -175,7 +177,7 @@ def _build(cfg: BenchConfig, camera: Camera, threads: int):
 
     topt: dict = dict(cfg.extra.get("tracker_options", {}))
     eopt: dict = dict(cfg.extra.get("estimator_options", {}))
-    if cfg.tracker.startswith("siamfc") or cfg.tracker_model:
+    if cfg.tracker in NETWORK_TRACKERS or cfg.tracker_model:  # EdgeTrack was timed at 1 thread in every row
         topt["threads"] = threads
         if cfg.tracker_model:
             topt["model"] = cfg.tracker_model
@@ -185,6 +187,10 @@ def _build(cfg: BenchConfig, camera: Camera, threads: int):
             eopt["model"] = cfg.boxnet_model
     return Track3D.create(camera, cfg.tracker, cfg.estimator, tracker_options=topt, estimator_options=eopt)
 
+
+# Built-in 2D trackers that run networks: they get the row's thread count as intra-op threads
+# (OpenCV's trackers get it through cv2.setNumThreads).
+NETWORK_TRACKERS = ("siamfc", "siamfc-edge", "edgetrack")
 
 STAGE_NAMES = ("track2d", "net2d", "frustum", "box3d", "net3d", "fusion", "end_to_end")
 
@@ -251,8 +257,9 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
         raise ValueError(f"threads must be >= 1, got {cfg.threads}")
     say = log or (lambda s: None)
     if cfg.data:
-        camera, passes = _dataset_frames(cfg.data, cfg.split, max(cfg.synthetic_frames, 100))
-        source = {"kind": "dataset", "data": str(cfg.data), "split": cfg.split}
+        camera, passes = _dataset_frames(cfg.data, cfg.split, max(cfg.synthetic_frames, 100), cfg.sequences)
+        source = {"kind": "dataset", "data": str(cfg.data), "split": cfg.split,
+                  **({"sequences": list(cfg.sequences)} if cfg.sequences else {})}
     else:
         camera = Camera.from_fov(640, 480, 45.0)
         say(f"synthesising {cfg.synthetic_frames} frames (640x480 sphere) ...")
@@ -269,6 +276,9 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
             pinned = bool(machine.pin_threads(threads, allowed))
             t3d = _build(cfg, camera, threads)
             described = described or t3d.describe()
+            if cfg.models_only and not (_onnx_models(t3d.tracker2d) or _onnx_models(t3d.estimator)):
+                raise ValueError(f"--models-only: {cfg.tracker} + {cfg.estimator} run no ONNX network "
+                                 f"(time the loop without --models-only)")
             say(f"{t3d.tracker_name}+{t3d.estimator_name} at {threads} thread(s) on CPU(s) {cpus} ...")
             wall0, cpu0 = time.perf_counter(), time.process_time()
             stages, statuses, feeds = _time_loop(t3d, passes, min(cfg.frames, 200) if cfg.models_only else cfg.frames)

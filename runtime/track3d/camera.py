@@ -33,8 +33,9 @@ class Camera:
     dist: tuple[float, ...] | None = None                          # OpenCV distortion coefficients
 
     def __post_init__(self) -> None:
-        if int(self.width) <= 0 or int(self.height) <= 0:
-            raise ValueError(f"camera resolution must be positive, got {self.width}x{self.height}")
+        w, h = _resolution(self.width, self.height)
+        object.__setattr__(self, "width", w)
+        object.__setattr__(self, "height", h)
         for name in ("fov_x_deg", "fov_y_deg"):
             v = float(getattr(self, name))
             if not (0.0 < v < 180.0) or not math.isfinite(v):
@@ -57,7 +58,7 @@ class Camera:
         """A calibrated camera: focal lengths and principal point in pixels (continuous pixel
         coordinates, pixel i spans [i, i+1): OpenCV's calibration gives cx for pixel centres at
         integers, add 0.5 to it), `dist` OpenCV's distortion coefficients or None."""
-        w, h = int(width), int(height)
+        w, h = _resolution(width, height)
         if fx <= 0 or fy <= 0:
             raise ValueError(f"focal lengths must be positive, got fx={fx}, fy={fy}")
         ax = math.degrees(2.0 * math.atan(w / (2.0 * fx)))
@@ -68,9 +69,7 @@ class Camera:
     @classmethod
     def from_K(cls, width: int, height: int, K, dist=None, baseline_m: float = 0.4) -> "Camera":
         """A calibrated camera from its (3, 3) intrinsic matrix (no skew)."""
-        k = np.asarray(K, dtype=np.float64)
-        if k.shape != (3, 3) or not np.all(np.isfinite(k)):
-            raise ValueError(f"K must be a finite 3x3 matrix, got shape {k.shape}")
+        k = _matrix3(K)
         if abs(k[0, 1]) > 1e-9 or np.any(np.abs(k[2] - [0, 0, 1]) > 1e-9) or abs(k[1, 0]) > 1e-9:
             raise ValueError("K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)")
         return cls.from_intrinsics(width, height, k[0, 0], k[1, 1], k[0, 2], k[1, 2], dist, baseline_m)
@@ -106,8 +105,9 @@ class Camera:
     @classmethod
     def from_fov(cls, width: int, height: int, fov_x_deg: float, baseline_m: float = 0.4) -> "Camera":
         """Square pixels: the vertical perspective angle follows from the horizontal one."""
+        width, height = _resolution(width, height)  # before the division below
         fy_half = math.atan(height / width * math.tan(math.radians(fov_x_deg) / 2.0))
-        return cls(int(width), int(height), float(fov_x_deg), math.degrees(2.0 * fy_half), baseline_m)
+        return cls(width, height, float(fov_x_deg), math.degrees(2.0 * fy_half), baseline_m)
 
     # --- intrinsics (paper eq. 1) ---
     @property
@@ -233,16 +233,42 @@ class Camera:
         otherwise the angles define K (eq. 1) and a K given next to them must agree."""
         if "K" in d and (d.get("calibrated") or "fov_x_deg" not in d or d.get("dist")):
             try:
-                return cls.from_K(int(d["width"]), int(d["height"]), d["K"], d.get("dist"),
+                return cls.from_K(d["width"], d["height"], d["K"], d.get("dist"),
                                   float(d.get("baseline_m", 0.4)))
             except KeyError as e:
                 raise ValueError(f"camera description lacks the key {e.args[0]!r}") from None
         try:
-            cam = cls(int(d["width"]), int(d["height"]), float(d["fov_x_deg"]), float(d["fov_y_deg"]),
+            cam = cls(d["width"], d["height"], float(d["fov_x_deg"]), float(d["fov_y_deg"]),
                       float(d.get("baseline_m", 0.4)))
         except KeyError as e:
             raise ValueError(f"camera description lacks the key {e.args[0]!r}") from None
-        if "K" in d and not np.allclose(np.asarray(d["K"], dtype=np.float64), cam.K, rtol=1e-9, atol=1e-6):
+        if "K" in d and not np.allclose(_matrix3(d["K"]), cam.K, rtol=1e-9, atol=1e-6):
             raise ValueError("camera K in the file disagrees with its perspective angles and resolution "
                              "(a calibrated K needs \"calibrated\": true)")
         return cam
+
+
+def _resolution(width, height) -> tuple[int, int]:
+    """(width, height) as positive whole numbers of pixels: 640.5 or "640" would otherwise be
+    truncated, kept as a float or parsed without a word (a camera one pixel off puts every
+    frustum in the wrong place)."""
+    for name, v in (("width", width), ("height", height)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(v) or v != int(v):
+            raise ValueError(f"camera {name} must be a whole number of pixels, got {v!r}")
+    if width <= 0 or height <= 0:
+        raise ValueError(f"camera resolution must be positive, got {width}x{height}")
+    return int(width), int(height)
+
+
+def _matrix3(K) -> np.ndarray:
+    """K as a finite (3, 3) float64 array, or ValueError saying what it is instead."""
+    try:
+        k = np.asarray(K, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"K must be a finite 3x3 matrix of numbers, got {K!r:.80}") from None
+    if k.shape != (3, 3):
+        raise ValueError(f"K must be a finite 3x3 matrix, got shape {k.shape}")
+    if not np.all(np.isfinite(k)):
+        raise ValueError("K must be a finite 3x3 matrix, it holds NaN or inf")
+    return k

@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .argparsing import apply_formatter, hidden_alias
+from .argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias, package_version
 
 __all__ = ["main"]
 
@@ -37,15 +37,17 @@ def _options(pairs: list[str] | None) -> dict:
     return out
 
 
-def _positive_int(text: str) -> int:
-    """argparse type: an integer >= 1 (a count of frames or threads)."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
-    return v
+def _result_name(text: str) -> str:
+    """argparse type: a result name is one folder under <results>/<split>/; "a/b" or "../x"
+    would write beside or outside the results, where `track3d eval` never looks."""
+    if not text or text in (".", "..") or "/" in text or "\\" in text:
+        raise argparse.ArgumentTypeError(f"a result name is one folder name (no '/', '\\', '.' or '..'), got {text!r}")
+    return text
+
+
+def _unique(names: list[str] | None) -> list[str] | None:
+    """Names in their order, each once (`--sequence a a` is one sequence, not two runs of it)."""
+    return None if names is None else list(dict.fromkeys(names))
 
 
 def _add_data_args(p: argparse.ArgumentParser) -> None:
@@ -53,18 +55,9 @@ def _add_data_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--split", default="test", help="dataset split (default: test)")
     p.add_argument("--sequence", "--sequences", dest="sequences", nargs="+", metavar="NAME",
                    help="only these sequences of the split")
-    p.add_argument("--frames", type=_positive_int, help="only the first N (>= 1) frames of each sequence (default: all)")
+    p.add_argument("--frames", type=bounded(int, 1), help="only the first N (>= 1) frames of each sequence (default: all)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     hidden_alias(p, "--no-progress", "quiet", action="store_true")
-
-
-def _version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("track3d")
-    except Exception:  # a bare checkout without installed metadata
-        return "unknown"
 
 
 def _add_plugin_arg(p: argparse.ArgumentParser) -> None:
@@ -75,9 +68,9 @@ def _add_plugin_arg(p: argparse.ArgumentParser) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="track3d", description="Track3D: 3D asteroid tracking runtime "
+    ap = ArgumentParser(prog="track3d", description="Track3D: 3D asteroid tracking runtime "
                                  "(2D tracker -> frustum -> 3D box estimator -> 2D-3D fusion).")
-    ap.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    ap.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
     ap.add_argument("--plugin", action="append", dest="plugins_top", metavar="MODULE", default=[],
                     help="import this module (dotted name or .py file) first: it registers its trackers or "
                          "estimators (repeatable; also accepted after the command)")
@@ -99,7 +92,7 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--engine", choices=("onnxruntime", "openvino", "auto"), default=None,
                    help="inference engine of the networks; openvino needs track3d[openvino] (default onnxruntime)")
     t.add_argument("--results", default="results", help="result folder (default ./results)")
-    t.add_argument("--name", help="result name (default <tracker>+<estimator>, tagged @<model>-<hash> for "
+    t.add_argument("--name", type=_result_name, help="result name (default <tracker>+<estimator>, tagged @<model>-<hash> for "
                                   "non-shipped model files)")
     t.add_argument("--replace", action="store_true",
                    help="replace results of another configuration under the same name (default: refuse)")
@@ -111,7 +104,7 @@ def _parser() -> argparse.ArgumentParser:
                         "left/right images by semi-global matching around the 2D box (stereo)")
     t.add_argument("--video", choices=("auto", "gif", "mp4", "none"), default="auto",
                    help="overlay format (default auto: gif when pillow is installed, else mp4; gif needs pillow)")
-    t.add_argument("--video-sequences", type=int, default=1, help="how many sequences get an overlay")
+    t.add_argument("--video-sequences", type=bounded(int, 0), default=1, help="how many sequences get an overlay")
 
     e = sub.add_parser("eval", help="results vs ground truth -> report.json, table and plots")
     _add_data_args(e)
@@ -119,7 +112,7 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--trackers", nargs="+", help="result names to compare (default: all in the folder)")
     e.add_argument("--out", default="reports", help="report folder (default ./reports)")
     e.add_argument("--no-plots", action="store_true", help="skip the plots (no matplotlib needed)")
-    e.add_argument("--trajectories", type=int, default=4, help="sequences with a 3D trajectory plot")
+    e.add_argument("--trajectories", type=bounded(int, 0), default=4, help="sequences with a 3D trajectory plot")
 
     # The demo simulates its data, so it lives with the simulator (`track3d-sim demo`): the
     # runtime never imports the simulator. This entry only says where it went.
@@ -142,6 +135,8 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--threads", type=int, nargs="+", default=[1, 2], help="thread counts to time")
     b.add_argument("--data", help="time on this dataset's first sequences instead of synthetic frames")
     b.add_argument("--split", default="test", help="dataset split with --data")
+    b.add_argument("--sequence", "--sequences", dest="sequences", nargs="+", metavar="NAME",
+                   help="with --data: only these sequences (default: the split's first)")
     b.add_argument("--models-only", action="store_true",
                    help="time each network alone on the inputs it gets in the loop (onnxruntime_perf_test style)")
     b.add_argument("--out", metavar="JSON", help="also write the report as JSON here")
@@ -160,10 +155,13 @@ def _cmd_bench(a) -> int:
 
     cfg = BenchConfig(tracker=a.tracker, estimator=a.estimator, tracker_model=a.tracker_model,
                       boxnet_model=a.boxnet_model, frames=a.frames, threads=tuple(a.threads), data=a.data,
-                      split=a.split, models_only=a.models_only)
+                      split=a.split, sequences=tuple(a.sequences) if a.sequences else None,
+                      models_only=a.models_only)
     for p in (a.tracker_model and Path(a.tracker_model).parent, a.boxnet_model):
         if p and not Path(p).exists():
             raise FileNotFoundError(f"no such model path: {p}")
+    if a.out and Path(a.out).is_dir():  # before the timing, not after minutes of it
+        raise ValueError(f"--out {a.out} is a folder: give the JSON file to write")
     report = run_bench(cfg, log=None if a.quiet else (lambda s: print(f"[bench] {s}", file=sys.stderr)))
     print(json.dumps(report, indent=1) if a.json else format_table(report))
     if a.out:
@@ -188,7 +186,7 @@ def _cmd_track(a) -> int:
                        tracker_options=topts, estimator_options=eopts, name=a.name)
     if a.depth == "stereo" and not a.name:
         spec.name = spec.label + "-stereo"   # keep the depth-map results of the same pair
-    exp = Experiment(a.data, a.split, a.results, sequences=a.sequences, max_frames=a.frames,
+    exp = Experiment(a.data, a.split, a.results, sequences=_unique(a.sequences), max_frames=a.frames,
                      restart=not a.no_restart, restart_skip=a.restart_skip, depth=a.depth)
     results = Path(a.results)
     if results.exists() and not results.is_dir():
@@ -228,14 +226,14 @@ def _cmd_eval(a) -> int:
 
     split_dir = Path(a.results) / a.split
     if a.trackers:
-        names = list(a.trackers)
+        names = _unique(a.trackers)
     elif split_dir.is_dir():
         names = sorted(p.name for p in split_dir.iterdir() if p.is_dir())
     else:
         names = []
     if not names:
         raise FileNotFoundError(f"no results in {split_dir} (run `track3d track` first)")
-    exp = Experiment(a.data, a.split, a.results, a.out, sequences=a.sequences, max_frames=a.frames)
+    exp = Experiment(a.data, a.split, a.results, a.out, sequences=_unique(a.sequences), max_frames=a.frames)
     if not a.sequences:
         # Default: the sequences every named tracker has results for.
         have = [s for s in exp.sequences

@@ -81,11 +81,15 @@ class NoEstimator:
 def _a3boxnet(**options) -> BoxEstimator:
     try:
         mod = importlib.import_module("track3d.boxnet")
-        create = getattr(mod, "create")
+        create = getattr(mod, "A3BoxNetEstimator")
     except (ImportError, AttributeError) as e:
         raise EstimatorUnavailable(f"A3BoxNet model not available: track3d.boxnet cannot be loaded ({e})") from None
+    from .plugins import call_factory
+
     try:
-        return create(**options)
+        # through call_factory with the real signature: this wrapper's **options would hide it
+        # and a wrong name would be a bare TypeError without the list of options it takes
+        return call_factory("3D box estimator", "a3boxnet", create, options)
     except (FileNotFoundError, OSError) as e:
         raise EstimatorUnavailable(f"A3BoxNet model not available: {e}") from None
     except Exception as e:  # onnxmodel.ModelError: no shipped model yet, or a bad file

@@ -244,8 +244,13 @@ class Track3D:
         ms: dict[str, float] = dict.fromkeys(STAGES, 0.0)
         t0 = time.perf_counter()
         image = self.camera.undistort_image(check_image(image, self._size))
-        ok, raw = self.tracker2d.update(image)
-        raw = np.asarray(raw, dtype=np.float64).reshape(-1)
+        res = self.tracker2d.update(image)
+        try:
+            ok, raw = res
+            raw = np.asarray(raw, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):  # a plug-in's bug, named as such (not numpy's message)
+            raise ValueError(f"the 2D tracker {self.tracker_name or self.tracker2d!r} returned {res!r:.80} from "
+                             f"update(image); the protocol is (ok: bool, box: [x, y, w, h])") from None
         t1 = time.perf_counter()
         ms["track2d"] = (t1 - t0) * 1e3
         if not ok or raw.shape != (4,) or not _valid_box2d(raw):
@@ -304,6 +309,7 @@ class Track3D:
         return to_plain({
             "version": STATE_VERSION, "tracker": self.tracker_name or type(self.tracker2d).__name__,
             "estimator": self.estimator_name or type(self.estimator).__name__,
+            "camera": self.camera.to_dict(),
             "category": self.category, "box2d": self.box2d, "box3d": self.box3d,
             "bad_frames": self.bad_frames, "held_frames": self.held_frames,
             "tracker2d": get2d(), "estimator_state": get3d() if get3d is not None else None,
@@ -317,18 +323,38 @@ class Track3D:
         if not isinstance(st, dict) or st.get("version") != STATE_VERSION:
             raise ValueError(f"not a Track3D state of version {STATE_VERSION}")
         mine = (self.tracker_name or type(self.tracker2d).__name__, self.estimator_name or type(self.estimator).__name__)
-        if (st["tracker"], st["estimator"]) != mine:
-            raise ValueError(f"state of {st['tracker']}+{st['estimator']} cannot restore a {mine[0]}+{mine[1]} tracker")
+        if (st.get("tracker"), st.get("estimator")) != mine:
+            raise ValueError(f"state of {st.get('tracker')}+{st.get('estimator')} cannot restore a "
+                             f"{mine[0]}+{mine[1]} tracker")
+        # Boxes are in the state's image: another camera's would land in the wrong place. (States
+        # written before the camera was recorded have none and are taken as they are.)
+        if "camera" in st and Camera.from_dict(st["camera"]) != self.camera:
+            raise ValueError(f"state of a {st['camera'].get('width')}x{st['camera'].get('height')} camera cannot "
+                             f"restore a tracker of another camera ({self.camera.width}x{self.camera.height} "
+                             f"or other intrinsics)")
         set2d = getattr(self.tracker2d, "set_state", None)
         if set2d is None:
             raise ValueError(f"the 2D tracker {self.tracker2d!r} has no set_state()")
-        set2d(st["tracker2d"])
-        if st.get("estimator_state") is not None:
-            self.estimator.set_state(st["estimator_state"])
-        self.category = int(st["category"])
-        self.box2d = np.asarray(st["box2d"], dtype=np.float64).reshape(4).copy()
-        self.box3d = np.asarray(st["box3d"], dtype=np.float64).reshape(6).copy()
-        self.bad_frames, self.held_frames = int(st["bad_frames"]), int(st["held_frames"])
+        # Read every field before changing anything: a damaged state leaves the tracker as it was.
+        try:
+            category = int(st["category"])
+            box2d = np.asarray(st["box2d"], dtype=np.float64).reshape(4).copy()
+            box3d = np.asarray(st["box3d"], dtype=np.float64).reshape(6).copy()
+            bad, held = int(st["bad_frames"]), int(st["held_frames"])
+            tracker2d, estimator_state = st["tracker2d"], st.get("estimator_state")
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"damaged Track3D state: {type(e).__name__}: {e}") from None
+        set2d(tracker2d)
+        if estimator_state is not None:
+            self.estimator.set_state(estimator_state)
+        self.category, self.box2d, self.box3d = category, box2d, box3d
+        self.bad_frames, self.held_frames = bad, held
+
+    def __getstate__(self):
+        # pickle / copy would stop inside onnxruntime ("cannot pickle InferenceSession"), a
+        # message that does not say what to do instead.
+        raise TypeError("a Track3D holds onnxruntime sessions and OpenCV trackers and cannot be pickled: "
+                        "checkpoint it with state = t.get_state() (plain data) and t2.set_state(state)")
 
     def describe(self) -> dict:
         """What this tracker is, as a plain dict: names, options, and every ONNX model file it

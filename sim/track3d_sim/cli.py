@@ -4,10 +4,18 @@ from __future__ import annotations
 import argparse
 import sys
 
+from track3d.argparsing import ArgumentParser, apply_formatter, exit_for_missing_extra, hidden_alias, package_version
+
 from .errors import SimError
 from .generate import PRESETS
 from .generators import GENERATORS
 from .sensors import DEPTH_SENSORS
+
+
+# What the simulator imports beyond the runtime (top-level module -> the extra installing it):
+# the base install also has the track3d-sim command, which must say so, not end in a traceback.
+EXTRA_MODULES = {**{m: "sim" for m in ("trimesh", "embreex", "PIL", "tqdm", "matplotlib", "scipy", "skimage")},
+                 "ray": "cluster"}
 
 
 def _resolution(text: str):
@@ -34,8 +42,9 @@ def _mesh(text: str):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="track3d-sim", description="3D asteroid tracking dataset simulator "
+    p = ArgumentParser(prog="track3d-sim", description="3D asteroid tracking dataset simulator "
                                 "(headless CPU ray casting; writes the layout of docs/dataset.md).")
+    p.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="{generate,stats,preview,ply,shapes,demo}")
     g = sub.add_parser("generate", help="render a dataset (resumable, deterministic for a seed)",
                        description="Render a dataset into --out. A killed run continues where it stopped "
@@ -81,8 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="use every mesh file of DIR that trimesh reads (cycled over the sequences, in name order) "
                         "as the bodies, scaled to the sampled box volume (default: procedural generators)")
     g.add_argument("--overwrite", action="store_true", help="delete an existing track3d-sim output folder first")
-    g.add_argument("--no-progress", action="store_true", help="no progress bar")
-    g.add_argument("--quiet", dest="no_progress", action="store_true", help=argparse.SUPPRESS)  # the other CLIs' name
+    g.add_argument("--quiet", dest="no_progress", action="store_true", help="no progress bar")
+    hidden_alias(g, "--no-progress", "no_progress", action="store_true")  # the name before --quiet
 
     s = sub.add_parser("stats", help="the paper's Fig. 4 plots (size classes, box volumes, speeds, illumination)")
     s.add_argument("root", help="dataset folder (with dataset.json)")
@@ -93,8 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
     v = sub.add_parser("preview", help="contact sheet (PNG) or animation (GIF) of a sequence with its boxes")
     v.add_argument("sequence", help="sequence folder, e.g. DATA/train/0001")
     v.add_argument("--out", required=True, help="output .png (contact sheet) or .gif (animation)")
-    v.add_argument("--frames", type=int, default=12, help="frames in the contact sheet (default 12)")
-    v.add_argument("--gain", type=float, default=1.0, help="brightness gain for viewing dark images (default 1)")
+    v.add_argument("--frames", type=int, default=12, help="frames in the contact sheet, >= 1 (default 12)")
+    v.add_argument("--gain", type=float, default=1.0, help="brightness gain (> 0) for viewing dark images (default 1)")
     v.add_argument("--right", action="store_true", help="add the right image beside the left")
     dm = sub.add_parser("demo", help="simulate a small test set, run Track3D with the shipped models, evaluate, "
                                       "write plots and an overlay (the README's main job)")
@@ -111,9 +120,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--count", type=int, default=6, help="bodies per generator (default 6)")
     c.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     c.add_argument("--detail", type=int, default=5, help="mesh detail 1..8 (default 5; the datasets use 6)")
-    c.add_argument("--cell", type=int, default=192, help="pixels per body image (default 192)")
-    c.add_argument("--no-progress", action="store_true", help="no progress bar")
-    return p
+    c.add_argument("--cell", type=int, default=192, help="pixels per body image, >= 16 (default 192)")
+    c.add_argument("--quiet", dest="no_progress", action="store_true", help="no progress bar")
+    hidden_alias(c, "--no-progress", "no_progress", action="store_true")
+    return apply_formatter(p)
 
 
 def main(argv=None) -> int:
@@ -156,6 +166,8 @@ def main(argv=None) -> int:
     except SimError as e:
         print(f"track3d-sim: error: {e}", file=sys.stderr)
         return 2
+    except ModuleNotFoundError as e:
+        return exit_for_missing_extra(e, EXTRA_MODULES, f"track3d-sim {args.cmd}")
     except KeyboardInterrupt:
         print("track3d-sim: interrupted (run the same command again to resume)", file=sys.stderr)
         return 130

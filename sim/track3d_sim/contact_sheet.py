@@ -52,6 +52,8 @@ def contact_sheet(out: str | Path, generators: list[str] | None = None, count: i
         raise SimError(f"--count must be >= 1, got {count}")
     if not 1 <= detail <= 8:
         raise SimError(f"--detail must be 1..8, got {detail}")
+    if cell < 16:  # smaller cells leave no room for a body under its label
+        raise SimError(f"--cell must be >= 16 pixels, got {cell}")
     out = Path(out)
     label_h = 18
     sheet = Image.new("RGB", (count * cell, len(names) * (cell + label_h)), (0, 0, 0))

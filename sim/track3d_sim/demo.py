@@ -46,10 +46,15 @@ def missing_demo_modules() -> list[str]:
 
 
 def pick_models(tracker: str | None, estimator: str | None, threads: int) -> tuple[str, str, list[str]]:
-    """The tracker and estimator names to use, and warnings for every fallback taken."""
-    from track3d.estimators import create_estimator
-    from track3d.trackers2d import create_tracker
+    """The tracker and estimator names to use, and warnings for every fallback taken. A name
+    no registry knows is the registry's ValueError (called before simulating anything)."""
+    from track3d.estimators import available_estimators, create_estimator
+    from track3d.trackers2d import available_trackers, create_tracker
 
+    if tracker is not None and str(tracker).lower() not in available_trackers():
+        create_tracker(tracker)          # raises "unknown 2D tracker ...; available: ..."
+    if estimator is not None and str(estimator).lower() not in available_estimators():
+        create_estimator(estimator)      # raises "unknown 3D box estimator ...; available: ..."
     warnings = []
     if tracker is None:
         try:
@@ -99,8 +104,9 @@ def run_demo(a) -> int:
     out = Path(a.out)
     data = out / "data"
     t0 = time.perf_counter()
-    _simulate(data, a)
+    # names first: a typo fails at once, not after minutes of simulation
     tracker, estimator, warnings = pick_models(a.tracker, a.estimator, a.threads)
+    _simulate(data, a)
     for w in warnings:
         print(f"[demo] WARNING: {w}", file=sys.stderr)
     spec = TrackerSpec(tracker, estimator, threads=a.threads)

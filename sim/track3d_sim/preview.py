@@ -66,6 +66,10 @@ def preview(sequence: str | Path, out: str | Path, n: int = 12, gain: float = 1.
     N = len(seq)
     if N == 0:
         raise SimError(f"{sequence} has no frames")
+    if n < 1:  # 0 or -5 used to give a one-frame sheet without a word
+        raise SimError(f"--frames must be >= 1, got {n}")
+    if not (0 < gain < float("inf")):  # <= 0 gave black images, NaN a numpy warning and black
+        raise SimError(f"--gain must be a positive number, got {gain}")
     if out.suffix.lower() == ".gif":
         frames = [draw_frame(seq, i, gain, right) for i in range(N)]
         frames[0].save(out, save_all=True, append_images=frames[1:], duration=100, loop=0)

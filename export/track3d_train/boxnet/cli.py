@@ -1,11 +1,11 @@
 """`track3d-train boxnet`: prepare the frustum caches, train, export and evaluate A3BoxNet.
 
-Typical run (the shipped model; see docs/a3boxnet.md):
+Typical run (the shipped model; see docs/models.md):
 
     track3d-train boxnet prepare --data data/small --split train --jitters 5 --out runs/boxnet/cache
     track3d-train boxnet prepare --data data/small --split test --jitters 0 --out runs/boxnet/cache
     track3d-train boxnet train --cache runs/boxnet/cache/boxnet_train_*.npz --out runs/boxnet/main
-    track3d-train boxnet export --checkpoint runs/boxnet/main/best.pt --out runtime/track3d/models/a3boxnet.onnx
+    track3d-train boxnet export --checkpoint runs/boxnet/main/best.pt --out runtime/track3d/models/a3boxnet.onnx --force
     track3d-train boxnet eval --model runtime/track3d/models/a3boxnet.onnx --cache runs/boxnet/cache/boxnet_test_*.npz
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from track3d.argparsing import apply_formatter, hidden_alias
+from track3d.argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias
 
 
 def _log(msg: str) -> None:
@@ -93,7 +93,7 @@ def _eval(a) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="track3d-train boxnet", description=__doc__,
+    p = ArgumentParser(prog="track3d-train boxnet", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="cmd", required=True)
 
@@ -103,17 +103,17 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--data", required=True, help="dataset root (with dataset.json)")
     q.add_argument("--split", default="train", help="split name (train / test / test_unseen; default train)")
     q.add_argument("--out", default="runs/boxnet/cache", help="a folder (file named by the data hash) or a .npz")
-    q.add_argument("--jitters", type=int, default=5, help="jittered boxes per frame (0 for the oracle test set)")
+    q.add_argument("--jitters", type=bounded(int, 0), default=5, help="jittered boxes per frame (0 for the oracle test set)")
     q.add_argument("--no-oracle", action="store_true", help="do not also keep the exact ground-truth box")
-    q.add_argument("--max-points", type=int, default=4096, help="points stored per frustum (random subset)")
-    q.add_argument("--min-points", type=int, default=16, help="skip frustums with fewer points")
-    q.add_argument("--center-sigma", type=float, default=0.1, help="centre shift std, fraction of w / h")
-    q.add_argument("--scale-sigma", type=float, default=0.1, help="log-scale std (shared by w and h)")
-    q.add_argument("--aspect-sigma", type=float, default=0.05, help="log-aspect std")
-    q.add_argument("--fail-prob", type=float, default=0.1, help="probability of a 3x larger error")
-    q.add_argument("--frame-step", type=int, default=1, help="use every k-th frame")
-    q.add_argument("--max-sequences", type=int, default=None, help="only the first k sequences")
-    q.add_argument("--seed", type=int, default=0, help="jitter / subsampling seed")
+    q.add_argument("--max-points", type=bounded(int, 1), default=4096, help="points stored per frustum (random subset)")
+    q.add_argument("--min-points", type=bounded(int, 1), default=16, help="skip frustums with fewer points")
+    q.add_argument("--center-sigma", type=bounded(float, 0), default=0.1, help="centre shift std, fraction of w / h")
+    q.add_argument("--scale-sigma", type=bounded(float, 0), default=0.1, help="log-scale std (shared by w and h)")
+    q.add_argument("--aspect-sigma", type=bounded(float, 0), default=0.05, help="log-aspect std")
+    q.add_argument("--fail-prob", type=bounded(float, 0, high=1), default=0.1, help="probability of a 3x larger error")
+    q.add_argument("--frame-step", type=bounded(int, 1), default=1, help="use every k-th frame")
+    q.add_argument("--max-sequences", type=bounded(int, 1), default=None, help="only the first k sequences")
+    q.add_argument("--seed", type=bounded(int, 0), default=0, help="jitter / subsampling seed")
     q.add_argument("--quiet", action="store_true", help="no progress bar")
     hidden_alias(q, "--no-progress", "quiet", action="store_true")
     q.set_defaults(func=_prepare)
@@ -123,28 +123,31 @@ def build_parser() -> argparse.ArgumentParser:
                                    "validation AO_3d on held-out train sequences), history.json, loss_curve.png.")
     t.add_argument("--cache", required=True, nargs="+", help="training .npz file(s) from `prepare` (several are concatenated)")
     t.add_argument("--out", default="runs/boxnet/main", help="run folder")
-    t.add_argument("--num-points", type=int, default=512, help="N input points (paper: 1024)")
-    t.add_argument("--width", type=float, default=1.0, help="channel multiplier (1 = Frustum PointNets v1)")
+    t.add_argument("--num-points", type=bounded(int, 1), default=512, help="N input points (paper: 1024)")
+    t.add_argument("--width", type=bounded(float, above=0), default=1.0, help="channel multiplier (1 = Frustum PointNets v1)")
     t.add_argument("--no-category", action="store_true", help="ablation: no one-hot category vector")
     t.add_argument("--size-norm", choices=["points", "paper", "extent"], default="points",
                    help="size coding: (template + r) * L of the input points (ours), the same with the label "
                         "normalised by max(size) (paper), or E * (1 + r) with E the points' per-axis extents "
                         "(ours, see track3d.boxnet)")
-    t.add_argument("--epochs", type=int, default=25, help="planned epochs (the LR schedule spans them)")
-    t.add_argument("--epoch-samples", type=int, default=0, help="items per epoch (0: the whole cache)")
-    t.add_argument("--batch", type=int, default=32, help="batch size")
-    t.add_argument("--lr", type=float, default=1e-3, help="initial learning rate")
+    t.add_argument("--epochs", type=bounded(int, 1), default=25, help="planned epochs (the LR schedule spans them)")
+    t.add_argument("--epoch-samples", type=bounded(int, 0), default=0, help="items per epoch (0: the whole cache)")
+    t.add_argument("--batch", type=bounded(int, 1), default=32, help="batch size")
+    t.add_argument("--lr", type=bounded(float, above=0), default=1e-3, help="initial learning rate")
     t.add_argument("--no-flip", action="store_true", help="no random x-mirroring")
-    t.add_argument("--cat-dropout", type=float, default=0.1,
+    t.add_argument("--cat-dropout", type=bounded(float, 0, high=1), default=0.1,
                    help="probability of an all-zero (unknown, -1) category vector in training")
     t.add_argument("--flip-y", action="store_true", help="also mirror y at random")
-    t.add_argument("--scale-aug", type=float, default=0.0,
+    t.add_argument("--scale-aug", type=bounded(float, 0), default=0.0,
                    help="sigma of a random log scale of points and box about the camera centre (e.g. 0.15)")
-    t.add_argument("--val-every", type=int, default=8, help="every k-th train sequence is validation (0: none)")
-    t.add_argument("--seed", type=int, default=0, help="seed")
-    t.add_argument("--threads", type=int, default=1, help="torch threads")
-    t.add_argument("--max-minutes", type=float, default=0.0, help="time budget: the cosine LR spans it and training stops when it is spent (resume-aware)")
-    t.add_argument("--max-steps", type=int, default=0, help="stop after this many steps")
+    t.add_argument("--val-every", type=bounded(int, 0), default=8, help="every k-th train sequence is validation (0: none)")
+    t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
+    t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
+    t.add_argument("--time-budget-min", dest="max_minutes", type=bounded(float, 0), default=0.0,
+                   help="time budget in minutes (0: none): the cosine LR spans it and training stops when it "
+                        "is spent (resume-aware)")
+    hidden_alias(t, "--max-minutes", "max_minutes", type=bounded(float, 0))  # the name before --time-budget-min
+    t.add_argument("--max-steps", type=bounded(int, 0), default=0, help="stop after this many steps")
     t.add_argument("--no-resume", action="store_true", help="start over even if <out>/last.pt exists")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     hidden_alias(t, "--no-progress", "quiet", action="store_true")

@@ -2,7 +2,7 @@
 
     track3d-train edgetrack prepare --data DATA --out CACHE
     track3d-train edgetrack train   --cache CACHE --out RUN --time-budget-min 180   # resumes from RUN/ckpt.pt
-    track3d-train edgetrack export  --checkpoint RUN/ckpt.pt --out runtime/track3d/models/edgetrack
+    track3d-train edgetrack export  --checkpoint RUN/ckpt.pt --out runtime/track3d/models/edgetrack --force
     track3d-train edgetrack eval    --model runtime/track3d/models/edgetrack --data DATA --split test --compare siamfc-edge
     track3d-train edgetrack time    --model runtime/track3d/models/edgetrack --pin
 
@@ -17,13 +17,14 @@ import sys
 import time
 from pathlib import Path
 
+from track3d.argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias
+
 
 def _prepare(a) -> int:
     from .data import prepare
 
     if not a.synthetic and not a.data:
-        print("error: give --data ROOT (a dataset) or --synthetic N", file=sys.stderr)
-        return 2
+        raise ValueError("give --data ROOT (a dataset) or --synthetic N")
     t0 = time.perf_counter()
     info = prepare(a.out, data=a.data, split=a.split, synthetic=a.synthetic, synthetic_frames=a.synthetic_frames,
                    max_frames=a.max_frames, max_background=a.max_background, seed=a.seed, progress=not a.quiet)
@@ -37,8 +38,7 @@ def _train(a) -> int:
     from .train import train
 
     if not (Path(a.cache) / "target" / "index.json").is_file():
-        print(f"error: {a.cache} is no EdgeTrack cache (run `prepare` first)", file=sys.stderr)
-        return 2
+        raise ValueError(f"{a.cache} is no EdgeTrack cache (run `track3d-train edgetrack prepare` first)")
     cfg = EdgeTrackConfig()
     print(f"EdgeTrack: widths {cfg.widths}, crops {cfg.exemplar_size}/{cfg.instance_size}, batch {a.batch}, "
           f"{a.steps} steps, {a.threads} thread(s)")
@@ -53,9 +53,13 @@ def _train(a) -> int:
 def _export(a) -> int:
     import dataclasses
 
+    from ..onnx_meta import refuse_shipped
     from .export import export_onnx, parity
     from .train import load_checkpoint
 
+    if not a.checkpoint:
+        raise ValueError("give --checkpoint CKPT (an EdgeTrack ckpt.pt)")
+    refuse_shipped([Path(f"{a.out}_template.onnx"), Path(f"{a.out}_search.onnx")], a.force)
     net, ck = load_checkpoint(a.checkpoint)
     over = {k: getattr(a, k) for k in ("window_influence", "penalty_k", "size_lr", "score_threshold",
                                        "instance_size", "lost_instance_size") if getattr(a, k) is not None}
@@ -128,8 +132,7 @@ def _time(a) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="track3d-train edgetrack", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = ArgumentParser(prog="track3d-train edgetrack", description=__doc__)
     sub = p.add_subparsers(dest="cmd", required=True)
     d = argparse.ArgumentDefaultsHelpFormatter
 
@@ -137,37 +140,45 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--data", nargs="+", help="dataset root(s) (dataset.json); several are concatenated")
     q.add_argument("--split", default="train", help="dataset split")
     q.add_argument("--out", required=True, help="cache folder")
-    q.add_argument("--max-frames", type=int, default=3000, help="bound on target crops (442 kB each)")
-    q.add_argument("--max-background", type=int, default=1000, help="bound on background crops")
-    q.add_argument("--synthetic", type=int, default=0, help="N synthetic sequences instead of a dataset")
-    q.add_argument("--synthetic-frames", type=int, default=60, help="frames per synthetic sequence")
-    q.add_argument("--seed", type=int, default=0, help="random seed")
+    q.add_argument("--max-frames", type=bounded(int, 1), default=3000, help="bound on target crops (442 kB each)")
+    q.add_argument("--max-background", type=bounded(int, 0), default=1000, help="bound on background crops")
+    q.add_argument("--synthetic", type=bounded(int, 0), default=0, help="N synthetic sequences instead of a dataset")
+    q.add_argument("--synthetic-frames", type=bounded(int, 2), default=60, help="frames per synthetic sequence")
+    q.add_argument("--seed", type=bounded(int, 0), default=0, help="random seed")
     q.add_argument("--quiet", action="store_true", help="no progress bar")
+    hidden_alias(q, "--no-progress", "quiet", action="store_true")
     q.set_defaults(fn=_prepare)
 
     t = sub.add_parser("train", help="train (resumes from <out>/ckpt.pt)", formatter_class=d)
     t.add_argument("--cache", required=True, help="cache folder from `prepare`")
     t.add_argument("--out", required=True, help="run folder: ckpt.pt, log.jsonl, curves.json/png")
-    t.add_argument("--steps", type=int, default=20000, help="step cap; the cosine LR ends here or at the time budget, whichever comes first")
-    t.add_argument("--batch", type=int, default=32, help="pairs per step")
-    t.add_argument("--lr", type=float, default=3e-3, help="peak AdamW learning rate")
-    t.add_argument("--max-gap", type=int, default=50, help="max frame gap of a pair")
-    t.add_argument("--val-every", type=int, default=200, help="steps between validations")
-    t.add_argument("--ckpt-every-min", type=float, default=3.0, help="minutes between atomic checkpoints")
-    t.add_argument("--seed", type=int, default=0, help="random seed")
-    t.add_argument("--threads", type=int, default=1, help="torch threads")
-    t.add_argument("--time-budget-min", type=float, default=None, help="stop (and checkpoint) after this much training time")
+    t.add_argument("--max-steps", dest="steps", type=bounded(int, 1), default=20000,
+                   help="step cap; the cosine LR ends here or at the time budget, whichever comes first")
+    hidden_alias(t, "--steps", "steps", type=bounded(int, 1))  # the name before --max-steps
+    t.add_argument("--batch", type=bounded(int, 1), default=32, help="pairs per step")
+    t.add_argument("--lr", type=bounded(float, above=0), default=3e-3, help="peak AdamW learning rate")
+    t.add_argument("--max-gap", type=bounded(int, 1), default=50, help="max frame gap of a pair")
+    t.add_argument("--val-every", type=bounded(int, 1), default=200, help="steps between validations")
+    t.add_argument("--ckpt-every-min", type=bounded(float, above=0), default=3.0, help="minutes between atomic checkpoints")
+    t.add_argument("--seed", type=bounded(int, 0), default=0, help="random seed")
+    t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
+    t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None, help="stop (and checkpoint) after this much training time")
     t.add_argument("--init-from", help="start from another run's checkpoint (fine-tuning)")
     t.add_argument("--no-resume", action="store_true", help="start over even if <out>/ckpt.pt exists")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
+    hidden_alias(t, "--no-progress", "quiet", action="store_true")
     t.set_defaults(fn=_train)
 
     e = sub.add_parser("export", help="write <out>_template.onnx + <out>_search.onnx, check parity", formatter_class=d)
-    e.add_argument("--checkpoint", required=True, help="ckpt.pt of a run")
+    e.add_argument("--checkpoint", help="ckpt.pt of an EdgeTrack run; required")
+    hidden_alias(e, "--ckpt", "checkpoint")
     e.add_argument("--out", required=True, help="path prefix")
+    e.add_argument("--force", action="store_true", help="overwrite the shipped models in track3d/models")
     e.add_argument("--data-note", default=None, help="what the model was trained on (metadata)")
-    for k, ty in (("window-influence", float), ("penalty-k", float), ("size-lr", float), ("score-threshold", float),
-                  ("instance-size", int), ("lost-instance-size", int)):
+    # bounds: a value the runtime cannot use must not be written into a model file
+    unit = bounded(float, 0, high=1)
+    for k, ty in (("window-influence", unit), ("penalty-k", bounded(float, 0)), ("size-lr", unit),
+                  ("score-threshold", unit), ("instance-size", bounded(int, 1)), ("lost-instance-size", bounded(int, 1))):
         e.add_argument(f"--{k}", type=ty, default=None, help="tracking default stored in the metadata (default: the config's)")
     e.set_defaults(fn=_export)
 
@@ -184,11 +195,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     m = sub.add_parser("time", help="median ms of the nets and crops vs SiamFC-edge, interleaved", formatter_class=d)
     m.add_argument("--model", required=True, help="prefix of <name>_template/_search.onnx")
-    m.add_argument("--threads", type=int, default=1, help="onnxruntime threads")
-    m.add_argument("--repeats", type=int, default=200, help="calls of each, interleaved")
+    m.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
+    m.add_argument("--repeats", type=bounded(int, 4), default=200, help="calls of each, interleaved (>= 4: the first 3 are warm-up)")
     m.add_argument("--pin", action="store_true", help="pin the process to one core")
     m.set_defaults(fn=_time)
-    return p
+    return apply_formatter(p)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -24,7 +24,10 @@ __all__ = ["train", "load_checkpoint", "validate", "fit_platt", "plot_curves"]
 
 
 def load_checkpoint(path) -> tuple[EdgeTrack, dict]:
-    ck = torch.load(str(path), map_location="cpu", weights_only=False)
+    """(network, checkpoint dict) of an EdgeTrack ckpt.pt; another network's is a ValueError."""
+    from ..checkpoint import load_checkpoint_dict
+
+    ck = load_checkpoint_dict(path, "EdgeTrack")
     net = EdgeTrack(EdgeTrackConfig.from_dict(ck["config"]))
     net.load_state_dict(ck["model"])
     return net, ck
@@ -190,7 +193,9 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
         print(f"resumed from {ck_path} at step {step} ({elapsed0 / 60:.1f} min trained)")
     else:
         if init_from:
-            src = torch.load(str(init_from), map_location="cpu", weights_only=False)
+            from ..checkpoint import load_checkpoint_dict
+
+            src = load_checkpoint_dict(init_from, "EdgeTrack")
             net.load_state_dict(src["model"])
             print(f"initialised from {init_from} (step {src.get('step')})")
         if log_path.exists():

@@ -2,7 +2,7 @@
 
     track3d-train siamfc prepare --data data/small --out data/cache/siamfc
     track3d-train siamfc train   --variant edge --cache data/cache/siamfc --out runs/siamfc_edge
-    track3d-train siamfc export  --checkpoint runs/siamfc_edge/ckpt.pt --out runtime/track3d/models/siamfc_edge
+    track3d-train siamfc export  --checkpoint runs/siamfc_edge/ckpt.pt --out runtime/track3d/models/siamfc_edge --force
     track3d-train siamfc eval    --model runtime/track3d/models/siamfc_edge --data data/small --split test
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from track3d.argparsing import apply_formatter, hidden_alias
+from track3d.argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias
 
 
 def _prepare(a) -> int:
@@ -122,7 +122,7 @@ def _eval(a) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="track3d-train siamfc", description=__doc__,
+    p = ArgumentParser(prog="track3d-train siamfc", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="cmd", required=True)
 
@@ -130,11 +130,12 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--data", help="dataset root (dataset.json)")
     q.add_argument("--split", default="train", help="split name")
     q.add_argument("--out", required=True, help="cache folder")
-    q.add_argument("--stride", type=int, default=1, help="use every k-th frame")
-    q.add_argument("--max-frames", type=int, default=2000, help="bound on cached crops (~195 kB each)")
-    q.add_argument("--synthetic", type=int, default=0, help="N synthetic sequences instead of a dataset")
-    q.add_argument("--synthetic-frames", type=int, default=60, help="frames per synthetic sequence")
-    q.add_argument("--seed", type=int, default=0, help="seed")
+    q.add_argument("--frame-step", dest="stride", type=bounded(int, 1), default=1, help="use every k-th frame")
+    hidden_alias(q, "--stride", "stride", type=bounded(int, 1))  # the name before --frame-step
+    q.add_argument("--max-frames", type=bounded(int, 1), default=2000, help="bound on cached crops (~195 kB each)")
+    q.add_argument("--synthetic", type=bounded(int, 0), default=0, help="N synthetic sequences instead of a dataset")
+    q.add_argument("--synthetic-frames", type=bounded(int, 2), default=60, help="frames per synthetic sequence")
+    q.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
     q.add_argument("--quiet", action="store_true", help="no progress bar")
     hidden_alias(q, "--no-progress", "quiet", action="store_true")
     q.set_defaults(fn=_prepare)
@@ -142,20 +143,20 @@ def build_parser() -> argparse.ArgumentParser:
     for name, fn, hlp in (("train", _train, "train (resumes from <out>/ckpt.pt)"),):
         t = sub.add_parser(name, help=hlp)
         t.add_argument("--variant", choices=["faithful", "edge"], default="edge", help="network variant")
-        t.add_argument("--width", type=float, default=None, help="override the width multiplier")
-        t.add_argument("--train-instance-size", type=int, default=None, help="search crop size in training")
+        t.add_argument("--width", type=bounded(float, above=0), default=None, help="override the width multiplier")
+        t.add_argument("--train-instance-size", type=bounded(int, 1), default=None, help="search crop size in training")
         t.add_argument("--cache", required=True, help="cache folder from `prepare`")
         t.add_argument("--out", required=True, help="run folder: ckpt.pt, log.jsonl, loss.png")
-        t.add_argument("--max-steps", dest="steps", type=int, default=2000,
+        t.add_argument("--max-steps", dest="steps", type=bounded(int, 1), default=2000,
                        help="training steps (the LR schedule spans them)")
-        hidden_alias(t, "--steps", "steps", type=int)
-        t.add_argument("--batch", type=int, default=16, help="batch size (pairs)")
-        t.add_argument("--lr", type=float, default=1e-2, help="initial learning rate")
-        t.add_argument("--lr-end", type=float, default=1e-4, help="final learning rate (geometric decay)")
-        t.add_argument("--max-gap", type=int, default=50, help="max frame gap of a pair")
-        t.add_argument("--seed", type=int, default=0, help="seed")
-        t.add_argument("--threads", type=int, default=1, help="torch threads")
-        t.add_argument("--time-budget-min", type=float, default=None, help="stop (and checkpoint) after this")
+        hidden_alias(t, "--steps", "steps", type=bounded(int, 1))
+        t.add_argument("--batch", type=bounded(int, 1), default=16, help="batch size (pairs)")
+        t.add_argument("--lr", type=bounded(float, above=0), default=1e-2, help="initial learning rate")
+        t.add_argument("--lr-end", type=bounded(float, above=0), default=1e-4, help="final learning rate (geometric decay)")
+        t.add_argument("--max-gap", type=bounded(int, 1), default=50, help="max frame gap of a pair")
+        t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
+        t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
+        t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None, help="stop (and checkpoint) after this")
         t.add_argument("--init-from", help="start from another run's checkpoint (fine-tuning)")
         t.add_argument("--no-resume", action="store_true", help="start over even if <out>/ckpt.pt exists")
         t.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -169,8 +170,11 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--force", action="store_true", help="overwrite the shipped models in track3d/models")
     e.add_argument("--data-note", default=None, help="what the model was trained on (metadata)")
     e.add_argument("--int8", metavar="CACHE", help="also write an int8 search graph calibrated on CACHE")
-    for k, ty in (("instance-size", int), ("scale-num", int), ("window-influence", float),
-                  ("scale-lr", float), ("scale-step", float), ("scale-penalty", float)):
+    # bounds: a value the runtime cannot use must not be written into a model file
+    unit = bounded(float, 0, high=1)
+    for k, ty in (("instance-size", bounded(int, 1)), ("scale-num", bounded(int, 1)), ("window-influence", unit),
+                  ("scale-lr", unit), ("scale-step", bounded(float, above=0)),
+                  ("scale-penalty", bounded(float, above=0, high=1))):
         e.add_argument(f"--{k}", type=ty, default=None, help="tracking default stored in the metadata")
     e.set_defaults(fn=_export)
 

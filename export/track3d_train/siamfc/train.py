@@ -85,7 +85,9 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
         torch.manual_seed(seed + step)
         print(f"resumed from {ck_path} at step {step}")
     elif init_from:
-        src = torch.load(str(init_from), map_location="cpu", weights_only=False)
+        from ..checkpoint import load_checkpoint_dict
+
+        src = load_checkpoint_dict(init_from, "SiamFC")
         net.load_state_dict(src["model"])
         print(f"initialised from {init_from} (step {src.get('step')})")
         if log_path.exists():
