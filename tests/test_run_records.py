@@ -8,6 +8,7 @@ import shutil
 import numpy as np
 import pytest
 
+from test_cli_conventions import _one_line
 from test_loop import make_synthetic_dataset
 from track3d.boxes import iou_2d, iou_3d, iou_bev
 from track3d.cli import main
@@ -80,8 +81,29 @@ def test_same_name_other_configuration_is_refused(synth, tmp_path, capsys):
     assert _track(synth, res, "--tracker", "kcf", "--name", "mine", "--replace") == 0
     assert read_run_record(res, "test", "mine")["track3d"]["tracker"] == "kcf"
     # the same configuration again (another subset of sequences) just adds to the record
-    assert _track(synth, res, "--tracker", "kcf", "--name", "mine", "--sequence", "a", "--frames", "4") == 0
-    assert read_run_record(res, "test", "mine")["frames"] == {"a": 4, "b": 5}
+    assert _track(synth, res, "--tracker", "kcf", "--name", "mine", "--sequence", "a") == 0
+    assert read_run_record(res, "test", "mine")["frames"] == {"a": 6, "b": 5}
+
+
+def test_a_run_over_other_frames_never_replaces_a_full_one(synth, tmp_path, capsys):
+    """A --frames 2 rerun of the same configuration silently replaced the full results (frame
+    counts were not part of the configuration check)."""
+    res = tmp_path / "res"
+    assert _track(synth, res, "--tracker", "oracle") == 0
+    status = res / "test" / "oracle+baseline" / "a" / "a_status.txt"
+    before = status.read_text()
+    capsys.readouterr()
+    assert _track(synth, res, "--tracker", "oracle", "--frames", "2") == 2
+    _one_line(capsys, "over 6 frames, this run covers 2", "--replace")
+    assert status.read_text() == before and len(before.split()) == 6
+    assert read_run_record(res, "test", "oracle+baseline")["frames"] == {"a": 6, "b": 5}
+    # under another name it runs; with --replace it replaces, and the record says so
+    assert _track(synth, res, "--tracker", "oracle", "--frames", "2", "--name", "short") == 0
+    assert _track(synth, res, "--tracker", "oracle", "--frames", "2", "--sequence", "a", "--replace") == 0
+    assert len(status.read_text().split()) == 2
+    assert read_run_record(res, "test", "oracle+baseline")["frames"] == {"a": 2, "b": 5}
+    # a --frames larger than every sequence covers the same frames as a full run
+    assert _track(synth, res, "--tracker", "oracle", "--frames", "50", "--sequence", "b") == 0
 
 
 def test_iou_of_a_box_with_itself_is_exactly_one():
@@ -111,3 +133,21 @@ def test_a_result_name_is_one_folder(synth, tmp_path, capsys, name):
 def test_a_sequence_named_twice_runs_once(synth, tmp_path, capsys):
     assert _track(synth, tmp_path, "--tracker", "oracle", "--sequence", "a", "a") == 0
     assert "on 1 sequence(s)" in capsys.readouterr().out
+
+
+def test_every_model_file_of_an_option_is_in_the_tag(tmp_path):
+    """EdgeTrack's <name>_template.onnx was not hashed: a run with another template looked like
+    the same model (same result name)."""
+    tags = []
+    for template in (b"template one", b"template two"):
+        d = tmp_path / template.decode().replace(" ", "_")
+        d.mkdir()
+        (d / "edge_template.onnx").write_bytes(template)
+        (d / "edge_search.onnx").write_bytes(b"the same search network")
+        tags += [TrackerSpec("edgetrack", "none", tracker_options={"model": str(d / "edge")}).label,
+                 TrackerSpec("edgetrack", "none", tracker_options={"model": str(d / "edge_search.onnx")}).label,
+                 TrackerSpec("edgetrack", "none", tracker_options={
+                     "template_model": str(d / "edge_template.onnx"),
+                     "search_model": str(d / "edge_search.onnx")}).label]
+    assert tags[0] == tags[1] == tags[2] and tags[3] == tags[4] == tags[5]   # the same files, however named
+    assert tags[0] != tags[3] and tags[0].startswith("edgetrack@edge-")

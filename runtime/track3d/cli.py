@@ -95,7 +95,8 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--name", type=_result_name, help="result name (default <tracker>+<estimator>, tagged @<model>-<hash> for "
                                   "non-shipped model files)")
     t.add_argument("--replace", action="store_true",
-                   help="replace results of another configuration under the same name (default: refuse)")
+                   help="replace results of another configuration or over other frames (--frames) under the same name "
+                        "(default: refuse)")
     t.add_argument("--restart-skip", type=int, default=1,
                    help="re-initialise this many frames after a zero-3D-IoU frame (default 1: the next)")
     t.add_argument("--no-restart", action="store_true", help="never re-initialise from the ground truth")

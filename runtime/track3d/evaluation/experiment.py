@@ -100,26 +100,45 @@ class TrackerSpec:
         return None
 
 
-_MODEL_OPTIONS = ("model", "exemplar_model", "search_model", "backbone", "neckhead")
+# Options that name model files (a file, or a prefix <dir>/<name> of a pair such as SiamFC's
+# <name>_exemplar/_search.onnx or EdgeTrack's <name>_template/_search.onnx).
+_MODEL_OPTIONS = ("model", "exemplar_model", "search_model", "template_model", "backbone", "neckhead")
+_PAIR_SUFFIXES = ("_exemplar.onnx", "_template.onnx", "_search.onnx")
+
+
+def _pair_stem(name: str) -> str:
+    for suffix in _PAIR_SUFFIXES + (".onnx",):
+        if name.endswith(suffix):
+            return name[: -len(suffix)]
+    return name
+
+
+def _model_files(key: str, value: str) -> list[Path]:
+    """The existing files an option names: the file itself; for `model` (a prefix, or one file
+    of a pair, as the trackers take it) also each file of the pair."""
+    p = Path(value)
+    files = [p]
+    if key == "model":
+        files += [p.parent / f"{_pair_stem(p.name)}{s}" for s in _PAIR_SUFFIXES]
+    return [f for f in files if f.is_file()]
 
 
 def _model_tag(options: dict) -> str:
-    """'' for the shipped models, else '@<stem>-<8 hex of sha256 over the model files' bytes>'."""
+    """'' for the shipped models, else '@<stem>-<8 hex of sha256 over the model files' bytes>'
+    (every file a model option names, in path order; a name that is no file counts as text)."""
     import hashlib
 
-    given = [str(options[k]) for k in _MODEL_OPTIONS if options.get(k)]
+    given = [(k, str(options[k])) for k in _MODEL_OPTIONS if options.get(k)]
     if not given:
         return ""
     h = hashlib.sha256()
-    for g in given:
-        p = Path(g)
-        files = [f for f in (p, p.parent / f"{p.name}_exemplar.onnx", p.parent / f"{p.name}_search.onnx")
-                 if f.is_file()]
-        for f in files:
-            h.update(f.read_bytes())
-        if not files:
+    files = sorted({f.resolve() for k, g in given for f in _model_files(k, g)})
+    for f in files:
+        h.update(f.read_bytes())
+    for k, g in given:
+        if not _model_files(k, g):
             h.update(g.encode())
-    stem = Path(given[0]).name.replace(".onnx", "")
+    stem = _pair_stem(Path(given[0][1]).name)
     stem = "".join(c if c.isalnum() or c in "-_." else "_" for c in stem)[:32]
     return f"@{stem}-{h.hexdigest()[:8]}"
 
@@ -261,7 +280,9 @@ class Experiment:
         Returns the result folders.
 
         Results of another configuration (other names, options, models or restart settings,
-        see results.run_config_key) already under `name` raise ValueError unless `replace`."""
+        see results.run_config_key) already under `name` raise ValueError unless `replace`, as
+        do results of a sequence over another number of frames (a --frames 2 run never silently
+        replaces a full one)."""
         if isinstance(spec, TrackerSpec):
             factory, name = spec.build, name or spec.label
         elif name is None:
@@ -274,15 +295,19 @@ class Experiment:
             raise ValueError(f"{self.result_dir / self.split / name} holds results of another configuration "
                              "(tracker, options, models or restart settings differ): pick another --name "
                              "or pass --replace")
+        todo = [seq for seq in self.sequences
+                if overwrite or not (self.folder(name, seq.name) / f"{seq.name}_status.txt").is_file()]
+        if old is not None and not replace:
+            self._refuse_other_frames(name, old, todo)
         if old is not None and run_config_key(old) == run_config_key(record):
             record["frames"] = {**old.get("frames", {}), **record["frames"]}
         folders = []
         for k, seq in enumerate(self.sequences):
             folder = self.folder(name, seq.name)
-            if not overwrite and (folder / f"{seq.name}_status.txt").is_file():
+            if all(t is not seq for t in todo):
                 folders.append(folder)
                 continue
-            n = len(seq) if self.max_frames is None else min(len(seq), self.max_frames)
+            n = self._frames(seq)
             record["frames"][seq.name] = n
             writer = None
             if overlay and k < overlay_sequences:
@@ -296,6 +321,20 @@ class Experiment:
             folders.append(folder)
             write_run_record(self.result_dir, self.split, name, record)
         return folders
+
+    def _frames(self, seq: Sequence) -> int:
+        return len(seq) if self.max_frames is None else min(len(seq), self.max_frames)
+
+    def _refuse_other_frames(self, name: str, old: dict, todo: list[Sequence]) -> None:
+        """A run over other frames of a sequence (e.g. --frames 2 after a full run) would replace
+        its results: ValueError naming the difference (the caller passes it unless `replace`)."""
+        had = old.get("frames") or {}
+        for seq in todo:
+            n = self._frames(seq)
+            if seq.name in had and had[seq.name] != n:
+                raise ValueError(f"{self.result_dir / self.split / name} holds results of {seq.name} over "
+                                 f"{had[seq.name]} frames, this run covers {n} (--frames): pick another --name "
+                                 "or pass --replace")
 
     def _run_record(self, factory, spec) -> dict:
         """What makes this run's results: Track3D.describe() of a tracker built for the first
