@@ -104,6 +104,23 @@ def test_skip_and_update_none_coast_without_raising():
     assert t.skip().status == LOST
 
 
+def test_update_or_skip_before_init_is_a_caller_error():
+    """update() before init() answered "lost" with nan boxes (a caller could take it for a real
+    loss); skip() coasted nan boxes. Both are one ValueError now; set_state of a started
+    tracker counts as init."""
+    t = _make("kcf", "baseline")
+    img, pts, box = _frame(0)
+    for call in (lambda: t.update(img, pts), lambda: t.update(None, pts), t.skip):
+        with pytest.raises(ValueError, match=r"before init\(\)") as e:
+            call()
+        assert "\n" not in str(e.value)
+    t.init(img, box, 0, points=pts)
+    assert t.update(*_frame(1)[:2]).status == TRACKING
+    fresh = _make("kcf", "baseline")
+    fresh.set_state(t.get_state())
+    assert fresh.skip().status == NO_POINTS
+
+
 def test_low_score_counts_as_bad():
     class Scored:
         score = 0.1

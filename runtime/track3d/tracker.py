@@ -20,10 +20,10 @@ the 3D box has been held (`held_frames`); after `lost_after` consecutive frames 
 estimate (or with a score below `min_score`) the status is "lost". `skip()` / `update(None,
 points)` coasts over a dropped frame. `get_state()` / `set_state()` checkpoint the tracker as
 plain data; `describe()` says what it runs (names, options, model files with sha256).
-Caller errors raise ValueError (the checks live in track3d.frames): an image that is not
-(H, W, 3) uint8 or not the camera's size, a cloud that is not (N, 3), a category that is not an
-integer in -1 .. categories - 1, an init box that is not finite, has no positive size, does not
-overlap the image or is more than 10x the image.
+Caller errors raise ValueError (the checks live in track3d.frames): update() or skip() before
+init(), an image that is not (H, W, 3) uint8 or not the camera's size, a cloud that is not
+(N, 3), a category that is not an integer in -1 .. categories - 1, an init box that is not
+finite, has no positive size, does not overlap the image or is more than 10x the image.
 """
 from __future__ import annotations
 
@@ -136,6 +136,7 @@ class Track3D:
         self.category = -1
         self.box2d = np.full(4, np.nan)
         self.box3d = np.full(6, np.nan)
+        self._started = False     # init() (or set_state of a started tracker) has run
 
     def __repr__(self) -> str:
         return (f"Track3D({self.tracker2d!r}, {self.estimator!r}, fusion={self.fusion}, "
@@ -207,6 +208,7 @@ class Track3D:
         self.box3d = np.full(6, np.nan)
         self.bad_frames = 0
         self.held_frames = 0
+        self._started = True
         if points is not None and self.needs_points:
             est = self._estimate(*self._frustum(points, b))
             if est is not None:
@@ -222,11 +224,17 @@ class Track3D:
             r.status = LOST
         return r
 
+    def _check_started(self, call: str) -> None:
+        if not self._started:
+            raise ValueError(f"Track3D.{call} before init(): start the tracker with init(image, box2d) first")
+
     def skip(self) -> TrackResult:
         """A dropped frame: no image, no update of the 2D tracker; the last boxes coast.
 
         Status "no_points" (no new estimate; counts towards `lost_after`), or "lost" once
-        `lost_after` bad frames have passed. ``update(None, points)`` does the same."""
+        `lost_after` bad frames have passed. ``update(None, points)`` does the same.
+        Before init(): ValueError (there is no box to coast), as for update()."""
+        self._check_started("skip()")
         r = TrackResult(self.box2d.copy(), self.box2d.copy(), self.box3d.copy(), NO_POINTS, 0,
                         dict.fromkeys(STAGES, 0.0), None)
         return self._judge(r, estimated=False)
@@ -238,7 +246,9 @@ class Track3D:
         camera computes depth only there: `track3d.stereo.StereoCloud.bind`; its time counts in
         the "frustum" stage); None with the null estimator ("none": 2D only).
 
-        image None: a dropped frame, see :meth:`skip`."""
+        image None: a dropped frame, see :meth:`skip`. Before init(): ValueError (it used to
+        answer "lost" with nan boxes, which a caller could take for a real loss)."""
+        self._check_started("update()")
         if image is None:
             return self.skip()
         ms: dict[str, float] = dict.fromkeys(STAGES, 0.0)
@@ -349,6 +359,7 @@ class Track3D:
             self.estimator.set_state(estimator_state)
         self.category, self.box2d, self.box3d = category, box2d, box3d
         self.bad_frames, self.held_frames = bad, held
+        self._started = bool(np.isfinite(box2d).all())   # the state of a started tracker
 
     def __getstate__(self):
         # pickle / copy would stop inside onnxruntime ("cannot pickle InferenceSession"), a
