@@ -163,10 +163,10 @@ class Env:
     """Objects built once per worker (models load once)."""
 
     def __init__(self, tmp: Path):
-        from track3d import Camera
+        from track3d.synthetic import CAM
 
         self.tmp = tmp
-        self.cam = Camera.from_fov(160, 120, 60.0)
+        self.cam = CAM
         self._est = {}
         self._data = None
 
@@ -179,8 +179,7 @@ class Env:
 
     def dataset(self) -> Path:
         if self._data is None:
-            sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-            from test_loop import make_synthetic_dataset
+            from track3d.synthetic import make_synthetic_dataset
 
             self._data = make_synthetic_dataset(self.tmp / "good", {"a": 4, "b": 3})
         return self._data

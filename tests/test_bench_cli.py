@@ -90,7 +90,7 @@ def test_synthetic_frames_have_the_target():
 
 
 def test_bench_on_a_dataset(tmp_path, capsys):
-    from test_loop import make_synthetic_dataset
+    from track3d.synthetic import make_synthetic_dataset
 
     root = make_synthetic_dataset(tmp_path / "ds", {"a": 5})
     assert main(["bench", "--tracker", "kcf", "--estimator", "baseline", "--data", str(root), "--frames", "6",

@@ -5,8 +5,8 @@ import json
 
 import pytest
 
-from test_loop import make_synthetic_dataset
 from track3d.cli import main
+from track3d.synthetic import make_synthetic_dataset
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +82,7 @@ def test_runtime_never_imports_the_simulator_or_torch():
     import subprocess
     import sys
 
-    code = ("import sys, track3d, track3d.cli, track3d.tracker, track3d.evaluation, track3d.bench, track3d.stereo; "
+    code = ("import sys, track3d, track3d.cli, track3d.tracker, track3d.evaluation, track3d.bench, track3d.stereo, track3d.synthetic; "
             "bad = [m for m in sys.modules if m.split('.')[0] in ('track3d_sim', 'track3d_train', 'torch')]; "
             "print(bad); sys.exit(1 if bad else 0)")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)

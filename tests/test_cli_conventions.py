@@ -220,7 +220,7 @@ def test_edgetrack_export_and_quantize_never_overwrite_a_shipped_model(tmp_path,
 
 
 def test_folder_kinds_are_named(tmp_path, capsys):
-    from test_loop import make_synthetic_dataset
+    from track3d.synthetic import make_synthetic_dataset
 
     root = make_synthetic_dataset(tmp_path / "ds", {"a": 3})
     seq = next(p for p in (root / "test").iterdir() if p.is_dir())
@@ -239,7 +239,7 @@ def test_folder_kinds_are_named(tmp_path, capsys):
 def test_gif_without_pillow_says_so(tmp_path, capsys, monkeypatch):
     import importlib.util
 
-    from test_loop import make_synthetic_dataset
+    from track3d.synthetic import make_synthetic_dataset
 
     root = make_synthetic_dataset(tmp_path / "ds", {"a": 3})
     real = importlib.util.find_spec
@@ -278,7 +278,7 @@ def test_a_missing_extra_is_named_not_a_traceback(tmp_path, capsys, monkeypatch,
     ModuleNotFoundError traceback (tqdm, torch, PIL, matplotlib)."""
     pytest.importorskip("track3d_sim")
     pytest.importorskip("torch")
-    from test_loop import make_synthetic_dataset
+    from track3d.synthetic import make_synthetic_dataset
     from track3d_sim.cli import main as sim_main
     from track3d_train.cli import main as train_main
 

@@ -6,13 +6,13 @@ import json
 import numpy as np
 import pytest
 
-from test_loop import make_synthetic_dataset
 from track3d.boxes import iou_3d
 from track3d.dataset import DatasetError
 from track3d.estimators import BaselineEstimator
 from track3d.evaluation import Experiment, TrackerSpec
 from track3d.evaluation.metrics import LostScore
 from track3d.evaluation.results import read_result
+from track3d.synthetic import make_synthetic_dataset
 from track3d.tracker import Track3D
 from track3d.trackers2d import OracleTracker
 

@@ -17,10 +17,10 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 import fuzz
-from test_loop import CAM
 from track3d.estimators import create_estimator
 from track3d.frustum import (extract_frustum_bounds, extract_frustum_bounds_numpy, sample_points,
                              sample_points_numpy)
+from track3d.synthetic import CAM
 from track3d.tracker import STATUSES, Track3D
 from track3d.trackers2d import create_tracker
 
@@ -182,3 +182,18 @@ def test_plan_runs_exactly_the_cases_asked(cases):
 
 def test_plan_gives_every_target_a_case():
     assert set(fuzz.plan(3)) == set(fuzz.TARGETS) and min(fuzz.plan(3).values()) == 1
+
+
+def test_the_fuzz_run_borrows_nothing_from_the_tests(tmp_path):
+    """benchmarks/fuzz.py put tests/ on sys.path to import make_synthetic_dataset from a test
+    module; it is track3d.synthetic now, importable by both."""
+    import subprocess
+    import sys
+
+    bench = Path(__file__).resolve().parents[1] / "benchmarks"
+    code = (f"import sys; sys.path.insert(0, {str(bench)!r}); import fuzz; before = list(sys.path); "
+            f"fuzz.Env(__import__('pathlib').Path({str(tmp_path)!r})).dataset(); "
+            "extra = [p for p in sys.path if p not in before]; print(extra); sys.exit(1 if extra else 0)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert (tmp_path / "good" / "dataset.json").is_file()

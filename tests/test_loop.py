@@ -1,93 +1,17 @@
-"""The Track3D loop on a small synthetic scene (an analytic sphere; no simulator needed).
-
-`make_synthetic_dataset` is shared with the evaluation tests (they import it from here).
-"""
+"""The Track3D loop on a small synthetic scene (an analytic sphere, track3d.synthetic; no
+simulator needed)."""
 from __future__ import annotations
-
-import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from track3d import Camera
 from track3d.boxes import box3d_from_points, iou_3d
-from track3d.dataset import FORMAT, FORMAT_VERSION, frame_name, write_depth_png, write_labels, write_rgb
 from track3d.estimators import create_estimator
 from track3d.frustum import extract_frustum
 from track3d.fusion import fuse
+from track3d.synthetic import CAM, make_synthetic_dataset, render_sphere, sphere_path
 from track3d.tracker import LOST, NO_POINTS, TRACKING, Track3D
 from track3d.trackers2d import OracleTracker, create_tracker
-
-CAM = Camera.from_fov(160, 120, 60.0)
-
-
-def render_sphere(cam: Camera, centre, radius: float):
-    """Image (H, W, 3) uint8, depth (H, W) float32 metres, tight 2D box, 3D box of a lit sphere."""
-    rays = cam.pixel_rays()                               # z = 1 rays through pixel centres
-    c = np.asarray(centre, np.float64)
-    a = np.sum(rays * rays, axis=-1)
-    b = -2.0 * rays @ c
-    cc = c @ c - radius ** 2
-    disc = b * b - 4 * a * cc
-    hit = disc >= 0
-    t = np.where(hit, (-b - np.sqrt(np.where(hit, disc, 0))) / (2 * a), 0.0)
-    depth = np.where(hit, t, 0.0).astype(np.float32)      # t is z because rays have z = 1
-    p = rays * t[..., None]
-    n = (p - c) / radius
-    shade = np.clip(n @ np.array([-0.5, -0.5, -0.7]), 0.05, 1.0)
-    u = np.arange(cam.width)[None, :]
-    v = np.arange(cam.height)[:, None]
-    checker = 0.75 + 0.25 * (((u // 6) + (v // 6)) % 2)  # texture for the trackers to hold on to
-    img = np.zeros((cam.height, cam.width, 3), np.uint8)
-    val = (255 * shade * checker).astype(np.uint8)
-    img[hit] = np.stack([val, (val * 0.9).astype(np.uint8), (val * 0.8).astype(np.uint8)], -1)[hit]
-    vv, uu = np.nonzero(hit)
-    box2d = np.array([uu.min(), vv.min(), uu.max() + 1 - uu.min(), vv.max() + 1 - vv.min()], np.float64) \
-        if len(uu) else np.zeros(4)
-    box3d = np.concatenate([c, [2 * radius] * 3])
-    return img, depth, box2d, box3d
-
-
-def sphere_path(n: int, start=(-1.0, 0.2, 12.0), step=(0.12, -0.02, 0.15)):
-    return [np.asarray(start) + k * np.asarray(step) for k in range(n)]
-
-
-def make_synthetic_dataset(root: Path, sequences: dict[str, int] | None = None, radius: float = 1.5,
-                           absent: dict[str, list[int]] | None = None, split: str = "test") -> Path:
-    """Write a tiny dataset in the docs/dataset.md layout: one moving sphere per sequence.
-
-    absent: frames (0-based) of a sequence where the target is flagged absent (its image and
-    depth are then empty and the 2D label zero, as the simulator does).
-    """
-    sequences = sequences or {"s0001": 8, "s0002": 6}
-    absent = absent or {}
-    root = Path(root)
-    for k, (name, n) in enumerate(sequences.items()):
-        d = root / split / name
-        for sub in ("left", "right", "depth"):
-            (d / sub).mkdir(parents=True, exist_ok=True)
-        gt2d, gt3d, flags = [], [], []
-        for i, c in enumerate(sphere_path(n, start=(-1.0 + 0.5 * k, 0.2, 12.0 + k))):
-            img, depth, b2, b3 = render_sphere(CAM, c, radius)
-            gone = i in absent.get(name, [])
-            if gone:
-                img[:] = 0
-                depth[:] = 0
-                b2 = np.zeros(4)
-            write_rgb(d / "left" / frame_name(i), img)
-            write_rgb(d / "right" / frame_name(i), img)
-            write_depth_png(d / "depth" / frame_name(i), depth)
-            gt2d.append(b2)
-            gt3d.append(b3)
-            flags.append(int(gone))
-        write_labels(d, np.array(gt2d, dtype=np.float64), np.array(gt3d), np.array(flags), np.zeros(n),
-                     {"family_index": 0}, decimals_3d=6)
-    info = {"format": FORMAT, "version": FORMAT_VERSION, "camera": CAM.to_dict(),
-            "splits": {split: list(sequences)}}
-    (root / "dataset.json").write_text(json.dumps(info))
-    return root
-
 
 # --- tests of the loop -------------------------------------------------------------------------
 

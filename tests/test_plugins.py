@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from test_loop import make_synthetic_dataset
 from track3d import estimators, plugins, trackers2d
 from track3d.camera import Camera
 from track3d.cli import main
+from track3d.synthetic import make_synthetic_dataset
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "tm_tracker.py"
 

@@ -13,12 +13,12 @@ import textwrap
 import numpy as np
 import pytest
 
-from test_loop import CAM, make_synthetic_dataset
 from track3d import dataset as D
 from track3d.boxnet import one_hot
 from track3d.cli import main
 from track3d.estimators import create_estimator
 from track3d.frustum import extract_frustum, sample_points, sample_points_numpy
+from track3d.synthetic import CAM, make_synthetic_dataset
 from track3d.tracker import NO_POINTS, Track3D
 from track3d.trackers2d import available_trackers
 

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from test_cli_conventions import _one_line
-from test_loop import make_synthetic_dataset
 from track3d.boxes import iou_2d, iou_3d, iou_bev
 from track3d.cli import main
 from track3d.evaluation import TrackerSpec
 from track3d.evaluation.metrics import success_curve
 from track3d.evaluation.results import read_run_record
+from track3d.synthetic import make_synthetic_dataset
 
 
 @pytest.fixture(scope="module")

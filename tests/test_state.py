@@ -8,7 +8,7 @@ import pickle
 import numpy as np
 import pytest
 
-from test_loop import CAM, render_sphere, sphere_path
+from track3d.synthetic import CAM, render_sphere, sphere_path
 from track3d.tracker import LOST, NO_POINTS, TRACKING, Track3D
 
 PATH = sphere_path(12)

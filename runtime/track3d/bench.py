@@ -26,6 +26,7 @@ import numpy as np
 
 from . import machine
 from .camera import Camera
+from .synthetic import sphere_hits
 from .table_text import cell
 
 __all__ = ["BenchConfig", "run_bench", "format_table", "synthetic_frames", "percentiles", "BUSY_THRESHOLD"]
@@ -94,13 +95,7 @@ def synthetic_frames(camera: Camera, n: int = 60, seed: int = 0):
     for k in range(n):
         f = k / max(n - 1, 1)
         c = np.array([-1.5 + 3.0 * f, 0.8 - 1.2 * f, 22.0 - 8.0 * f])
-        a = np.sum(rays * rays, axis=-1)
-        b = -2.0 * rays @ c
-        disc = b * b - 4 * a * (c @ c - radius ** 2)
-        hit = disc >= 0
-        t = np.where(hit, (-b - np.sqrt(np.where(hit, disc, 0.0))) / (2 * a), 0.0)
-        p = rays * t[..., None]
-        nrm = (p - c) / radius
+        hit, t, nrm = sphere_hits(rays, c, radius)
         shade = np.clip(nrm @ -light, 0.03, 1.0)
         lon = (np.arctan2(nrm[..., 0], nrm[..., 2]) / (2 * np.pi) + 0.5 + 0.01 * k) % 1.0
         lat = np.arccos(np.clip(nrm[..., 1], -1, 1)) / np.pi
