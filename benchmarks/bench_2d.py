@@ -19,7 +19,6 @@ toolkit's plots), bench_2d_tradeoff.png (--sweep) and the toolkit's result files
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -28,6 +27,7 @@ from benchlib.output import add_out_argument
 from benchlib.paper import TABLE2
 from benchlib.record import finish_record, start_record
 
+from track3d.argparsing import ArgumentParser, bounded, hidden_alias, run_main
 from track3d.evaluation import Experiment, TrackerSpec, average_scores
 from track3d.jsonable import write_json
 from track3d.machine import pin_threads
@@ -147,24 +147,29 @@ def markdown(results: dict, sweep: dict, ratio: list[dict]) -> str:
     return md
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> ArgumentParser:
+    ap = ArgumentParser(description=__doc__)
     ap.add_argument("--data", default="data/small", help="dataset root (default: data/small)")
-    ap.add_argument("--split", default="test")
-    ap.add_argument("--trackers", default=",".join(DEFAULT_TRACKERS))
-    ap.add_argument("--max-seqs", type=int, default=0, help="0: all")
+    ap.add_argument("--split", default="test", help="dataset split")
+    ap.add_argument("--trackers", default=",".join(DEFAULT_TRACKERS), help="comma-separated 2D trackers")
+    ap.add_argument("--max-sequences", type=bounded(int, 0), default=0, help="only the first N sequences (0: all)")
+    hidden_alias(ap, "--max-seqs", "max_sequences", type=bounded(int, 0))
     ap.add_argument("--speed-seqs", type=int, default=3, help="sequences for the 2-thread timing")
     ap.add_argument("--sweep", action="store_true", help="also run the edge design sweep")
     ap.add_argument("--sweep-models", nargs="*", default=[], help="folders with <name>_search.onnx")
-    ap.add_argument("--sweep-sizes", type=int, nargs="*", default=[143, 159, 191, 255])
-    ap.add_argument("--sweep-scales", type=int, nargs="*", default=[1, 3])
+    ap.add_argument("--sweep-sizes", type=int, nargs="*", default=[143, 159, 191, 255], help="search sizes of the sweep")
+    ap.add_argument("--sweep-scales", type=int, nargs="*", default=[1, 3], help="scale counts of the sweep")
     ap.add_argument("--ratio", action="store_true", help="onnxruntime vs torch eager (needs torch)")
     add_out_argument(ap, "siamfc", committed="benchmarks/results/siamfc")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
     out = Path(a.out)
     rec = start_record("2D trackers (paper Fig. 14)", data=a.data, split=a.split, protocol=PROTOCOL)
 
-    exp = Experiment(a.data, a.split, out / "results", out / "report", restart=False, max_sequences=a.max_seqs or None)
+    exp = Experiment(a.data, a.split, out / "results", out / "report", restart=False, max_sequences=a.max_sequences or None)
     first = exp.sequences[: max(a.speed_seqs, 0)]
     exp2 = Experiment(a.data, a.split, out / "results_2t", out / "report_2t", restart=False,
                       sequences=[s.name for s in first]) if first else None
@@ -222,6 +227,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from track3d.argparsing import run_main
-
     sys.exit(run_main(main, "bench_2d.py"))

@@ -13,13 +13,12 @@
    coding, width), plus a test-time sweep of N for the shipped model: a table and a plot.
 
     python benchmarks/bench_boxnet.py --data data/small --cache runs/boxnet/cache/boxnet_test_*.npz \
-        --ckpt runs/boxnet/main/best.pt --ablation p512=runs/boxnet/abl/p512.onnx ...
+        --checkpoint runs/boxnet/main/best.pt --ablation p512=runs/boxnet/abl/p512.onnx ...
 
 Writes <out>/boxnet.json, boxnet.md (tables) and boxnet_ablation.png.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import re
 import sys
@@ -31,6 +30,7 @@ from benchlib.output import add_out_argument
 from benchlib.paper import TABLE2, TABLE3_NO_CATEGORY
 from benchlib.record import finish_record, start_record
 
+from track3d.argparsing import ArgumentParser, hidden_alias, run_main
 from track3d.jsonable import write_json
 from track3d.machine import START_CPUS, pin_threads
 from track3d.onnxmodel import MODELS_DIR
@@ -267,13 +267,14 @@ def net_ms(model: str, n: int, reps: int = 100) -> float:
     return _timeit(lambda v: est.infer(v, [0]), x)["median_ms"]
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> ArgumentParser:
+    ap = ArgumentParser(description=__doc__)
     ap.add_argument("--data", default="data/small", help="dataset root")
-    ap.add_argument("--split", default="test")
+    ap.add_argument("--split", default="test", help="dataset split")
     ap.add_argument("--cache", required=True, help="oracle frustum cache of the split (`boxnet prepare --jitters 0`)")
     ap.add_argument("--model", default=str(MODELS_DIR / "a3boxnet.onnx"), help="A3BoxNet ONNX (default: the shipped one)")
-    ap.add_argument("--ckpt", default=None, help="its torch checkpoint (for the ORT vs torch ratio)")
+    ap.add_argument("--checkpoint", default=None, help="its torch checkpoint (for the ORT vs torch ratio)")
+    hidden_alias(ap, "--ckpt", "checkpoint")
     ap.add_argument("--ablation", nargs="*", default=[], metavar="NAME=MODEL.onnx",
                     help="retrained models; names p<N> (or p<N>_s<seed> for another seed of the same "
                          "recipe) go to the points table, models without the category vector to "
@@ -283,8 +284,12 @@ def main(argv=None) -> int:
     ap.add_argument("--speed-frames", type=int, default=300, help="frames for the timing runs")
     add_out_argument(ap)
     ap.add_argument("--name", default="boxnet", help="output file stem")
-    ap.add_argument("--no-speed", action="store_true")
-    a = ap.parse_args(argv)
+    ap.add_argument("--no-speed", action="store_true", help="skip the timing runs")
+    return ap
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
 
     from track3d_train.boxnet.data import PointCache
     from track3d_train.boxnet.evaluate import oracle_metrics
@@ -321,8 +326,8 @@ def main(argv=None) -> int:
             res["speed"].append(speed(a.model, frustums, clouds, M, threads))
             print(json.dumps(res["speed"][-1]), flush=True)
         _pin(True)
-        if a.ckpt:
-            res["torch_ratio"] = torch_ratio(a.ckpt, a.model, res["oracle"]["a3boxnet"]["num_points"])
+        if a.checkpoint:
+            res["torch_ratio"] = torch_ratio(a.checkpoint, a.model, res["oracle"]["a3boxnet"]["num_points"])
         _pin(False)
     write_json(out / f"{a.name}.json", finish_record(res))
     (out / f"{a.name}.md").write_text(markdown(res))
@@ -332,6 +337,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from track3d.argparsing import run_main
-
     sys.exit(run_main(main, "bench_boxnet.py"))

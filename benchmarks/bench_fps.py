@@ -23,7 +23,6 @@ fps_<tag>.md (the summary table, also printed).
 """
 from __future__ import annotations
 
-import argparse
 import gc
 import platform
 import sys
@@ -34,6 +33,7 @@ from benchlib.output import add_out_argument
 from benchlib.record import finish_record, start_record
 from benchlib.torch_models import EquivalenceError, TorchNets
 
+from track3d.argparsing import ArgumentParser, bounded, run_main
 from track3d.estimators import EstimatorUnavailable
 from track3d.jsonable import write_json
 from track3d.machine import pin_threads
@@ -182,14 +182,14 @@ def markdown(out: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> ArgumentParser:
+    ap = ArgumentParser(description=__doc__)
     ap.add_argument("--data", type=Path, required=True, help="dataset root (track3d-sim output)")
-    ap.add_argument("--split", default="test")
+    ap.add_argument("--split", default="test", help="dataset split")
     ap.add_argument("--frames", type=int, default=1000, help="measured frames per configuration (>= 1000 for p99)")
     ap.add_argument("--preload", type=int, default=400, help="frames kept in memory (looped over)")
-    ap.add_argument("--sequences", type=int, default=8)
-    ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--sequences", type=bounded(int, 1), default=8, help="sequences preloaded")
+    ap.add_argument("--threads", type=bounded(int, 1), nargs="+", default=[1, 2], help="thread counts to time")
     ap.add_argument("--config", action="append", default=None, metavar="TRACKER:ESTIMATOR",
                     help="configurations to run (default: siamfc-edge:a3boxnet siamfc:a3boxnet kcf:baseline)")
     ap.add_argument("--tag", default=None, help="result file name tag (default: the host name)")
@@ -203,10 +203,17 @@ def main(argv=None) -> int:
                     help="also run SiamFC from <prefix>_int8_exemplar/_search.onnx (shipped: models/siamfc_edge_int8_*)")
     ap.add_argument("--torch", action="store_true",
                     help="also run every SiamFC / A3BoxNet configuration in torch eager")
-    ap.add_argument("--torch-siamfc-edge", type=Path, default=Path("runs/siamfc_edge/ckpt.pt"), metavar="CKPT")
-    ap.add_argument("--torch-siamfc", type=Path, default=Path("runs/siamfc_faithful/ckpt.pt"), metavar="CKPT")
-    ap.add_argument("--torch-boxnet", type=Path, default=Path("runs/boxnet/main/best.pt"), metavar="CKPT")
-    args = ap.parse_args(argv)
+    ap.add_argument("--torch-siamfc-edge", type=Path, default=Path("runs/siamfc_edge/ckpt.pt"), metavar="CKPT",
+                    help="torch checkpoint of siamfc-edge (--torch)")
+    ap.add_argument("--torch-siamfc", type=Path, default=Path("runs/siamfc_faithful/ckpt.pt"), metavar="CKPT",
+                    help="torch checkpoint of siamfc (--torch)")
+    ap.add_argument("--torch-boxnet", type=Path, default=Path("runs/boxnet/main/best.pt"), metavar="CKPT",
+                    help="torch checkpoint of A3BoxNet (--torch)")
+    return ap
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
     torch_nets = None
     if args.torch:
         torch_nets = TorchNets({"siamfc-edge": args.torch_siamfc_edge, "siamfc": args.torch_siamfc}, args.torch_boxnet)
@@ -256,6 +263,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from track3d.argparsing import run_main
-
     sys.exit(run_main(main, "bench_fps.py"))

@@ -15,7 +15,7 @@ undisturbed cost). Writes ./bench-results/frustum_<tag>.json.
 """
 from __future__ import annotations
 
-import argparse
+import sys
 import time
 
 import numpy as np
@@ -23,6 +23,7 @@ from benchlib.output import add_out_argument
 from benchlib.record import finish_record, start_record
 
 from track3d import Camera
+from track3d.argparsing import ArgumentParser, bounded, run_main
 from track3d.frustum import (HAVE_EXTENSION, extract_frustum, extract_frustum_numpy, sample_points,
                              sample_points_numpy)
 from track3d.jsonable import write_json
@@ -70,14 +71,18 @@ def bench_cloud(name: str, pts: np.ndarray, box: np.ndarray, M: np.ndarray, repe
     return row
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def build_parser() -> ArgumentParser:
+    ap = ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", help="a simulated dataset root, for the 'frame' cloud")
-    ap.add_argument("--split", default="test")
-    ap.add_argument("--repeat", type=int, default=200)
+    ap.add_argument("--split", default="test", help="dataset split")
+    ap.add_argument("--repeat", type=bounded(int, 1), default=200, help="calls per timing")
     ap.add_argument("--tag", default="cpu", help="results file tag (default cpu)")
     add_out_argument(ap)
-    a = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
     if not HAVE_EXTENSION:
         raise SystemExit("the C++ extension is not built: pip install -e .")
     cam = Camera.from_fov(640, 480, 45.0)
@@ -107,6 +112,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from track3d.argparsing import run_main
-
-    raise SystemExit(run_main(main, "bench_frustum.py"))
+    sys.exit(run_main(main, "bench_frustum.py"))

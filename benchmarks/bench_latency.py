@@ -17,7 +17,6 @@ Writes JSON only with --out (nothing is written into the repository by default).
 """
 from __future__ import annotations
 
-import argparse
 import gc
 import json
 import os
@@ -29,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from track3d import machine
+from track3d.argparsing import ArgumentParser, bounded, run_main
 from track3d.dataset import Dataset
 from track3d.jsonable import write_json
 from track3d.tracker import STAGES, Track3D
@@ -57,19 +57,21 @@ def stats(v: np.ndarray) -> dict:
     return out
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> ArgumentParser:
+    ap = ArgumentParser(description=__doc__)
     ap.add_argument("--data", type=Path, required=True, help="dataset root (track3d-sim output)")
     ap.add_argument("--split", default="test", help="split (default test)")
-    ap.add_argument("--frames", type=int, default=10_000, help="measured updates (default 10000)")
-    ap.add_argument("--warmup", type=int, default=50, help="updates before measuring (default 50)")
+    ap.add_argument("--frames", type=bounded(int, 1), default=10_000, help="measured updates (default 10000)")
+    ap.add_argument("--warmup", type=bounded(int, 0), default=50, help="updates before measuring (default 50)")
     ap.add_argument("--preload", type=int, default=400, help="frames kept in memory, looped over (default 400)")
     ap.add_argument("--cpu", type=int, default=None, help="pin every thread to this CPU (default: the lowest allowed)")
     ap.add_argument("--gc-freeze", action="store_true", help="gc.freeze() after warm-up (objects alive then are never scanned)")
     ap.add_argument("--out", type=Path, help="write the JSON report here (default: print only)")
-    a = ap.parse_args(argv)
-    if a.frames < 1 or a.warmup < 0:
-        ap.error("--frames must be >= 1 and --warmup >= 0")
+    return ap
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
 
     camera, seqs = load(a.data, a.split, a.preload)
     if not seqs:
@@ -152,4 +154,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_main(main, "bench_latency.py"))

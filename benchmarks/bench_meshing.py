@@ -10,7 +10,7 @@ callback). Writes ./bench-results/meshing_<tag>.json and prints a table.
 """
 from __future__ import annotations
 
-import argparse
+import sys
 import time
 
 import numpy as np
@@ -21,6 +21,7 @@ from track3d_sim import bodies
 from track3d_sim.generators import make_body
 from track3d_sim.noise import trilinear
 
+from track3d.argparsing import ArgumentParser, run_main
 from track3d.jsonable import write_json
 
 
@@ -76,13 +77,17 @@ def _manifold(v):
     return np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts)
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def build_parser() -> ArgumentParser:
+    ap = ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tag", default="cpu", help="./bench-results/meshing_<tag>.json (default cpu)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the bodies (default 0)")
     ap.add_argument("--manifold-detail", type=int, default=4,
                     help="detail for manifold3d, whose per-point Python callback is slow (default 4)")
-    args = ap.parse_args()
+    return ap
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
     rec = start_record("meshing")
     names = ["bilobate", "elongated", "top_shape", "rubble_pile", "giant_craters", "fragment"]
     libs = {"scikit-image": _skimage, "PyMCubes": _mcubes, "manifold3d": _manifold}
@@ -110,4 +115,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_main(main, "bench_meshing.py"))

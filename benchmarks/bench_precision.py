@@ -18,7 +18,6 @@ Writes <out-dir>/precision_<tag>.json (CPU name, ISA flags, versions, every numb
 """
 from __future__ import annotations
 
-import argparse
 import gc
 import json
 import platform
@@ -30,6 +29,7 @@ from benchlib.loop_timing import build, load_frames, time_loop
 from benchlib.output import add_out_argument
 from benchlib.record import finish_record, start_record
 
+from track3d.argparsing import ArgumentParser, bounded, run_main
 from track3d.jsonable import write_json
 from track3d.machine import START_CPUS, pin_threads
 from track3d.onnxmodel import MODELS_DIR, ModelError, OnnxModel, openvino_version, variant_path
@@ -266,12 +266,12 @@ def markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> ArgumentParser:
+    ap = ArgumentParser(description=__doc__)
     ap.add_argument("--data", type=Path, default=None, help="dataset root for the whole-loop rows (none: networks only)")
     ap.add_argument("--split", default="test", help="dataset split (default test)")
-    ap.add_argument("--frames", type=int, default=300, help="measured loop frames per configuration (default 300)")
-    ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of the loop configurations (default 3)")
+    ap.add_argument("--frames", type=bounded(int, 1), default=300, help="measured loop frames per configuration (default 300)")
+    ap.add_argument("--rounds", type=bounded(int, 1), default=3, help="interleaved rounds of the loop configurations (default 3)")
     ap.add_argument("--preload", type=int, default=200, help="frames kept in memory (default 200)")
     ap.add_argument("--sequences", type=int, default=6, help="sequences preloaded (default 6)")
     ap.add_argument("--net-seconds", type=float, default=3.0, help="round-robin seconds per network (default 3)")
@@ -287,9 +287,11 @@ def main(argv=None) -> int:
     ap.add_argument("--no-speed", action="store_true", help="skip the speed rows (accuracy only)")
     ap.add_argument("--tag", default=None, help="result file tag (default: the host name)")
     add_out_argument(ap, flag="--out-dir")
-    a = ap.parse_args(argv)
-    if a.rounds < 1 or a.frames < 1:
-        ap.error("--rounds and --frames must be >= 1")
+    return ap
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
     pin_threads(1)  # one thread, one core (as bench_fps --threads 1)
     res = start_record("track3d precision x engine", openvino=openvino_version(), threads=1)
     res["networks"] = {} if a.no_speed else bench_networks(a.net_seconds)
@@ -319,4 +321,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_main(main, "bench_precision.py"))

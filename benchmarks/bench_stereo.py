@@ -8,21 +8,26 @@ compare on a shared machine).
 """
 from __future__ import annotations
 
-import argparse
+import sys
 import time
 
 import cv2
 import numpy as np
 
+from track3d.argparsing import ArgumentParser, run_main
 from track3d.camera import Camera
 from track3d.stereo import StereoMatcher
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def build_parser() -> ArgumentParser:
+    ap = ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5, help="calls per configuration (default 5)")
     ap.add_argument("--threads", type=int, default=1, help="OpenCV threads (default 1)")
-    a = ap.parse_args()
+    return ap
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
     cv2.setNumThreads(a.threads)
     cam = Camera.from_fov(640, 480, 45.0)
     rng = np.random.default_rng(0)
@@ -50,4 +55,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_main(main, "bench_stereo.py"))

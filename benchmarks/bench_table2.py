@@ -48,6 +48,7 @@ from benchlib.paper import TABLE2 as PAPER
 from benchlib.paper import fusion_gain
 from benchlib.record import finish_record, start_record
 
+from track3d.argparsing import ArgumentParser, bounded, hidden_alias, run_main
 from track3d.evaluation.tables import columns
 from track3d.jsonable import write_json
 from track3d.machine import pin_threads
@@ -346,15 +347,17 @@ def sweep_plots(sweep_rows: list[dict], overall: dict, out: Path, subtitle: str)
 
 # --- main -----------------------------------------------------------------------------------------
 
-def parse_args(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> ArgumentParser:
+    ap = ArgumentParser(description=__doc__)
     ap.add_argument("--data", required=True, help="dataset root (the folder with dataset.json)")
     ap.add_argument("--split", default="test", help="dataset split (default: test)")
     add_out_argument(ap, "table2", committed="benchmarks/results/table2")
-    ap.add_argument("--threads", type=int, default=1,
+    ap.add_argument("--threads", type=bounded(int, 1), default=1,
                     help="CPU threads of the ONNX models and OpenCV (default 1: the process is pinned to one core)")
-    ap.add_argument("--max-seqs", type=int, default=0, help="only the first N sequences of the split (0: all)")
-    ap.add_argument("--max-frames", type=int, default=0, help="only the first N frames of each sequence (0: all)")
+    ap.add_argument("--max-sequences", type=bounded(int, 0), default=0,
+                    help="only the first N sequences of the split (0: all)")
+    hidden_alias(ap, "--max-seqs", "max_sequences", type=bounded(int, 0))
+    ap.add_argument("--max-frames", type=bounded(int, 0), default=0, help="only the first N frames of each sequence (0: all)")
     ap.add_argument("--trackers", nargs="+", default=list(DEFAULT_TRACKERS), metavar="NAME",
                     help="2D trackers of the Fig. 15/16 sweep (default: %(default)s)")
     ap.add_argument("--sweep-estimators", nargs="+", default=["a3boxnet"], metavar="NAME",
@@ -377,12 +380,7 @@ def parse_args(argv=None):
                          "re-running them")
     ap.add_argument("--trajectories", type=int, default=2, help="sequences with a 3D trajectory plot (2)")
     ap.add_argument("--quiet", action="store_true", help="no progress output on stderr")
-    a = ap.parse_args(argv)
-    if a.threads < 1:
-        ap.error("--threads must be >= 1")
-    if a.max_seqs < 0 or a.max_frames < 0:
-        ap.error("--max-seqs and --max-frames must be >= 0")
-    return a
+    return ap
 
 
 def unknown_names(a) -> str | None:
@@ -405,7 +403,7 @@ def experiments(a, out: Path) -> dict:
 
     max_frames = a.max_frames or None
     exps = {"main": Experiment(a.data, a.split, out / "results", out / "report", max_frames=max_frames,
-                               restart=True, restart_skip=a.restart_skip, max_sequences=a.max_seqs or None)}
+                               restart=True, restart_skip=a.restart_skip, max_sequences=a.max_sequences or None)}
     if a.ope:
         exps["ope"] = Experiment(a.data, a.split, out / "results_ope", out / "report_ope", max_frames=max_frames,
                                  sequences=[s.name for s in exps["main"].sequences], restart=False)
@@ -545,7 +543,7 @@ def all_plots(a, out: Path, main_exp, seqs, rows, overall: dict, sweep_rows, sub
 
 
 def main(argv=None) -> int:
-    a = parse_args(argv)
+    a = build_parser().parse_args(argv)
     from track3d.dataset import DatasetError
 
     bad = unknown_names(a)
@@ -615,6 +613,4 @@ def _spec_dict(spec) -> dict:
 
 
 if __name__ == "__main__":
-    from track3d.argparsing import run_main
-
     sys.exit(run_main(main, "bench_table2.py"))

@@ -13,11 +13,11 @@ The reports come from (per sensor S, split P, protocol M; see benchmarks/README.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
+from track3d.argparsing import ArgumentParser, run_main
 from track3d.evaluation.tables import columns
 from track3d.jsonable import write_json
 from track3d.table_text import cell, markdown_table
@@ -49,11 +49,15 @@ def markdown(rows: list[dict]) -> str:
                                  + [cell(r[k], fmt) for _, k, fmt in COLUMNS] for r in rows]) + "\n"
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> ArgumentParser:
+    ap = ArgumentParser(description=__doc__)
     ap.add_argument("--results", required=True, type=Path, help="folder holding engine-<sensor>/ result folders")
     ap.add_argument("--out", required=True, type=Path, help="folder for engine_baseline.json / .md")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
     rows = collect(a.results)
     if not rows:
         print(f"engine_baseline: error: no engine-*/*-report/report.json under {a.results}", file=sys.stderr)
@@ -65,4 +69,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_main(main, "engine_baseline.py"))

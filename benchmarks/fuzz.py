@@ -48,6 +48,8 @@ from pathlib import Path
 
 import numpy as np
 
+from track3d.argparsing import ArgumentParser, run_main
+
 OUTCOMES = ("ok", "clean_error", "wrong", "crash", "hang")
 ORACLE_K = 10.0  # A3BoxNet: centre offset and size at most 10 L (measured worst 5.2 L, see docs)
 
@@ -538,8 +540,8 @@ def run_range(target: str, start: int, stop: int, seed: int, timeout: float, dea
     return case
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> ArgumentParser:
+    ap = ArgumentParser(description=__doc__)
     ap.add_argument("--cases", type=int, default=100_000, help="total cases over all targets (default 100000)")
     ap.add_argument("--seed", type=int, default=0, help="fuzz seed (default 0)")
     ap.add_argument("--minutes", type=float, default=20.0, help="stop after this long, reporting the count reached (20)")
@@ -550,7 +552,11 @@ def main(argv=None) -> int:
     ap.add_argument("--worker", help=argparse.SUPPRESS)
     ap.add_argument("--start", type=int, default=0, help=argparse.SUPPRESS)
     ap.add_argument("--stop", type=int, default=0, help=argparse.SUPPRESS)
-    a = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
     if a.worker:
         worker(a.worker, a.seed, a.start, a.stop)
         return 0
@@ -585,4 +591,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_main(main, "fuzz.py"))

@@ -10,7 +10,6 @@ tracker) they come from, so no paragraph has to say which run made which number.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import re
 import sys
@@ -18,6 +17,7 @@ from pathlib import Path
 
 from benchlib.paper import TABLE2
 
+from track3d.argparsing import ArgumentParser, run_main
 from track3d.table_text import cell, markdown_table
 
 REPO = Path(__file__).resolve().parents[1]
@@ -121,14 +121,18 @@ def render(readme: str, root: Path) -> str:
                   flags=re.S)
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> ArgumentParser:
+    ap = ArgumentParser(description=__doc__)
     ap.add_argument("--readme", type=Path, default=REPO / "README.md", help="the README (default: the repository's)")
     ap.add_argument("--root", type=Path, default=REPO, help="the repository holding benchmarks/results")
     mode = ap.add_mutually_exclusive_group()
     mode.add_argument("--check", action="store_true", help="exit 1 when the README's tables differ from the JSON")
     mode.add_argument("--write", action="store_true", help="update the README's marked sections in place")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
     if not (a.check or a.write):
         for name, fn in TABLES.items():
             print(f"<!-- readme_tables.py: {name} -->\n{fn(a.root)}\n")
@@ -147,4 +151,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_main(main, "readme_tables.py"))

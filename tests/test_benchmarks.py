@@ -14,7 +14,7 @@ def test_bench_2d_scores_are_the_toolkits(tiny_dataset, tmp_path):
     from track3d.evaluation import Experiment, TrackerSpec, average_scores
 
     out = tmp_path / "b2d"
-    assert bench_2d.main(["--data", str(tiny_dataset), "--trackers", "kcf", "--max-seqs", "2", "--speed-seqs", "1",
+    assert bench_2d.main(["--data", str(tiny_dataset), "--trackers", "kcf", "--max-sequences", "2", "--speed-seqs", "1",
                           "--out", str(out)]) == 0
     row = json.loads((out / "bench_2d.json").read_text())["trackers"]["kcf"]
     exp = Experiment(tiny_dataset, "test", tmp_path / "r", tmp_path / "p", restart=False, max_sequences=2)

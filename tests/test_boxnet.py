@@ -431,7 +431,7 @@ def test_cli_eval(exported, tiny_cache, tmp_path):
     from track3d_train.boxnet.cli import main
 
     out = tmp_path / "eval.json"
-    assert main(["eval", "--model", str(exported[0]), "--cache", str(tiny_cache[1]), "--json", str(out)]) == 0
+    assert main(["eval", "--model", str(exported[0]), "--cache", str(tiny_cache[1]), "--out", str(out)]) == 0
     r = json.loads(out.read_text())
     assert set(r) >= {"a3boxnet", "baseline"} and r["a3boxnet"]["frames"] == r["baseline"]["frames"]
 

@@ -51,6 +51,27 @@ def _parsers():
     return out
 
 
+BENCH_SCRIPTS = sorted(p.name for p in (ROOT / "benchmarks").glob("*.py"))
+
+
+def _bench_parsers():
+    """Every benchmark script's parser (each has build_parser(); the scripts import as modules:
+    pyproject's pytest pythonpath), skipping those whose extra is not installed."""
+    import importlib
+
+    out = []
+    for name in BENCH_SCRIPTS:
+        try:
+            out.append((name, importlib.import_module(name[:-3]).build_parser()))
+        except ImportError:
+            pass
+    return out
+
+
+def _all_parsers():
+    return _parsers() + _bench_parsers()
+
+
 def _visible_flags(parser):
     for p in _walk(parser):
         for a in p._actions:
@@ -70,7 +91,7 @@ def test_every_command_of_the_three_clis_is_covered():
         assert sub in progs
 
 
-@pytest.mark.parametrize("name,parser", _parsers())
+@pytest.mark.parametrize("name,parser", _all_parsers())
 def test_every_flag_has_help_and_shows_its_default(name, parser):
     for p in _walk(parser):
         text = p.format_help()
@@ -88,10 +109,10 @@ def test_every_flag_has_help_and_shows_its_default(name, parser):
 # One name per flag across the CLIs; the older spellings parse (scripts keep working) but are
 # never shown.
 OLD_SPELLINGS = {"--ckpt": "--checkpoint", "--steps": "--max-steps", "--no-progress": "--quiet",
-                 "--max-minutes": "--time-budget-min", "--stride": "--frame-step"}
+                 "--max-minutes": "--time-budget-min", "--stride": "--frame-step", "--max-seqs": "--max-sequences"}
 
 
-@pytest.mark.parametrize("name,parser", _parsers())
+@pytest.mark.parametrize("name,parser", _all_parsers())
 def test_no_command_shows_an_old_flag_spelling(name, parser):
     shown = [(prog, o) for prog, a in _visible_flags(parser) for o in a.option_strings if o in OLD_SPELLINGS]
     assert not shown, f"{name}: {shown} (show {[OLD_SPELLINGS[o] for _, o in shown]}; keep the old as hidden_alias)"
@@ -110,21 +131,62 @@ def test_no_command_shows_an_old_flag_spelling(name, parser):
     ("track3d-train boxnet", ["train", "--cache", "c", "--time-budget-min", "3"], "max_minutes", 3.0),
     ("track3d-train siamfc", ["prepare", "--out", "o", "--stride", "2"], "stride", 2),
     ("track3d-train siamfc", ["prepare", "--out", "o", "--frame-step", "2"], "stride", 2),
+    ("track3d-train siamfc", ["eval", "--model", "m", "--data", "d", "--max-seqs", "2"], "max_sequences", 2),
+    ("track3d-train siamfc", ["eval", "--model", "m", "--data", "d", "--max-sequences", "2"], "max_sequences", 2),
+    ("track3d-train edgetrack", ["eval", "--data", "d", "--max-seqs", "2"], "max_sequences", 2),
+    ("track3d-train edgetrack", ["eval", "--data", "d", "--max-sequences", "2"], "max_sequences", 2),
+    ("track3d-train boxnet", ["eval", "--model", "m", "--cache", "c", "--json", "r.json"], "out", "r.json"),
+    ("track3d-train boxnet", ["eval", "--model", "m", "--cache", "c", "--out", "r.json"], "out", "r.json"),
+    ("bench_boxnet.py", ["--cache", "c", "--ckpt", "k.pt"], "checkpoint", "k.pt"),
+    ("bench_boxnet.py", ["--cache", "c", "--checkpoint", "k.pt"], "checkpoint", "k.pt"),
+    ("bench_2d.py", ["--max-seqs", "3"], "max_sequences", 3),
+    ("bench_table2.py", ["--data", "d", "--max-seqs", "3"], "max_sequences", 3),
 ])
 def test_old_and_new_spellings_parse_alike(cli, argv, dest, value):
-    parsers = dict(_parsers())
+    parsers = dict(_all_parsers())
     if cli not in parsers:
         pytest.skip(f"{cli} not installed")
     assert getattr(parsers[cli].parse_args(argv), dest) == value
 
 
-@pytest.mark.parametrize("name,parser", _parsers())
+@pytest.mark.parametrize("name,parser", _all_parsers())
 def test_a_command_line_mistake_is_one_line(name, parser, capsys):
     with pytest.raises(SystemExit) as e:
         parser.parse_args(["--no-such-flag"])
     assert e.value.code == 2
     line = _one_line(capsys, "error: ", "--help)")
     assert "usage:" not in line
+
+
+def test_every_benchmark_script_follows_the_conventions():
+    """Each script builds its parser with build_parser() (track3d.argparsing.ArgumentParser: a
+    mistake is one line) and runs main() through run_main (a user's error is one line, exit 2)."""
+    import ast
+
+    from track3d.argparsing import ArgumentParser
+
+    assert len(BENCH_SCRIPTS) >= 10
+    for name in BENCH_SCRIPTS:
+        tree = ast.parse((ROOT / "benchmarks" / name).read_text())
+        funcs = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
+        assert {"build_parser", "main"} <= funcs, name
+        guard = [n for n in tree.body if isinstance(n, ast.If) and "__main__" in ast.unparse(n.test)]
+        assert guard and "run_main(main" in ast.unparse(guard[0]), f"{name}: __main__ must call run_main(main, ...)"
+    for name, parser in _bench_parsers():
+        assert isinstance(parser, ArgumentParser), name
+
+
+@pytest.mark.parametrize("script,argv", [
+    ("bench_latency.py", ["--data", "no/such/dataset"]),      # ended in a DatasetError traceback
+    ("bench_precision.py", ["--data", "no/such/dataset", "--no-speed", "--accuracy-data", "no/such/dataset"]),
+    ("bench_boxnet.py", ["--cache", "no/such/cache.npz", "--no-speed"]),
+    ("bench_latency.py", ["--data", "d", "--frames", "0"]),
+])
+def test_benchmark_mistakes_are_one_line(script, argv, tmp_path):
+    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *argv], capture_output=True, text=True,
+                       timeout=300, cwd=tmp_path)
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1 and f"{script}: error: " in err[0], r.stderr[-2000:]
 
 
 def test_version(capsys):
@@ -299,11 +361,11 @@ def test_a_missing_module_of_no_extra_keeps_its_traceback(monkeypatch):
 
 def test_every_number_of_the_training_commands_has_bounds():
     """A plain int / float flag takes 0, -5 or nan: boxnet prepare --jitters -1 wrote a cache,
-    train --batch 0 ended in a ZeroDivisionError, --threads 0 in torch's RuntimeError. (The
-    eval sub-commands are left to their own refactoring.)"""
+    train --batch 0 ended in a ZeroDivisionError, --threads 0 in torch's RuntimeError; the eval
+    sub-commands too (siamfc eval --scale-num 0, --threads 0)."""
     pytest.importorskip("torch")
     plain = [(p.prog, a.option_strings) for name, parser in _parsers() if name.startswith("track3d-train")
-             for p in _walk(parser) if not p.prog.endswith(" eval")
+             for p in _walk(parser)
              for a in p._actions if a.option_strings and a.type in (int, float)]
     assert not plain, f"give these a track3d.argparsing.bounded type: {plain}"
 
@@ -324,6 +386,9 @@ def test_every_number_of_the_training_commands_has_bounds():
     ["edgetrack", "export", "--out", "o", "--instance-size", "-5"],   # written into the model's metadata
     ["edgetrack", "time", "--model", "m", "--repeats", "2"],          # median of an empty list
     ["quantize", "--data", "d", "--samples", "0"],
+    ["siamfc", "eval", "--model", "m", "--data", "d", "--scale-num", "0"],   # the eval commands took any number
+    ["edgetrack", "eval", "--data", "d", "--threads", "0"],
+    ["boxnet", "eval", "--model", "m", "--cache", "c", "--num-points", "-5"],
     ["boxnet", "prepare", "--data", "d", "--seed", "-1"],
 ])
 def test_bad_numbers_of_the_training_commands_are_one_line(argv, capsys, tmp_path, monkeypatch):

@@ -236,7 +236,7 @@ def test_cli_eval_and_time_run_on_an_exported_model(trained, tiny_dataset, tmp_p
     from track3d_train.edgetrack.cli import main
 
     prefix = str(trained["root"] / "model" / "et")
-    assert main(["eval", "--model", prefix, "--data", str(tiny_dataset), "--max-seqs", "1", "--quiet",
+    assert main(["eval", "--model", prefix, "--data", str(tiny_dataset), "--max-sequences", "1", "--quiet",
                  "--out", str(tmp_path / "e.json")]) == 0
     rows = json.loads((tmp_path / "e.json").read_text())["trackers"]
     assert rows["model et"]["sequences"] == 1 and 0.0 <= rows["model et"]["ao_2d"] <= 1.0

@@ -248,7 +248,7 @@ def test_cli_prepare_train_export_eval_on_tiny_data(tiny_dataset, tmp_path, caps
     assert meta["training"]["steps"] == 5 and meta["width"] == 0.125
     capsys.readouterr()
     assert main(["siamfc", "eval", "--model", str(prefix), "--data", str(tiny_dataset), "--split", "test",
-                 "--max-seqs", "1"]) == 0
+                 "--max-sequences", "1"]) == 0
     res = json.loads(capsys.readouterr().out)
     assert res["sequences"] == 1 and 0.0 <= res["ao_2d"] <= 1.0 and "ao_3d" not in res
 

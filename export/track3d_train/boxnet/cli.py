@@ -87,8 +87,8 @@ def _eval(a) -> int:
            "baseline": oracle_metrics(cache.field("baseline"), cache.field("gt3d"), cache.field("seq")),
            "seconds": time.time() - t}
     print(json.dumps(res, indent=1))
-    if a.json:
-        Path(a.json).write_text(json.dumps(res, indent=1))
+    if a.out:
+        Path(a.out).write_text(json.dumps(res, indent=1))
     return 0
 
 
@@ -170,10 +170,11 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--model", required=True, help="ONNX model")
     v.add_argument("--cache", required=True, help="test .npz from `prepare --jitters 0`")
     v.add_argument("--all-boxes", action="store_true", help="also the jittered boxes of the cache")
-    v.add_argument("--num-points", type=int, default=None, help="override N")
-    v.add_argument("--threads", type=int, default=1, help="onnxruntime threads")
-    v.add_argument("--seed", type=int, default=0, help="sampling seed")
-    v.add_argument("--json", default=None, help="write the result here")
+    v.add_argument("--num-points", type=bounded(int, 1), default=None, help="override N")
+    v.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
+    v.add_argument("--seed", type=bounded(int, 0), default=0, help="sampling seed")
+    v.add_argument("--out", default=None, help="also write the result to this JSON file")
+    hidden_alias(v, "--json", "out")
     v.set_defaults(func=_eval)
     return apply_formatter(p)
 

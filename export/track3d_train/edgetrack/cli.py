@@ -83,7 +83,7 @@ def _eval(a) -> int:
     if a.model:
         specs.insert(0, TrackerSpec("edgetrack", "none", threads=a.threads, tracker_options={"model": a.model},
                                     name=f"model {Path(a.model).name}"))
-    rows = evaluate_2d(a.data, a.split, specs, max_sequences=a.max_seqs or None, quiet=a.quiet)
+    rows = evaluate_2d(a.data, a.split, specs, max_sequences=a.max_sequences or None, quiet=a.quiet)
     print(json.dumps(rows, indent=1))
     if a.out:
         sequences = next(iter(rows.values()))["sequences"] if rows else 0
@@ -187,8 +187,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--data", required=True, help="dataset root")
     v.add_argument("--split", default="test", help="dataset split")
     v.add_argument("--compare", nargs="*", default=[], help="registered 2D trackers to run on the same frames")
-    v.add_argument("--max-seqs", type=int, default=0, help="0: all")
-    v.add_argument("--threads", type=int, default=1, help="onnxruntime threads")
+    v.add_argument("--max-sequences", type=bounded(int, 0), default=0, help="only the first N sequences (0: all)")
+    hidden_alias(v, "--max-seqs", "max_sequences", type=bounded(int, 0))
+    v.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
     v.add_argument("--out", help="also write the numbers to this JSON file")
     v.add_argument("--quiet", action="store_true", help="no progress bar")
     v.set_defaults(fn=_eval)

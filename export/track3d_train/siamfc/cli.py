@@ -117,7 +117,7 @@ def _eval(a) -> int:
             if getattr(a, k) is not None}
     spec = TrackerSpec("siamfc-edge", "none", threads=a.threads, tracker_options={"model": a.model, **over},
                        name="model")
-    print(json.dumps(evaluate_2d(a.data, a.split, [spec], max_sequences=a.max_seqs or None)["model"], indent=1))
+    print(json.dumps(evaluate_2d(a.data, a.split, [spec], max_sequences=a.max_sequences or None)["model"], indent=1))
     return 0
 
 
@@ -182,9 +182,11 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--model", required=True, help="prefix of <name>_exemplar/_search.onnx")
     v.add_argument("--data", required=True, help="dataset root")
     v.add_argument("--split", default="test", help="split name")
-    v.add_argument("--max-seqs", type=int, default=0, help="only the first k sequences (0: all)")
-    v.add_argument("--threads", type=int, default=1, help="onnxruntime threads")
-    for k, ty in (("instance-size", int), ("scale-num", int), ("window-influence", float), ("scale-lr", float)):
+    v.add_argument("--max-sequences", type=bounded(int, 0), default=0, help="only the first N sequences (0: all)")
+    hidden_alias(v, "--max-seqs", "max_sequences", type=bounded(int, 0))
+    v.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
+    for k, ty in (("instance-size", bounded(int, 1)), ("scale-num", bounded(int, 1)), ("window-influence", unit),
+                  ("scale-lr", unit)):
         v.add_argument(f"--{k}", type=ty, default=None, help="override the model's tracking default")
     v.set_defaults(fn=_eval)
     return apply_formatter(p)
