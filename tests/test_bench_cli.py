@@ -132,3 +132,18 @@ def test_bench_mistakes_fail_before_timing(tmp_path, capsys, monkeypatch):
                  "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "run no ONNX network" in err[0]
+
+
+def test_bench_reads_the_models_counters_and_wraps_nothing(monkeypatch):
+    """--models-only used to replace each model's run() by a timing wrapper (left on the models
+    the bench built); the run_ms counters and OnnxModel.keep_feeds give the same without it."""
+    pytest.importorskip("track3d.siamfc")
+    built = []
+    build = bench._build
+    monkeypatch.setattr(bench, "_build", lambda *a: built.append(build(*a)) or built[-1])
+    rep = bench.run_bench(bench.BenchConfig(frames=3, threads=(1,), synthetic_frames=4, models_only=True))
+    models = [m for t in built for part in (t.tracker2d, t.estimator) for m in bench._onnx_models(part)]
+    assert models and not [m for m in models if "run" in vars(m)]
+    assert all(m.run_ms > 0 and m.first_feeds for m in models)
+    row = rep["results"][0]["models"]
+    assert row["a3boxnet"]["inputs"] == {k: list(v.shape) for k, v in built[0].estimator.model.first_feeds.items()}

@@ -16,7 +16,7 @@ import numpy as np
 
 from track3d.dataset import Dataset
 from track3d.machine import affinity_of_all_threads
-from track3d.onnxmodel import models_of
+from track3d.onnxmodel import run_ms_of
 from track3d.tracker import Track3D
 
 __all__ = ["STAGES", "load_frames", "build", "time_loop"]
@@ -50,10 +50,6 @@ def build(camera, cfg: dict, threads: int, fusion: bool = True) -> Track3D:
                           fusion=fusion)
 
 
-def _net_ms(part) -> float:
-    return sum(m.run_ms for m in models_of(part).values())
-
-
 def time_loop(t3d: Track3D, sequences, frames: int, warm: int = 20) -> dict:
     """Per-stage median / p99 / mean ms and FPS over `frames` measured updates."""
     rows: dict[str, list] = {k: [] for k in STAGES}
@@ -70,11 +66,11 @@ def time_loop(t3d: Track3D, sequences, frames: int, warm: int = 20) -> dict:
             t3d.init(img, box, seq.category, points=pts)
             for img, pts, _ in fr[first + 1:]:
                 progressed = True
-                n2, n3 = _net_ms(t3d.tracker2d), _net_ms(t3d.estimator)
+                n2, n3 = run_ms_of(t3d.tracker2d), run_ms_of(t3d.estimator)
                 t = time.perf_counter()
                 res = t3d.update(img, pts)
                 e2e = (time.perf_counter() - t) * 1e3
-                n2, n3 = _net_ms(t3d.tracker2d) - n2, _net_ms(t3d.estimator) - n3
+                n2, n3 = run_ms_of(t3d.tracker2d) - n2, run_ms_of(t3d.estimator) - n3
                 done += 1
                 if done <= warm:
                     if done == warm:

@@ -143,28 +143,31 @@ def _onnx_models(obj) -> list:
 
 
 class _NetTimer:
-    """Wraps the run() of models to accumulate their time and keep their first feeds."""
+    """The network time of a tracker or estimator from its models' own run_ms counters (nothing
+    wraps run()), and each model's first inputs (OnnxModel.keep_feeds) for --models-only."""
 
-    def __init__(self, models):
-        self.ms = 0.0
-        self.feeds: dict[str, dict] = {}
-        for m in models:
-            run = m.run
-            key = m.meta.get("kind", m.path.name)
+    def __init__(self, part):
+        from .onnxmodel import run_ms_of
 
-            def timed(feeds, outputs=None, _run=run, _key=key):
-                self.feeds.setdefault(_key, {k: np.array(v) for k, v in feeds.items()})
-                t = time.perf_counter()
-                try:
-                    return _run(feeds, outputs)
-                finally:
-                    self.ms += (time.perf_counter() - t) * 1e3
-
-            m.run = timed
+        self.part, self._run_ms = part, run_ms_of
+        self.models = _onnx_models(part)
+        for m in self.models:
+            m.keep_feeds = True
+        self._last = run_ms_of(part)
 
     def take(self) -> float:
-        v, self.ms = self.ms, 0.0
+        """Milliseconds in the networks since the last take()."""
+        now = self._run_ms(self.part)
+        v, self._last = now - self._last, now
         return v
+
+    @property
+    def feeds(self) -> dict[str, dict]:
+        out: dict[str, dict] = {}
+        for m in self.models:
+            if getattr(m, "first_feeds", None) is not None:
+                out.setdefault(m.meta.get("kind", m.path.name), m.first_feeds)
+        return out
 
 
 def _build(cfg: BenchConfig, camera: Camera, threads: int):
@@ -191,8 +194,8 @@ STAGE_NAMES = ("track2d", "net2d", "frustum", "box3d", "net3d", "fusion", "end_t
 
 
 def _time_loop(t3d, passes, frames: int) -> tuple[dict, dict, dict]:
-    net2d = _NetTimer(_onnx_models(t3d.tracker2d))
-    net3d = _NetTimer(_onnx_models(t3d.estimator))
+    net2d = _NetTimer(t3d.tracker2d)
+    net3d = _NetTimer(t3d.estimator)
     rows: dict[str, list] = {k: [] for k in STAGE_NAMES}
     statuses: dict[str, int] = {}
     done = 0
@@ -229,7 +232,7 @@ def _time_models(t3d, feeds: dict, frames: int) -> dict:
             key = m.meta.get("kind", m.path.name)
             if key not in feeds:
                 continue
-            run = type(m).run.__get__(m)   # the unwrapped method
+            run = m.run
             for _ in range(5):
                 run(feeds[key])
             ms = []

@@ -218,6 +218,10 @@ class OnnxModel:
         self.input_names = list(session.input_names)
         self.output_names = list(session.output_names)
         self.run_ms = 0.0   # summed time of run(): benchmarks read it, nothing wraps run
+        # keep_feeds: run() keeps a copy of its first inputs in first_feeds (track3d bench
+        # --models-only times each network alone on the inputs it got in the loop)
+        self.keep_feeds = False
+        self.first_feeds: dict[str, np.ndarray] | None = None
 
     @property
     def session(self):
@@ -230,6 +234,8 @@ class OnnxModel:
         return {"model": self.path.name, "kind": self.meta.get("kind"), "threads": self.threads, **self.choice}
 
     def run(self, feeds: dict[str, np.ndarray], outputs: list[str] | None = None) -> list[np.ndarray]:
+        if self.keep_feeds and self.first_feeds is None:
+            self.first_feeds = {k: np.array(v) for k, v in feeds.items()}
         t = time.perf_counter()
         try:
             return self._session.run(feeds, outputs)
@@ -258,3 +264,8 @@ def load_model(model, threads: int = 1, kind: str | None = None, precision: str 
 def models_of(part) -> dict:
     """{attribute: model} of the models (is_model) a tracker or estimator holds."""
     return {k: v for k, v in sorted(vars(part).items()) if is_model(v)} if hasattr(part, "__dict__") else {}
+
+
+def run_ms_of(part) -> float:
+    """The summed run_ms counters of the models a tracker or estimator holds (their network time)."""
+    return sum(m.run_ms for m in models_of(part).values())
