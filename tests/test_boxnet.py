@@ -263,6 +263,53 @@ def test_augmentations_keep_points_inside_their_box(tiny_cache):
     assert np.std(scales) > 0.05                                       # the scale does vary
 
 
+def test_stretch_moves_points_and_box_together(tiny_cache):
+    """The per-axis stretch about the box centre: each axis of the points' offsets from the box
+    centre and of the box size is multiplied by one factor in [0.4, 2.5]; the points stay inside
+    their stretched box; the factors differ between axes and items."""
+    from track3d.boxes import decode_size
+    from track3d_train.boxnet.data import BoxNetSamples, PointCache
+
+    cache = PointCache(tiny_cache[0])
+    cache = cache.subset(np.nonzero(cache.jittered == 0)[0])
+    plain = BoxNetSamples(cache, 64)
+    aug = BoxNetSamples(cache, 64, stretch_sigma=0.4)
+    ks = []
+    for i in range(len(cache)):
+        pts, _, crel, cls, res, scale = aug[i]
+        size = decode_size(cls, res, scale)
+        assert np.all(np.abs(pts - crel) <= size / 2 + 2e-3 * 2.5), i
+        p0, _, c0, k0, r0, s0 = plain[i]
+        size0 = decode_size(k0, r0, s0)
+        k = size / size0
+        assert np.all((0.4 - 1e-5 <= k) & (k <= 2.5 + 1e-5)), k
+        # the same sampled points: offsets from the box centre scaled per axis by k
+        np.testing.assert_allclose(pts - crel, (p0 - c0) * k, rtol=1e-4, atol=2e-4)
+        ks.append(k)
+    ks = np.array(ks)
+    assert np.std(np.log(ks)) > 0.1 and np.mean(np.abs(ks[:, 0] - ks[:, 2])) > 0.05
+
+
+def test_init_from_starts_from_a_checkpoint_and_refuses_another_model(trained, tmp_path):
+    import torch
+
+    from track3d_train.boxnet.train import TrainConfig, train
+
+    out, cfg, _ = trained
+    src = torch.load(str(out / "best.pt"), map_location="cpu", weights_only=False)
+    tune = TrainConfig(**{**cfg.__dict__, "out": str(tmp_path / "tune"), "epochs": 1, "max_steps": 1, "lr": 1e-12,
+                          "lr_min": 1e-12})
+    h = train(tune, progress=False, log=lambda *_: None, init_from=str(out / "best.pt"))
+    assert h["init_from"]["file"] == "best.pt"
+    tuned = torch.load(str(tmp_path / "tune" / "last.pt"), map_location="cpu", weights_only=False)
+    for k, v in src["model"].items():       # one step at lr 1e-12: the weights are the source's
+        if v.dtype.is_floating_point and "running_" not in k:   # (batch-norm statistics move)
+            torch.testing.assert_close(tuned["model"][k], v, rtol=1e-6, atol=1e-6)
+    other = TrainConfig(**{**cfg.__dict__, "out": str(tmp_path / "other"), "width": 0.5, "max_steps": 1})
+    with pytest.raises(ValueError, match="not an A3BoxNet checkpoint of this model"):
+        train(other, progress=False, log=lambda *_: None, init_from=str(out / "best.pt"))
+
+
 def test_jitter_box_stays_in_image():
     from track3d_train.boxnet.data import JitterSpec, jitter_box
 

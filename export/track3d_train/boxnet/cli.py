@@ -44,11 +44,11 @@ def _train(a) -> int:
     cfg = TrainConfig(train_cache=[str(c) for c in a.cache], out=str(a.out), num_points=a.num_points, width=a.width,
                       use_category=not a.no_category, size_norm=a.size_norm, epochs=a.epochs,
                       epoch_samples=a.epoch_samples, batch=a.batch, lr=a.lr, flip=not a.no_flip,
-                      cat_dropout=a.cat_dropout, flip_y=a.flip_y, scale_aug=a.scale_aug,
+                      cat_dropout=a.cat_dropout, flip_y=a.flip_y, scale_aug=a.scale_aug, stretch_aug=a.stretch_aug,
                       val_every=a.val_every, seed=a.seed, threads=a.threads, max_minutes=a.max_minutes,
                       max_steps=a.max_steps)
     _log(f"training A3BoxNet into {a.out}: {cfg}")
-    h = train(cfg, resume=not a.no_resume, progress=not a.quiet, log=_log)
+    h = train(cfg, resume=not a.no_resume, progress=not a.quiet, log=_log, init_from=a.init_from)
     _log(f"done: {len(h['epochs'])} epochs, {h['seconds'] / 60:.1f} min; curve in {Path(a.out) / 'loss_curve.png'}")
     return 0
 
@@ -140,6 +140,11 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--flip-y", action="store_true", help="also mirror y at random")
     t.add_argument("--scale-aug", type=bounded(float, 0), default=0.0,
                    help="sigma of a random log scale of points and box about the camera centre (e.g. 0.15)")
+    t.add_argument("--stretch-aug", type=bounded(float, 0), default=0.0,
+                   help="sigma of a random per-axis log stretch of points and box about the box centre "
+                        "(other body proportions, e.g. 0.3)")
+    t.add_argument("--init-from", default=None,
+                   help="start from this A3BoxNet checkpoint's weights (fine-tuning; default: random)")
     t.add_argument("--val-every", type=bounded(int, 0), default=8, help="every k-th train sequence is validation (0: none)")
     t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
     t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")

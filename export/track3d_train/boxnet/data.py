@@ -209,15 +209,21 @@ class BoxNetSamples:
     centre, so the mirrored box cuts the mirrored frustum);
     ``scale_sigma``: points and box scaled about the camera centre by exp(N(0, scale_sigma)),
     clipped to [0.7, 1.4] (projection is scale invariant, so the same 2D box still cuts the scaled
-    scene: a bigger body farther away, or a smaller one nearer)."""
+    scene: a bigger body farther away, or a smaller one nearer);
+    ``stretch_sigma``: points and box stretched about the box centre, each axis by its own
+    exp(N(0, stretch_sigma)) clipped to [0.4, 2.5]: another body (flatter, deeper, longer) whose
+    visible surface is the stretched one (the view is near-orthographic at these ranges), so the
+    hidden depth cannot be read off the visible width and height alone, as it could be for the
+    generators' proportions."""
 
     def __init__(self, cache: PointCache, num_points: int, num_categories: int = 3, size_norm: str = "points",
                  seed: int = 0, flip: bool = False, cat_dropout: float = 0.0, flip_y: bool = False,
-                 scale_sigma: float = 0.0):
+                 scale_sigma: float = 0.0, stretch_sigma: float = 0.0):
         self.cache, self.num_points, self.num_categories = cache, int(num_points), int(num_categories)
         self.size_norm, self.seed, self.flip, self.epoch = size_norm, int(seed), bool(flip), 0
         self.cat_dropout = float(cat_dropout)
         self.flip_y, self.scale_sigma = bool(flip_y), float(scale_sigma)
+        self.stretch_sigma = float(stretch_sigma)
 
     def __len__(self) -> int:
         return len(self.cache)
@@ -236,7 +242,7 @@ class BoxNetSamples:
         if self.flip and (self.item_seed(i) % 2):
             pts = pts * np.array([-1.0, 1.0, 1.0], np.float32)
             gt[0] = -gt[0]
-        if self.flip_y or self.scale_sigma > 0:
+        if self.flip_y or self.scale_sigma > 0 or self.stretch_sigma > 0:
             rng = np.random.default_rng([self.item_seed(i), 17])
             if self.flip_y and rng.random() < 0.5:
                 pts = pts * np.array([1.0, -1.0, 1.0], np.float32)
@@ -245,6 +251,10 @@ class BoxNetSamples:
                 k = float(np.clip(np.exp(rng.normal(0.0, self.scale_sigma)), 0.7, 1.4))
                 pts = pts * np.float32(k)
                 gt = gt * k
+            if self.stretch_sigma > 0:
+                k3 = np.clip(np.exp(rng.normal(0.0, self.stretch_sigma, 3)), 0.4, 2.5)
+                pts = ((pts - gt[:3]) * k3 + gt[:3]).astype(np.float32)
+                gt[3:] = gt[3:] * k3
         centred, centroid, length = normalise(pts, self.size_norm)
         cls, res, scale = size_labels(gt[3:], length, self.size_norm)
         cat = one_hot(self.cache.category[self.cache.index[i]], self.num_categories)

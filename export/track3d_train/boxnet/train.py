@@ -35,6 +35,7 @@ class TrainConfig:
     cat_dropout: float = 0.1        # probability of an all-zero ("unknown") category vector
     flip_y: bool = False            # random y-mirroring too
     scale_aug: float = 0.0          # sigma of the log scale about the camera centre (0: none)
+    stretch_aug: float = 0.0        # sigma of the per-axis log stretch about the box centre (0: none)
     val_every: int = 8              # every k-th train sequence is held out for validation (0: none)
     val_max: int = 600              # validation items per epoch (a fixed random subset)
     seed: int = 0
@@ -151,8 +152,11 @@ def _validate(model, val_ds, batch: int):
     return m
 
 
-def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=print) -> dict:
-    """Train (or resume) into cfg.out: last.pt, best.pt, history.json, loss_curve.png."""
+def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=print,
+          init_from: str | None = None) -> dict:
+    """Train (or resume) into cfg.out: last.pt, best.pt, history.json, loss_curve.png.
+    ``init_from``: a checkpoint whose weights start a new run (fine-tuning: a fresh optimiser and
+    schedule); ignored when the run resumes from its own last.pt."""
     import torch
 
     from .data import BoxNetSamples, PointCache
@@ -165,7 +169,8 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
     cache = PointCache.concat(cfg.train_cache)
     tr_cache, va_cache = _split_val(cache, cfg.val_every, cfg.seed)
     train_ds = BoxNetSamples(tr_cache, cfg.num_points, cfg.num_categories, cfg.size_norm, cfg.seed, cfg.flip,
-                             cfg.cat_dropout if cfg.use_category else 0.0, cfg.flip_y, cfg.scale_aug)
+                             cfg.cat_dropout if cfg.use_category else 0.0, cfg.flip_y, cfg.scale_aug,
+                             cfg.stretch_aug)
     val_ds = None
     if va_cache is not None:
         rng = np.random.default_rng(cfg.seed + 1)
@@ -208,6 +213,14 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
         opt.load_state_dict(ck["optim"])
         start_epoch, step, best, history = ck["epoch"] + 1, ck["step"], ck["best"], ck["history"]
         log(f"resumed from {last}: epoch {start_epoch}, step {step}")
+    elif init_from:
+        src = torch.load(str(init_from), map_location="cpu", weights_only=False)
+        if not isinstance(src, dict) or src.get("model_config") != mcfg.to_dict():
+            raise ValueError(f"{init_from} is not an A3BoxNet checkpoint of this model (N, width, category, "
+                             "size coding must match)")
+        model.load_state_dict(src["model"])
+        history["init_from"] = {"file": Path(init_from).name, "epoch": src.get("epoch"), "step": src.get("step")}
+        log(f"initialised from {init_from} (epoch {src.get('epoch')}, step {src.get('step')})")
     t_session = time.time()
     t_before = history["seconds"]
     if budget_s > 0 and progress_at(step, t_before) >= 1.0:
