@@ -264,3 +264,30 @@ def test_cli_export_writes_a_new_prefix_and_refuses_a_shipped_one(trained, tmp_p
     assert (shipped / "edgetrack_search.onnx").stat().st_mtime_ns == before
     assert train_main(["edgetrack", "export", "--checkpoint", ck, "--out", str(shipped / "edgetrack"), "--force"]) == 0
     assert (shipped / "edgetrack_search.onnx").stat().st_mtime_ns != before
+
+
+def test_export_records_the_training_data(trained, tmp_path, capsys):
+    """The checkpoint carries its cache's identity into the exported metadata; a checkpoint from
+    before that needs --cache, else a one-line error (a shipped model must say what made it)."""
+    import json
+
+    import onnx
+    import torch
+
+    from track3d_train.cli import main as train_main
+    from track3d_train.siamfc.data import cache_data_info
+
+    ck = trained["root"] / "run" / "ckpt.pt"
+    want = cache_data_info(trained["root"] / "cache" / "target")["train_data_hash"]
+    assert train_main(["edgetrack", "export", "--checkpoint", str(ck), "--out", str(tmp_path / "a" / "et")]) == 0
+    meta = json.loads({p.key: p.value for p in onnx.load(str(tmp_path / "a" / "et_search.onnx")).metadata_props}["track3d"])
+    assert meta["train_data_hash"] == want and meta["train_data"]
+    old = {k: v for k, v in torch.load(str(ck), map_location="cpu", weights_only=False).items()
+           if k not in ("train_data_hash", "train_data")}
+    torch.save(old, str(tmp_path / "old.pt"))
+    capsys.readouterr()
+    assert train_main(["edgetrack", "export", "--checkpoint", str(tmp_path / "old.pt"), "--out", str(tmp_path / "b" / "et")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--cache" in err[0]
+    assert train_main(["edgetrack", "export", "--checkpoint", str(tmp_path / "old.pt"), "--out", str(tmp_path / "b" / "et"),
+                       "--cache", str(trained["root"] / "cache")]) == 0

@@ -65,9 +65,16 @@ def _export(a) -> int:
                                        "instance_size", "lost_instance_size") if getattr(a, k) is not None}
     if over:
         net.cfg = dataclasses.replace(net.cfg, **over)
-    extra = {"training": {"steps": ck.get("step"), "batch": ck.get("batch"), "seed": ck.get("seed"),
-                          "elapsed_s": round(float(ck.get("elapsed_s", 0)), 1),
-                          "data": a.data_note or "track3d simulator train split"}}
+    ident = {k: ck.get(k) for k in ("train_data_hash", "train_data")}
+    if ident["train_data_hash"] is None and a.cache:       # a checkpoint from before it recorded them
+        from ..siamfc.data import cache_data_info
+        ident = cache_data_info(Path(a.cache) / "target")
+    if ident["train_data_hash"] is None:
+        raise ValueError(f"{a.checkpoint} does not record its training data: give --cache (the run's cache folder)")
+    data = a.data_note or ident["train_data"] or "track3d simulator train split"
+    extra = {"train_data": data, "train_data_hash": ident["train_data_hash"],
+             "training": {"steps": ck.get("step"), "batch": ck.get("batch"), "seed": ck.get("seed"),
+                          "elapsed_s": round(float(ck.get("elapsed_s", 0)), 1), "data": data}}
     pz, px = export_onnx(net, a.out, extra)
     p = parity(net, pz, px)
     print(f"wrote {pz} ({pz.stat().st_size / 1e3:.0f} kB), {px} ({px.stat().st_size / 1e3:.0f} kB)")
@@ -175,6 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--out", required=True, help="path prefix")
     e.add_argument("--force", action="store_true", help="overwrite the shipped models in track3d/models")
     e.add_argument("--data-note", default=None, help="what the model was trained on (metadata)")
+    e.add_argument("--cache", default=None,
+                   help="the run's cache folder: the training data's hash for checkpoints that do not record it")
     # bounds: a value the runtime cannot use must not be written into a model file
     unit = bounded(float, 0, high=1)
     for k, ty in (("window-influence", unit), ("penalty-k", bounded(float, 0)), ("size-lr", unit),

@@ -201,10 +201,14 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
         if log_path.exists():
             log_path.unlink()
 
+    from ..siamfc.data import cache_data_info
+    data_info = cache_data_info(Path(cache_dir) / "target")   # the training data's identity, for the export
+
     def checkpoint(elapsed):
         _save(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
                         "config": net.cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
-                        "batch": batch, "seed": seed, "calib": [net.cfg.calib_a, net.cfg.calib_b]})
+                        "batch": batch, "seed": seed, "calib": [net.cfg.calib_a, net.cfg.calib_b],
+                        **data_info})
 
     net.train()
     t_start = time.perf_counter()
