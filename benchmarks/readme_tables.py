@@ -25,15 +25,14 @@ RESULTS = Path("benchmarks") / "results"     # relative to the repository
 
 # (label, result file, configuration, bold)
 SPEED_ROWS = (
-    ("Track3D default: SiamFC-edge + A3BoxNet", "engine/fps_epyc_engine_1t.json", "siamfc-edge:a3boxnet", True),
-    ("EdgeTrack + A3BoxNet (new tracker, not yet the default: see below)", "engine/fps_epyc_engine_1t.json",
-     "edgetrack:a3boxnet", False),
+    ("Track3D default: EdgeTrack + A3BoxNet", "engine/fps_epyc_engine_1t.json", "edgetrack:a3boxnet", True),
+    ("SiamFC-edge (the paper's tracker) + A3BoxNet", "engine/fps_epyc_engine_1t.json", "siamfc-edge:a3boxnet", False),
     ("NanoTrack v2 (peer) + A3BoxNet", "engine/fps_epyc_engine_1t.json", "nano:a3boxnet", False),
-    ("SiamFC-edge + baseline box", "engine/fps_epyc_engine_1t.json", "siamfc-edge:baseline", False),
-    ("SiamFC-edge + A3BoxNet, 2 threads (both cores)", "engine/fps_epyc_engine_2t.json", "siamfc-edge:a3boxnet", False),
-    ("EdgeTrack + A3BoxNet, 2 threads", "engine/fps_epyc_engine_2t.json", "edgetrack:a3boxnet", False),
+    ("EdgeTrack + baseline box", "engine/fps_epyc_engine_1t.json", "edgetrack:baseline", False),
+    ("EdgeTrack + A3BoxNet, 2 threads (both cores)", "engine/fps_epyc_engine_2t.json", "edgetrack:a3boxnet", False),
+    ("SiamFC-edge + A3BoxNet, 2 threads", "engine/fps_epyc_engine_2t.json", "siamfc-edge:a3boxnet", False),
 )
-ENGINE_SPLITS = (("ideal", "test"), ("ideal", "test_unseen"), ("flash-lidar", "test"), ("flash-lidar", "test_unseen"))
+ENGINE_SPLITS = tuple((s, sp) for s in ("ideal", "flash-lidar", "tof", "stereo") for sp in ("test", "test_unseen"))
 # (label, source, row, kind, bold): source "table2*" -> <source>/table2.json's row; "bench_2d" -> its tracker
 TABLE2_ROWS = (
     ("**Track3D, ours** (SiamFC-edge + A3BoxNet + fusion)", "table2_edge_current",
@@ -71,17 +70,26 @@ def speed_table(root: Path) -> str:
 
 
 def engine_table(root: Path) -> str:
-    by = {(r["sensor"], r["split"], r["protocol"], r["tracker"]): r
-          for r in _load(root, "engine_baseline/engine_baseline.json")["rows"]}
+    """Before (engine_baseline: the models shipped before the data engine's retraining) and now
+    (engine_current: the shipped models), on the same sequences, AO_3d / ACE_3d (m)."""
+    def rows_of(rel):
+        return {(r["sensor"], r["split"], r["protocol"], r["tracker"]): r for r in _load(root, rel)["rows"]}
 
-    def pair(sensor, split, protocol, tracker):
-        r = by[(sensor, split, protocol, tracker)]
-        return f"{r['ao_3d']:.3f} / {r['ace_3d']:.3f}"
+    before, now = rows_of("engine_baseline/engine_baseline.json"), rows_of("engine_current/engine_baseline.json")
 
-    rows = [[s, sp, pair(s, sp, "restart", "oracle+a3boxnet"), pair(s, sp, "restart", "siamfc-edge+a3boxnet"),
-             pair(s, sp, "onepass", "siamfc-edge+a3boxnet")] for s, sp in ENGINE_SPLITS]
-    return markdown_table(["depth", "split", "A3BoxNet, oracle 2D: AO_3d / ACE_3d (m)",
-                           "Track3D (SiamFC-edge), restart: AO_3d / ACE_3d", "one pass: AO_3d / ACE_3d"], rows)
+    def pair(by, key):
+        r = by.get(key)
+        return "-" if r is None else f"{r['ao_3d']:.3f} / {r['ace_3d']:.3f}"
+
+    rows = []
+    for s, sp in ENGINE_SPLITS:
+        oracle, siam = (s, sp, "restart", "oracle+a3boxnet"), (s, sp, "onepass", "siamfc-edge+a3boxnet")
+        rows.append([s, sp, pair(before, oracle), f"**{pair(now, oracle)}**", pair(before, siam), pair(now, siam),
+                     f"**{pair(now, (s, sp, 'onepass', 'edgetrack+a3boxnet'))}**",
+                     pair(now, (s, sp, "onepass", "nano+a3boxnet"))])
+    return markdown_table(["depth", "split", "A3BoxNet, oracle 2D: before", "now",
+                           "Track3D (SiamFC-edge), one pass: before", "now",
+                           "Track3D default (EdgeTrack), one pass", "NanoTrack v2 + A3BoxNet, one pass"], rows)
 
 
 def table2_table(root: Path) -> str:

@@ -214,7 +214,7 @@ def test_create_by_unknown_names_is_a_clear_error():
 def test_from_default_uses_the_shipped_models():
     t = Track3D.from_default(CAM, threads=1)
     assert t.fusion
-    assert type(t.tracker2d).__name__ == "SiamFCTracker" and t.tracker2d.meta["variant"] == "edge"
+    assert type(t.tracker2d).__name__ == "EdgeTracker"
     assert type(t.estimator).__name__ == "A3BoxNetEstimator"
 
 

@@ -35,7 +35,8 @@ def _same(a, b):
     assert (a.status, a.num_points, a.score, a.held_frames) == (b.status, b.num_points, b.score, b.held_frames)
 
 
-@pytest.mark.parametrize("tracker,estimator", [("siamfc-edge", "a3boxnet"), ("kcf", "baseline")])
+@pytest.mark.parametrize("tracker,estimator", [("siamfc-edge", "a3boxnet"), ("edgetrack", "a3boxnet"),
+                                               ("kcf", "baseline")])
 def test_state_restores_bit_identically(tracker, estimator):
     t = _make(tracker, estimator)
     img, pts, box = _frame(0)
@@ -48,8 +49,8 @@ def test_state_restores_bit_identically(tracker, estimator):
     a, b = _make(tracker, estimator), _make(tracker, estimator)
     a.set_state(plain)
     b.set_state(state)
-    if tracker.startswith("siamfc"):
-        b = t                                          # SiamFC: the original continues identically
+    if tracker != "kcf":
+        b = t                                          # learned trackers: the original continues identically
     for k in range(5, 10):
         img, pts, _ = _frame(k)
         _same(a.update(img, pts), b.update(img, pts))

@@ -40,7 +40,7 @@ class BenchConfig:
     """What to time. tracker/estimator: registry names; tracker_model: a `<dir>/<name>` prefix
     of a SiamFC pair (`<name>_exemplar.onnx` / `_search.onnx`); boxnet_model: an A3BoxNet ONNX."""
 
-    tracker: str = "siamfc-edge"
+    tracker: str = "edgetrack"
     estimator: str = "a3boxnet"
     tracker_model: str | None = None
     boxnet_model: str | None = None

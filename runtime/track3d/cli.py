@@ -127,10 +127,10 @@ def _parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="time the loop (or each network) on this CPU: per-stage median, p99, "
                                      "p99.9, max ms and FPS at 1 and 2 threads, pinned; no dataset needed",
                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    b.add_argument("--tracker", default="siamfc-edge", help="2D tracker name")
+    b.add_argument("--tracker", default="edgetrack", help="2D tracker name")
     b.add_argument("--estimator", default="a3boxnet", help="3D box estimator name")
     b.add_argument("--tracker-model", metavar="PREFIX",
-                   help="<dir>/<name> of a SiamFC pair <name>_exemplar.onnx / <name>_search.onnx (default: shipped)")
+                   help="<dir>/<name> prefix of the tracker's ONNX pair (EdgeTrack: <name>_template.onnx / _search.onnx; SiamFC: _exemplar / _search) (default: shipped)")
     b.add_argument("--boxnet-model", metavar="ONNX", help="an A3BoxNet ONNX file (default: shipped)")
     b.add_argument("--frames", type=int, default=1000, help="timed frames per thread count (after 20 warm-up)")
     b.add_argument("--threads", type=int, nargs="+", default=[1, 2], help="thread counts to time")

@@ -62,10 +62,13 @@ class EdgeTracker:
     the stage times (crop, net, post).
     """
 
-    def __init__(self, template_model: str | Path, search_model: str | Path, threads: int = 1, **overrides):
-        # each model a path or a model object (onnxmodel.load_model)
-        self.template_net = load_model(template_model, threads, "edgetrack-template")
-        self.search_net = load_model(search_model, threads, "edgetrack-search")
+    def __init__(self, template_model: str | Path, search_model: str | Path, threads: int = 1,
+                 precision: str = "fp32", engine: str = "onnxruntime", **overrides):
+        # each model a path or a model object (onnxmodel.load_model); precision / engine as
+        # track3d.onnxmodel (variants chosen by measurement)
+        arith = {"precision": precision, "engine": engine}
+        self.template_net = load_model(template_model, threads, "edgetrack-template", **arith)
+        self.search_net = load_model(search_model, threads, "edgetrack-search", **arith)
         meta = self.search_net.meta
         self.meta = meta
         unknown = set(overrides) - set(TUNABLE)
@@ -137,6 +140,38 @@ class EdgeTracker:
     def box(self) -> np.ndarray:
         return np.concatenate([self.center - self.target_sz / 2.0, self.target_sz])
 
+    def get_state(self) -> dict:
+        """Everything the next update depends on, as numpy arrays and builtins (no ORT objects)."""
+        if self._kernel is None:
+            return {"initialised": False}
+        return {"initialised": True, "kernel": self._kernel.copy(), "center": self.center.copy(),
+                "target_sz": self.target_sz.copy(), "_min_sz": float(self._min_sz),
+                "avg_color": list(self.avg_color), "score": float(self.score), "lost": bool(self.lost)}
+
+    def _kernel_shape(self) -> tuple:
+        """The template kernel's shape this model makes (from a blank template, once)."""
+        if getattr(self, "_kshape", None) is None:
+            blank = np.zeros((1, self.exemplar_size, self.exemplar_size, 3), np.uint8)
+            self._kshape = tuple(self.template_net.run({"template": blank})[0].shape)
+        return self._kshape
+
+    def set_state(self, state: dict) -> None:
+        """Restore a `get_state()` of a tracker with the same models and hyper-parameters."""
+        if not state.get("initialised"):
+            self._kernel = None
+            return
+        kernel = np.asarray(state["kernel"], dtype=np.float32)
+        want = tuple(-1 if d is None else int(d) for d in self._kernel_shape())
+        if kernel.ndim != len(want) or any(w > 0 and w != k for w, k in zip(want, kernel.shape)):
+            raise ValueError(f"EdgeTrack state: template kernel of shape {kernel.shape} does not fit this model")
+        center = np.asarray(state["center"], dtype=np.float64).reshape(2).copy()
+        target_sz = np.asarray(state["target_sz"], dtype=np.float64).reshape(2).copy()
+        avg_color = tuple(float(c) for c in state["avg_color"])
+        score, lost, min_sz = float(state["score"]), bool(state["lost"]), float(state["_min_sz"])
+        # assigned only once everything parsed: a damaged state leaves the tracker as it was
+        self._kernel, self.center, self.target_sz, self.avg_color = kernel.copy(), center, target_sz, avg_color
+        self.score, self.lost, self._min_sz = score, lost, min_sz
+
     def update(self, image: np.ndarray) -> tuple[bool, np.ndarray]:
         if self._kernel is None:
             raise RuntimeError("update() before init()")
@@ -183,7 +218,8 @@ class EdgeTracker:
 
 
 def create(threads: int = 1, model: str | Path | None = None, template_model: str | Path | None = None,
-           search_model: str | Path | None = None, **overrides) -> EdgeTracker:
+           search_model: str | Path | None = None, precision: str = "fp32", engine: str = "onnxruntime",
+           **overrides) -> EdgeTracker:
     """An EdgeTrack tracker: the shipped model, or `model` a prefix `<dir>/<name>` of a pair
     `<name>_template.onnx` / `<name>_search.onnx`, or both explicit paths. Overrides: TUNABLE."""
     if model is not None:
@@ -199,4 +235,5 @@ def create(threads: int = 1, model: str | Path | None = None, template_model: st
         raise ValueError("give both template_model and search_model, or neither")
     if template_model is None:
         template_model, search_model = model_paths()
-    return EdgeTracker(template_model, search_model, threads=threads, **overrides)
+    return EdgeTracker(template_model, search_model, threads=threads, precision=precision, engine=engine,
+                       **overrides)

@@ -58,11 +58,11 @@ def pick_models(tracker: str | None, estimator: str | None, threads: int) -> tup
     warnings = []
     if tracker is None:
         try:
-            create_tracker("siamfc-edge", threads=threads)
-            tracker = "siamfc-edge"
+            create_tracker("edgetrack", threads=threads)
+            tracker = "edgetrack"
         except Exception as e:  # a missing or unreadable shipped model: fall back, loudly
             tracker = "csrt"
-            warnings.append(f"no shipped SiamFC ({e}); using OpenCV's CSRT as the 2D tracker")
+            warnings.append(f"no shipped EdgeTrack ({e}); using OpenCV's CSRT as the 2D tracker")
     if estimator is None:
         try:
             create_estimator("a3boxnet", threads=threads)

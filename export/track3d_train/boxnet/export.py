@@ -124,6 +124,8 @@ def export_checkpoint(ckpt: str | Path, out: str | Path, check: bool = True, log
              "trained": {"epochs": ck.get("epoch", -1) + 1, "steps": ck.get("step"), "seconds": hist.get("seconds"),
                          "items": hist.get("train_items"), "batch": ck["train_config"].get("batch"),
                          "jitter": (hist.get("cache") or {}).get("jitter"),
+                         "augment": {k: ck["train_config"].get(k) for k in ("flip", "flip_y", "scale_aug", "stretch_aug")},
+                         "fine_tuned_from": hist.get("init_from"),   # the run these weights started from
                          "val": last.get("val")},
              "exported": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     path = export_onnx(model, out, extra)
