@@ -97,7 +97,13 @@ def test_the_readme_tables_are_the_committed_results(tmp_path):
     readme = tmp_path / "README.md"
     text = readme_tables.REPO.joinpath("README.md").read_text()
     assert text.count("<!-- readme_tables.py: ") == len(readme_tables.TABLES)
-    readme.write_text(text.replace("| **8.08 / 10.25** |", "| **8.00 / 10.25** |"))   # a number edited by hand
+    import re
+
+    start = text.index("<!-- readme_tables.py: speed -->")
+    m = re.compile(r"\d").search(text, text.index("| **", start))        # a number edited by hand
+    edited = text[:m.start()] + str((int(m.group()) + 1) % 10) + text[m.end():]
+    assert edited != text
+    readme.write_text(edited)
     assert readme_tables.main(["--check", "--readme", str(readme)]) == 1
     assert readme_tables.main(["--write", "--readme", str(readme)]) == 0 and readme.read_text() == text
 
