@@ -2,7 +2,7 @@
 
     python benchmarks/bench_latency.py --data data/small --frames 10000 --out latency.json
 
-Runs the default tracker (shipped SiamFC edge + A3BoxNet, one thread) over preloaded frames of a
+Runs the default tracker (Track3D.from_default: the shipped models, one thread) over preloaded frames of a
 split (I/O excluded), re-initialising at each sequence start, pinned to one core (every thread of
 the process). It records each update's total and per-stage times, the frustum size, and the
 garbage collections that ran during the update (gc.callbacks), then reports
@@ -120,7 +120,8 @@ def main(argv=None) -> int:
     report = {
         "machine": {"cpu": machine.cpu_name(), "isa_flags": machine.isa_flags(), "pinned_cpu": cpu,
                     "loadavg": os.getloadavg(), "python": platform.python_version()},
-        "config": {"tracker": "siamfc-edge", "estimator": "a3boxnet", "threads": 1, "frames": len(total),
+        "config": {"tracker": t3d.describe()["tracker"], "estimator": t3d.describe()["estimator"], "threads": 1,
+                   "frames": len(total),
                    "gc_freeze": a.gc_freeze, "data": Path(a.data).name, "split": a.split},
         "total": stats(total_a),
         "stages_median_ms": {k: float(np.median(v)) for k, v in st.items()},
