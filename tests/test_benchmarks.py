@@ -122,3 +122,20 @@ def test_pin_threads_pins_every_thread_and_widens_again():
     finally:
         pin_threads(len(START_CPUS))
         cv2.setNumThreads(before)
+
+
+def test_latency_record_names_the_tracker_that_ran(tmp_path):
+    """bench_latency wrote tracker "siamfc-edge" into its record whatever from_default built."""
+    import json
+
+    import bench_latency
+
+    from track3d.synthetic import CAM, make_synthetic_dataset
+    from track3d.tracker import Track3D
+
+    data = make_synthetic_dataset(tmp_path / "d", {"a": 12})
+    out = tmp_path / "lat.json"
+    assert bench_latency.main(["--data", str(data), "--frames", "20", "--out", str(out)]) in (0, None)
+    rec = json.loads(out.read_text())["config"]
+    want = Track3D.from_default(CAM).describe()
+    assert (rec["tracker"], rec["estimator"]) == (want["tracker"], want["estimator"])
