@@ -94,6 +94,7 @@ class EdgeTracker:
         self.calib_a, self.calib_b = float(meta["score"]["a"]), float(meta["score"]["b"])
         self._grids = {}
         self._kernel = None
+        self._kshape = None      # the template kernel's shape, found on the first set_state
         self.score = float("nan")
         self.lost = False
         self.timings_ms: dict[str, float] = {}
@@ -150,7 +151,7 @@ class EdgeTracker:
 
     def _kernel_shape(self) -> tuple:
         """The template kernel's shape this model makes (from a blank template, once)."""
-        if getattr(self, "_kshape", None) is None:
+        if self._kshape is None:
             blank = np.zeros((1, self.exemplar_size, self.exemplar_size, 3), np.uint8)
             self._kshape = tuple(self.template_net.run({"template": blank})[0].shape)
         return self._kshape
