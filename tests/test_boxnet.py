@@ -9,56 +9,13 @@ import sys
 import numpy as np
 import pytest
 
-from track3d.boxes import SIZE_TEMPLATES, size_class_of
-from track3d.boxnet import (decode, decode_batch, normalise, one_hot, remap_length, size_labels)
+from track3d.boxes import SIZE_TEMPLATES
+from track3d.boxnet import one_hot
 
 torch = pytest.importorskip("torch")
 
 from track3d_train.boxnet.losses import boxnet_loss, huber_norm  # noqa: E402
 from track3d_train.boxnet.model import A3BoxNet, BoxNetConfig  # noqa: E402
-
-
-# --- runtime decoding (numpy, no torch) ---------------------------------------------------
-
-def test_decode_hand_case():
-    scores = np.zeros(14)
-    scores[1] = 5.0                                   # class 1: template [1/2, 1, 1]
-    res = np.zeros((14, 3))
-    res[1] = [0.1, -0.1, 0.0]
-    res[0] = [9, 9, 9]                                # other classes' residuals must be ignored
-    box = decode(np.array([1.0, 2.0, 3.0]), 4.0, np.array([0.5, 0, 0]), np.array([0, 0.25, 0]), scores, res)
-    np.testing.assert_allclose(box, [1.5, 2.25, 3.0, 2.4, 3.6, 4.0], atol=1e-12)
-
-
-def test_decode_batch_and_clamp():
-    scores = np.zeros((2, 14))
-    scores[0, 0] = scores[1, 2] = 1.0
-    res = np.zeros((2, 14, 3))
-    res[1, 2] = [-0.5, 0, 0]                          # 1/3 - 0.5 < 0: clamped to 1 mm, never negative
-    boxes = decode_batch(np.zeros((2, 3)), np.array([2.0, 3.0]), np.zeros((2, 3)), np.ones((2, 3)), scores, res)
-    np.testing.assert_allclose(boxes[0], [1, 1, 1, 2, 2, 2])
-    assert boxes[1, 3] == pytest.approx(1e-3) and boxes[1, 4] == pytest.approx(3.0)
-
-
-def test_extent_coding_hand_case():
-    from track3d.boxnet import remap_extent
-
-    p = np.array([[0, 0, 10], [2, 0, 10], [0, 1, 10.5], [2, 1, 10]], np.float64)
-    e = remap_extent(p)
-    np.testing.assert_allclose(e, [2.0, 1.0, 0.5])
-    np.testing.assert_allclose(remap_extent(p * [1, 1, 0] + [0, 0, 10]), [2.0, 1.0, 0.2])  # flat: 10% of 2 m
-    centred, centroid, scale = normalise(p, "extent")
-    np.testing.assert_allclose(scale, e)
-    # labels: size / E - 1 per axis; decoding E * (1 + r) of the predicted class gives the size back
-    cls, res, sc = size_labels(np.array([2.2, 1.0, 1.5]), e, "extent")
-    np.testing.assert_allclose(res, [0.1, 0.0, 2.0])
-    np.testing.assert_allclose(sc, e)
-    scores = np.zeros(14)
-    scores[cls] = 3.0
-    r = np.full((14, 3), 9.0)                          # other classes' residuals are ignored
-    r[cls] = res
-    box = decode(centroid, scale, np.zeros(3), np.array([0.0, 0.0, 0.5]), scores, r, size_norm="extent")
-    np.testing.assert_allclose(box, [1.0, 0.5, 10.625, 2.2, 1.0, 1.5], atol=1e-12)
 
 
 def test_loss_with_per_axis_scale():
@@ -67,32 +24,6 @@ def test_loss_with_per_axis_scale():
     _, terms = boxnet_loss((z3, z3, torch.zeros(1, 14), torch.zeros(1, 14, 3)), z3, torch.tensor([0]),
                            res_label, torch.tensor([[2.0, 1.0, 0.8]]))
     assert terms["size_res"] == pytest.approx(0.5 * (0.2 ** 2 + 0.4 ** 2))   # |(0.2, 0, 0.4)| m < 1
-
-
-@pytest.mark.parametrize("size_norm", ["points", "paper"])
-def test_size_labels_round_trip(size_norm):
-    rng = np.random.default_rng(0)
-    sizes = rng.uniform(1, 20, size=(50, 3))
-    length = sizes.max(axis=1) * rng.uniform(0.5, 1.0, size=50)   # points see part of the object
-    cls, res, scale = size_labels(sizes, length, size_norm)
-    np.testing.assert_array_equal(cls, size_class_of(sizes)[0])
-    # decoding multiplies by L of the points; the "points" label makes that exact
-    decoded = (SIZE_TEMPLATES[cls] + res) * length[:, None]
-    if size_norm == "points":
-        np.testing.assert_allclose(decoded, sizes, rtol=1e-12)
-        np.testing.assert_allclose(scale, length)
-    else:
-        np.testing.assert_allclose(decoded, sizes * (length / sizes.max(axis=1))[:, None], rtol=1e-12)
-        np.testing.assert_allclose(scale, sizes.max(axis=1))
-
-
-def test_normalise_and_remap_length():
-    p = np.array([[0, 0, 10], [2, 0, 10], [0, 1, 13], [2, 1, 11]], np.float32)
-    centred, centroid, L = normalise(p)
-    np.testing.assert_allclose(centroid, [1, 0.5, 11])
-    np.testing.assert_allclose(centred.mean(axis=0), 0, atol=1e-6)
-    assert centred.dtype == np.float32 and L == pytest.approx(3.0)
-    assert remap_length(np.ones((1, 3))) == pytest.approx(1e-3)  # one point: floored, no divide by 0
 
 
 def test_one_hot():
@@ -290,6 +221,23 @@ def test_stretch_moves_points_and_box_together(tiny_cache):
     assert np.std(np.log(ks)) > 0.1 and np.mean(np.abs(ks[:, 0] - ks[:, 2])) > 0.05
 
 
+def test_frustum_bounds_follow_every_augmentation(tiny_cache):
+    """The whole frustum's bounds are mirrored, scaled and stretched with the points: the
+    item's x / y extents (from the bounds) still enclose its sample, and its reference is the
+    bounds' middle."""
+    from track3d_train.boxnet.data import BoxNetSamples, PointCache
+
+    cache = PointCache(tiny_cache[0])
+    aug = BoxNetSamples(cache, 64, size_norm="frustum", flip=True, flip_y=True, scale_sigma=0.1,
+                        stretch_sigma=0.4)
+    for i in range(len(cache)):
+        pts, _, crel, cls, res, scale = aug[i]
+        span = pts.max(axis=0) - pts.min(axis=0)
+        assert np.all(scale[:2] >= span[:2] - 1e-4), i
+        assert np.all(np.abs(pts[:, :2].max(axis=0) + pts[:, :2].min(axis=0)) <= scale[:2] - span[:2] + 1e-4), i
+    assert len(cache) > 3
+
+
 def test_init_from_starts_from_a_checkpoint_and_refuses_another_model(trained, tmp_path):
     import torch
 
@@ -305,6 +253,11 @@ def test_init_from_starts_from_a_checkpoint_and_refuses_another_model(trained, t
     for k, v in src["model"].items():       # one step at lr 1e-12: the weights are the source's
         if v.dtype.is_floating_point and "running_" not in k:   # (batch-norm statistics move)
             torch.testing.assert_close(tuned["model"][k], v, rtol=1e-6, atol=1e-6)
+    # another box coding of the same layers starts from the same weights (fine-tuning to it)
+    recoded = TrainConfig(**{**cfg.__dict__, "out": str(tmp_path / "recoded"), "epochs": 1, "max_steps": 1,
+                             "size_norm": "frustum"})
+    h = train(recoded, progress=False, log=lambda *_: None, init_from=str(out / "best.pt"))
+    assert h["init_from"]["size_norm"] == cfg.size_norm
     other = TrainConfig(**{**cfg.__dict__, "out": str(tmp_path / "other"), "width": 0.5, "max_steps": 1})
     with pytest.raises(ValueError, match="not an A3BoxNet checkpoint of this model"):
         train(other, progress=False, log=lambda *_: None, init_from=str(out / "best.pt"))
@@ -401,23 +354,45 @@ def test_export_without_category(tmp_path):
     assert est.estimate(np.random.default_rng(0).normal(size=(50, 3)).astype(np.float32) + 10, 1).shape == (6,)
 
 
-def test_extent_model_trains_exports_and_decodes(tiny_cache, tmp_path):
+@pytest.mark.parametrize("size_norm", ["extent", "frustum"])
+def test_per_axis_model_trains_exports_and_decodes(size_norm, tiny_cache, tmp_path):
     from track3d.boxnet import A3BoxNetEstimator
+    from track3d.frames import point_bounds
+    from track3d_train.boxnet.data import PointCache
+    from track3d_train.boxnet.evaluate import onnx_runner, predict
     from track3d_train.boxnet.export import export_checkpoint
     from track3d_train.boxnet.train import TrainConfig, train
 
     cfg = TrainConfig(train_cache=str(tiny_cache[0]), out=str(tmp_path / "run"), num_points=64, width=0.25,
-                      epochs=1, batch=8, val_every=2, size_norm="extent", max_steps=3)
+                      epochs=1, batch=8, val_every=2, size_norm=size_norm, max_steps=3)
     hist = train(cfg, progress=False, log=lambda *_: None)
     assert np.isfinite(hist["epochs"][-1]["val"]["AO_3d"])
     export_checkpoint(tmp_path / "run" / "last.pt", tmp_path / "ext.onnx", log=lambda *_: None)
     est = A3BoxNetEstimator(tmp_path / "ext.onnx")
-    assert est.size_norm == "extent"
+    assert est.size_norm == size_norm and est.coding.name == size_norm
     pts = np.random.default_rng(0).uniform([-1, -2, 9], [1, 2, 10], size=(300, 3)).astype(np.float32)
     box = est.estimate(pts, 0)
     # a barely trained net: residuals ~0, so the size is about the points' extents (2, 4, 1)
     assert box.shape == (6,) and np.all(np.isfinite(box))
     np.testing.assert_allclose(box[3:], [2, 4, 1], rtol=0.5)
+    # the loop's bounds give the answer the estimator computes without them
+    np.testing.assert_array_equal(est.estimate(pts, 0, bounds=np.stack(point_bounds(pts))), box)
+    # the batch evaluation path (bounds from the cache's whole-frustum box) gives the estimator's answer
+    test = PointCache(tiny_cache[1])
+    pred = predict(onnx_runner(est), test, est.num_points, seed=est.seed, size_norm=size_norm)
+    b = test.baseline[0]     # the cache keeps <= 4096 of the frustum's points, and its whole box
+    np.testing.assert_allclose(pred[0], est.estimate(test.points(0), int(test.category[0]),
+                                                     bounds=np.stack([b[:3] - b[3:] / 2, b[:3] + b[3:] / 2])),
+                               atol=1e-4)
+    if size_norm == "frustum":
+        # x / y follow the bounds: wider bounds, a wider box
+        wide = np.stack(point_bounds(pts)).astype(np.float64) + [[-1, 0, 0], [1, 0, 0]]
+        assert est.estimate(pts, 0, bounds=wide)[3] > box[3] + 1.0
+        for bad, msg in [(wide[:, ::-1], "do not enclose"), (np.zeros(5), r"\(2, 3\)"),
+                         (wide * [[1, 1, 1], [np.nan, 1, 1]], "finite"),
+                         (wide + [[-100, 0, 0], [0, 0, 0]], "at most")]:
+            with pytest.raises(ValueError, match=msg):
+                est.estimate(pts, 0, bounds=bad)
 
 
 def test_estimator_on_tiny_frustums(exported, tiny_cache):

@@ -291,3 +291,44 @@ def test_export_records_the_training_data(trained, tmp_path, capsys):
     assert len(err) == 1 and "--cache" in err[0]
     assert train_main(["edgetrack", "export", "--checkpoint", str(tmp_path / "old.pt"), "--out", str(tmp_path / "b" / "et"),
                        "--cache", str(trained["root"] / "cache")]) == 0
+
+
+def test_fit_threshold_runs_the_grid_picks_by_f1_and_writes_the_metadata(trained, tmp_path, capsys):
+    """The lost threshold is fitted one pass per candidate on sequences with absent frames,
+    written into both files' metadata (weights untouched), and the runtime then uses it."""
+    import shutil
+
+    from track3d.edgetrack import EdgeTracker
+    from track3d.synthetic import make_synthetic_dataset
+    from track3d_train.edgetrack.cli import main
+    from track3d_train.edgetrack.threshold import fit_threshold
+
+    data = make_synthetic_dataset(tmp_path / "ds", {"s0001": 10, "s0002": 8}, absent={"s0001": [4, 5, 6]},
+                                  split="train")
+    prefix = tmp_path / "m" / "et"
+    prefix.parent.mkdir()
+    for part in ("template", "search"):
+        shutil.copy(trained["root"] / "model" / f"et_{part}.onnx", f"{prefix}_{part}.onnx")
+    fit = fit_threshold(prefix, data, "train", [0.1, 0.9])
+    assert [r["threshold"] for r in fit["rows"]] == [0.1, 0.9]
+    assert all(r["absent_frames"] == 3 and 0.0 <= r["f1"] <= 1.0 for r in fit["rows"])
+    best = max(fit["rows"], key=lambda r: (round(r["f1"], 6), r["ao_2d"]))
+    assert fit["threshold"] == best["threshold"]
+    import onnx
+
+    def graphs():
+        return [onnx.load(f"{prefix}_{p}.onnx").graph.SerializeToString() for p in ("template", "search")]
+
+    graph_before = graphs()
+    assert main(["fit-threshold", "--model", str(prefix), "--data", str(data), "--split", "train",
+                 "--grid", "0.1,0.9", "--write", "--quiet"]) == 0
+    assert "best:" in capsys.readouterr().out
+    t = EdgeTracker(f"{prefix}_template.onnx", f"{prefix}_search.onnx")
+    assert t.score_threshold == fit["threshold"]
+    assert t.meta["score"]["threshold_fit"]["split"] == "train" and len(t.meta["score"]["threshold_fit"]["rows"]) == 2
+    assert graphs() == graph_before
+    # never on a test split; a grid outside (0, 1) is refused
+    with pytest.raises(ValueError, match="not on a test split"):
+        main(["fit-threshold", "--model", str(prefix), "--data", str(data), "--split", "test"])
+    with pytest.raises(ValueError, match=r"lie in \(0, 1\)"):
+        fit_threshold(prefix, data, "train", [0.0, 0.5])

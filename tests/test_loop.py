@@ -234,3 +234,29 @@ def test_oracle_tracker_frame_index():
     assert o.update(im)[1].tolist() == gt[1].tolist()
     with pytest.raises(ValueError, match="seek"):
         create_tracker("oracle", gt=gt).init(im, [9, 9, 9, 9])
+
+
+def test_the_loop_hands_its_frustum_bounds_to_an_estimator_that_takes_them(frames):
+    """An estimator with ``takes_bounds`` gets the frustum pass's [min; max] of exactly the
+    points it is given (no second pass in the loop); others are called as before."""
+    from track3d.frames import point_bounds
+
+    class Spy:
+        takes_bounds = True
+
+        def __init__(self):
+            self.calls = []
+
+        def estimate(self, points, category, bounds=None):
+            self.calls.append((points.copy(), None if bounds is None else np.array(bounds)))
+            return box3d_from_points(points)
+
+    gt2d = np.array([f[2] for f in frames])
+    spy = Spy()
+    t = Track3D(CAM, OracleTracker(gt2d), spy)
+    t.init(frames[0][0], gt2d[0], points=frames[0][1])
+    t.update(frames[1][0], frames[1][1])
+    assert len(spy.calls) == 2
+    for pts, bounds in spy.calls:
+        assert bounds is not None and bounds.shape == (2, 3)
+        np.testing.assert_array_equal(bounds, np.stack(point_bounds(pts)))

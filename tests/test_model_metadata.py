@@ -45,7 +45,7 @@ def test_shipped_model_metadata(path):
 
         assert meta["size_norm"] in SIZE_NORMS
         text = meta["normalisation"]
-        if meta["size_norm"] == "extent":
+        if meta["size_norm"] in ("extent", "frustum"):
             assert "E * (1 + residual" in text and "* L" not in text
         else:
             assert "* L" in text
@@ -54,12 +54,14 @@ def test_shipped_model_metadata(path):
 
 def test_exporter_writes_the_normalisation_of_its_coding():
     pytest.importorskip("onnx")
-    from track3d_train.boxnet.export import NORMALISATION, model_metadata
+    from track3d.size_coding import SIZE_CODINGS
+    from track3d_train.boxnet.export import model_metadata
 
-    for norm in ("points", "paper", "extent"):
+    for norm, coding in SIZE_CODINGS.items():
         cfg = SimpleNamespace(num_points=512, num_categories=3, use_category=True, width=1.0, size_norm=norm)
-        assert model_metadata(SimpleNamespace(config=cfg))["normalisation"] == NORMALISATION[norm]
-    assert "E * (1 + residual" in NORMALISATION["extent"]
+        assert model_metadata(SimpleNamespace(config=cfg))["normalisation"] == coding.description
+    assert "E * (1 + residual" in SIZE_CODINGS["extent"].description
+    assert "WHOLE frustum" not in SIZE_CODINGS["extent"].description and "ALL frustum" in SIZE_CODINGS["frustum"].description
 
 
 def _tiny_model():

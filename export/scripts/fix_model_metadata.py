@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from track3d.onnxmodel import META_KEY, MODELS_DIR
-from track3d_train.boxnet.export import NORMALISATION
+from track3d.size_coding import size_coding
 from track3d_train.onnx_meta import rewrite_metadata
 
 SIAMFC_DATA = ("track3d-sim generate --preset small --train 36 --test 18 --seed 0 (the 'med' dataset of "
@@ -32,7 +32,7 @@ SIAMFC_DATA = ("track3d-sim generate --preset small --train 36 --test 18 --seed 
 def fixed(meta: dict) -> dict:
     m = dict(meta)
     if m.get("kind") == "a3boxnet":
-        m["normalisation"] = NORMALISATION[m.get("size_norm", "points")]
+        m["normalisation"] = size_coding(m.get("size_norm", "points")).description
         if isinstance(m.get("train_data"), str) and m["train_data"].startswith("/"):
             m["train_data"] = Path(m["train_data"]).name
     elif str(m.get("kind", "")).startswith("edgetrack") and "train_data" not in m:

@@ -62,7 +62,8 @@ def _frames(root, split: str, samples: int, seed: int):
 
 def calibration_boxnet(fp32: Path, root, split: str = "train", samples: int = 200, seed: int = 0) -> list[dict]:
     """Feeds of A3BoxNet from the split's frustum proposals (batch 1 each)."""
-    from track3d.boxnet import INPUT_CATEGORY, INPUT_POINTS, A3BoxNetEstimator, normalise, one_hot
+    from track3d.boxnet import INPUT_CATEGORY, INPUT_POINTS, A3BoxNetEstimator, one_hot
+    from track3d.frames import point_bounds
     from track3d.frustum import extract_frustum
 
     est = A3BoxNetEstimator(fp32)
@@ -72,7 +73,7 @@ def calibration_boxnet(fp32: Path, root, split: str = "train", samples: int = 20
         pts = extract_frustum(seq.points(i), seq.gt2d[i].astype(np.float32), ds.camera.M)
         if len(pts) < 16:
             continue
-        centred, _, _ = normalise(est.sample(pts), est.size_norm)
+        centred, _, _ = est.coding.normalise(est.sample(pts), np.stack(point_bounds(pts)))
         f = {INPUT_POINTS: centred[None].astype(np.float32)}
         if est._with_category:
             f[INPUT_CATEGORY] = one_hot([seq.category], est.num_categories)

@@ -1,31 +1,15 @@
 """A3BoxNet at run time (paper section IV-B): sampling, the ONNX session, decoding. No torch.
 
 The network sees a fixed number N of points sampled from the frustum proposal (the C++
-extension's sampler), made translation invariant by subtracting their centroid, plus the
-one-hot coarse category. Its four heads are decoded here, the ONE implementation used by
-the runtime, by training (labels) and by evaluation::
+extension's sampler), translated by a reference point (the centroid for the paper's coding),
+plus, for models trained with it, the one-hot coarse category. Its four heads decode as::
 
-    centre = centroid + dC1 + dC2
-    size   = (template[cls] + residual[cls]) * L,   cls = argmax(size scores)
+    centre = ref + dC1 + dC2
+    size   = (template[cls] + residual[cls]) * L     or  E * (1 + residual[cls])   (per axis)
 
-L, the remapping length of the paper, is the largest extent of the enclosing box of the
-sampled points (``remap_length``). Two codings of the size-residual label exist
-(model metadata ``size_norm``):
-
-- ``"points"`` (default, ours): the label is ``size / L - template[cls]``, with L from the
-  same input points, so training and decoding use the same length;
-- ``"paper"`` (the paper's Appendix B): the label is ``size / max(size) - template[cls]``
-  while decoding multiplies by L from the points. When the points see only part of the
-  object (always: the far side is hidden), L < max(size) and the decoded size is biased;
-- ``"extent"`` (ours, per axis): ``size = E * (1 + residual[cls])`` with E the extent of the
-  points' enclosing box along x, y, z (``remap_extent``). The visible surface already spans
-  nearly the whole body across the line of sight (measured: the points' x / y extents are
-  3-4% short of the truth, a net regressing template + residual * L is 10-13% off), so the
-  net only learns a small correction there and the hidden depth along z. The class head
-  is kept: it picks which of the 14 residuals applies.
-
-In both codings the size class is the template nearest to ``size / max(size)``
-(``track3d.boxes.size_class_of``).
+with cls = argmax(size scores). Which reference and which scale a model uses is its box
+coding, named in its metadata (``size_norm``) and implemented once in `track3d.size_coding`
+("points", "paper", "extent", "frustum"), which training and evaluation use as well.
 """
 from __future__ import annotations
 
@@ -33,54 +17,27 @@ from pathlib import Path
 
 import numpy as np
 
-from .boxes import NUM_SIZE_CLASSES, SIZE_TEMPLATES, decode_size, size_class_of
+from .boxes import SIZE_TEMPLATES
 from .frames import check_category, check_estimator_points, check_point_bounds, point_bounds
 from .onnxmodel import ModelError, load_model, shipped_model
+from .size_coding import SIZE_CODINGS, SizeCoding, size_coding
 
 __all__ = [
     "KIND", "DEFAULT_MODEL", "SIZE_NORMS", "MAX_EXTENT_M", "INPUT_POINTS", "INPUT_CATEGORY", "OUTPUTS",
-    "remap_length", "remap_extent", "normalise", "one_hot", "size_labels", "decode", "decode_batch",
-    "A3BoxNetEstimator", "create",
+    "one_hot", "A3BoxNetEstimator", "create",
 ]
 
 KIND = "a3boxnet"
 DEFAULT_MODEL = "a3boxnet.onnx"
-SIZE_NORMS = ("points", "paper", "extent")
+SIZE_NORMS = tuple(SIZE_CODINGS)   # the box codings a model's metadata may name (track3d.size_coding)
 # ONNX interface: inputs and outputs by name (batch dimension dynamic).
-INPUT_POINTS = "points"        # (B, N, 3) float32, centroid-subtracted
+INPUT_POINTS = "points"        # (B, N, 3) float32, minus the coding's reference point
 INPUT_CATEGORY = "category"    # (B, C) float32 one-hot coarse category (absent without category)
 OUTPUTS = ("center1", "center2", "size_scores", "size_residuals")  # (B,3) (B,3) (B,14) (B,14,3)
-_MIN_LENGTH = 1e-3             # metres: L of a degenerate point set (one point, a line)
 # metres: the largest extent of the sampled points A3BoxNet answers for. The frustum of the
 # paper's 1..45 m crop is at most 44 m deep; on point sets spanning hundreds of metres the net
 # (trained on asteroids of a few metres) returned boxes 200-3000x their extent (measured).
 MAX_EXTENT_M = 60.0
-
-
-def remap_length(points: np.ndarray) -> np.ndarray:
-    """L: the largest extent of the axis-aligned enclosing box of the points.
-
-    points (..., N, 3) -> (...) float64, floored at 1 mm so a degenerate set cannot divide by 0."""
-    p = np.asarray(points, dtype=np.float64)
-    ext = p.max(axis=-2) - p.min(axis=-2)
-    return np.maximum(ext.max(axis=-1), _MIN_LENGTH)
-
-
-def remap_extent(points: np.ndarray) -> np.ndarray:
-    """E: the extents of the points' axis-aligned enclosing box, (..., N, 3) -> (..., 3) float64,
-    each floored at 10% of the largest (and 1 mm), so a flat or thin cut cannot divide by ~0."""
-    p = np.asarray(points, dtype=np.float64)
-    ext = p.max(axis=-2) - p.min(axis=-2)
-    return np.maximum(ext, 0.1 * np.maximum(ext.max(axis=-1, keepdims=True), _MIN_LENGTH))
-
-
-def normalise(points: np.ndarray, size_norm: str = "points") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sampled points (..., N, 3) -> (centred float32 points, centroid (..., 3) float64, the size
-    scale: L (...) for the "points" and "paper" codings, E (..., 3) for "extent")."""
-    p = np.asarray(points, dtype=np.float64)
-    centroid = p.mean(axis=-2)
-    scale = remap_extent(p) if size_norm == "extent" else remap_length(p)
-    return (p - centroid[..., None, :]).astype(np.float32), centroid, scale
 
 
 def one_hot(category, num_categories: int) -> np.ndarray:
@@ -98,52 +55,6 @@ def one_hot(category, num_categories: int) -> np.ndarray:
     return out.reshape(c.shape + (num_categories,))
 
 
-def size_labels(size: np.ndarray, length: np.ndarray, size_norm: str = "points"):
-    """Training labels of the size head: (cls (...,) int64, residual (..., 3), scale (...)).
-
-    The residual is normalised: the net predicts it and ``decode`` multiplies by L. ``scale``
-    is the length that turns a normalised residual error into metres (the loss of Appendix B:
-    gamma = |R - r * max(S)|): max(size) for "paper", L for "points", E (..., 3) for "extent"
-    (``length`` is then the points' extents, see ``normalise``).
-    """
-    s = np.asarray(size, dtype=np.float64)
-    cls, res = size_class_of(s)
-    if size_norm == "extent":
-        e = np.asarray(length, dtype=np.float64)
-        return cls, s / e - 1.0, e
-    if size_norm == "paper":
-        return cls, res, s.max(axis=-1)
-    if size_norm == "points":
-        length = np.asarray(length, dtype=np.float64)
-        return cls, s / length[..., None] - SIZE_TEMPLATES[cls], length
-    raise ValueError(f"size_norm must be one of {SIZE_NORMS}, got {size_norm!r}")
-
-
-def decode_batch(centroid, length, center1, center2, size_scores, size_residuals,
-                 size_norm: str = "points") -> np.ndarray:
-    """Network outputs of a batch -> (B, 6) boxes [cx, cy, cz, sx, sy, sz] (float64).
-    length: L (B,), or the extents E (B, 3) for the "extent" coding."""
-    scores = np.asarray(size_scores, dtype=np.float64)
-    res = np.asarray(size_residuals, dtype=np.float64).reshape(len(scores), NUM_SIZE_CLASSES, 3)
-    cls = scores.argmax(axis=-1)
-    r = res[np.arange(len(cls)), cls]
-    center = np.asarray(centroid, np.float64) + np.asarray(center1, np.float64) + np.asarray(center2, np.float64)
-    if size_norm == "extent":
-        size = np.asarray(length, dtype=np.float64).reshape(-1, 3) * (1.0 + r)
-    else:
-        size = decode_size(cls, r, np.asarray(length, dtype=np.float64))
-    # a size can never be negative; a (rare) residual beyond the template is clamped to 1 mm
-    return np.concatenate([center, np.maximum(size, _MIN_LENGTH)], axis=-1)
-
-
-def decode(centroid, length, center1, center2, size_scores, size_residuals, size_norm: str = "points") -> np.ndarray:
-    """One sample's outputs (batch of 1 or unbatched) -> (6,) box."""
-    scale = np.reshape(length, (1, 3) if size_norm == "extent" else (1,))
-    return decode_batch(np.reshape(centroid, (1, 3)), scale, np.reshape(center1, (1, 3)),
-                        np.reshape(center2, (1, 3)), np.reshape(size_scores, (1, -1)),
-                        np.reshape(size_residuals, (1, -1, 3)), size_norm)[0]
-
-
 class A3BoxNetEstimator:
     """The box estimator behind the loop's seam: ``estimate(points (n,3), category) -> (6,)``.
 
@@ -156,6 +67,8 @@ class A3BoxNetEstimator:
     """
 
     name = KIND
+    # estimate() takes the loop's frustum bounds (Track3D passes them: no second pass over the points)
+    takes_bounds = True
 
     def __init__(self, model: str | Path | None = None, threads: int = 1, num_points: int | None = None,
                  seed: int = 0, precision: str = "fp32", engine: str = "onnxruntime"):
@@ -169,13 +82,12 @@ class A3BoxNetEstimator:
             self.num_categories = int(meta["num_categories"])
             self.use_category = bool(meta.get("use_category", True))
             self.size_norm = str(meta.get("size_norm", "points"))
+            self.coding: SizeCoding = size_coding(self.size_norm)
             templates = np.asarray(meta["size_templates"], dtype=np.float64)
         except (KeyError, TypeError, ValueError) as e:
-            raise ModelError(f"{path}: A3BoxNet metadata is incomplete ({e})") from None
+            raise ModelError(f"{self.model.path}: A3BoxNet metadata is incomplete ({e})") from None
         if templates.shape != SIZE_TEMPLATES.shape or not np.allclose(templates, SIZE_TEMPLATES, atol=1e-6):
-            raise ModelError(f"{path}: its size-class table differs from track3d.boxes.SIZE_TEMPLATES")
-        if self.size_norm not in SIZE_NORMS:
-            raise ModelError(f"{path}: unknown size coding {self.size_norm!r} (known: {', '.join(SIZE_NORMS)})")
+            raise ModelError(f"{self.model.path}: its size-class table differs from track3d.boxes.SIZE_TEMPLATES")
         if self.num_points < 1:
             raise ValueError(f"num_points must be >= 1, got {self.num_points}")
         self.seed = int(seed)
@@ -183,7 +95,7 @@ class A3BoxNetEstimator:
         self.meta = meta
         names = set(self.model.input_names)
         if INPUT_POINTS not in names or (self.use_category and INPUT_CATEGORY not in names):
-            raise ModelError(f"{path}: inputs {sorted(names)} are not an A3BoxNet's")
+            raise ModelError(f"{self.model.path}: inputs {sorted(names)} are not an A3BoxNet's")
         self._with_category = INPUT_CATEGORY in names
 
     def __repr__(self) -> str:
@@ -201,11 +113,14 @@ class A3BoxNetEstimator:
             feeds[INPUT_CATEGORY] = one_hot(np.reshape(category, (-1,)), self.num_categories)
         return self.model.run(feeds, list(OUTPUTS))
 
-    def estimate(self, points: np.ndarray, category: int) -> np.ndarray:
+    def estimate(self, points: np.ndarray, category: int, bounds: np.ndarray | None = None) -> np.ndarray:
         """Frustum points (n, 3) float32, n >= 1, and the coarse category -> box (6,) float64.
 
-        Raises ValueError on points or a category outside the contract (track3d.frames). The
-        values are checked on the sample the network sees (N points), not on the whole frustum."""
+        bounds: (2, 3) [min; max] of the points, if the caller has them (the loop's frustum pass
+        does); computed here otherwise, and only by codings that read them (``coding.needs_bounds``).
+        Raises ValueError on points, bounds or a category outside the contract (track3d.frames).
+        The values are checked on the sample the network sees (N points) and on the bounds, not
+        point by point over the whole frustum."""
         category = check_category(category, self.num_categories)
         pts = check_estimator_points(points, finite=False)
         sample = self.sample(pts)
@@ -214,9 +129,29 @@ class A3BoxNetEstimator:
         if float(np.max(hi.astype(np.float64) - lo)) > MAX_EXTENT_M:
             raise ValueError(f"A3BoxNet answers for points spanning at most {MAX_EXTENT_M:g} m, "
                              f"these span {float(np.max(hi.astype(np.float64) - lo)):.3g} m")
-        centred, centroid, scale = normalise(sample, self.size_norm)
-        out = self.infer(centred[None], [category])
-        return decode(centroid, scale, *out, size_norm=self.size_norm)
+        if self.coding.needs_bounds:
+            bounds = self._check_bounds(pts, bounds, lo, hi)
+        centred, ref, scale = self.coding.normalise(sample[None], None if bounds is None else bounds[None])
+        out = self.infer(centred, [category])
+        return self.coding.decode(ref, scale, *out)[0]
+
+    @staticmethod
+    def _check_bounds(pts: np.ndarray, bounds, sample_lo: np.ndarray, sample_hi: np.ndarray) -> np.ndarray:
+        if bounds is None:
+            b = np.stack(point_bounds(pts)).astype(np.float64)
+        else:
+            try:
+                b = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
+            except (TypeError, ValueError):
+                raise ValueError(f"bounds must be (2, 3) numbers [min; max], got {bounds!r:.80}") from None
+        check_point_bounds(b[0], b[1])
+        # the bounds of these points enclose their sample; anything else is another point set's
+        if np.any(b[0] > sample_lo) or np.any(b[1] < sample_hi):
+            raise ValueError("bounds do not enclose the points: pass the [min; max] of these points")
+        if float(np.max(b[1, :2] - b[0, :2])) > MAX_EXTENT_M:
+            raise ValueError(f"A3BoxNet answers for points spanning at most {MAX_EXTENT_M:g} m, "
+                             f"these span {float(np.max(b[1, :2] - b[0, :2])):.3g} m across the line of sight")
+        return b
 
 
 def create(**options) -> A3BoxNetEstimator:

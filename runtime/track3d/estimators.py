@@ -2,6 +2,10 @@
 
     box3d = estimator.estimate(points, category)   # points (n, 3) float32, n >= 1 -> (6,) float64
 
+An estimator with the class attribute ``takes_bounds = True`` also accepts
+``estimate(points, category, bounds=)``, bounds the (2, 3) [min; max] of the points, which the
+loop's frustum pass has already computed (A3BoxNet's "frustum" coding reads them).
+
 Built-in names: ``"baseline"`` (the paper's 3D tracking baseline, section V-A: the minimum
 enclosing axis-aligned box of the frustum points, ``track3d.boxes.box3d_from_points``) and
 ``"a3boxnet"`` (the shipped A3BoxNet ONNX model, ``track3d.boxnet``, loaded lazily) and

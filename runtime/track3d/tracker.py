@@ -134,6 +134,8 @@ class Track3D:
         self._correct = getattr(tracker2d, "correct", None)
         # False for the null estimator ("none"): 2D only, the loop skips frustum, estimate, fusion.
         self.needs_points = bool(getattr(estimator, "needs_points", True))
+        # an estimator whose estimate() takes bounds= gets the frustum pass's [min; max] (A3BoxNet)
+        self._estimator_takes_bounds = bool(getattr(estimator, "takes_bounds", False))
         self.category = -1
         self.box2d = np.full(4, np.nan)
         self.box3d = np.full(6, np.nan)
@@ -186,7 +188,9 @@ class Track3D:
         if (hi - lo).max() < MIN_SPREAD_M or lo.min() < -MAX_COORD_M or hi.max() > MAX_COORD_M:
             return None
         try:
-            b = np.asarray(self.estimator.estimate(pts, self.category), dtype=np.float64).reshape(-1)
+            b = (self.estimator.estimate(pts, self.category, bounds=bounds) if self._estimator_takes_bounds
+                 else self.estimator.estimate(pts, self.category))
+            b = np.asarray(b, dtype=np.float64).reshape(-1)
         except ValueError:  # points outside the estimator's domain (e.g. A3BoxNet's extent)
             return None
         if b.shape != (6,) or not np.all(np.isfinite(b)) or np.any(b[3:] <= 0.0):

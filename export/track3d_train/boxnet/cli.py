@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 from track3d.argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias
+from track3d.size_coding import SIZE_CODINGS
 
 
 def _log(msg: str) -> None:
@@ -126,10 +127,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--num-points", type=bounded(int, 1), default=512, help="N input points (paper: 1024)")
     t.add_argument("--width", type=bounded(float, above=0), default=1.0, help="channel multiplier (1 = Frustum PointNets v1)")
     t.add_argument("--no-category", action="store_true", help="ablation: no one-hot category vector")
-    t.add_argument("--size-norm", choices=["points", "paper", "extent"], default="points",
-                   help="size coding: (template + r) * L of the input points (ours), the same with the label "
-                        "normalised by max(size) (paper), or E * (1 + r) with E the points' per-axis extents "
-                        "(ours, see track3d.boxnet)")
+    t.add_argument("--size-norm", choices=list(SIZE_CODINGS), default="points",
+                   help="box coding (track3d.size_coding): (template + r) * L of the input points (points), the "
+                        "same with the label normalised by max(size) (paper), E * (1 + r) with E the points' "
+                        "per-axis extents (extent), or with x / y from the whole frustum's box (frustum)")
     t.add_argument("--epochs", type=bounded(int, 1), default=25, help="planned epochs (the LR schedule spans them)")
     t.add_argument("--epoch-samples", type=bounded(int, 0), default=0, help="items per epoch (0: the whole cache)")
     t.add_argument("--batch", type=bounded(int, 1), default=32, help="batch size")

@@ -11,7 +11,7 @@ baseline) and the labels. The cache is one .npz named by the split's hash.
 
 `BoxNetSamples` is the torch Dataset over a cache: each item samples N points with the
 runtime sampler (`track3d.frustum.sample_points`), normalises them with the runtime
-(`track3d.boxnet.normalise`) and codes the size label with `track3d.boxnet.size_labels`,
+(the model's `track3d.size_coding` object) and codes the size label with the same object,
 so train and run time share every formula.
 """
 from __future__ import annotations
@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from track3d.boxes import box3d_from_points, clip_box2d
-from track3d.boxnet import normalise, one_hot, size_labels
+from track3d.boxnet import one_hot
+from track3d.size_coding import size_coding
 from track3d.dataset import GT2D, GT3D, META, Dataset
 
 from ..onnx_meta import hash_files
@@ -200,7 +201,7 @@ class PointCache:
 
 class BoxNetSamples:
     """torch-style Dataset over a PointCache: item -> (centred points (N,3) f32, one-hot (C,) f32,
-    centre label relative to the centroid (3,) f32, size class (), normalised residual (3,) f32,
+    centre label relative to the coding's reference (3,) f32, size class (), normalised residual (3,) f32,
     residual scale () f32). ``epoch`` (set by the loop) changes the sampling seed;
     ``flip`` mirrors x at random (a valid augmentation: the mirrored frustum of the mirrored box);
     ``cat_dropout``: probability of an all-zero category vector, the runtime's "unknown category"
@@ -236,29 +237,41 @@ class BoxNetSamples:
 
         return sample_points(self.cache.points(i), self.num_points, self.item_seed(i))
 
+    def bounds(self, i: int) -> np.ndarray:
+        """(2, 3) [min; max] of the item's WHOLE frustum (the cache's enclosing box of it)."""
+        b = self.cache.baseline[self.cache.index[i]]
+        return np.stack([b[:3] - b[3:] / 2, b[:3] + b[3:] / 2])
+
     def __getitem__(self, i: int):
         pts = self.sample(i)
         gt = self.cache.gt3d[self.cache.index[i]].copy()
+        corners = self.bounds(i)    # transformed with the points, re-sorted per axis at the end
         if self.flip and (self.item_seed(i) % 2):
             pts = pts * np.array([-1.0, 1.0, 1.0], np.float32)
+            corners = corners * [-1.0, 1.0, 1.0]
             gt[0] = -gt[0]
         if self.flip_y or self.scale_sigma > 0 or self.stretch_sigma > 0:
             rng = np.random.default_rng([self.item_seed(i), 17])
             if self.flip_y and rng.random() < 0.5:
                 pts = pts * np.array([1.0, -1.0, 1.0], np.float32)
+                corners = corners * [1.0, -1.0, 1.0]
                 gt[1] = -gt[1]
             if self.scale_sigma > 0:
                 k = float(np.clip(np.exp(rng.normal(0.0, self.scale_sigma)), 0.7, 1.4))
                 pts = pts * np.float32(k)
+                corners = corners * k
                 gt = gt * k
             if self.stretch_sigma > 0:
                 k3 = np.clip(np.exp(rng.normal(0.0, self.stretch_sigma, 3)), 0.4, 2.5)
                 pts = ((pts - gt[:3]) * k3 + gt[:3]).astype(np.float32)
+                corners = (corners - gt[:3]) * k3 + gt[:3]
                 gt[3:] = gt[3:] * k3
-        centred, centroid, length = normalise(pts, self.size_norm)
-        cls, res, scale = size_labels(gt[3:], length, self.size_norm)
+        bounds = np.stack([corners.min(axis=0), corners.max(axis=0)])
+        coding = size_coding(self.size_norm)
+        centred, ref, scale = coding.normalise(pts, bounds)
+        cls, res, loss_scale = coding.labels(gt[3:], scale)
         cat = one_hot(self.cache.category[self.cache.index[i]], self.num_categories)
         if self.cat_dropout > 0 and (self.item_seed(i) // 2 % 1000) < 1000 * self.cat_dropout:
             cat[:] = 0.0
-        return (centred, cat, (gt[:3] - centroid).astype(np.float32), np.int64(cls),
-                np.asarray(res, np.float32), np.asarray(scale, np.float32))
+        return (centred, cat, (gt[:3] - ref).astype(np.float32), np.int64(cls),
+                np.asarray(res, np.float32), np.asarray(loss_scale, np.float32))

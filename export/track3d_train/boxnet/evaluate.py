@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from track3d.boxes import iou_3d
-from track3d.boxnet import OUTPUTS, decode_batch, normalise, one_hot
+from track3d.boxnet import OUTPUTS, one_hot
+from track3d.size_coding import size_coding
 
 from .data import PointCache
 
@@ -41,17 +42,21 @@ def onnx_runner(est):
 def predict(run, cache: PointCache, num_points: int, num_categories: int = 3, batch: int = 64,
             seed: int = 12345, zero_category: bool = False, size_norm: str = "points") -> np.ndarray:
     """(len(cache), 6) boxes. Sampling: the runtime sampler with seed `seed` for every item
-    (what the runtime estimator does)."""
+    (what the runtime estimator does); the whole frustum's bounds from the cache."""
     from track3d.frustum import sample_points
 
+    coding = size_coding(size_norm)
+    base = cache.field("baseline")
     out = np.zeros((len(cache), 6))
     for s in range(0, len(cache), batch):
-        idx = range(s, min(s + batch, len(cache)))
+        idx = list(range(s, min(s + batch, len(cache))))
         pts = np.stack([sample_points(cache.points(i), num_points, seed) for i in idx])
-        centred, centroid, length = normalise(pts, size_norm)
-        cats = cache.category[cache.index[list(idx)]]
+        b = base[idx]
+        bounds = np.stack([b[:, :3] - b[:, 3:] / 2, b[:, :3] + b[:, 3:] / 2], axis=1)
+        centred, ref, scale = coding.normalise(pts, bounds)
+        cats = cache.category[cache.index[idx]]
         cat = one_hot(np.full_like(cats, -1) if zero_category else cats, num_categories)
-        out[s:s + len(idx)] = decode_batch(centroid, length, *run(centred, cat), size_norm=size_norm)
+        out[s:s + len(idx)] = coding.decode(ref, scale, *run(centred, cat))
     return out
 
 

@@ -16,6 +16,7 @@ import numpy as np
 from track3d.boxes import SIZE_TEMPLATES
 from track3d.dataset import COARSE_CATEGORIES
 from track3d.boxnet import INPUT_CATEGORY, INPUT_POINTS, KIND, OUTPUTS
+from track3d.size_coding import size_coding
 
 from ..onnx_meta import attach_metadata
 
@@ -26,16 +27,6 @@ OPSET = 17
 FAMILIES = list(COARSE_CATEGORIES)
 
 
-# The decoding each size coding implies (track3d.boxnet is the implementation), for the metadata.
-_CENTRE = "points minus their centroid (float32); centre = centroid + center1 + center2; "
-NORMALISATION = {
-    "points": _CENTRE + "L = largest extent of the enclosing box of the sampled points; "
-                        "size = (template[argmax scores] + residual[argmax]) * L",
-    "paper": _CENTRE + "L = largest extent of the enclosing box of the sampled points; "
-                       "size = (template[argmax scores] + residual[argmax]) * L (labels normalised by max(size))",
-    "extent": _CENTRE + "E = per-axis extents of the enclosing box of the sampled points, each floored at 10% "
-                        "of the largest; size = E * (1 + residual[argmax scores])",
-}
 
 
 def model_metadata(model, extra: dict | None = None) -> dict:
@@ -45,7 +36,7 @@ def model_metadata(model, extra: dict | None = None) -> dict:
         "num_points": int(cfg.num_points), "num_categories": int(cfg.num_categories),
         "use_category": bool(cfg.use_category), "categories": FAMILIES[:cfg.num_categories],
         "width": float(cfg.width), "size_templates": SIZE_TEMPLATES.tolist(), "size_norm": cfg.size_norm,
-        "normalisation": NORMALISATION[cfg.size_norm],
+        "normalisation": size_coding(cfg.size_norm).description,
         "inputs": {INPUT_POINTS: "B x N x 3 float32 centred"} |
                   ({INPUT_CATEGORY: f"B x {cfg.num_categories} float32 one-hot"} if cfg.use_category else {}),
         "outputs": list(OUTPUTS), "opset": OPSET,

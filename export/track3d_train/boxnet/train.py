@@ -126,7 +126,7 @@ def plot_history(history: dict, path: str | Path, title: str = "A3BoxNet trainin
 def _validate(model, val_ds, batch: int):
     import torch
 
-    from track3d.boxnet import decode_batch
+    from track3d.size_coding import size_coding
 
     from .evaluate import oracle_metrics
     from .losses import boxnet_loss
@@ -141,11 +141,12 @@ def _validate(model, val_ds, batch: int):
             out = model(pts, cat)
             loss, _ = boxnet_loss(out, crel, cls, res, scale)
             losses.append(float(loss) * len(items))
-            # the decoding needs the centroid and L of the sampled points: recompute them
-            from track3d.boxnet import normalise
-            raw = [val_ds.sample(int(i)) for i in order[s:s + batch]]
-            _, centroid, length = normalise(np.stack(raw), val_ds.size_norm)
-            boxes.append(decode_batch(centroid, length, *[o.numpy() for o in out], size_norm=val_ds.size_norm))
+            # the decoding needs the reference and scale of the sampled points: recompute them
+            ids = [int(i) for i in order[s:s + batch]]
+            coding = size_coding(val_ds.size_norm)
+            _, ref, scale = coding.normalise(np.stack([val_ds.sample(i) for i in ids]),
+                                             np.stack([val_ds.bounds(i) for i in ids]))
+            boxes.append(coding.decode(ref, scale, *[o.numpy() for o in out]))
     c = val_ds.cache
     m = oracle_metrics(np.concatenate(boxes), c.field("gt3d"), c.field("seq"))
     m["loss"] = float(np.sum(losses) / len(order))
@@ -215,11 +216,16 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
         log(f"resumed from {last}: epoch {start_epoch}, step {step}")
     elif init_from:
         src = torch.load(str(init_from), map_location="cpu", weights_only=False)
-        if not isinstance(src, dict) or src.get("model_config") != mcfg.to_dict():
-            raise ValueError(f"{init_from} is not an A3BoxNet checkpoint of this model (N, width, category, "
-                             "size coding must match)")
+        # the weights carry over between box codings (same layers; the heads re-learn what their
+        # outputs mean), not between architectures
+        arch = {k: v for k, v in mcfg.to_dict().items() if k != "size_norm"}
+        src_cfg = src.get("model_config") if isinstance(src, dict) else None
+        if not isinstance(src_cfg, dict) or {k: v for k, v in src_cfg.items() if k != "size_norm"} != arch:
+            raise ValueError(f"{init_from} is not an A3BoxNet checkpoint of this model (N, width, category "
+                             "must match)")
         model.load_state_dict(src["model"])
-        history["init_from"] = {"file": Path(init_from).name, "epoch": src.get("epoch"), "step": src.get("step")}
+        history["init_from"] = {"file": Path(init_from).name, "epoch": src.get("epoch"), "step": src.get("step"),
+                                "size_norm": src_cfg.get("size_norm")}
         log(f"initialised from {init_from} (epoch {src.get('epoch')}, step {src.get('step')})")
     t_session = time.time()
     t_before = history["seconds"]

@@ -5,6 +5,8 @@
     track3d-train edgetrack export  --checkpoint RUN/ckpt.pt --out runtime/track3d/models/edgetrack --force
     track3d-train edgetrack eval    --model runtime/track3d/models/edgetrack --data DATA --split test --compare siamfc-edge
     track3d-train edgetrack time    --model runtime/track3d/models/edgetrack --pin
+    track3d-train edgetrack fit-threshold --model runtime/track3d/models/edgetrack --data data/engine-calib \
+        --split train --write --force     # the lost threshold, fitted on held-out train-like sequences
 
 The long-run recipe (the real training command, resumable, ~3 h) is export/scripts/train_edgetrack.sh;
 the shipped short-run model is described in docs/models.md.
@@ -95,6 +97,38 @@ def _eval(a) -> int:
     if a.out:
         sequences = next(iter(rows.values()))["sequences"] if rows else 0
         Path(a.out).write_text(json.dumps({"data_split": a.split, "sequences": sequences, "trackers": rows}, indent=1))
+    return 0
+
+
+def _grid(text: str) -> list[float]:
+    try:
+        return [float(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+
+
+def _fit_threshold(a) -> int:
+    from ..onnx_meta import refuse_shipped
+    from .threshold import fit_threshold, write_threshold
+
+    if a.write:
+        refuse_shipped([Path(f"{a.model}_template.onnx"), Path(f"{a.model}_search.onnx")], a.force, "--model")
+    if a.split.startswith("test"):
+        raise ValueError(f"fit the threshold on held-out train-like sequences, not on a test split ({a.split!r})")
+    fit = fit_threshold(a.model, a.data, a.split, a.grid, threads=a.threads,
+                        max_sequences=a.max_sequences or None, quiet=a.quiet)
+    print(f"{'threshold':>9} {'F1':>5} {'precision':>9} {'recall':>6} {'AO_2d':>6}")
+    for r in fit["rows"]:
+        print(f"{r['threshold']:9.3g} {r['f1']:5.3f} {r['lost_precision']:9.3f} {r['lost_recall']:6.3f} {r['ao_2d']:6.3f}")
+    print(f"best: {fit['threshold']:g}")
+    if a.write:
+        from track3d_train.boxnet.data import split_hash
+        from track3d.dataset import Dataset
+
+        note = {"data": Path(a.data).name, "split": a.split, "data_hash": split_hash(Dataset(a.data), a.split),
+                "criterion": "F1 of lost vs absent frames, one pass; AO_2d breaks ties", "rows": fit["rows"]}
+        for p in write_threshold(a.model, fit["threshold"], note):
+            print(f"wrote the threshold into {p}")
     return 0
 
 
@@ -202,6 +236,20 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out", help="also write the numbers to this JSON file")
     v.add_argument("--quiet", action="store_true", help="no progress bar")
     v.set_defaults(fn=_eval)
+
+    f = sub.add_parser("fit-threshold", help="fit the lost threshold one pass on held-out sequences; --write stores it",
+                       formatter_class=d)
+    f.add_argument("--model", required=True, help="prefix of <name>_template/_search.onnx")
+    f.add_argument("--data", required=True, help="dataset root with absent frames (not the training data, not a test split)")
+    f.add_argument("--split", default="train", help="dataset split (a test split is refused)")
+    f.add_argument("--grid", type=_grid, default=[0.02, 0.05, 0.1, 0.2, 0.3, 0.5],
+                   help="comma-separated candidate thresholds in (0, 1)")
+    f.add_argument("--max-sequences", type=bounded(int, 0), default=0, help="only the first N sequences (0: all)")
+    f.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
+    f.add_argument("--write", action="store_true", help="write the best threshold into the model's metadata")
+    f.add_argument("--force", action="store_true", help="allow --write on the shipped models in track3d/models")
+    f.add_argument("--quiet", action="store_true", help="no progress bar")
+    f.set_defaults(fn=_fit_threshold)
 
     m = sub.add_parser("time", help="median ms of the nets and crops vs SiamFC-edge, interleaved", formatter_class=d)
     m.add_argument("--model", required=True, help="prefix of <name>_template/_search.onnx")
