@@ -4,7 +4,7 @@
 # vector, all with the same recipe and the same number of optimiser steps, then evaluated
 # side by side on the oracle frustums of the test split.
 #
-#   bash export/scripts/ablation_boxnet.sh      # needs the caches of reproduce_models.sh
+#   bash export/scripts/ablation_boxnet.sh      # makes its data and caches first (resumable)
 #
 # A step at N = 4096 costs about 12x one at N = 512 here (10 s vs 0.8 s, one thread), so the
 # shared budget is STEPS optimiser steps (default 400 of batch 32; a training takes 6 min at
@@ -21,7 +21,16 @@ DATA=${DATA:-data/med}
 OUT=${OUT:-$RUNS/boxnet/ablation}
 STEPS=${STEPS:-400}
 CACHES=("$RUNS/boxnet/cache/train.npz" "$RUNS/boxnet/cache/div_train.npz")
-mkdir -p "$OUT"
+mkdir -p "$OUT" "$RUNS/boxnet/cache"
+
+# the first release's data (data/med, as the `siamfc` recipe makes it, + 120 more train shapes)
+# and its frustum caches; each command resumes or is skipped when its output exists
+"$BIN/track3d-sim" generate --preset small --train 36 --test 18 --out "$DATA" --workers 2 --quiet
+"$BIN/track3d-sim" generate --preset small --seed 1 --train 120 --test 0 --frames 25 --out "${DATA}_div" --workers 2 --quiet
+[ -f "${CACHES[0]}" ] || "$BIN/track3d-train" boxnet prepare --data "$DATA" --split train --jitters 5 --out "${CACHES[0]}" --quiet
+[ -f "${CACHES[1]}" ] || "$BIN/track3d-train" boxnet prepare --data "${DATA}_div" --split train --jitters 3 --out "${CACHES[1]}" --quiet
+[ -f "$RUNS/boxnet/cache/test.npz" ] || "$BIN/track3d-train" boxnet prepare --data "$DATA" --split test --jitters 0 \
+    --out "$RUNS/boxnet/cache/test.npz" --quiet
 
 train() {  # name, extra args...
     local name=$1; shift

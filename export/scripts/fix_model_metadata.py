@@ -26,7 +26,7 @@ from track3d.size_coding import size_coding
 from track3d_train.onnx_meta import rewrite_metadata
 
 SIAMFC_DATA = ("track3d-sim generate --preset small --train 36 --test 18 --seed 0 (the 'med' dataset of "
-               "export/scripts/reproduce_models.sh), split train")
+               "the `siamfc` training recipe, track3d_train.recipes), split train")
 
 
 def fixed(meta: dict) -> dict:

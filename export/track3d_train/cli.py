@@ -5,6 +5,7 @@
     track3d-train --version
     track3d-train quantize ...  int8 twins of the shipped models (see `track3d-train quantize --help`)
     track3d-train edgetrack ... EdgeTrack, the fast edge 2D tracker
+    track3d-train recipe ...    the shipped models' training recipes, end to end (see `track3d-train recipe list`)
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ COMMANDS = {
     "siamfc": ("track3d_train.siamfc.cli", "train, export and check SiamFC"),
     "quantize": ("track3d_train.quantize", "int8 (static QDQ) twins of the models, calibrated on a train split"),
     "edgetrack": ("track3d_train.edgetrack.cli", "train, export and check EdgeTrack (fast edge 2D tracker)"),
+    "recipe": ("track3d_train.recipes", "the shipped models' training recipes, data to ONNX (resumable; --tiny)"),
 }
 
 

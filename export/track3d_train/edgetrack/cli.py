@@ -8,7 +8,7 @@
     track3d-train edgetrack fit-threshold --model runtime/track3d/models/edgetrack --data data/engine-calib \
         --split train --write --force     # the lost threshold, fitted on held-out train-like sequences
 
-The long-run recipe (the real training command, resumable, ~3 h) is export/scripts/train_edgetrack.sh;
+The long-run recipe (resumable) is `track3d-train recipe run edgetrack-engine`;
 the shipped short-run model is described in docs/models.md.
 """
 from __future__ import annotations

@@ -1,0 +1,301 @@
+"""The training recipes of the shipped models, named in one place, each with a tiny variant.
+
+A recipe is the whole path from nothing to an ONNX file: simulate the data, cut the caches,
+train (one thread, resumable, under a time budget), export with a parity check, and for
+EdgeTrack fit the lost threshold. Each step is one call of the project's own CLIs; every
+step resumes (the simulator from its last complete sequence, the trainings from their last
+checkpoint, the caches are skipped when present), so running a recipe again after an
+interruption continues where it stopped.
+
+    track3d-train recipe list
+    track3d-train recipe show a3boxnet-engine          # the commands, full size
+    track3d-train recipe run a3boxnet-engine --data data --runs runs
+    track3d-train recipe run edgetrack-engine --tiny --data /tmp/d --runs /tmp/r   # minutes, CI
+
+The models land in the run folder (``{runs}/<recipe>/...``), never in the package: a model
+ships only after it beats the shipped one on the README's engine sets, by
+``track3d-train <model> export --force`` into ``runtime/track3d/models``.
+
+Knobs (``--set name=value``) scale a recipe; ``tiny`` overrides them so that the whole recipe
+runs in about a minute on tiny data (CI runs it end to end); tiny-only differences are the
+knobs, never the commands.
+"""
+from __future__ import annotations
+
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = ["Step", "Recipe", "RECIPES", "recipe", "commands", "run"]
+
+
+@dataclass(frozen=True)
+class Step:
+    """One command. ``argv``: the program ("track3d-sim" | "track3d-train") and its arguments,
+    with ``{data}``, ``{runs}`` and knob placeholders; ``done_when``: a path whose existence
+    means the step has nothing left to do (skipped); ``full_only``: not run by the tiny variant
+    (it needs data the tiny variant does not have, said in ``why``)."""
+
+    label: str
+    argv: tuple[str, ...]
+    done_when: str | None = None
+    full_only: bool = False
+    why: str = ""
+
+
+@dataclass(frozen=True)
+class Recipe:
+    name: str
+    makes: str
+    description: str
+    knobs: dict
+    tiny: dict
+    steps: tuple[Step, ...]
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+
+def _a(text: str) -> tuple[str, ...]:
+    return tuple(shlex.split(text))
+
+
+_BOXNET_TRAIN = ("track3d-train boxnet train --cache {runs}/boxnet-engine/cache/engine-train-po.npz "
+                 "{runs}/boxnet-engine/cache/engine-train-stereo.npz --num-points 512 --epochs 100 "
+                 "--epoch-samples {epoch_samples} --batch {batch} --max-steps {max_steps} --flip-y --scale-aug 0.15 --no-category "
+                 "--threads {threads} --quiet ")
+
+A3BOXNET_ENGINE = Recipe(
+    name="a3boxnet-engine",
+    makes="{runs}/boxnet-engine/a3boxnet.onnx",
+    description="A3BoxNet on the data engine: points-only bodies of every generator but the held-out ones, "
+                "every range sensor, plus stereo bodies; no category input; two phases (extent coding, "
+                "then a per-axis stretch augmentation).",
+    knobs={"preset": "small", "po_train": 240, "stereo_train": 36, "frames": 25, "jitters": 3,
+           "epoch_samples": 4000, "batch": 32, "max_steps": 0, "minutes": 105, "stretch_minutes": 40,
+           "threads": 1, "workers": 1},
+    tiny={"preset": "tiny", "po_train": 2, "stereo_train": 1, "frames": 4, "jitters": 1, "epoch_samples": 16,
+          "batch": 8,
+          "max_steps": 2, "minutes": 5, "stretch_minutes": 5},
+    steps=(
+        Step("data: points-only bodies, range sensors mixed", _a(
+            "track3d-sim generate --preset {preset} --seed 1 --train {po_train} --test 0 --test-unseen 1 "
+            "--frames {frames} --points-only --sensors ideal,flash-lidar,tof --out {data}/engine-train-po "
+            "--workers {workers} --quiet")),
+        Step("data: stereo bodies (images for the stereo matcher)", _a(
+            "track3d-sim generate --preset {preset} --seed 2 --train {stereo_train} --test 0 --test-unseen 1 "
+            "--frames {frames} --sensors stereo --out {data}/engine-train-stereo --workers {workers} --quiet")),
+        Step("cache: frustums of jittered ground-truth boxes (points-only)", _a(
+            "track3d-train boxnet prepare --data {data}/engine-train-po --split train --jitters {jitters} "
+            "--out {runs}/boxnet-engine/cache/engine-train-po.npz --quiet"),
+            done_when="{runs}/boxnet-engine/cache/engine-train-po.npz"),
+        Step("cache: frustums (stereo)", _a(
+            "track3d-train boxnet prepare --data {data}/engine-train-stereo --split train --jitters {jitters} "
+            "--out {runs}/boxnet-engine/cache/engine-train-stereo.npz --quiet"),
+            done_when="{runs}/boxnet-engine/cache/engine-train-stereo.npz"),
+        Step("train phase 1: extent coding", _a(
+            _BOXNET_TRAIN + "--out {runs}/boxnet-engine/nocat --time-budget-min {minutes} --size-norm extent")),
+        Step("train phase 2: + stretch augmentation, from phase 1", _a(
+            _BOXNET_TRAIN + "--out {runs}/boxnet-engine/stretch --time-budget-min {stretch_minutes} "
+            "--stretch-aug 0.3 --size-norm extent --lr 5e-4 --init-from {runs}/boxnet-engine/nocat/best.pt")),
+        Step("export with a parity check", _a(
+            "track3d-train boxnet export --checkpoint {runs}/boxnet-engine/stretch/best.pt "
+            "--out {runs}/boxnet-engine/a3boxnet.onnx")),
+    ),
+    notes=("The shipped phase 2 started from phase 1's best checkpoint at epoch 51, copied while phase 1 ran "
+           "(105 min budget, 65 min in); run as written, phase 2 starts from phase 1's final best.",),
+)
+
+EDGETRACK_ENGINE = Recipe(
+    name="edgetrack-engine",
+    makes="{runs}/edgetrack/model/edgetrack_{{template,search}}.onnx",
+    description="EdgeTrack, the default 2D tracker: 36 train sequences x 100 frames plus 120 shapes x 25 frames "
+                "in low light with motion blur; ~70 min on one thread; the lost threshold fitted on 12 held-out "
+                "train-like sequences (seed 3).",
+    knobs={"preset": "small", "train": 36, "div_train": 120, "div_frames": 25, "max_frames": 3600,
+           "max_background": 1500, "steps": 30000, "batch": 32, "minutes": 70, "threads": 1, "workers": 2},
+    tiny={"preset": "tiny", "train": 2, "div_train": 1, "div_frames": 4, "max_frames": 40, "max_background": 10,
+          "steps": 2, "batch": 4, "minutes": 5, "workers": 1},
+    steps=(
+        Step("data: train sequences", _a(
+            "track3d-sim generate --preset {preset} --train {train} --test 0 --test-unseen 1 "
+            "--out {data}/engine-train --workers {workers} --quiet")),
+        Step("data: more shapes, low light, motion blur", _a(
+            "track3d-sim generate --preset {preset} --seed 1 --train {div_train} --test 0 --test-unseen 1 "
+            "--frames {div_frames} --auto-exposure --motion-blur --out {data}/engine-train_div --workers {workers} "
+            "--quiet")),
+        Step("cache: target and background crops", _a(
+            "track3d-train edgetrack prepare --data {data}/engine-train {data}/engine-train_div "
+            "--max-frames {max_frames} --max-background {max_background} --out {runs}/edgetrack/cache --quiet"),
+            done_when="{runs}/edgetrack/cache/background/bg.json"),
+        Step("train", _a(
+            "track3d-train edgetrack train --cache {runs}/edgetrack/cache --out {runs}/edgetrack/run "
+            "--max-steps {steps} --batch {batch} --time-budget-min {minutes} --threads {threads} --quiet")),
+        Step("export with a parity check", _a(
+            "track3d-train edgetrack export --checkpoint {runs}/edgetrack/run/ckpt.pt "
+            "--out {runs}/edgetrack/model/edgetrack")),
+        Step("data: held-out sequences for the lost threshold", _a(
+            "track3d-sim generate --preset small --seed 3 --train 12 --test 0 --test-unseen 1 --frames 60 "
+            "--sensors ideal --out {data}/engine-calib --workers {workers} --quiet"),
+            full_only=True, why="the tiny presets' sequences have no absent frames to fit on"),
+        Step("fit the lost threshold", _a(
+            "track3d-train edgetrack fit-threshold --model {runs}/edgetrack/model/edgetrack "
+            "--data {data}/engine-calib --split train --write --quiet"), full_only=True,
+            why="needs the held-out sequences above"),
+    ),
+)
+
+SIAMFC = Recipe(
+    name="siamfc",
+    makes="{runs}/siamfc_{{edge,faithful}}/model_{{exemplar,search}}.onnx",
+    description="The paper's SiamFC (faithful) and our SiamFC-edge, on the first release's data "
+                "(36 train + 18 test sequences x 100 frames, data/med).",
+    knobs={"preset": "small", "train": 36, "test": 18, "max_frames": 3600, "edge_steps": 4800, "edge_minutes": 36,
+           "faithful_steps": 900, "faithful_minutes": 40, "workers": 2},
+    tiny={"preset": "tiny", "train": 2, "test": 1, "max_frames": 20, "edge_steps": 1, "edge_minutes": 5,
+          "faithful_steps": 1, "faithful_minutes": 5, "workers": 1},
+    steps=(
+        Step("data", _a("track3d-sim generate --preset {preset} --train {train} --test {test} --out {data}/med "
+                        "--workers {workers} --quiet")),
+        Step("cache: training pairs", _a(
+            "track3d-train siamfc prepare --data {data}/med --split train --max-frames {max_frames} "
+            "--out {runs}/siamfc/cache --quiet"), done_when="{runs}/siamfc/cache/index.json"),
+        Step("train SiamFC-edge", _a(
+            "track3d-train siamfc train --variant edge --cache {runs}/siamfc/cache --out {runs}/siamfc_edge "
+            "--max-steps {edge_steps} --batch 16 --time-budget-min {edge_minutes} --threads 1 --quiet")),
+        Step("train SiamFC (faithful)", _a(
+            "track3d-train siamfc train --variant faithful --cache {runs}/siamfc/cache --out {runs}/siamfc_faithful "
+            "--max-steps {faithful_steps} --batch 8 --time-budget-min {faithful_minutes} --threads 2 --quiet")),
+        Step("export SiamFC-edge", _a(
+            "track3d-train siamfc export --checkpoint {runs}/siamfc_edge/ckpt.pt --out {runs}/siamfc_edge/model")),
+        Step("export SiamFC (faithful)", _a(
+            "track3d-train siamfc export --checkpoint {runs}/siamfc_faithful/ckpt.pt "
+            "--out {runs}/siamfc_faithful/model")),
+    ),
+)
+
+RECIPES: dict[str, Recipe] = {r.name: r for r in (A3BOXNET_ENGINE, EDGETRACK_ENGINE, SIAMFC)}
+
+
+def recipe(name: str) -> Recipe:
+    try:
+        return RECIPES[name]
+    except KeyError:
+        raise ValueError(f"unknown recipe {name!r} (known: {', '.join(RECIPES)})") from None
+
+
+def knob_values(r: Recipe, tiny: bool = False, overrides: dict | None = None) -> dict:
+    """The knobs of a run: the recipe's, the tiny variant's, then ``overrides`` (``--set``)."""
+    k = dict(r.knobs)
+    if tiny:
+        k.update(r.tiny)
+    for name, value in (overrides or {}).items():
+        if name not in r.knobs:
+            raise ValueError(f"recipe {r.name!r} has no knob {name!r} (knobs: {', '.join(r.knobs)})")
+        k[name] = value
+    return k
+
+
+def commands(r: Recipe, data: str | Path, runs: str | Path, tiny: bool = False,
+             overrides: dict | None = None) -> list[tuple[Step, list[str], str | None]]:
+    """[(step, argv, done_when path)] with every placeholder filled; the tiny variant drops the
+    full-only steps."""
+    values = {**knob_values(r, tiny, overrides), "data": str(data), "runs": str(runs)}
+    out = []
+    for s in r.steps:
+        if tiny and s.full_only:
+            continue
+        argv = [a.format(**values) for a in s.argv]
+        out.append((s, argv, s.done_when.format(**values) if s.done_when else None))
+    return out
+
+
+def _program(name: str) -> str:
+    """The project's CLI next to this interpreter (the same virtual environment), else on PATH."""
+    local = Path(sys.executable).parent / name
+    found = str(local) if local.exists() else shutil.which(name)
+    if not found:
+        raise FileNotFoundError(f"{name} is not installed next to {sys.executable} nor on PATH "
+                                f"(pip install -e '.[sim,train]')")
+    return found
+
+
+def run(r: Recipe, data: str | Path, runs: str | Path, tiny: bool = False, overrides: dict | None = None,
+        dry_run: bool = False, log=print) -> int:
+    """Run the steps in order; a failing step stops the recipe with its exit code (run again to
+    resume). Returns 0 when every step succeeded or was already done."""
+    steps = commands(r, data, runs, tiny, overrides)
+    t_all = time.time()
+    for i, (s, argv, done) in enumerate(steps, 1):
+        head = f"[{i}/{len(steps)}] {s.label}"
+        if done and Path(done).exists():
+            log(f"{head}: done ({done} exists)")
+            continue
+        log(f"{head}\n    {shlex.join(argv)}")
+        if dry_run:
+            continue
+        t0 = time.time()
+        rc = subprocess.call([_program(argv[0]), *argv[1:]])
+        if rc != 0:
+            log(f"{head}: failed with exit code {rc}; run the recipe again to resume from here")
+            return rc
+        log(f"{head}: {time.time() - t0:.0f} s")
+    if not dry_run:
+        log(f"recipe {r.name}{' (tiny)' if tiny else ''}: done in {time.time() - t_all:.0f} s; "
+            f"made {r.makes.format(runs=runs)}")
+    return 0
+
+
+def _parse_set(items: list[str]) -> dict:
+    out = {}
+    for item in items or []:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            raise ValueError(f"--set takes name=value, got {item!r}")
+        try:
+            out[name] = int(value)
+        except ValueError:
+            try:
+                out[name] = float(value)
+            except ValueError:
+                out[name] = value
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    from track3d.argparsing import ArgumentParser, apply_formatter
+
+    p = ArgumentParser(prog="track3d-train recipe", description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="cmd", required=True)
+    sub.add_parser("list", help="the recipes and what each makes")
+    for cmd, text in (("show", "print the commands of a recipe"), ("run", "run a recipe (resumes)")):
+        q = sub.add_parser(cmd, help=text)
+        q.add_argument("name", help=f"recipe name: {', '.join(RECIPES)}")
+        q.add_argument("--data", default="data", help="folder of the datasets")
+        q.add_argument("--runs", default="runs", help="folder of caches, runs and exported models")
+        q.add_argument("--tiny", action="store_true", help="the tiny variant (minutes; CI runs it)")
+        q.add_argument("--set", nargs="*", default=[], metavar="KNOB=VALUE", help="override a knob (see `show`)")
+        if cmd == "run":
+            q.add_argument("--dry-run", action="store_true", help="print the steps without running them")
+    a = apply_formatter(p).parse_args(argv)
+    if a.cmd == "list":
+        for r in RECIPES.values():
+            print(f"{r.name:18s} {r.description}")
+        return 0
+    r = recipe(a.name)
+    overrides = _parse_set(a.set)
+    if a.cmd == "show":
+        print(f"# {r.name}: {r.description}")
+        print(f"# knobs: {knob_values(r, a.tiny, overrides)}")
+        for note in r.notes:
+            print(f"# note: {note}")
+        for s, args, done in commands(r, a.data, a.runs, a.tiny, overrides):
+            print(f"# {s.label}{f' (skipped when {done} exists)' if done else ''}")
+            print(shlex.join(args))
+        for s in r.steps:
+            if a.tiny and s.full_only:
+                print(f"# not in the tiny variant: {s.label} ({s.why})")
+        return 0
+    return run(r, a.data, a.runs, a.tiny, overrides, dry_run=a.dry_run)
