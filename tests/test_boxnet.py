@@ -221,6 +221,20 @@ def test_stretch_moves_points_and_box_together(tiny_cache):
     assert np.std(np.log(ks)) > 0.1 and np.mean(np.abs(ks[:, 0] - ks[:, 2])) > 0.05
 
 
+def test_stretch_takes_one_sigma_or_three(tiny_cache):
+    """One sigma is the same stream as three equal ones; (0, 0, s) stretches depth alone."""
+    from track3d_train.boxnet.data import BoxNetSamples, PointCache
+
+    cache = PointCache(tiny_cache[0])
+    one, three = BoxNetSamples(cache, 64, stretch_sigma=0.4), BoxNetSamples(cache, 64, stretch_sigma=(0.4, 0.4, 0.4))
+    z_only, plain = BoxNetSamples(cache, 64, stretch_sigma=(0.0, 0.0, 0.5)), BoxNetSamples(cache, 64)
+    for i in range(min(len(cache), 6)):
+        for a, b in zip(one[i], three[i]):
+            np.testing.assert_array_equal(a, b)
+        pz, p0 = z_only[i][0], plain[i][0]
+        np.testing.assert_allclose(np.ptp(pz[:, :2], axis=0), np.ptp(p0[:, :2], axis=0), rtol=1e-5)
+
+
 def test_frustum_bounds_follow_every_augmentation(tiny_cache):
     """The whole frustum's bounds are mirrored, scaled and stretched with the points: the
     item's x / y extents (from the bounds) still enclose its sample, and its reference is the

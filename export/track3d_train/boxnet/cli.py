@@ -42,10 +42,14 @@ def _prepare(a) -> int:
 def _train(a) -> int:
     from .train import TrainConfig, train
 
+    if len(a.stretch_aug) not in (1, 3):
+        raise ValueError(f"--stretch-aug takes one sigma or three (x y z), got {len(a.stretch_aug)}")
+    stretch = a.stretch_aug[0] if len(a.stretch_aug) == 1 else tuple(a.stretch_aug)
+
     cfg = TrainConfig(train_cache=[str(c) for c in a.cache], out=str(a.out), num_points=a.num_points, width=a.width,
                       use_category=not a.no_category, size_norm=a.size_norm, epochs=a.epochs,
                       epoch_samples=a.epoch_samples, batch=a.batch, lr=a.lr, flip=not a.no_flip,
-                      cat_dropout=a.cat_dropout, flip_y=a.flip_y, scale_aug=a.scale_aug, stretch_aug=a.stretch_aug,
+                      cat_dropout=a.cat_dropout, flip_y=a.flip_y, scale_aug=a.scale_aug, stretch_aug=stretch,
                       val_every=a.val_every, seed=a.seed, threads=a.threads, max_minutes=a.max_minutes,
                       max_steps=a.max_steps)
     _log(f"training A3BoxNet into {a.out}: {cfg}")
@@ -141,9 +145,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--flip-y", action="store_true", help="also mirror y at random")
     t.add_argument("--scale-aug", type=bounded(float, 0), default=0.0,
                    help="sigma of a random log scale of points and box about the camera centre (e.g. 0.15)")
-    t.add_argument("--stretch-aug", type=bounded(float, 0), default=0.0,
+    t.add_argument("--stretch-aug", type=bounded(float, 0), nargs="+", default=[0.0], metavar="SIGMA",
                    help="sigma of a random per-axis log stretch of points and box about the box centre "
-                        "(other body proportions, e.g. 0.3)")
+                        "(other body proportions, e.g. 0.3); three values: x, y, z (e.g. 0.3 0.3 0.5)")
     t.add_argument("--init-from", default=None,
                    help="start from this A3BoxNet checkpoint's weights (fine-tuning; default: random)")
     t.add_argument("--val-every", type=bounded(int, 0), default=8, help="every k-th train sequence is validation (0: none)")

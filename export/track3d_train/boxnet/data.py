@@ -212,7 +212,8 @@ class BoxNetSamples:
     clipped to [0.7, 1.4] (projection is scale invariant, so the same 2D box still cuts the scaled
     scene: a bigger body farther away, or a smaller one nearer);
     ``stretch_sigma``: points and box stretched about the box centre, each axis by its own
-    exp(N(0, stretch_sigma)) clipped to [0.4, 2.5]: another body (flatter, deeper, longer) whose
+    exp(N(0, stretch_sigma)) (one sigma, or x / y / z sigmas) clipped to [0.4, 2.5]: another
+    body (flatter, deeper, longer) whose
     visible surface is the stretched one (the view is near-orthographic at these ranges), so the
     hidden depth cannot be read off the visible width and height alone, as it could be for the
     generators' proportions."""
@@ -224,7 +225,8 @@ class BoxNetSamples:
         self.size_norm, self.seed, self.flip, self.epoch = size_norm, int(seed), bool(flip), 0
         self.cat_dropout = float(cat_dropout)
         self.flip_y, self.scale_sigma = bool(flip_y), float(scale_sigma)
-        self.stretch_sigma = float(stretch_sigma)
+        # one sigma for every axis, or (x, y, z); the same random stream either way
+        self.stretch_sigma = np.broadcast_to(np.asarray(stretch_sigma, np.float64), (3,)).copy()
 
     def __len__(self) -> int:
         return len(self.cache)
@@ -250,7 +252,7 @@ class BoxNetSamples:
             pts = pts * np.array([-1.0, 1.0, 1.0], np.float32)
             corners = corners * [-1.0, 1.0, 1.0]
             gt[0] = -gt[0]
-        if self.flip_y or self.scale_sigma > 0 or self.stretch_sigma > 0:
+        if self.flip_y or self.scale_sigma > 0 or np.any(self.stretch_sigma > 0):
             rng = np.random.default_rng([self.item_seed(i), 17])
             if self.flip_y and rng.random() < 0.5:
                 pts = pts * np.array([1.0, -1.0, 1.0], np.float32)
@@ -261,7 +263,7 @@ class BoxNetSamples:
                 pts = pts * np.float32(k)
                 corners = corners * k
                 gt = gt * k
-            if self.stretch_sigma > 0:
+            if np.any(self.stretch_sigma > 0):
                 k3 = np.clip(np.exp(rng.normal(0.0, self.stretch_sigma, 3)), 0.4, 2.5)
                 pts = ((pts - gt[:3]) * k3 + gt[:3]).astype(np.float32)
                 corners = (corners - gt[:3]) * k3 + gt[:3]

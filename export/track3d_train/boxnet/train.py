@@ -35,7 +35,7 @@ class TrainConfig:
     cat_dropout: float = 0.1        # probability of an all-zero ("unknown") category vector
     flip_y: bool = False            # random y-mirroring too
     scale_aug: float = 0.0          # sigma of the log scale about the camera centre (0: none)
-    stretch_aug: float = 0.0        # sigma of the per-axis log stretch about the box centre (0: none)
+    stretch_aug: float | tuple = 0.0  # sigma of the per-axis log stretch about the box centre (0: none), or (x, y, z)
     val_every: int = 8              # every k-th train sequence is held out for validation (0: none)
     val_max: int = 600              # validation items per epoch (a fixed random subset)
     seed: int = 0
