@@ -8,7 +8,7 @@ OpenVINO does not run the int8 files, see track3d.onnxmodel) on the same fixed r
 other load on the machine hits them alike), median ms; max relative difference to onnxruntime
 fp32 (max |diff| / max |fp32| over the outputs).
 
-Whole loop (siamfc-edge + a3boxnet, fusion on, bench_fps's loop and stage timers on preloaded
+Whole loop (--tracker, default the default loop's edgetrack, + a3boxnet, fusion on, bench_fps's loop and stage timers on preloaded
 frames, one thread pinned to one core): one configuration per variant (both networks at that
 engine / precision) plus precision=auto / engine=auto, interleaved: --rounds rounds, each
 running every configuration for frames/rounds frames; the reported ms is the median of the
@@ -29,15 +29,21 @@ from benchlib.loop_timing import build, load_frames, time_loop
 from benchlib.output import add_out_argument
 from benchlib.record import finish_record, start_record
 
-from track3d.argparsing import ArgumentParser, bounded, run_main
+from track3d.argparsing import ArgumentParser, bounded, hidden_alias, run_main
 from track3d.jsonable import write_json
 from track3d.machine import START_CPUS, pin_threads
 from track3d.onnxmodel import MODELS_DIR, ModelError, OnnxModel, openvino_version, variant_path
 from track3d.variant_choice import example_feeds, measure
 
 VARIANTS = (("onnxruntime", "fp32"), ("onnxruntime", "int8"), ("openvino", "fp32"), ("openvino", "bf16"))
-NETWORKS = {"a3boxnet": "a3boxnet.onnx", "siamfc_edge_search": "siamfc_edge_search.onnx",
+NETWORKS = {"a3boxnet": "a3boxnet.onnx", "edgetrack_search": "edgetrack_search.onnx",
+            "edgetrack_template": "edgetrack_template.onnx", "siamfc_edge_search": "siamfc_edge_search.onnx",
             "siamfc_edge_exemplar": "siamfc_edge_exemplar.onnx"}
+# the files of each 2D tracker's networks (the search one first) and of the box net
+TRACKER_FILES = {"edgetrack": ["edgetrack_search.onnx", "edgetrack_template.onnx"],
+                 "siamfc-edge": ["siamfc_edge_search.onnx", "siamfc_edge_exemplar.onnx"],
+                 "siamfc": ["siamfc_faithful_search.onnx", "siamfc_faithful_exemplar.onnx"],
+                 "a3boxnet": ["a3boxnet.onnx"]}
 STAGES = ("net2d", "net3d", "end_to_end")
 
 
@@ -84,32 +90,33 @@ def bench_networks(seconds: float) -> dict:
     return out
 
 
-def loop_configs() -> list[dict]:
+def loop_configs(tracker: str = "edgetrack") -> list[dict]:
     """One configuration per variant: each network at that engine / precision when it has it
     (else fp32 on that engine, said in the label), plus auto / auto."""
     cfgs = []
     for e, p in VARIANTS + (("auto", "auto"),):
         topt, eopt = {"precision": p, "engine": e}, {"precision": p, "engine": e}
         if p == "int8":
-            if not variant_path(MODELS_DIR / "siamfc_edge_search.onnx", "int8").is_file():
+            if not variant_path(MODELS_DIR / TRACKER_FILES[tracker][0], "int8").is_file():
                 topt["precision"] = "fp32"
             if not variant_path(MODELS_DIR / "a3boxnet.onnx", "int8").is_file():
                 eopt["precision"] = "fp32"
             if topt["precision"] == eopt["precision"] == "fp32":
                 continue
-        lab = f"{e}/{p}" if topt == eopt else f"{e}: siamfc {topt['precision']}, a3boxnet {eopt['precision']}"
-        cfgs.append({"label": lab, "tracker": "siamfc-edge", "estimator": "a3boxnet", "backend": e,
+        lab = f"{e}/{p}" if topt == eopt else f"{e}: {tracker} {topt['precision']}, a3boxnet {eopt['precision']}"
+        cfgs.append({"label": lab, "tracker": tracker, "estimator": "a3boxnet", "backend": e,
                      "precision": p, "tracker_options": topt, "estimator_options": eopt})
     return cfgs
 
 
-def bench_loop(data: Path, split: str, frames: int, rounds: int, preload: int, sequences: int) -> dict:
+def bench_loop(data: Path, split: str, frames: int, rounds: int, preload: int, sequences: int,
+               tracker: str = "edgetrack") -> dict:
     camera, seqs = load_frames(data, split, preload, sequences)
     per = max(frames // rounds, 20)
     runs: dict[str, list[dict]] = {}
     skipped = {}
     for r in range(rounds):
-        for cfg in loop_configs():
+        for cfg in loop_configs(tracker):
             if cfg["label"] in skipped:
                 continue
             try:
@@ -134,26 +141,26 @@ def bench_loop(data: Path, split: str, frames: int, rounds: int, preload: int, s
     for lab, row in out.items():
         row["speedup_vs_ort_fp32"] = {k: base[k] / row["median_ms"][k] if base and row["median_ms"][k] > 0 else None
                                       for k in STAGES}
-    return {"configs": out, "skipped": skipped}
+    return {"tracker": tracker, "configs": out, "skipped": skipped}
 
 
 AO_TOL, ACE_TOL_M = 0.005, 0.01   # the shipping rule (docs/models.md, "Arithmetic")
 
 
-def accuracy_configs() -> list[tuple[str, dict, dict]]:
-    """(label, SiamFC options, A3BoxNet options): fp32 first, then each variant of one network
-    at a time and of both together."""
+def accuracy_configs(tracker: str = "edgetrack") -> list[tuple[str, dict, dict]]:
+    """(label, 2D tracker options, A3BoxNet options): fp32 first, then each variant of one
+    network at a time and of both together."""
     fp32 = {"precision": "fp32", "engine": "onnxruntime"}
     out = [("onnxruntime/fp32", fp32, fp32)]
     for e, p in VARIANTS[1:]:
         v = {"precision": p, "engine": e}
-        out += [(f"{e}/{p} siamfc only", v, fp32), (f"{e}/{p} a3boxnet only", fp32, v), (f"{e}/{p} both", v, v)]
+        out += [(f"{e}/{p} {tracker} only", v, fp32), (f"{e}/{p} a3boxnet only", fp32, v), (f"{e}/{p} both", v, v)]
     return out
 
 
-def bench_accuracy(data: Path, split: str, out_dir: Path, tracker: str = "siamfc-edge",
+def bench_accuracy(data: Path, split: str, out_dir: Path, tracker: str = "edgetrack",
                    only: list[str] | None = None) -> dict:
-    """AO_3d / ACE_3d of Track3D (siamfc-edge + a3boxnet) per variant, restart and one-pass rows,
+    """AO_3d / ACE_3d of Track3D (`tracker` + a3boxnet) per variant, restart and one-pass rows,
     and whether each variant passes the rule against fp32."""
     import tempfile
 
@@ -162,7 +169,7 @@ def bench_accuracy(data: Path, split: str, out_dir: Path, tracker: str = "siamfc
 
     rows: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(dir=out_dir) as tmp:
-        for lab, topt, eopt in accuracy_configs():
+        for lab, topt, eopt in accuracy_configs(tracker):
             if only and lab != "onnxruntime/fp32" and not any(lab.startswith(o) for o in only):
                 continue
             name = lab.replace("/", "-").replace(" ", "_")
@@ -199,30 +206,33 @@ def bench_accuracy(data: Path, split: str, out_dir: Path, tracker: str = "siamfc
             "rows": rows}
 
 
-def write_verdicts(acc: dict, models_dir: Path = MODELS_DIR) -> Path:
-    """Merge the per-network verdicts of an accuracy run into <models_dir>/accuracy.json, the file
-    precision="auto" reads (track3d.variant_choice.VERDICTS_FILE): a network's variant is allowed
-    only if its "<network> only" row passed."""
+def write_verdicts(accs: list[dict], models_dir: Path = MODELS_DIR) -> Path:
+    """Merge the per-network verdicts of accuracy runs (one per split, same tracker) into
+    <models_dir>/accuracy.json, the file precision="auto" reads (track3d.variant_choice.VERDICTS_FILE):
+    a network's variant is allowed only if its "<network> only" row passed on EVERY split (on 9
+    sequences a one-pass row can flip with a tiny numeric change: measured, both ways)."""
     from track3d.variant_choice import VERDICTS_FILE
 
-    stems = {"siamfc": ["siamfc_edge_exemplar.onnx", "siamfc_edge_search.onnx"]
-             if acc["tracker"] == "siamfc-edge" else ["siamfc_faithful_exemplar.onnx", "siamfc_faithful_search.onnx"],
-             "a3boxnet": ["a3boxnet.onnx"]}
     path = models_dir / VERDICTS_FILE
     data = json.loads(path.read_text()) if path.is_file() else {}
-    data["rule"] = acc["rule"]
+    data["rule"] = accs[0]["rule"] + (", on every split measured" if len(accs) > 1 else "")
     models = data.setdefault("models", {})
-    for lab, row in acc["rows"].items():
-        if "passes" not in row or not lab.endswith(" only"):
-            continue
-        variant, net = lab[: -len(" only")].split(" ")
-        engine, precision = variant.split("/")
-        for f in stems[net]:
-            models.setdefault(f, {})[f"{engine}/{precision}"] = {
-                "passes": bool(row["passes"]), "tracker": acc["tracker"], "split": acc["split"],
-                "sequences": acc["sequences"], "frames": acc["frames"],
-                "d_ao_3d": {m: round(v["d_ao_3d"], 5) for m, v in row["delta"].items()},
-                "d_ace_3d_m": {m: round(v["d_ace_3d"], 5) for m, v in row["delta"].items()}}
+    merged: dict[tuple[str, str], dict] = {}
+    for acc in accs:
+        for lab, row in acc["rows"].items():
+            if "passes" not in row or not lab.endswith(" only"):
+                continue
+            variant, net = lab[: -len(" only")].split(" ")
+            net = "siamfc-edge" if net == "siamfc" and acc["tracker"] == "siamfc-edge" else net   # older labels
+            m = merged.setdefault((variant, net), {"passes": True, "tracker": acc["tracker"], "splits": {}})
+            m["passes"] = m["passes"] and bool(row["passes"])
+            m["splits"][acc["split"]] = {
+                "passes": bool(row["passes"]), "sequences": acc["sequences"], "frames": acc["frames"],
+                "d_ao_3d": {k: round(v["d_ao_3d"], 5) for k, v in row["delta"].items()},
+                "d_ace_3d_m": {k: round(v["d_ace_3d"], 5) for k, v in row["delta"].items()}}
+    for (variant, net), verdict in merged.items():
+        for f in TRACKER_FILES[net]:
+            models.setdefault(f, {})[variant] = verdict
     path.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
     return path
 
@@ -247,8 +257,7 @@ def markdown(res: dict) -> str:
                          f"{m['net3d']:.2f} |")
         for lab, why in res["loop"]["skipped"].items():
             lines.append(f"- skipped {lab}: {why}")
-    if res.get("accuracy"):
-        acc = res["accuracy"]
+    for acc in res.get("accuracy") or []:
         lines += ["", f"Track3D ({acc['tracker']} + a3boxnet) accuracy on {acc['sequences']} sequences / {acc['frames']} frames of "
                       f"'{acc['split']}'; rule: {acc['rule']}", "",
                   "| variant | AO_3d restart | ACE_3d restart (m) | AO_3d one-pass | ACE_3d one-pass (m) | passes |",
@@ -278,8 +287,11 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--accuracy-data", type=Path, default=None,
                     help="dataset root: also Track3D's AO_3d / ACE_3d per variant (restart and one-pass) "
                          "and the shipping rule (default: not measured)")
-    ap.add_argument("--accuracy-split", default="test", help="split of --accuracy-data (default test)")
-    ap.add_argument("--accuracy-tracker", default="siamfc-edge", help="2D tracker of the accuracy rows (default siamfc-edge)")
+    ap.add_argument("--accuracy-split", nargs="+", default=["test"],
+                    help="split(s) of --accuracy-data; a variant passes only on every one (default test)")
+    ap.add_argument("--tracker", default="edgetrack", choices=[t for t in TRACKER_FILES if t != "a3boxnet"],
+                    help="2D tracker of the loop and accuracy rows (default edgetrack, the default loop's)")
+    hidden_alias(ap, "--accuracy-tracker", "tracker")
     ap.add_argument("--accuracy-variants", nargs="+", default=None, metavar="LABEL",
                     help="only the accuracy rows starting with these labels, e.g. onnxruntime/int8 (default: all)")
     ap.add_argument("--write-verdicts", action="store_true",
@@ -296,20 +308,22 @@ def main(argv=None) -> int:
     res = start_record("track3d precision x engine", openvino=openvino_version(), threads=1)
     res["networks"] = {} if a.no_speed else bench_networks(a.net_seconds)
     if a.data is not None and not a.no_speed:
-        res["loop"] = bench_loop(a.data, a.split, a.frames, a.rounds, a.preload, a.sequences)
+        res["loop"] = bench_loop(a.data, a.split, a.frames, a.rounds, a.preload, a.sequences, a.tracker)
         res["data_split"] = a.split
     if a.accuracy_data is not None:
         a.out_dir.mkdir(parents=True, exist_ok=True)
-        res["accuracy"] = bench_accuracy(a.accuracy_data, a.accuracy_split, a.out_dir, a.accuracy_tracker,
-                                         a.accuracy_variants)
+        res["accuracy"] = [bench_accuracy(a.accuracy_data, split, a.out_dir, a.tracker, a.accuracy_variants)
+                           for split in a.accuracy_split]
         if a.write_verdicts:
             print(f"wrote {write_verdicts(res['accuracy'])}")
-    from track3d.siamfc import create as siamfc
     from track3d.boxnet import A3BoxNetEstimator
+    from track3d.trackers2d import create_tracker
 
-    trk = siamfc("edge", precision="auto", engine="auto")
-    res["auto"] = [trk.exemplar.describe(), trk.search.describe(),
-                   A3BoxNetEstimator(precision="auto", engine="auto").model.describe()]
+    trk = create_tracker(a.tracker, precision="auto", engine="auto")
+    from track3d.onnxmodel import models_of
+
+    res["auto"] = [m.describe() for m in models_of(trk).values()] + \
+        [A3BoxNetEstimator(precision="auto", engine="auto").model.describe()]
     pin_threads(len(START_CPUS))
     tag = a.tag or platform.node()
     path = write_json(a.out_dir / f"precision_{tag}.json", finish_record(res))

@@ -84,7 +84,7 @@ def test_every_command_of_the_three_clis_is_covered():
     pytest.importorskip("track3d_sim")
     pytest.importorskip("torch")
     assert names == ["track3d", "track3d-sim", "track3d-train boxnet", "track3d-train siamfc",
-                     "track3d-train quantize", "track3d-train edgetrack"]
+                     "track3d-train quantize", "track3d-train edgetrack", "track3d-train recipe"]
     progs = {p.prog for _, parser in _parsers() for p in _walk(parser)}
     for sub in ("track3d track", "track3d bench", "track3d-sim generate", "track3d-sim shapes",
                 "track3d-train edgetrack export", "track3d-train quantize"):
@@ -420,16 +420,24 @@ def _script_commands(text: str):
 
 
 def test_the_scripts_in_export_scripts_parse():
-    """The recipes keep working with the renamed flags (and use the shown spellings)."""
+    """The scripts and the training recipes keep working with the renamed flags (and use the shown
+    spellings)."""
     pytest.importorskip("torch")
     pytest.importorskip("track3d_sim")
     parsers = dict(_parsers())
     seen = 0
-    for script in sorted((ROOT / "export" / "scripts").glob("*.sh")):
-        for cmd, argv in _script_commands(script.read_text()):
+    from track3d_train.recipes import RECIPES, commands
+
+    sources = [(script.name, _script_commands(script.read_text()))
+               for script in sorted((ROOT / "export" / "scripts").glob("*.sh"))]
+    sources += [(f"recipe {name}", [(argv[0], argv[1:]) for _, argv, _ in commands(r, "d", "r")])
+                for name, r in RECIPES.items()]
+    for where, cmds in sources:
+        for cmd, argv in cmds:
+            argv = list(argv)
             parser = parsers["track3d-sim"] if cmd == "track3d-sim" else parsers[f"track3d-train {argv.pop(0)}"]
             parser.parse_args(argv)          # exits 2 on an unknown flag or a bad value
             old = [w for w in argv if w in OLD_SPELLINGS]
-            assert not old, f"{script.name}: {cmd} {' '.join(argv)} uses the old spelling(s) {old}"
+            assert not old, f"{where}: {cmd} {' '.join(argv)} uses the old spelling(s) {old}"
             seen += 1
     assert seen >= 20

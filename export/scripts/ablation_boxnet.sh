@@ -20,17 +20,20 @@ RUNS=${RUNS:-runs}
 DATA=${DATA:-data/med}
 OUT=${OUT:-$RUNS/boxnet/ablation}
 STEPS=${STEPS:-400}
-CACHES=("$RUNS/boxnet/cache/train.npz" "$RUNS/boxnet/cache/div_train.npz")
+DIV_DATA=${DATA}_div
+TRAIN_CACHE=$RUNS/boxnet/cache/train.npz
+DIV_CACHE=$RUNS/boxnet/cache/div_train.npz
+TEST_CACHE=$RUNS/boxnet/cache/test.npz
+CACHES=("$TRAIN_CACHE" "$DIV_CACHE")
 mkdir -p "$OUT" "$RUNS/boxnet/cache"
 
 # the first release's data (data/med, as the `siamfc` recipe makes it, + 120 more train shapes)
 # and its frustum caches; each command resumes or is skipped when its output exists
 "$BIN/track3d-sim" generate --preset small --train 36 --test 18 --out "$DATA" --workers 2 --quiet
-"$BIN/track3d-sim" generate --preset small --seed 1 --train 120 --test 0 --frames 25 --out "${DATA}_div" --workers 2 --quiet
-[ -f "${CACHES[0]}" ] || "$BIN/track3d-train" boxnet prepare --data "$DATA" --split train --jitters 5 --out "${CACHES[0]}" --quiet
-[ -f "${CACHES[1]}" ] || "$BIN/track3d-train" boxnet prepare --data "${DATA}_div" --split train --jitters 3 --out "${CACHES[1]}" --quiet
-[ -f "$RUNS/boxnet/cache/test.npz" ] || "$BIN/track3d-train" boxnet prepare --data "$DATA" --split test --jitters 0 \
-    --out "$RUNS/boxnet/cache/test.npz" --quiet
+"$BIN/track3d-sim" generate --preset small --seed 1 --train 120 --test 0 --frames 25 --out "$DIV_DATA" --workers 2 --quiet
+[ -f "$TRAIN_CACHE" ] || "$BIN/track3d-train" boxnet prepare --data "$DATA" --split train --jitters 5 --out "$TRAIN_CACHE" --quiet
+[ -f "$DIV_CACHE" ] || "$BIN/track3d-train" boxnet prepare --data "$DIV_DATA" --split train --jitters 3 --out "$DIV_CACHE" --quiet
+[ -f "$TEST_CACHE" ] || "$BIN/track3d-train" boxnet prepare --data "$DATA" --split test --jitters 0 --out "$TEST_CACHE" --quiet
 
 train() {  # name, extra args...
     local name=$1; shift
@@ -52,7 +55,7 @@ train() {  # name, extra args...
   train p512_nocat_s1 --num-points 512 --no-category --seed 1 ) &
 wait
 
-"$PY" benchmarks/bench_boxnet.py --data "$DATA" --cache "$RUNS/boxnet/cache/test.npz" \
+"$PY" benchmarks/bench_boxnet.py --data "$DATA" --cache "$TEST_CACHE" \
     --ckpt "$RUNS/boxnet/v3/best.pt" --out "$OUT/results" --no-speed \
     --ablation p512="$OUT/p512.onnx" p1024="$OUT/p1024.onnx" p2048="$OUT/p2048.onnx" \
     p3072="$OUT/p3072.onnx" p4096="$OUT/p4096.onnx" nocat512="$OUT/p512_nocat.onnx" \

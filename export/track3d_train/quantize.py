@@ -15,6 +15,9 @@ runtime's own input preparation:
 - A3BoxNet: frustum proposals of the ground-truth 2D boxes (``track3d.frustum.extract_frustum``),
   sampled and centred with ``A3BoxNetEstimator.sample`` / ``track3d.boxnet.normalise``;
   Conv + Gemm are quantised except the heads (the layers producing the outputs, ``head_nodes``);
+- EdgeTrack: template and search crops cut as the tracker cuts them (normal and lost search
+  sizes), each search crop with its sequence's template kernel; Conv quantised except the
+  first layers and the heads (the correlation MatMul stays float);
 - SiamFC: exemplar crops and search crops at the ground-truth boxes cut with
   ``track3d.siamfc.crop_square`` by the tracker's own geometry, each search crop paired with
   its sequence's exemplar feature; Conv is quantised (the correlation stays float).
@@ -38,7 +41,8 @@ from track3d.argparsing import ArgumentParser, bounded
 
 from .onnx_meta import attach_metadata, file_hash, refuse_shipped
 
-__all__ = ["QUANT_RECIPE", "calibration_boxnet", "calibration_siamfc", "quantize_file", "build_parser", "main"]
+__all__ = ["QUANT_RECIPE", "calibration_boxnet", "calibration_siamfc", "calibration_edgetrack", "quantize_file",
+           "build_parser", "main"]
 
 QUANT_RECIPE = {"format": "QDQ", "method": "MinMax", "activations": "uint8", "weights": "int8 per channel",
                 "reduce_range": False, "tool": "onnxruntime.quantization.quantize_static"}
@@ -107,6 +111,37 @@ def calibration_siamfc(exemplar: Path, search: Path, root, split: str = "train",
         x = crop_square(img, c, trk.x_sz * f, trk.instance_size, avg)[None]
         se.append({"search": x, "exemplar_feature": kernels[seq.name]})
     return ex, se
+
+
+def calibration_edgetrack(template: Path, search: Path, root, split: str = "train", samples: int = 200,
+                          seed: int = 0) -> tuple[list[dict], list[dict]]:
+    """(template feeds, search feeds) at the split's ground-truth boxes, cut as EdgeTrack cuts:
+    the search crop around a centre shifted by up to a quarter of the target, at the tracked
+    (normal) or the wider lost size, paired with its sequence's template kernel."""
+    import cv2
+
+    from track3d.edgetrack import EdgeTracker
+    from track3d.siamfc import crop_square
+
+    trk = EdgeTracker(template, search)
+    ds, pairs = _frames(root, split, samples, seed)
+    rng = np.random.default_rng(seed)
+    kernels: dict[str, np.ndarray] = {}
+    tz, sx = [], []
+    for seq, i in pairs:
+        img = seq.image(i)
+        trk._set_box(seq.gt2d[i])
+        avg = tuple(float(c) for c in cv2.mean(img)[:3])
+        z = crop_square(img, trk.center, trk._z_sz(), trk.exemplar_size, avg)[None]
+        tz.append({"template": z})
+        if seq.name not in kernels:
+            kernels[seq.name] = trk.template_net.run({"template": z})[0]
+        size = trk.lost_instance_size if rng.random() < 0.2 else trk.instance_size
+        scale = trk.exemplar_size / trk._z_sz()
+        c = trk.center + rng.uniform(-0.25, 0.25, 2) * trk.target_sz
+        x = crop_square(img, c, size / scale, size, avg)[None]
+        sx.append({"search": x, "kernel": kernels[seq.name]})
+    return tz, sx
 
 
 def input_nodes(model, op_types: list[str]) -> list[str]:
@@ -204,7 +239,8 @@ def quantize_file(fp32: Path, out: Path, feeds: list[dict], op_types: list[str],
 
 def _outputs(stem: str, models_dir: Path, out_dir: Path) -> list[tuple[Path, Path]]:
     """(fp32 file, int8 file it becomes) of a model stem."""
-    parts = ["a3boxnet"] if stem == "a3boxnet" else [f"{stem}_exemplar", f"{stem}_search"]
+    parts = (["a3boxnet"] if stem == "a3boxnet" else [f"{stem}_template", f"{stem}_search"] if stem == "edgetrack"
+             else [f"{stem}_exemplar", f"{stem}_search"])
     return [(models_dir / f"{p}.onnx", out_dir / variant_path(models_dir / f"{p}.onnx", "int8").name) for p in parts]
 
 
@@ -216,7 +252,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="folder of the fp32 models (default: the shipped models)")
     ap.add_argument("--out-dir", type=Path, default=None, help="where the *_int8.onnx go (default: --models-dir)")
     ap.add_argument("--models", nargs="+", default=["a3boxnet", "siamfc_edge", "siamfc_faithful"],
-                    help="stems to quantise (default: a3boxnet siamfc_edge siamfc_faithful)")
+                    help="stems to quantise: a3boxnet, edgetrack, siamfc_edge, siamfc_faithful "
+                         "(default: a3boxnet siamfc_edge siamfc_faithful)")
     ap.add_argument("--samples", type=bounded(int, 1), default=300, help="calibration samples per network (default 300)")
     ap.add_argument("--seed", type=bounded(int, 0), default=0, help="sampling seed (default 0)")
     ap.add_argument("--force", action="store_true", help="overwrite shipped int8 models in track3d/models")
@@ -226,9 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     a = ap.parse_args(argv)
-    unknown = [m for m in a.models if m != "a3boxnet" and m not in SIAMFC_STEMS]
+    unknown = [m for m in a.models if m not in ("a3boxnet", "edgetrack") and m not in SIAMFC_STEMS]
     if unknown:
-        ap.error(f"unknown model stem(s) {', '.join(unknown)} (known: a3boxnet, {', '.join(SIAMFC_STEMS)})")
+        ap.error(f"unknown model stem(s) {', '.join(unknown)} (known: a3boxnet, edgetrack, {', '.join(SIAMFC_STEMS)})")
     out_dir = a.out_dir or a.models_dir
     # Before any calibration work: a shipped file is only replaced when asked.
     refuse_shipped([q for stem in a.models for _, q in _outputs(stem, a.models_dir, out_dir)], a.force, "--out-dir")
@@ -243,6 +280,13 @@ def main(argv: list[str] | None = None) -> int:
             feeds = calibration_boxnet(fp32, a.data, a.split, a.samples, a.seed)
             out = quantize_file(fp32, q, feeds, ["Conv", "Gemm"], data_hash, a.split, float_heads=True)
             print(f"wrote {out} ({len(feeds)} calibration samples)")
+        elif stem == "edgetrack":
+            (pz, qz), (px, qx) = _outputs(stem, a.models_dir, out_dir)
+            tz, sx = calibration_edgetrack(pz, px, a.data, a.split, a.samples, a.seed)
+            for fp32, q, feeds in ((pz, qz, tz), (px, qx, sx)):
+                # the correlation (MatMul with the kernel) and the heads' outputs stay float
+                out = quantize_file(fp32, q, feeds, ["Conv"], data_hash, a.split, float_heads=True)
+                print(f"wrote {out} ({len(feeds)} calibration samples)")
         else:
             (pz, qz), (px, qx) = _outputs(stem, a.models_dir, out_dir)
             ex, se = calibration_siamfc(pz, px, a.data, a.split, a.samples, a.seed)

@@ -30,7 +30,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["Step", "Recipe", "RECIPES", "recipe", "commands", "run"]
+__all__ = ["Step", "Recipe", "RECIPES", "recipe", "commands", "run", "build_parser", "main"]
 
 
 @dataclass(frozen=True)
@@ -264,7 +264,7 @@ def _parse_set(items: list[str]) -> dict:
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser():
     from track3d.argparsing import ArgumentParser, apply_formatter
 
     p = ArgumentParser(prog="track3d-train recipe", description=__doc__.split("\n\n")[0])
@@ -279,7 +279,11 @@ def main(argv: list[str] | None = None) -> int:
         q.add_argument("--set", nargs="*", default=[], metavar="KNOB=VALUE", help="override a knob (see `show`)")
         if cmd == "run":
             q.add_argument("--dry-run", action="store_true", help="print the steps without running them")
-    a = apply_formatter(p).parse_args(argv)
+    return apply_formatter(p)
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
     if a.cmd == "list":
         for r in RECIPES.values():
             print(f"{r.name:18s} {r.description}")
