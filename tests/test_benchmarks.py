@@ -139,3 +139,26 @@ def test_latency_record_names_the_tracker_that_ran(tmp_path):
     rec = json.loads(out.read_text())["config"]
     want = Track3D.from_default(CAM).describe()
     assert (rec["tracker"], rec["estimator"]) == (want["tracker"], want["estimator"])
+
+
+def test_precision_verdicts_pass_only_on_every_split(tmp_path):
+    """A variant measured on two splits is allowed only if its "<network> only" row passed on
+    both; the verdict lands on every file of that network."""
+    import json
+
+    import bench_precision
+
+    def acc(split, passes_a3, passes_et):
+        d = {"restart": {"d_ao_3d": -0.001, "d_ace_3d": 0.002}, "one_pass": {"d_ao_3d": -0.001, "d_ace_3d": 0.002}}
+        return {"tracker": "edgetrack", "split": split, "sequences": 9, "frames": 540, "rule": "r",
+                "rows": {"onnxruntime/fp32": {}, "onnxruntime/int8 a3boxnet only": {"passes": passes_a3, "delta": d},
+                         "onnxruntime/int8 edgetrack only": {"passes": passes_et, "delta": d},
+                         "onnxruntime/int8 both": {"passes": True, "delta": d}}}
+
+    path = bench_precision.write_verdicts([acc("test", True, True), acc("test_unseen", False, True)], tmp_path)
+    models = json.loads(path.read_text())["models"]
+    assert models["a3boxnet.onnx"]["onnxruntime/int8"]["passes"] is False
+    assert models["a3boxnet.onnx"]["onnxruntime/int8"]["splits"]["test"]["passes"] is True
+    for f in ("edgetrack_search.onnx", "edgetrack_template.onnx"):
+        assert models[f]["onnxruntime/int8"]["passes"] is True
+        assert set(models[f]["onnxruntime/int8"]["splits"]) == {"test", "test_unseen"}

@@ -284,3 +284,29 @@ def test_quantize_command_writes_an_int8_twin_with_provenance(tiny_dataset, tmp_
     with pytest.raises(SystemExit) as e:  # argparse's one-line error, exit 2
         main(["quantize", "--data", str(tiny_dataset), "--models", "nope"])
     assert e.value.code == 2
+
+
+def test_quantize_edgetrack_writes_both_twins_cut_as_the_tracker_cuts(tiny_dataset, tmp_path):
+    pytest.importorskip("onnx")
+    import shutil
+
+    from track3d.edgetrack import EdgeTracker
+    from track3d_train.cli import main
+
+    d = tmp_path / "m"
+    d.mkdir()
+    for part in ("template", "search"):
+        shutil.copy(MODELS_DIR / f"edgetrack_{part}.onnx", d / f"edgetrack_{part}.onnx")
+    assert main(["quantize", "--data", str(tiny_dataset), "--models-dir", str(d), "--models", "edgetrack",
+                 "--samples", "8"]) == 0
+    for part in ("template", "search"):
+        m = OnnxModel(d / f"edgetrack_{part}.onnx", precision="int8")
+        assert m.meta["precision"] == "int8" and m.meta["quantization"]["float_nodes"], part
+        assert m.meta["parent_model"] == f"edgetrack_{part}.onnx"
+    # the int8 pair tracks (same interface as fp32)
+    t = EdgeTracker(d / "edgetrack_template.onnx", d / "edgetrack_search.onnx", precision="int8")
+    img = np.zeros((120, 160, 3), np.uint8)
+    img[40:80, 60:100] = 180
+    t.init(img, [60, 40, 40, 40])
+    ok, box = t.update(img)
+    assert box.shape == (4,) and np.all(np.isfinite(box))
