@@ -26,6 +26,13 @@ COLUMNS = columns("ao_2d", "ao_bev", "ao_3d", "ace_3d", "restarts", "frames")   
 SENSOR_ORDER = ("ideal", "flash-lidar", "tof", "stereo")
 
 
+def models_of_run(run: dict | None) -> dict:
+    """{model file: first 12 hex of its sha256} of the networks a run used (its run record's
+    ``track3d.models``): every row names the models that made it, whatever changes later."""
+    models = ((run or {}).get("track3d") or {}).get("models") or []
+    return {m["file"]: m["sha256"][:12] for m in models if m.get("file") and m.get("sha256")}
+
+
 def collect(results: Path) -> list[dict]:
     """One row per (sensor, split, protocol, tracker) from RESULTS/engine-*/*-report/report.json."""
     rows = []
@@ -37,7 +44,7 @@ def collect(results: Path) -> list[dict]:
             ov = t["overall"]
             rows.append({"sensor": sensor, "split": split, "protocol": protocol, "tracker": name,
                          "dataset": Path(r["dataset"]).name, "cpu": r.get("cpu"),
-                         **{k: ov.get(k) for _, k, _ in COLUMNS}})
+                         **{k: ov.get(k) for _, k, _ in COLUMNS}, "models": models_of_run(t.get("run"))})
     key = {s: i for i, s in enumerate(SENSOR_ORDER)}
     rows.sort(key=lambda x: (key.get(x["sensor"], 99), x["split"], x["protocol"], x["tracker"]))
     return rows

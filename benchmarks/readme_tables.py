@@ -87,9 +87,22 @@ def engine_table(root: Path) -> str:
         rows.append([s, sp, pair(before, oracle), f"**{pair(now, oracle)}**", pair(before, siam), pair(now, siam),
                      f"**{pair(now, (s, sp, 'onepass', 'edgetrack+a3boxnet'))}**",
                      pair(now, (s, sp, "onepass", "nano+a3boxnet"))])
-    return markdown_table(["depth", "split", "A3BoxNet, oracle 2D: before", "now",
-                           "Track3D (SiamFC-edge), one pass: before", "now",
-                           "Track3D default (EdgeTrack), one pass", "NanoTrack v2 + A3BoxNet, one pass"], rows)
+    table = markdown_table(["depth", "split", "A3BoxNet, oracle 2D: before", "now",
+                            "Track3D (SiamFC-edge), one pass: before", "now",
+                            "Track3D default (EdgeTrack), one pass", "NanoTrack v2 + A3BoxNet, one pass"], rows)
+    return table + "\n\n" + models_line(now.values(), '"now"')
+
+
+def models_line(rows, what: str) -> str:
+    """One line naming the model files (sha256 prefixes, from the runs' records) behind `rows`."""
+    seen: dict[str, set] = {}
+    for r in rows:
+        for f, h in (r.get("models") or {}).items():
+            seen.setdefault(f, set()).add(h)
+    if not seen:
+        return f"Models of {what}: not recorded."
+    return (f"Models of {what} (sha256 prefix; `sha256sum runtime/track3d/models/*.onnx`): "
+            + ", ".join(f"{f} `{'`/`'.join(sorted(h))}`" for f, h in sorted(seen.items())) + ".")
 
 
 def table2_table(root: Path) -> str:
