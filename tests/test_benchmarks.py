@@ -162,3 +162,16 @@ def test_precision_verdicts_pass_only_on_every_split(tmp_path):
     for f in ("edgetrack_search.onnx", "edgetrack_template.onnx"):
         assert models[f]["onnxruntime/int8"]["passes"] is True
         assert set(models[f]["onnxruntime/int8"]["splits"]) == {"test", "test_unseen"}
+
+
+def test_engine_rows_name_their_models():
+    import engine_baseline
+    import readme_tables
+
+    run = {"track3d": {"models": [{"file": "a3boxnet.onnx", "sha256": "ab" * 32},
+                                  {"file": "edgetrack_search.onnx", "sha256": "cd" * 32}]}}
+    assert engine_baseline.models_of_run(run) == {"a3boxnet.onnx": "ab" * 6, "edgetrack_search.onnx": "cd" * 6}
+    assert engine_baseline.models_of_run(None) == {} and engine_baseline.models_of_run({"track3d": {}}) == {}
+    line = readme_tables.models_line([{"models": {"a3boxnet.onnx": "abababababab"}},
+                                      {"models": {"a3boxnet.onnx": "abababababab"}}, {}], "now")
+    assert line.endswith("a3boxnet.onnx `abababababab`.") and readme_tables.models_line([{}], "x").endswith("not recorded.")
