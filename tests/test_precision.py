@@ -284,6 +284,10 @@ def test_quantize_command_writes_an_int8_twin_with_provenance(tiny_dataset, tmp_
     with pytest.raises(SystemExit) as e:  # argparse's one-line error, exit 2
         main(["quantize", "--data", str(tiny_dataset), "--models", "nope"])
     assert e.value.code == 2
+    # another calibration method is recorded in the twin's recipe
+    assert main(["quantize", "--data", str(tiny_dataset), "--models-dir", str(d), "--models", "a3boxnet",
+                 "--samples", "8", "--calibration", "percentile", "--force"]) == 0
+    assert OnnxModel(d / "a3boxnet.onnx", precision="int8").meta["quantization"]["method"] == "Percentile"
 
 
 def test_quantize_edgetrack_writes_both_twins_cut_as_the_tracker_cuts(tiny_dataset, tmp_path):

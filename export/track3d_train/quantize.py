@@ -194,13 +194,20 @@ def head_nodes(model, op_types: list[str]) -> list[str]:
     return heads
 
 
+CALIBRATIONS = ("minmax", "percentile", "entropy")
+
+
 def quantize_file(fp32: Path, out: Path, feeds: list[dict], op_types: list[str], data_hash: str,
-                  split: str, float_heads: bool = False) -> Path:
+                  split: str, float_heads: bool = False, calibration: str = "minmax") -> Path:
     """Static QDQ int8 of `fp32` into `out`, calibrated on `feeds`, with the variant's metadata;
     float_heads: keep the first layers and the layers that produce the outputs in float
-    (``input_nodes``, ``head_nodes``)."""
+    (``input_nodes``, ``head_nodes``); calibration: how activation ranges are set from the
+    samples ("minmax": their extremes; "percentile": the 99.999th percentile of |x|, so rare
+    outliers do not widen every step; "entropy": the range that keeps the histogram's
+    information)."""
     import onnx
-    from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+    from onnxruntime.quantization import (CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType,
+                                          quantize_static)
     from onnxruntime.quantization.shape_inference import quant_pre_process
 
     class Reader(CalibrationDataReader):
@@ -212,6 +219,10 @@ def quantize_file(fp32: Path, out: Path, feeds: list[dict], op_types: list[str],
 
     if not feeds:
         raise ValueError(f"no calibration data for {fp32.name}")
+    methods = {"minmax": CalibrationMethod.MinMax, "percentile": CalibrationMethod.Percentile,
+               "entropy": CalibrationMethod.Entropy}
+    if calibration not in methods:
+        raise ValueError(f"calibration must be one of {', '.join(methods)}, got {calibration!r}")
     out.parent.mkdir(parents=True, exist_ok=True)
     pre = out.with_name(out.stem + ".pre.onnx")
     try:
@@ -224,12 +235,15 @@ def quantize_file(fp32: Path, out: Path, feeds: list[dict], op_types: list[str],
     try:
         quantize_static(str(src), str(out), Reader(), quant_format=QuantFormat.QDQ,
                         activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8, per_channel=True,
-                        reduce_range=False, op_types_to_quantize=op_types, nodes_to_exclude=exclude)
+                        reduce_range=False, op_types_to_quantize=op_types, nodes_to_exclude=exclude,
+                        calibrate_method=methods[calibration])
     finally:
         if pre.exists():
             pre.unlink()
     meta = json.loads({p.key: p.value for p in onnx.load(str(fp32)).metadata_props}[META_KEY])
-    meta.update({"precision": "int8", "quantization": {**QUANT_RECIPE, "op_types": op_types,
+    recipe = {**QUANT_RECIPE, "method": {"minmax": "MinMax", "percentile": "Percentile",
+                                         "entropy": "Entropy"}[calibration]}
+    meta.update({"precision": "int8", "quantization": {**recipe, "op_types": op_types,
                                                        "float_nodes": exclude},
                  "parent_model": fp32.name, "parent_sha256": file_hash(fp32),
                  "calibration": {"split": split, "samples": len(feeds), "data_hash": data_hash}})
@@ -256,6 +270,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "(default: a3boxnet siamfc_edge siamfc_faithful)")
     ap.add_argument("--samples", type=bounded(int, 1), default=300, help="calibration samples per network (default 300)")
     ap.add_argument("--seed", type=bounded(int, 0), default=0, help="sampling seed (default 0)")
+    ap.add_argument("--calibration", choices=CALIBRATIONS, default="minmax",
+                    help="activation ranges from the samples' extremes (minmax), a high percentile, or entropy")
     ap.add_argument("--force", action="store_true", help="overwrite shipped int8 models in track3d/models")
     return ap
 
@@ -278,19 +294,21 @@ def main(argv: list[str] | None = None) -> int:
         if stem == "a3boxnet":
             [(fp32, q)] = _outputs(stem, a.models_dir, out_dir)
             feeds = calibration_boxnet(fp32, a.data, a.split, a.samples, a.seed)
-            out = quantize_file(fp32, q, feeds, ["Conv", "Gemm"], data_hash, a.split, float_heads=True)
+            out = quantize_file(fp32, q, feeds, ["Conv", "Gemm"], data_hash, a.split, float_heads=True,
+                                calibration=a.calibration)
             print(f"wrote {out} ({len(feeds)} calibration samples)")
         elif stem == "edgetrack":
             (pz, qz), (px, qx) = _outputs(stem, a.models_dir, out_dir)
             tz, sx = calibration_edgetrack(pz, px, a.data, a.split, a.samples, a.seed)
             for fp32, q, feeds in ((pz, qz, tz), (px, qx, sx)):
                 # the correlation (MatMul with the kernel) and the heads' outputs stay float
-                out = quantize_file(fp32, q, feeds, ["Conv"], data_hash, a.split, float_heads=True)
+                out = quantize_file(fp32, q, feeds, ["Conv"], data_hash, a.split, float_heads=True,
+                                    calibration=a.calibration)
                 print(f"wrote {out} ({len(feeds)} calibration samples)")
         else:
             (pz, qz), (px, qx) = _outputs(stem, a.models_dir, out_dir)
             ex, se = calibration_siamfc(pz, px, a.data, a.split, a.samples, a.seed)
             for fp32, q, feeds in ((pz, qz, ex), (px, qx, se)):
-                out = quantize_file(fp32, q, feeds, ["Conv"], data_hash, a.split)
+                out = quantize_file(fp32, q, feeds, ["Conv"], data_hash, a.split, calibration=a.calibration)
                 print(f"wrote {out} ({len(feeds)} calibration samples)")
     return 0
