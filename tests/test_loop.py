@@ -260,3 +260,28 @@ def test_the_loop_hands_its_frustum_bounds_to_an_estimator_that_takes_them(frame
     for pts, bounds in spy.calls:
         assert bounds is not None and bounds.shape == (2, 3)
         np.testing.assert_array_equal(bounds, np.stack(point_bounds(pts)))
+
+
+def test_frustum_margin_widens_the_cut_and_zero_is_the_box_itself(frames):
+    """The frustum is cut with the 2D box widened by `frustum_margin` of its size, half on
+    each side (hand case); margin 0 cuts with the box itself; out-of-range margins are refused."""
+    from track3d.tracker import FRUSTUM_MARGIN
+
+    gt2d = np.array([f[2] for f in frames])
+    seen = []
+
+    def spy(box):
+        seen.append(np.asarray(box).copy())
+        return frames[1][1]
+
+    for margin in (FRUSTUM_MARGIN, 0.0, 0.5):
+        t = Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"), frustum_margin=margin)
+        t.init(frames[0][0], gt2d[0], points=frames[0][1])
+        t.update(frames[1][0], spy)
+        x, y, w, h = gt2d[1]
+        np.testing.assert_allclose(seen[-1], [x - w * margin / 2, y - h * margin / 2, w * (1 + margin), h * (1 + margin)])
+        assert t.describe()["options"]["frustum_margin"] == margin
+    assert FRUSTUM_MARGIN == 0.1
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="frustum_margin"):
+            Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"), frustum_margin=bad)

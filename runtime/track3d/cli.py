@@ -85,6 +85,9 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--estimator-option", action="append", metavar="KEY=VALUE", help="option of the estimator")
     t.add_argument("--no-fusion", action="store_true", help="report the 2D tracker's box, no 2D-3D fusion")
     t.add_argument("--weight-3d", type=float, default=0.3, help="fusion weight of the projected 3D box")
+    t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
+                   help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
+                        "itself; default: track3d.tracker.FRUSTUM_MARGIN, 0.1)")
     t.add_argument("--threads", type=int, default=1, help="CPU threads of the ONNX models (default 1)")
     t.add_argument("--precision", choices=("fp32", "int8", "bf16", "auto"), default=None,
                    help="arithmetic of the networks (SiamFC, A3BoxNet); auto: the fastest this CPU allows, "
@@ -183,7 +186,11 @@ def _cmd_track(a) -> int:
         topts = {**arith, **topts}
     if a.estimator == "a3boxnet":
         eopts = {**arith, **eopts}
+    from .tracker import FRUSTUM_MARGIN
+
+    margin = FRUSTUM_MARGIN if a.frustum_margin is None else a.frustum_margin
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=a.weight_3d, threads=a.threads,
+                       frustum_margin=margin,
                        tracker_options=topts, estimator_options=eopts, name=a.name)
     if a.depth == "stereo" and not a.name:
         spec.name = spec.label + "-stereo"   # keep the depth-map results of the same pair

@@ -40,7 +40,8 @@ from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .fusion import WEIGHT_3D, fuse
 from .trackers2d import Tracker2D, create_tracker
 
-__all__ = ["Track3D", "TrackResult", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES", "MIN_POINTS"]
+__all__ = ["Track3D", "TrackResult", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES", "MIN_POINTS",
+           "FRUSTUM_MARGIN"]
 
 TRACKING, NO_POINTS, LOST = "tracking", "no_points", "lost"
 STATUSES = (TRACKING, NO_POINTS, LOST)
@@ -49,6 +50,13 @@ MIN_POINTS = 16          # the fewest frustum points A3BoxNet was trained on
 DEFAULT_TRACKER = "edgetrack"  # from_default's 2D tracker (faster and more accurate in 2D than SiamFC-edge)
 MIN_SPREAD_M = 0.01      # a frustum whose points all lie within 1 cm holds no shape
 LOST_AFTER = 10          # consecutive frames without a usable estimate (or below min_score) -> lost
+# The frustum is cut with the 2D box widened by this fraction of its width and height (half on
+# each side). Behind a small body in space there is nothing, so a wider cut adds no clutter,
+# while a 2D box a little too tight cuts the body's rim out of the points. Measured one pass on
+# 12 held-out train-like sequences (data/engine-calib), AO_3d at 0 -> 0.1: EdgeTrack 0.797 ->
+# 0.802, NanoTrack 0.799 -> 0.805, SiamFC-edge 0.740 -> 0.776 (0.05: 0.801, 0.2: 0.802 EdgeTrack);
+# EdgeTrack's boxes are smaller than the truth on 64% of those frames, NanoTrack's on 21%.
+FRUSTUM_MARGIN = 0.1
 STATE_VERSION = 1
 
 
@@ -100,7 +108,8 @@ class Track3D:
 
     def __init__(self, camera: Camera, tracker2d: Tracker2D, estimator: BoxEstimator, fusion: bool = True,
                  weight_3d: float = WEIGHT_3D, z_range: tuple[float, float] = (Z_MIN, Z_MAX),
-                 min_points: int = MIN_POINTS, lost_after: int = LOST_AFTER, min_score: float = 0.0):
+                 min_points: int = MIN_POINTS, lost_after: int = LOST_AFTER, min_score: float = 0.0,
+                 frustum_margin: float = FRUSTUM_MARGIN):
         if not isinstance(camera, Camera):
             raise TypeError(f"camera must be a track3d.Camera, got {type(camera).__name__}")
         if not 0.0 <= float(weight_3d) <= 1.0:
@@ -110,6 +119,9 @@ class Track3D:
             raise ValueError(f"z_range must be (near, far) with 0 <= near < far, got {z_range}")
         if int(min_points) < 1:
             raise ValueError(f"min_points must be >= 1, got {min_points}")
+        if not 0.0 <= float(frustum_margin) <= 1.0:
+            raise ValueError(f"frustum_margin must be in [0, 1] (a fraction of the 2D box), got {frustum_margin}")
+        self.frustum_margin = float(frustum_margin)
         self.camera = camera
         self.tracker2d = tracker2d
         self.estimator = estimator
@@ -174,8 +186,12 @@ class Track3D:
     # --- the loop --------------------------------------------------------------------------------
     def _frustum(self, points, box2d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(frustum points, their (2, 3) [min; max]) from one C++ pass; the points are finite.
+        The cut uses the 2D box widened by ``frustum_margin`` (see FRUSTUM_MARGIN).
         points: a cloud (N, 3) or a callable box2d -> cloud (e.g. track3d.stereo.StereoCloud.bind,
         which computes depth only around the box)."""
+        if self.frustum_margin > 0.0:
+            grow = box2d[2:] * self.frustum_margin
+            box2d = np.concatenate([box2d[:2] - grow / 2.0, box2d[2:] + grow])
         if callable(points):
             points = points(box2d.copy())
         return extract_frustum_bounds(points, box2d, self._M, *self.z_range)
@@ -385,6 +401,7 @@ class Track3D:
             "tracker_options": _plain_options(self.tracker_options),
             "estimator_options": _plain_options(self.estimator_options),
             "options": {"fusion": self.fusion, "weight_3d": self.weight_3d, "z_range": list(self.z_range),
+                        "frustum_margin": self.frustum_margin,
                         "min_points": self.min_points, "lost_after": self.lost_after, "min_score": self.min_score},
             "models": models,
         }
