@@ -86,10 +86,12 @@ def engine_table(root: Path) -> str:
         oracle, siam = (s, sp, "restart", "oracle+a3boxnet"), (s, sp, "onepass", "siamfc-edge+a3boxnet")
         rows.append([s, sp, pair(before, oracle), f"**{pair(now, oracle)}**", pair(before, siam), pair(now, siam),
                      f"**{pair(now, (s, sp, 'onepass', 'edgetrack+a3boxnet'))}**",
-                     pair(now, (s, sp, "onepass", "nano+a3boxnet"))])
+                     pair(now, (s, sp, "restart", "edgetrack+a3boxnet")),
+                     pair(now, (s, sp, "onepass", "nano+a3boxnet")), pair(now, (s, sp, "restart", "nano+a3boxnet"))])
     table = markdown_table(["depth", "split", "A3BoxNet, oracle 2D: before", "now",
                             "Track3D (SiamFC-edge), one pass: before", "now",
-                            "Track3D default (EdgeTrack), one pass", "NanoTrack v2 + A3BoxNet, one pass"], rows)
+                            "Track3D default (EdgeTrack): one pass", "restart",
+                            "NanoTrack v2 + A3BoxNet: one pass", "restart"], rows)
     return table + "\n\n" + models_line(now.values(), '"now"')
 
 

@@ -285,3 +285,27 @@ def test_frustum_margin_widens_the_cut_and_zero_is_the_box_itself(frames):
     for bad in (-0.1, 1.5, float("nan")):
         with pytest.raises(ValueError, match="frustum_margin"):
             Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"), frustum_margin=bad)
+
+
+def test_the_frustum_margin_follows_the_depth_sensor(tmp_path):
+    """Stereo depth smears past the silhouette: no margin there; every other or unknown
+    sensor gets the default. The evaluation builds each sequence's tracker by its sensor."""
+    import json
+
+    from track3d.dataset import Dataset
+    from track3d.evaluation import TrackerSpec
+    from track3d.synthetic import make_synthetic_dataset
+    from track3d.tracker import FRUSTUM_MARGIN, frustum_margin_for
+
+    assert frustum_margin_for("stereo") == 0.0
+    assert frustum_margin_for("ideal") == frustum_margin_for("tof") == frustum_margin_for(None) == FRUSTUM_MARGIN
+    root = make_synthetic_dataset(tmp_path / "d", {"a": 4, "b": 4})
+    meta = root / "test" / "b" / "meta.json"
+    m = json.loads(meta.read_text())
+    m["depth_sensor"] = {"name": "stereo", "block_size": 5}
+    meta.write_text(json.dumps(m))
+    a, b = Dataset(root).sequences("test")
+    assert (a.depth_sensor, b.depth_sensor) == (None, "stereo")
+    spec = TrackerSpec("oracle", "baseline")
+    assert spec.build(a).frustum_margin == FRUSTUM_MARGIN and spec.build(b).frustum_margin == 0.0
+    assert TrackerSpec("oracle", "baseline", frustum_margin=0.3).build(b).frustum_margin == 0.3

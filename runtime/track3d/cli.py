@@ -87,7 +87,7 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--weight-3d", type=float, default=0.3, help="fusion weight of the projected 3D box")
     t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
                    help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
-                        "itself; default: track3d.tracker.FRUSTUM_MARGIN, 0.1)")
+                        "itself; default: by the depth sensor, 0.1, 0 for stereo; track3d.tracker.frustum_margin_for)")
     t.add_argument("--threads", type=int, default=1, help="CPU threads of the ONNX models (default 1)")
     t.add_argument("--precision", choices=("fp32", "int8", "bf16", "auto"), default=None,
                    help="arithmetic of the networks (SiamFC, A3BoxNet); auto: the fastest this CPU allows, "
@@ -186,9 +186,11 @@ def _cmd_track(a) -> int:
         topts = {**arith, **topts}
     if a.estimator == "a3boxnet":
         eopts = {**arith, **eopts}
-    from .tracker import FRUSTUM_MARGIN
+    from .tracker import frustum_margin_for
 
-    margin = FRUSTUM_MARGIN if a.frustum_margin is None else a.frustum_margin
+    # stereo computed here from the image pairs: the stereo sensor's margin; else the dataset's
+    # sensor decides per sequence (None)
+    margin = frustum_margin_for("stereo") if a.frustum_margin is None and a.depth == "stereo" else a.frustum_margin
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=a.weight_3d, threads=a.threads,
                        frustum_margin=margin,
                        tracker_options=topts, estimator_options=eopts, name=a.name)

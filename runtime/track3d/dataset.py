@@ -222,6 +222,14 @@ class Sequence:
         """Index of the coarse category (shape family), -1 if unknown."""
         return int(self.meta.get("family_index", -1))
 
+    @property
+    def depth_sensor(self) -> str | None:
+        """Name of the depth sensor that made the depth maps ("ideal", "tof", "flash-lidar",
+        "stereo"), None when meta.json does not say."""
+        sensor = self.meta.get("depth_sensor")
+        name = sensor.get("name") if isinstance(sensor, dict) else sensor
+        return str(name) if isinstance(name, str) else None
+
     def image_path(self, i: int, side: str = LEFT_DIR) -> Path:
         return self.path / side / frame_name(i)
 

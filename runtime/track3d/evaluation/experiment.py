@@ -32,7 +32,7 @@ from ..jsonable import write_json
 from ..dataset import RIGHT_DIR, Dataset, DatasetError, Sequence, read_rgb
 from ..machine import cpu_name
 from ..progress import Progress
-from ..tracker import FRUSTUM_MARGIN, LOST, STAGES, Track3D
+from ..tracker import LOST, STAGES, Track3D, frustum_margin_for
 from .draw import OverlayWriter, draw_overlay
 from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, LostScore, SequenceScore, average_scores,
                       score_lost, score_sequence)
@@ -56,7 +56,7 @@ class TrackerSpec:
     estimator: str = "baseline"
     fusion: bool = True
     weight_3d: float = WEIGHT_3D
-    frustum_margin: float = FRUSTUM_MARGIN
+    frustum_margin: float | None = None      # None: by the sequence's depth sensor (frustum_margin_for)
     threads: int = 1
     tracker_options: dict = field(default_factory=dict)
     estimator_options: dict = field(default_factory=dict)
@@ -85,7 +85,9 @@ class TrackerSpec:
             topts.update(gt=seq.gt2d, absent=seq.absent)
         return Track3D.create(seq.camera, self.tracker, self.estimator, tracker_options=topts,
                               estimator_options=self._options(self.estimator, self.estimator_options),
-                              fusion=self.fusion, weight_3d=self.weight_3d, frustum_margin=self.frustum_margin)
+                              fusion=self.fusion, weight_3d=self.weight_3d,
+                              frustum_margin=(frustum_margin_for(seq.depth_sensor) if self.frustum_margin is None
+                                              else self.frustum_margin))
 
     def unavailable(self, seq: Sequence) -> str | None:
         """None when this configuration builds here, else why not (a missing model or module):
