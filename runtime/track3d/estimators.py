@@ -88,18 +88,15 @@ def _a3boxnet(**options) -> BoxEstimator:
         create = getattr(mod, "A3BoxNetEstimator")
     except (ImportError, AttributeError) as e:
         raise EstimatorUnavailable(f"A3BoxNet model not available: track3d.boxnet cannot be loaded ({e})") from None
+    from .onnxmodel import ModelError   # loaded with track3d.boxnet above
     from .plugins import call_factory
 
     try:
         # through call_factory with the real signature: this wrapper's **options would hide it
         # and a wrong name would be a bare TypeError without the list of options it takes
         return call_factory("3D box estimator", "a3boxnet", create, options)
-    except (FileNotFoundError, OSError) as e:
+    except (FileNotFoundError, OSError, ModelError) as e:   # no shipped model yet, or a bad file
         raise EstimatorUnavailable(f"A3BoxNet model not available: {e}") from None
-    except Exception as e:  # onnxmodel.ModelError: no shipped model yet, or a bad file
-        if type(e).__name__ == "ModelError":
-            raise EstimatorUnavailable(f"A3BoxNet model not available: {e}") from None
-        raise
 
 
 _REGISTRY: dict[str, Callable[..., BoxEstimator]] = {"baseline": BaselineEstimator, "a3boxnet": _a3boxnet,

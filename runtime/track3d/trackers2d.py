@@ -308,14 +308,12 @@ def _siamfc(variant: str) -> Callable[..., Tracker2D]:
             create = getattr(mod, "create")
         except (ImportError, AttributeError) as e:
             raise TrackerUnavailable(f"SiamFC model not available: track3d.siamfc cannot be loaded ({e})") from None
+        from .onnxmodel import ModelError   # loaded with track3d.siamfc above
+
         try:
             return create(variant=variant, **options)
-        except (FileNotFoundError, OSError) as e:
+        except (FileNotFoundError, OSError, ModelError) as e:   # e.g. no shipped model yet
             raise TrackerUnavailable(f"SiamFC model not available: {e}") from None
-        except Exception as e:  # e.g. onnxmodel.ModelError: no shipped model yet
-            if type(e).__name__ == "ModelError":
-                raise TrackerUnavailable(f"SiamFC model not available: {e}") from None
-            raise
 
     return factory
 
