@@ -175,3 +175,18 @@ def test_engine_rows_name_their_models():
     line = readme_tables.models_line([{"models": {"a3boxnet.onnx": "abababababab"}},
                                       {"models": {"a3boxnet.onnx": "abababababab"}}, {}], "now")
     assert line.endswith("a3boxnet.onnx `abababababab`.") and readme_tables.models_line([{}], "x").endswith("not recorded.")
+
+
+def test_precision_accuracy_skips_a_variant_that_is_not_there(tmp_path):
+    """A network without an int8 twin is a skipped row, not a crash of the whole run (the
+    registries raise TrackerUnavailable for a missing model file; it escaped before)."""
+    import bench_precision
+
+    from track3d.onnxmodel import MODELS_DIR, variant_path
+    from track3d.synthetic import make_synthetic_dataset
+
+    assert not variant_path(MODELS_DIR / "edgetrack_search.onnx", "int8").is_file()
+    data = make_synthetic_dataset(tmp_path / "d", {"a": 4})
+    acc = bench_precision.bench_accuracy(data, "test", tmp_path, "edgetrack", only=["onnxruntime/int8"])
+    assert "skipped" in acc["rows"]["onnxruntime/int8 edgetrack only"]
+    assert "restart" in acc["rows"]["onnxruntime/fp32"]
