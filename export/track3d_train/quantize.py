@@ -85,46 +85,14 @@ def calibration_boxnet(fp32: Path, root, split: str = "train", samples: int = 20
     return feeds
 
 
-def calibration_siamfc(exemplar: Path, search: Path, root, split: str = "train", samples: int = 200,
-                       seed: int = 0) -> tuple[list[dict], list[dict]]:
-    """(exemplar feeds, search feeds) at the split's ground-truth boxes, cut as the tracker cuts."""
+def _siamese_feeds(trk, pairs, seed: int, template_feed, search_feed) -> tuple[list[dict], list[dict]]:
+    """(template feeds, search feeds) of a Siamese tracker `trk` at the ground-truth boxes of
+    `pairs`: the template crop of each frame, and a search crop around a centre shifted by up to
+    a quarter of the target (the search region lies around the LAST centre) paired with its
+    sequence's template output. template_feed(trk, img, avg) -> (feed, net input name, net);
+    search_feed(trk, img, centre, avg, kernel, rng) -> feed."""
     import cv2
 
-    from track3d.siamfc import SiamFCTracker, crop_square
-
-    trk = SiamFCTracker(exemplar, search)
-    ds, pairs = _frames(root, split, samples, seed)
-    rng = np.random.default_rng(seed)
-    kernels: dict[str, np.ndarray] = {}
-    ex, se = [], []
-    for seq, i in pairs:
-        img = seq.image(i)
-        trk._set_box(seq.gt2d[i])
-        avg = tuple(float(c) for c in cv2.mean(img)[:3])
-        z = crop_square(img, trk.center, trk.z_sz, trk.exemplar_size, avg)[None]
-        ex.append({"exemplar": z})
-        if seq.name not in kernels:
-            kernels[seq.name] = trk.exemplar.run({"exemplar": z})[0]
-        # the search region lies around the LAST centre: shift by up to a quarter of the target
-        c = trk.center + rng.uniform(-0.25, 0.25, 2) * trk.target_sz
-        f = trk.scale_factors[rng.integers(len(trk.scale_factors))]
-        x = crop_square(img, c, trk.x_sz * f, trk.instance_size, avg)[None]
-        se.append({"search": x, "exemplar_feature": kernels[seq.name]})
-    return ex, se
-
-
-def calibration_edgetrack(template: Path, search: Path, root, split: str = "train", samples: int = 200,
-                          seed: int = 0) -> tuple[list[dict], list[dict]]:
-    """(template feeds, search feeds) at the split's ground-truth boxes, cut as EdgeTrack cuts:
-    the search crop around a centre shifted by up to a quarter of the target, at the tracked
-    (normal) or the wider lost size, paired with its sequence's template kernel."""
-    import cv2
-
-    from track3d.edgetrack import EdgeTracker
-    from track3d.siamfc import crop_square
-
-    trk = EdgeTracker(template, search)
-    ds, pairs = _frames(root, split, samples, seed)
     rng = np.random.default_rng(seed)
     kernels: dict[str, np.ndarray] = {}
     tz, sx = [], []
@@ -132,16 +100,50 @@ def calibration_edgetrack(template: Path, search: Path, root, split: str = "trai
         img = seq.image(i)
         trk._set_box(seq.gt2d[i])
         avg = tuple(float(c) for c in cv2.mean(img)[:3])
-        z = crop_square(img, trk.center, trk._z_sz(), trk.exemplar_size, avg)[None]
-        tz.append({"template": z})
+        feed, net = template_feed(trk, img, avg)
+        tz.append(feed)
         if seq.name not in kernels:
-            kernels[seq.name] = trk.template_net.run({"template": z})[0]
+            kernels[seq.name] = net.run(feed)[0]
+        c = trk.center + rng.uniform(-0.25, 0.25, 2) * trk.target_sz
+        sx.append(search_feed(trk, img, c, avg, kernels[seq.name], rng))
+    return tz, sx
+
+
+def calibration_siamfc(exemplar: Path, search: Path, root, split: str = "train", samples: int = 200,
+                       seed: int = 0) -> tuple[list[dict], list[dict]]:
+    """(exemplar feeds, search feeds) at the split's ground-truth boxes, cut as the tracker cuts
+    (a random one of its search scales)."""
+    from track3d.siamfc import SiamFCTracker, crop_square
+
+    def template_feed(trk, img, avg):
+        return {"exemplar": crop_square(img, trk.center, trk.z_sz, trk.exemplar_size, avg)[None]}, trk.exemplar
+
+    def search_feed(trk, img, c, avg, kernel, rng):
+        f = trk.scale_factors[rng.integers(len(trk.scale_factors))]
+        return {"search": crop_square(img, c, trk.x_sz * f, trk.instance_size, avg)[None], "exemplar_feature": kernel}
+
+    ds, pairs = _frames(root, split, samples, seed)
+    return _siamese_feeds(SiamFCTracker(exemplar, search), pairs, seed, template_feed, search_feed)
+
+
+def calibration_edgetrack(template: Path, search: Path, root, split: str = "train", samples: int = 200,
+                          seed: int = 0) -> tuple[list[dict], list[dict]]:
+    """(template feeds, search feeds) at the split's ground-truth boxes, cut as EdgeTrack cuts:
+    the search crop at the tracked (normal) or, one time in five, the wider lost size, paired
+    with its sequence's template kernel."""
+    from track3d.edgetrack import EdgeTracker
+    from track3d.siamfc import crop_square
+
+    def template_feed(trk, img, avg):
+        return {"template": crop_square(img, trk.center, trk._z_sz(), trk.exemplar_size, avg)[None]}, trk.template_net
+
+    def search_feed(trk, img, c, avg, kernel, rng):
         size = trk.lost_instance_size if rng.random() < 0.2 else trk.instance_size
         scale = trk.exemplar_size / trk._z_sz()
-        c = trk.center + rng.uniform(-0.25, 0.25, 2) * trk.target_sz
-        x = crop_square(img, c, size / scale, size, avg)[None]
-        sx.append({"search": x, "kernel": kernels[seq.name]})
-    return tz, sx
+        return {"search": crop_square(img, c, size / scale, size, avg)[None], "kernel": kernel}
+
+    ds, pairs = _frames(root, split, samples, seed)
+    return _siamese_feeds(EdgeTracker(template, search), pairs, seed, template_feed, search_feed)
 
 
 def input_nodes(model, op_types: list[str]) -> list[str]:
