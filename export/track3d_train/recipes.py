@@ -10,7 +10,7 @@ interruption continues where it stopped.
     track3d-train recipe list
     track3d-train recipe show a3boxnet-engine          # the commands, full size
     track3d-train recipe run a3boxnet-engine --data data --runs runs
-    track3d-train recipe run edgetrack-engine --tiny --data /tmp/d --runs /tmp/r   # minutes, CI
+    track3d-train recipe run edgetrack-engine --tiny --data tiny/data --runs tiny/runs   # a minute, CI
 
 The models land in the run folder (``{runs}/<recipe>/...``), never in the package: a model
 ships only after it beats the shipped one on the README's engine sets, by
