@@ -48,3 +48,12 @@ def test_downscaling_path_matches_the_reference():
         b = _reference(img, c, size, 191, (10.0, 20.0, 30.0)).astype(int)
         diffs.append(np.abs(a - b).mean())
     assert np.mean(diffs) < 2.0 and np.max(diffs) < 5.0, (np.mean(diffs), np.max(diffs))
+
+
+def test_part_outside_the_image_is_exactly_the_rounded_border_colour():
+    # the downscaling path frames the resized image part with OpenCV (copyMakeBorder) instead of
+    # filling a numpy canvas: the frame must stay the border colour, rounded, to the pixel
+    img = np.full((480, 640, 3), 200, np.uint8)
+    out = crop_square(img, np.array([0.0, 240.0]), 800.0, 128, (10.4, 20.6, 30.5))
+    assert out.shape == (128, 128, 3) and out.dtype == np.uint8
+    assert np.all(out[:, :60] == [10, 21, 30]) and np.all(out[30:100, 70:] == 200)
