@@ -182,6 +182,81 @@ def test_runtime_follows_reports_lost_and_recovers(trained):
     assert ious[after].mean() > 0.5, ious[after]                     # recovers after the return
 
 
+def _fast_sequence(steps):
+    """The textured blob crossing the frame, moving steps[i] pixels right into frame i + 1."""
+    from track3d_train.siamfc.synthetic import blob_sprite, star_field
+
+    rng = np.random.default_rng(5)
+    h, w = 240, 640
+    bg = star_field(h, w, rng)
+    sprite, mask = blob_sprite(40, rng)
+    ys, xs = np.nonzero(mask > 0.5)
+    frames, boxes = [], []
+    for i, x in enumerate(40.0 + np.concatenate([[0.0], np.cumsum(steps)])):
+        y = 120.0
+        m = np.array([[1.0, 0, x - 20], [0, 1.0, y - 20]])
+        s = cv2.warpAffine(sprite, m, (w, h))
+        k = cv2.warpAffine(mask, m, (w, h))[..., None]
+        frames.append(np.clip(bg * (1 - k) + s * k + rng.normal(0, 2, (h, w, 3)), 0, 255).astype(np.uint8))
+        boxes.append([x - 20 + xs.min(), y - 20 + ys.min(), xs.max() + 1 - xs.min(), ys.max() + 1 - ys.min()])
+    return frames, np.array(boxes, np.float64)
+
+
+def test_motion_prediction_moves_the_search_by_the_smoothed_motion(trained, monkeypatch):
+    """Hand case of the prediction: the search crop is centred at the last centre plus `motion`
+    times the smoothed motion (v <- 0.5 v + 0.5 d) shrunk by the dead zone (5% of the search
+    side), and a state round trip keeps the motion."""
+    import track3d.edgetrack as E
+
+    frames, gt = _fast_sequence([30.0] * 6)
+    tr = E.create(model=trained["root"] / "model" / "et", motion=1.0)
+    centres = []
+    real = E.crop_square
+    monkeypatch.setattr(E, "crop_square", lambda img, c, *a: (centres.append(np.array(c, float)), real(img, c, *a))[1])
+    tr.init(frames[0], gt[0])
+    v = np.zeros(2)
+    moved = 0
+    for i in range(1, 6):
+        start = tr.center.copy()
+        dead = 0.05 * tr.instance_size * tr._z_sz() / tr.exemplar_size
+        speed = np.hypot(*v)
+        want = start + (v * (1.0 - dead / speed) if speed > dead else 0.0)
+        ok, _ = tr.update(frames[i])
+        assert ok
+        np.testing.assert_allclose(centres[-1], want)                # searched where predicted
+        moved += speed > dead
+        v = 0.5 * v + 0.5 * (tr.center - start)
+        np.testing.assert_allclose(tr.velocity, v)
+    assert moved >= 3                          # 30 px per frame is motion, not jitter
+    twin = E.create(model=trained["root"] / "model" / "et", motion=1.0)
+    twin.set_state(tr.get_state())
+    assert np.array_equal(twin.velocity, tr.velocity)
+    state = tr.get_state()
+    del state["velocity"]                                            # a state from before the motion
+    twin.set_state(state)
+    assert np.array_equal(twin.velocity, np.zeros(2))
+    with pytest.raises(ValueError, match="motion"):
+        E.create(model=trained["root"] / "model" / "et", motion=-1.0)
+
+
+def test_motion_prediction_follows_a_body_faster_than_half_the_search_region(trained):
+    """A body speeding up to 90 px per frame: beyond the reach of a search at the last centre (a
+    failure before the prediction), within it once the search moves with the body."""
+    from track3d.edgetrack import create
+
+    frames, gt = _fast_sequence([20.0, 40.0, 60.0, 75.0, 90.0, 90.0, 90.0])
+    mean_iou = {}
+    for motion in (0.0, 1.0):
+        tr = create(model=trained["root"] / "model" / "et", motion=motion)
+        tr.init(frames[0], gt[0])
+        ious = []
+        for i in range(1, len(frames)):
+            _, box = tr.update(frames[i])
+            ious.append(float(iou_2d(box[None], gt[i][None])[0]))
+        mean_iou[motion] = np.mean(ious[3:])     # at the fastest
+    assert mean_iou[1.0] > 0.5 and mean_iou[0.0] < 0.3, mean_iou
+
+
 def test_registry_builds_edgetrack_and_says_when_no_model_is_shipped(trained, tmp_path, monkeypatch):
     from track3d import onnxmodel
     from track3d import trackers2d as T

@@ -48,7 +48,7 @@ def test_tiny_recipe_runs_end_to_end(name, tmp_path):
 def test_show_prints_commands_and_knobs(capsys):
     assert main(["show", "edgetrack-engine", "--tiny", "--set", "steps=7"]) == 0
     out = capsys.readouterr().out
-    assert "--max-steps 7" in out and "not in the tiny variant: fit the lost threshold" in out
+    assert "--max-steps 7" in out and "not in the tiny variant: fit the motion weight and the lost threshold" in out
     assert main(["list"]) == 0
     listed = capsys.readouterr().out
     assert all(n in listed for n in RECIPES)

@@ -140,10 +140,14 @@ EDGETRACK_ENGINE = Recipe(
             "track3d-sim generate --preset small --seed 3 --train 12 --test 0 --test-unseen 1 --frames 60 "
             "--sensors ideal --out {data}/engine-calib --workers {workers} --quiet"),
             full_only=True, why="the tiny presets' sequences have no absent frames to fit on"),
-        Step("fit the lost threshold", _a(
+        Step("data: more held-out sequences", _a(
+            "track3d-sim generate --preset small --seed 4 --train 24 --test 0 --test-unseen 1 --frames 60 "
+            "--sensors ideal --out {data}/engine-calib2 --workers {workers} --quiet"), full_only=True,
+            why="twelve sequences alone decide the motion weight by noise"),
+        Step("fit the motion weight and the lost threshold", _a(
             "track3d-train edgetrack fit-threshold --model {runs}/edgetrack/model/edgetrack "
-            "--data {data}/engine-calib --split train --write --quiet"), full_only=True,
-            why="needs the held-out sequences above"),
+            "--data {data}/engine-calib {data}/engine-calib2 --split train --motion-grid 0,0.5,1,1.5 --write --quiet"),
+            full_only=True, why="needs the held-out sequences above"),
     ),
 )
 

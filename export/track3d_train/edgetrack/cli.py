@@ -5,8 +5,8 @@
     track3d-train edgetrack export  --checkpoint RUN/ckpt.pt --out runtime/track3d/models/edgetrack --force
     track3d-train edgetrack eval    --model runtime/track3d/models/edgetrack --data DATA --split test --compare siamfc-edge
     track3d-train edgetrack time    --model runtime/track3d/models/edgetrack --pin
-    track3d-train edgetrack fit-threshold --model runtime/track3d/models/edgetrack --data data/engine-calib \
-        --split train --write --force     # the lost threshold, fitted on held-out train-like sequences
+    track3d-train edgetrack fit-threshold --model runtime/track3d/models/edgetrack --data data/engine-calib data/engine-calib2 \
+        --split train --motion-grid 0,0.5,1,1.5 --write --force   # motion weight, lost threshold: held-out sequences
 
 The long-run recipe (resumable) is `track3d-train recipe run edgetrack-engine`;
 the shipped short-run model is described in docs/models.md.
@@ -109,14 +109,23 @@ def _grid(text: str) -> list[float]:
 
 def _fit_threshold(a) -> int:
     from ..onnx_meta import refuse_shipped
-    from .threshold import fit_threshold, write_threshold
+    from .threshold import fit_motion, fit_threshold, write_threshold
 
     if a.write:
         refuse_shipped([Path(f"{a.model}_template.onnx"), Path(f"{a.model}_search.onnx")], a.force, "--model")
     if a.split.startswith("test"):
         raise ValueError(f"fit the threshold on held-out train-like sequences, not on a test split ({a.split!r})")
+    motion = None
+    if a.motion_grid:
+        mfit = fit_motion(a.model, a.data, a.split, a.motion_grid, threads=a.threads,
+                          max_sequences=a.max_sequences or None, quiet=a.quiet)
+        print(f"{'motion':>9} {'AO_2d':>6} {'precision':>9} {'recall':>6}")
+        for r in mfit["rows"]:
+            print(f"{r['motion']:9.3g} {r['ao_2d']:6.3f} {r['lost_precision']:9.3f} {r['lost_recall']:6.3f}")
+        motion = mfit["motion"]
+        print(f"best motion: {motion:g}")
     fit = fit_threshold(a.model, a.data, a.split, a.grid, threads=a.threads,
-                        max_sequences=a.max_sequences or None, quiet=a.quiet)
+                        max_sequences=a.max_sequences or None, quiet=a.quiet, motion=motion)
     print(f"{'threshold':>9} {'F1':>5} {'precision':>9} {'recall':>6} {'AO_2d':>6}")
     for r in fit["rows"]:
         print(f"{r['threshold']:9.3g} {r['f1']:5.3f} {r['lost_precision']:9.3f} {r['lost_recall']:6.3f} {r['ao_2d']:6.3f}")
@@ -125,10 +134,13 @@ def _fit_threshold(a) -> int:
         from track3d_train.boxnet.data import split_hash
         from track3d.dataset import Dataset
 
-        note = {"data": Path(a.data).name, "split": a.split, "data_hash": split_hash(Dataset(a.data), a.split),
+        note = {"data": [Path(d).name for d in a.data], "split": a.split,
+                "data_hash": [split_hash(Dataset(d), a.split) for d in a.data],
                 "criterion": "F1 of lost vs absent frames, one pass; AO_2d breaks ties", "rows": fit["rows"]}
-        for p in write_threshold(a.model, fit["threshold"], note):
-            print(f"wrote the threshold into {p}")
+        if motion is not None:
+            note["motion"] = {"criterion": "one-pass AO_2d at the model's threshold", "rows": mfit["rows"]}
+        for p in write_threshold(a.model, fit["threshold"], note, motion=motion):
+            print(f"wrote the {'motion weight and ' if motion is not None else ''}threshold into {p}")
     return 0
 
 
@@ -240,13 +252,17 @@ def build_parser() -> argparse.ArgumentParser:
     f = sub.add_parser("fit-threshold", help="fit the lost threshold one pass on held-out sequences; --write stores it",
                        formatter_class=d)
     f.add_argument("--model", required=True, help="prefix of <name>_template/_search.onnx")
-    f.add_argument("--data", required=True, help="dataset root with absent frames (not the training data, not a test split)")
+    f.add_argument("--data", required=True, nargs="+",
+                   help="dataset root(s) with absent frames, pooled (not the training data, not a test split)")
     f.add_argument("--split", default="train", help="dataset split (a test split is refused)")
     f.add_argument("--grid", type=_grid, default=[0.02, 0.05, 0.1, 0.2, 0.3, 0.5],
                    help="comma-separated candidate thresholds in (0, 1)")
+    f.add_argument("--motion-grid", type=_grid, default=None,
+                   help="comma-separated candidate motion weights in [0, 2], chosen first by one-pass AO_2d "
+                        "(default: keep the model's)")
     f.add_argument("--max-sequences", type=bounded(int, 0), default=0, help="only the first N sequences (0: all)")
     f.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
-    f.add_argument("--write", action="store_true", help="write the best threshold into the model's metadata")
+    f.add_argument("--write", action="store_true", help="write the best threshold (and motion) into the model's metadata")
     f.add_argument("--force", action="store_true", help="allow --write on the shipped models in track3d/models")
     f.add_argument("--quiet", action="store_true", help="no progress bar")
     f.set_defaults(fn=_fit_threshold)
