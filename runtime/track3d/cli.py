@@ -84,7 +84,9 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--tracker-option", action="append", metavar="KEY=VALUE", help="option of the 2D tracker")
     t.add_argument("--estimator-option", action="append", metavar="KEY=VALUE", help="option of the estimator")
     t.add_argument("--no-fusion", action="store_true", help="report the 2D tracker's box, no 2D-3D fusion")
-    t.add_argument("--weight-3d", type=float, default=0.3, help="fusion weight of the projected 3D box")
+    t.add_argument("--weight-3d", type=bounded(float, 0, high=1), default=None,
+                   help="fusion weight of the projected 3D box (default: by the depth sensor, the paper's 0.3, "
+                        "0 for stereo; track3d.tracker.fusion_weight_for)")
     t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
                    help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
                         "itself; default: by the depth sensor, 0.1, 0 for stereo; track3d.tracker.frustum_margin_for)")
@@ -186,12 +188,13 @@ def _cmd_track(a) -> int:
         topts = {**arith, **topts}
     if a.estimator == "a3boxnet":
         eopts = {**arith, **eopts}
-    from .tracker import frustum_margin_for
+    from .tracker import frustum_margin_for, fusion_weight_for
 
     # stereo computed here from the image pairs: the stereo sensor's margin; else the dataset's
     # sensor decides per sequence (None)
     margin = frustum_margin_for("stereo") if a.frustum_margin is None and a.depth == "stereo" else a.frustum_margin
-    spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=a.weight_3d, threads=a.threads,
+    weight = fusion_weight_for("stereo") if a.weight_3d is None and a.depth == "stereo" else a.weight_3d
+    spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
                        frustum_margin=margin,
                        tracker_options=topts, estimator_options=eopts, name=a.name)
     if a.depth == "stereo" and not a.name:

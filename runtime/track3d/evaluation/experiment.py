@@ -27,12 +27,11 @@ from typing import Callable
 import numpy as np
 
 from ..boxes import iou_3d
-from ..fusion import WEIGHT_3D
 from ..jsonable import write_json
 from ..dataset import RIGHT_DIR, Dataset, DatasetError, Sequence, read_rgb
 from ..machine import cpu_name
 from ..progress import Progress
-from ..tracker import LOST, STAGES, Track3D, frustum_margin_for
+from ..tracker import LOST, STAGES, Track3D, frustum_margin_for, fusion_weight_for
 from .draw import OverlayWriter, draw_overlay
 from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, LostScore, SequenceScore, average_scores,
                       score_lost, score_sequence)
@@ -55,7 +54,7 @@ class TrackerSpec:
     tracker: str = "kcf"
     estimator: str = "baseline"
     fusion: bool = True
-    weight_3d: float = WEIGHT_3D
+    weight_3d: float | None = None           # None: by the sequence's depth sensor (fusion_weight_for)
     frustum_margin: float | None = None      # None: by the sequence's depth sensor (frustum_margin_for)
     threads: int = 1
     tracker_options: dict = field(default_factory=dict)
@@ -85,7 +84,9 @@ class TrackerSpec:
             topts.update(gt=seq.gt2d, absent=seq.absent)
         return Track3D.create(seq.camera, self.tracker, self.estimator, tracker_options=topts,
                               estimator_options=self._options(self.estimator, self.estimator_options),
-                              fusion=self.fusion, weight_3d=self.weight_3d,
+                              fusion=self.fusion,
+                              weight_3d=(fusion_weight_for(seq.depth_sensor) if self.weight_3d is None
+                                         else self.weight_3d),
                               frustum_margin=(frustum_margin_for(seq.depth_sensor) if self.frustum_margin is None
                                               else self.frustum_margin))
 
