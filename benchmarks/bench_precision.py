@@ -213,7 +213,7 @@ def write_verdicts(accs: list[dict], models_dir: Path = MODELS_DIR) -> Path:
     <models_dir>/accuracy.json, the file precision="auto" reads (track3d.variant_choice.VERDICTS_FILE):
     a network's variant is allowed only if its "<network> only" row passed on EVERY split (on 9
     sequences a one-pass row can flip with a tiny numeric change: measured, both ways)."""
-    from track3d.variant_choice import VERDICTS_FILE
+    from track3d.variant_choice import VERDICTS_FILE, verdict_files
 
     path = models_dir / VERDICTS_FILE
     data = json.loads(path.read_text()) if path.is_file() else {}
@@ -234,7 +234,8 @@ def write_verdicts(accs: list[dict], models_dir: Path = MODELS_DIR) -> Path:
                 "d_ace_3d_m": {k: round(v["d_ace_3d"], 5) for k, v in row["delta"].items()}}
     for (variant, net), verdict in merged.items():
         for f in TRACKER_FILES[net]:
-            models.setdefault(f, {})[variant] = verdict
+            # bound to the files measured: a later model under the same name gets no verdict
+            models.setdefault(f, {})[variant] = {**verdict, **verdict_files(models_dir / f, variant)}
     path.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
     return path
 

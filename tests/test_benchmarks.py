@@ -158,6 +158,7 @@ def test_precision_verdicts_pass_only_on_every_split(tmp_path):
     path = bench_precision.write_verdicts([acc("test", True, True), acc("test_unseen", False, True)], tmp_path)
     models = json.loads(path.read_text())["models"]
     assert models["a3boxnet.onnx"]["onnxruntime/int8"]["passes"] is False
+    assert models["a3boxnet.onnx"]["onnxruntime/int8"]["sha256"] == "-"   # bound to the (here absent) file
     assert models["a3boxnet.onnx"]["onnxruntime/int8"]["splits"]["test"]["passes"] is True
     for f in ("edgetrack_search.onnx", "edgetrack_template.onnx"):
         assert models[f]["onnxruntime/int8"]["passes"] is True

@@ -65,9 +65,12 @@ def _variants():
 
 def test_every_shipped_int8_variant_passed_the_accuracy_rule():
     """A twin ships only with a passing verdict (the current A3BoxNet's int8 failed it: not shipped)."""
+    from track3d.variant_choice import verdicts as bound
+
     verdicts = json.loads((MODELS_DIR / "accuracy.json").read_text())["models"]
     for net in _shipped_int8():
         assert verdicts[net]["onnxruntime/int8"]["passes"], net
+        assert bound(MODELS_DIR / net)["onnxruntime/int8"]["passes"], f"{net}: the verdict is of other files"
     for net, v in verdicts.items():
         if not v.get("onnxruntime/int8", {}).get("passes", True):
             assert net not in _shipped_int8()
@@ -247,10 +250,38 @@ def test_auto_needs_an_accuracy_verdict(tmp_path):
     shutil.copy(src, d / variant_path(src, "int8").name)
     m = OnnxModel(d / src.name, precision="auto", engine="onnxruntime", flags=VNNI_BF16)
     assert m.precision == "fp32" and "no accuracy verdict" in m.choice["reason"]
-    (d / "accuracy.json").write_text(json.dumps({"models": {src.name: {"onnxruntime/int8": {"passes": False}}}}))
+    from track3d.variant_choice import verdict_files
+
+    files = verdict_files(d / src.name, "onnxruntime/int8")
+    (d / "accuracy.json").write_text(json.dumps({"models": {src.name: {"onnxruntime/int8": {"passes": False, **files}}}}))
     m = OnnxModel(d / src.name, precision="auto", engine="onnxruntime", flags=VNNI_BF16)
     assert m.precision == "fp32" and "failed the accuracy rule" in m.choice["reason"]
     assert OnnxModel(d / src.name, precision="int8").precision == "int8"  # explicit: the caller's choice
+
+
+def test_a_verdict_of_another_file_is_not_inherited(tmp_path):
+    """accuracy.json keyed the verdicts by file name only: a retrained model (or a re-quantised
+    twin) under the same name inherited the old model's pass. The verdict is bound to the
+    contents it was measured on."""
+    import shutil
+
+    from track3d.variant_choice import verdict_files, verdicts
+
+    src = MODELS_DIR / "a3boxnet.onnx"
+    d = tmp_path / "models"
+    d.mkdir()
+    shutil.copy(src, d / src.name)
+    shutil.copy(src, d / variant_path(src, "int8").name)
+    ok = {"passes": True, **verdict_files(d / src.name, "onnxruntime/int8")}
+    (d / "accuracy.json").write_text(json.dumps({"models": {src.name: {"onnxruntime/int8": ok}}}))
+    assert verdicts(d / src.name)["onnxruntime/int8"]["passes"]
+    for stale in ({"passes": True},                                     # no record of the files
+                  {**ok, "sha256": "0" * 16},                           # another fp32 model
+                  {**ok, "variant_sha256": "0" * 16}):                  # another int8 twin
+        (d / "accuracy.json").write_text(json.dumps({"models": {src.name: {"onnxruntime/int8": stale}}}))
+        assert verdicts(d / src.name) == {}
+        m = OnnxModel(d / src.name, precision="auto", engine="onnxruntime", flags=VNNI_BF16)
+        assert m.precision == "fp32" and "no accuracy verdict" in m.choice["reason"]
 
 
 # --- the quantisation recipe ---------------------------------------------------------------------

@@ -57,14 +57,28 @@ def _openvino_installed() -> bool:
         return False
 
 
+def verdict_files(path: Path, variant: str) -> dict[str, str]:
+    """{"sha256": of the model file, ["variant_sha256": of its int8 twin]}: what a verdict of
+    `variant` ("engine/precision") was measured on. Written with the verdict and checked on reading,
+    so a retrained or re-quantised file never inherits the verdict of the file it replaced."""
+    out = {"sha256": _file_digest(path)}
+    if variant.endswith("/int8"):
+        out["variant_sha256"] = _file_digest(variant_path(path, "int8"))
+    return out
+
+
 def verdicts(path: Path) -> dict:
     """{"engine/precision": {"passes": bool, ...}} of the model `path` from the accuracy.json
-    beside it (written by benchmarks/bench_precision.py --write-verdicts); {} without one."""
+    beside it (written by benchmarks/bench_precision.py --write-verdicts); {} without one. A
+    verdict recorded for other file contents (see ``verdict_files``), or without them, is left
+    out: it was measured on another model."""
     try:
         data = json.loads((path.parent / VERDICTS_FILE).read_text())
-        return dict(data.get("models", {}).get(path.name, {}))
+        found = dict(data.get("models", {}).get(path.name, {}))
     except (OSError, ValueError, AttributeError):
         return {}
+    return {k: v for k, v in found.items()
+            if isinstance(v, dict) and all(v.get(h) == d for h, d in verdict_files(path, k).items())}
 
 
 def candidates(path: Path, precision: str, engine: str, flags: frozenset[str]) -> tuple[list, list[str]]:
