@@ -14,8 +14,9 @@ update (SiamRPN / NanoTrack post-processing).
 
 Lost and found: when `score` falls below the threshold, `update` returns ok=False and the box
 stays where it was; while lost the search crop is wider (`lost_instance_size` pixels at the
-same image scale, so the template still matches) and has no cosine window; the first frame
-whose score passes the threshold again re-acquires the target there.
+same image scale, so the template still matches) and has no cosine window, and after
+SWEEP_AFTER lost frames every other search steps over a grid of the whole image; the first
+frame whose score passes the threshold again re-acquires the target there.
 
 Every size and hyper-parameter comes from the models' metadata (key 'track3d'); keyword
 overrides to `create` / `EdgeTracker` win over it.
@@ -46,6 +47,11 @@ MOTION_SMOOTHING = 0.5
 # prediction shrinks the smoothed motion by it (a soft dead zone). Without it, bodies drifting a
 # few pixels per frame were tracked worse (calibration sequences: AO_2d -0.047 on one).
 MOTION_DEAD_ZONE = 0.05
+# While lost for more than this many frames, every other search sweeps the image (the wider lost
+# region stepped over a grid, one crop per frame: latency stays one search): a body that moved
+# far while the tracker was lost was otherwise never found again (a held-out sequence: lost for
+# its last 22 frames with the body in view ~330 px from the last centre).
+SWEEP_AFTER = 3
 
 
 def model_paths(name: str = SHIPPED_NAME) -> tuple[Path, Path]:
@@ -140,6 +146,7 @@ class EdgeTracker:
         z = crop_square(image, self.center, self._z_sz(), self.exemplar_size, self.avg_color)
         self._kernel = self.template_net.run({"template": z[None]})[0]
         self.velocity = np.zeros(2)
+        self.lost_frames = 0
         self.lost = False
         self.score = 1.0
 
@@ -160,7 +167,7 @@ class EdgeTracker:
         return {"initialised": True, "kernel": self._kernel.copy(), "center": self.center.copy(),
                 "target_sz": self.target_sz.copy(), "_min_sz": float(self._min_sz),
                 "avg_color": list(self.avg_color), "score": float(self.score), "lost": bool(self.lost),
-                "velocity": self.velocity.copy()}
+                "velocity": self.velocity.copy(), "lost_frames": int(self.lost_frames)}
 
     def _kernel_shape(self) -> tuple:
         """The template kernel's shape this model makes (from a blank template, once)."""
@@ -184,9 +191,24 @@ class EdgeTracker:
         score, lost, min_sz = float(state["score"]), bool(state["lost"]), float(state["_min_sz"])
         # states written before the motion prediction carry no velocity: at rest
         velocity = np.asarray(state.get("velocity", (0.0, 0.0)), dtype=np.float64).reshape(2).copy()
+        lost_frames = int(state.get("lost_frames", 0))
         # assigned only once everything parsed: a damaged state leaves the tracker as it was
         self._kernel, self.center, self.target_sz, self.avg_color = kernel.copy(), center, target_sz, avg_color
         self.score, self.lost, self._min_sz, self.velocity = score, lost, min_sz, velocity
+        self.lost_frames = lost_frames
+
+    def _lost_search_centre(self, side: float, ww: int, hh: int) -> np.ndarray:
+        """Where a lost search looks: the last centre, and after SWEEP_AFTER lost frames, every
+        other frame the next cell of a grid over the image (cells 0.8 search sides apart)."""
+        k = self.lost_frames - SWEEP_AFTER
+        if k <= 0 or k % 2 == 1:
+            return self.center
+        step = 0.8 * side
+        xs = np.arange(side / 2.0, max(ww - side / 2.0, side / 2.0) + step, step)
+        ys = np.arange(side / 2.0, max(hh - side / 2.0, side / 2.0) + step, step)
+        cells = [(min(x, ww - side / 2.0) if ww > side else ww / 2.0, min(y, hh - side / 2.0) if hh > side else hh / 2.0)
+                 for y in ys for x in xs]
+        return np.array(cells[(k // 2 - 1) % len(cells)], dtype=np.float64)
 
     def _predicted(self, side: float) -> np.ndarray:
         """The search centre's offset (2,) pixels for a search region of `side` image pixels."""
@@ -206,7 +228,10 @@ class EdgeTracker:
         scale = self.exemplar_size / self._z_sz()            # crop pixels per image pixel
         start = self.center
         # where the target should be now: the last centre moved by the smoothed motion
-        at = start if self.lost or self.motion == 0.0 else np.clip(start + self._predicted(size / scale), 0.0, [ww, hh])
+        if self.lost:
+            at = self._lost_search_centre(size / scale, ww, hh)
+        else:
+            at = start if self.motion == 0.0 else np.clip(start + self._predicted(size / scale), 0.0, [ww, hh])
         crop = crop_square(image, at, size / scale, size, self.avg_color)
         t1 = time.perf_counter()
         logit, ltrb = self.search_net.run({"search": crop[None], "kernel": self._kernel})
@@ -214,6 +239,7 @@ class EdgeTracker:
         logit, ltrb = logit[0].astype(np.float64), ltrb[0].astype(np.float64)
         if not (np.all(np.isfinite(logit)) and np.all(np.isfinite(ltrb))):
             self.score, self.lost, self.velocity = 0.0, True, np.zeros(2)
+            self.lost_frames += 1
             return False, self.box
         centres, window = self._grid(size)
         px, py = centres[None, :], centres[:, None]
@@ -233,10 +259,11 @@ class EdgeTracker:
         if self.score < self.score_threshold:
             # lost: the search stays where the target was last seen, without a motion guess
             self.lost, self.velocity = True, np.zeros(2)
+            self.lost_frames += 1
             self.timings_ms = {"crop": 1e3 * (t1 - t0), "net": 1e3 * (t2 - t1), "post": 1e3 * (time.perf_counter() - t2)}
             return False, self.box
         found = not self.lost
-        self.lost = False
+        self.lost, self.lost_frames = False, 0
         lr = float(penalty[i, j] * prob[i, j] * self.size_lr)
         self.center = np.clip(at + (np.array([cx[i, j], cy[i, j]]) - size / 2.0) / scale, 0.0, [ww, hh])
         new_sz = np.array([w[i, j], h[i, j]]) / scale
