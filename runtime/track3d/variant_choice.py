@@ -77,8 +77,10 @@ def verdicts(path: Path) -> dict:
         found = dict(data.get("models", {}).get(path.name, {}))
     except (OSError, ValueError, AttributeError):
         return {}
+    both = verdict_files(path, "any/int8")       # each file hashed once, not once per verdict
     return {k: v for k, v in found.items()
-            if isinstance(v, dict) and all(v.get(h) == d for h, d in verdict_files(path, k).items())}
+            if isinstance(v, dict) and v.get("sha256") == both["sha256"]
+            and (not k.endswith("/int8") or v.get("variant_sha256") == both["variant_sha256"])}
 
 
 def candidates(path: Path, precision: str, engine: str, flags: frozenset[str]) -> tuple[list, list[str]]:
