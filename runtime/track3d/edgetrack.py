@@ -16,7 +16,8 @@ Lost and found: when `score` falls below the threshold, `update` returns ok=Fals
 stays where it was; while lost the search crop is wider (`lost_instance_size` pixels at the
 same image scale, so the template still matches) and has no cosine window, and after
 SWEEP_AFTER lost frames every other search steps over a grid of the whole image; the first
-frame whose score passes the threshold again re-acquires the target there.
+frame whose score passes the threshold again re-acquires the target there, and the frame after
+a re-acquisition searches the wide region too (the body's motion is not known yet).
 
 Every size and hyper-parameter comes from the models' metadata (key 'track3d'); keyword
 overrides to `create` / `EdgeTracker` win over it.
@@ -52,6 +53,10 @@ MOTION_DEAD_ZONE = 0.05
 # far while the tracker was lost was otherwise never found again (a held-out sequence: lost for
 # its last 22 frames with the body in view ~330 px from the last centre).
 SWEEP_AFTER = 3
+# The frame after a re-acquisition ("settling") searches the wide lost region without the cosine
+# window: the velocity is unknown then (a re-acquisition's jump is not motion), and a body that
+# came back into view fast crossed the normal region in one frame (a held-out sequence: found at
+# its return, lost the next frame ~150 px further, a chaotic fork between arithmetic variants).
 
 
 def model_paths(name: str = SHIPPED_NAME) -> tuple[Path, Path]:
@@ -147,6 +152,7 @@ class EdgeTracker:
         self._kernel = self.template_net.run({"template": z[None]})[0]
         self.velocity = np.zeros(2)
         self.lost_frames = 0
+        self.settling = False
         self.lost = False
         self.score = 1.0
 
@@ -167,7 +173,8 @@ class EdgeTracker:
         return {"initialised": True, "kernel": self._kernel.copy(), "center": self.center.copy(),
                 "target_sz": self.target_sz.copy(), "_min_sz": float(self._min_sz),
                 "avg_color": list(self.avg_color), "score": float(self.score), "lost": bool(self.lost),
-                "velocity": self.velocity.copy(), "lost_frames": int(self.lost_frames)}
+                "velocity": self.velocity.copy(), "lost_frames": int(self.lost_frames),
+                "settling": bool(self.settling)}
 
     def _kernel_shape(self) -> tuple:
         """The template kernel's shape this model makes (from a blank template, once)."""
@@ -192,10 +199,11 @@ class EdgeTracker:
         # states written before the motion prediction carry no velocity: at rest
         velocity = np.asarray(state.get("velocity", (0.0, 0.0)), dtype=np.float64).reshape(2).copy()
         lost_frames = int(state.get("lost_frames", 0))
+        settling = bool(state.get("settling", False))
         # assigned only once everything parsed: a damaged state leaves the tracker as it was
         self._kernel, self.center, self.target_sz, self.avg_color = kernel.copy(), center, target_sz, avg_color
         self.score, self.lost, self._min_sz, self.velocity = score, lost, min_sz, velocity
-        self.lost_frames = lost_frames
+        self.lost_frames, self.settling = lost_frames, settling
 
     def _lost_search_centre(self, side: float, ww: int, hh: int) -> np.ndarray:
         """Where a lost search looks: the last centre, and after SWEEP_AFTER lost frames, every
@@ -224,7 +232,8 @@ class EdgeTracker:
         image = check_image(image)
         t0 = time.perf_counter()
         hh, ww = image.shape[:2]
-        size = self.lost_instance_size if self.lost else self.instance_size
+        wide = self.lost or self.settling
+        size = self.lost_instance_size if wide else self.instance_size
         scale = self.exemplar_size / self._z_sz()            # crop pixels per image pixel
         start = self.center
         # where the target should be now: the last centre moved by the smoothed motion
@@ -238,7 +247,7 @@ class EdgeTracker:
         t2 = time.perf_counter()
         logit, ltrb = logit[0].astype(np.float64), ltrb[0].astype(np.float64)
         if not (np.all(np.isfinite(logit)) and np.all(np.isfinite(ltrb))):
-            self.score, self.lost, self.velocity = 0.0, True, np.zeros(2)
+            self.score, self.lost, self.velocity, self.settling = 0.0, True, np.zeros(2), False
             self.lost_frames += 1
             return False, self.box
         centres, window = self._grid(size)
@@ -252,17 +261,18 @@ class EdgeTracker:
         penalty = np.exp(-(r_c * s_c - 1.0) * self.penalty_k)
         prob = _sigmoid(logit)
         pscore = penalty * prob
-        if not self.lost:
+        if not wide:
             pscore = pscore * (1.0 - self.window_influence) + window * self.window_influence
         i, j = np.unravel_index(int(np.argmax(pscore)), pscore.shape)
         self.score = float(_sigmoid(self.calib_a * logit[i, j] + self.calib_b))
         if self.score < self.score_threshold:
             # lost: the search stays where the target was last seen, without a motion guess
-            self.lost, self.velocity = True, np.zeros(2)
+            self.lost, self.velocity, self.settling = True, np.zeros(2), False
             self.lost_frames += 1
             self.timings_ms = {"crop": 1e3 * (t1 - t0), "net": 1e3 * (t2 - t1), "post": 1e3 * (time.perf_counter() - t2)}
             return False, self.box
         found = not self.lost
+        self.settling = not found
         self.lost, self.lost_frames = False, 0
         lr = float(penalty[i, j] * prob[i, j] * self.size_lr)
         self.center = np.clip(at + (np.array([cx[i, j], cy[i, j]]) - size / 2.0) / scale, 0.0, [ww, hh])
