@@ -125,8 +125,17 @@ def test_variant_matches_fp32(net, engine, precision):
     assert m.input_names == ref.input_names and m.output_names == ref.output_names
     feeds = realistic_feeds(path, ref)
     want, got = ref.run(feeds), m.run(feeds)
+    raw = [g.copy() for g in got]
     tol = PARITY_TOLERANCE[precision]
-    for name, w, g in zip(ref.output_names, want, got):
+    names = list(ref.output_names)
+    if ref.meta["kind"] == "a3boxnet":
+        # center2 is a small correction (|max| ~4 cm) added to center1: alone, its relative
+        # difference measures its own smallness; the runtime uses the sum
+        i1, i2 = names.index("center1"), names.index("center2")
+        names[i2] = "center1+center2"
+        want, got = list(want), list(got)
+        want[i2], got[i2] = want[i1] + want[i2], got[i1] + got[i2]
+    for name, w, g in zip(names, want, got):
         assert g.shape == w.shape and g.dtype == w.dtype, name
         w64, g64 = w.astype(np.float64).ravel(), g.astype(np.float64).ravel()
         rel = float(np.abs(g64 - w64).max() / np.abs(w64).max())
@@ -134,7 +143,7 @@ def test_variant_matches_fp32(net, engine, precision):
         assert rel <= tol["max_rel"], f"{net} {engine}/{precision} {name}: max rel diff {rel:.2e} > {tol}"
         assert cos >= tol["min_cos"], f"{net} {engine}/{precision} {name}: cosine {cos:.4f} < {tol}"
     again = m.run(feeds)  # deterministic for a given choice
-    for g, a in zip(got, again):
+    for g, a in zip(raw, again):
         np.testing.assert_array_equal(g, a)
 
 

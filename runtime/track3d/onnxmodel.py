@@ -38,6 +38,8 @@ PRECISIONS = ("fp32", "int8", "bf16")
 # broken or mismatched file (measured: int8 up to 0.47 / down to 0.89 for SiamFC's exemplar
 # feature, 0.04 / 0.999 for A3BoxNet; bf16 up to 0.03, and 0.061 on the small centre residual
 # `center2` of the A3BoxNet retrained on 1.5x more bodies, whose maximum is smaller, cosine 0.9975).
+# A3BoxNet's `center2` (a correction of a few cm) is compared as `center1 + center2`, the centre
+# the runtime uses: alone, its int8 difference of 2.5 cm on a 4 cm maximum read as 0.60.
 PARITY_TOLERANCE = {"fp32": {"max_rel": 1e-4, "min_cos": 0.9999}, "int8": {"max_rel": 0.6, "min_cos": 0.85},
                     "bf16": {"max_rel": 0.1, "min_cos": 0.995}}
 
