@@ -42,7 +42,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-from benchlib.output import add_out_argument
+from benchlib.output import add_out_argument, relative_to
 from benchlib.paper import COLUMNS as PAPER_COLUMNS
 from benchlib.paper import TABLE2 as PAPER
 from benchlib.paper import fusion_gain
@@ -597,7 +597,9 @@ def main(argv=None) -> int:
                paper=PAPER, paper_columns=PAPER_COLUMNS, rows=row_recs, fusion=fusion_rows, sweep=sweep_rows,
                runs={f"{k[0]}/{k[1]}": {"spec": _spec_dict(runs[k]), "status": status[k], "reason": reason.get(k),
                                          "wall_s": wall.get(k)} for k in runs},
-               reports=reports, plots=[str(p) for p in plots])
+               # relative to the output folder: an absolute --out must not put machine paths in the record
+               reports={k: relative_to(v, out) for k, v in reports.items()},
+               plots=[relative_to(p, out) for p in plots])
     write_json(out / "table2.json", finish_record(rec))
     (out / "table2.md").write_text(md + "\n")
     print(md)
