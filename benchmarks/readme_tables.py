@@ -49,6 +49,28 @@ TABLE2_ROWS = (
     ("SiamFC-faithful alone, one pass (2D)", "bench_2d", "siamfc", "2d", False),
     ("paper", "SiamFC"),
 )
+# The same rows on the data engine's test split with this release's models (bench_table2.py on
+# data/engine-ideal); a key "sweep:<run>" is a row of the Fig. 15 sweep, source "edgetrack_2d" the
+# EdgeTrack one-pass 2D evaluation of the same split.
+TABLE2_ENGINE_ROWS = (
+    ("**Track3D default, ours** (EdgeTrack + A3BoxNet + fusion)", "table2_engine", "sweep:edgetrack+a3boxnet",
+     "full", True),
+    ("Track3D, the paper's design (SiamFC-edge + A3BoxNet + fusion)", "table2_engine",
+     "Track3D: SiamFC-edge + A3BoxNet + fusion", "full", False),
+    ("Track3D with the faithful SiamFC (AlexNet, 3 scales)", "table2_engine",
+     "Track3D: SiamFC-faithful + A3BoxNet + fusion", "full", False),
+    ("NanoTrack v2 (peer) + A3BoxNet + fusion", "table2_engine", "sweep:nano+a3boxnet", "full", False),
+    ("paper", "Track3D"),
+    ("A3BoxNet alone, oracle 2D box (ours)", "table2_engine", "A3BoxNet (oracle 2D)", "oracle", False),
+    ("paper", "A3BoxNet"),
+    ("3D baseline (SiamFC-edge + minimum enclosing box + fusion)", "table2_engine",
+     "3D baseline: SiamFC-edge + min box + fusion", "full", False),
+    ("paper", "3D Tracking Baseline"),
+    ("EdgeTrack alone, one pass (2D)", "edgetrack_2d", "edgetrack", "2d", False),
+    ("SiamFC-edge alone, one pass (2D)", "table2_engine", "SiamFC-edge (2D, no restarts)", "2d", False),
+    ("SiamFC-faithful alone, one pass (2D)", "table2_engine", "SiamFC-faithful (2D, no restarts)", "2d", False),
+    ("paper", "SiamFC"),
+)
 PAPER_LABELS = {"Track3D": "Track3D", "A3BoxNet": "A3BoxNet", "3D Tracking Baseline": "3D tracking baseline",
                 "SiamFC": "SiamFC"}
 
@@ -107,24 +129,33 @@ def models_line(rows, what: str) -> str:
             + ", ".join(f"{f} `{'`/`'.join(sorted(h))}`" for f, h in sorted(seen.items())) + ".")
 
 
-def table2_table(root: Path) -> str:
+def _table2_metrics(root: Path, source: str, row: str) -> dict:
+    if source == "bench_2d":   # the one-pass 2D benchmark: its own keys, no restarts by protocol
+        r = _load(root, "siamfc/bench_2d.json")["trackers"][row]
+        return {"ao_2d": r["AO_2d"], "ace_2d": r["ACE_2d"], "restarts": 0}
+    if source == "edgetrack_2d":   # EdgeTrack's one-pass 2D evaluation (track3d-train edgetrack eval)
+        r = _load(root, "edgetrack/engine_eval_test.json")["trackers"][row]
+        return {"ao_2d": r["ao_2d"], "ace_2d": r["ace_2d"], "restarts": 0}
+    rec = _load(root, f"{source}/table2.json")
+    if row.startswith("sweep:"):
+        return next(x for x in rec["sweep"] if x["run"] == row[len("sweep:"):])["metrics"]
+    return next(x for x in rec["rows"] if x["row"] == row)["metrics"]
+
+
+def _table2(root: Path, specs) -> str:
     fmts = (("ao_2d", "AO_2d", "{:.3f}"), ("ace_2d", "ACE_2d(px)", "{:.1f}"), ("ao_bev", "AO_bev", "{:.3f}"),
             ("ao_3d", "AO_3d", "{:.3f}"), ("ace_3d", "ACE_3d(m)", "{:.3f}"))
     shown = {"full": {"ao_2d", "ace_2d", "ao_bev", "ao_3d", "ace_3d"}, "oracle": {"ao_bev", "ao_3d", "ace_3d"},
              "2d": {"ao_2d", "ace_2d"}}
     rows = []
-    for spec in TABLE2_ROWS:
+    for spec in specs:
         if spec[0] == "paper":
             p = TABLE2[spec[1]]
             rows.append([f"*paper: {PAPER_LABELS[spec[1]]}*"]
                         + [f"*{cell(p[k], f)}*" if p[k] is not None else "-" for _, k, f in fmts] + [""])
             continue
         label, source, row, kind, bold = spec
-        if source == "bench_2d":   # the one-pass 2D benchmark: its own keys, no restarts by protocol
-            r = _load(root, "siamfc/bench_2d.json")["trackers"][row]
-            m = {"ao_2d": r["AO_2d"], "ace_2d": r["ACE_2d"], "restarts": 0}
-        else:
-            m = next(x for x in _load(root, f"{source}/table2.json")["rows"] if x["row"] == row)["metrics"]
+        m = _table2_metrics(root, source, row)
         cells = [cell(m[k], f) if k in shown[kind] else "-" for k, _, f in fmts]
         if bold:
             cells = [f"**{c}**" for c in cells]
@@ -132,7 +163,15 @@ def table2_table(root: Path) -> str:
     return markdown_table(["row", "AO_2d", "ACE_2d (px)", "AO_bev", "AO_3d", "ACE_3d (m)", "restarts"], rows)
 
 
-TABLES = {"speed": speed_table, "engine": engine_table, "table2": table2_table}
+def table2_table(root: Path) -> str:
+    return _table2(root, TABLE2_ROWS)
+
+
+def table2_engine_table(root: Path) -> str:
+    return _table2(root, TABLE2_ENGINE_ROWS)
+
+
+TABLES = {"speed": speed_table, "engine": engine_table, "table2": table2_table, "table2_engine": table2_engine_table}
 
 
 def render(readme: str, root: Path) -> str:
