@@ -281,7 +281,7 @@ def test_frustum_margin_widens_the_cut_and_zero_is_the_box_itself(frames):
         x, y, w, h = gt2d[1]
         np.testing.assert_allclose(seen[-1], [x - w * margin / 2, y - h * margin / 2, w * (1 + margin), h * (1 + margin)])
         assert t.describe()["options"]["frustum_margin"] == margin
-    assert FRUSTUM_MARGIN == 0.1
+    assert FRUSTUM_MARGIN == 0.3
     for bad in (-0.1, 1.5, float("nan")):
         with pytest.raises(ValueError, match="frustum_margin"):
             Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"), frustum_margin=bad)
