@@ -260,19 +260,16 @@ def test_motion_prediction_follows_a_body_faster_than_half_the_search_region(tra
     assert mean_iou[1.0] > 0.5 and mean_iou[0.0] < 0.3, mean_iou
 
 
-def test_a_lost_search_sweeps_the_image_and_finds_a_body_that_moved_far(trained, monkeypatch):
-    """Lost, the search stayed at the last centre: a body that came back far from it was never
-    found again (a held-out sequence lost its last 22 frames that way). After SWEEP_AFTER lost
-    frames every other search steps over a grid of the image."""
-    import track3d.edgetrack as E
+def _sprite_path(path, seed):
+    """A 40 px blob on a 640 x 240 star field at x = path[i] (None: out of view), y = 100:
+    (frames uint8 (240, 640, 3), boxes [x, y, w, h] or None)."""
     from track3d_train.siamfc.synthetic import blob_sprite, star_field
 
-    rng = np.random.default_rng(7)
+    rng = np.random.default_rng(seed)
     h, w = 240, 640
     bg = star_field(h, w, rng)
     sprite, mask = blob_sprite(40, rng)
     ys, xs = np.nonzero(mask > 0.5)
-    path = [80.0] * 3 + [None] * 3 + [560.0] * 30           # gone, then back 480 px away
     frames, boxes = [], []
     for x in path:
         img = bg.copy()
@@ -284,6 +281,17 @@ def test_a_lost_search_sweeps_the_image_and_finds_a_body_that_moved_far(trained,
         else:
             boxes.append(None)
         frames.append(np.clip(img + rng.normal(0, 2, (h, w, 3)), 0, 255).astype(np.uint8))
+    return frames, boxes
+
+
+def test_a_lost_search_sweeps_the_image_and_finds_a_body_that_moved_far(trained, monkeypatch):
+    """Lost, the search stayed at the last centre: a body that came back far from it was never
+    found again (a held-out sequence lost its last 22 frames that way). After SWEEP_AFTER lost
+    frames every other search steps over a grid of the image."""
+    import track3d.edgetrack as E
+
+    path = [80.0] * 3 + [None] * 3 + [560.0] * 30           # gone, then back 480 px away
+    frames, boxes = _sprite_path(path, seed=7)
 
     def first_found(sweep_after):
         monkeypatch.setattr(E, "SWEEP_AFTER", sweep_after)
@@ -305,25 +313,9 @@ def test_the_frame_after_a_reacquisition_searches_the_wide_region(trained):
     sequence forked that way between arithmetic variants). That frame now searches the wide lost
     region; the old behaviour is reproduced by clearing `settling` after every update."""
     from track3d.edgetrack import create
-    from track3d_train.siamfc.synthetic import blob_sprite, star_field
 
-    rng = np.random.default_rng(11)
-    h, w = 240, 640
-    bg = star_field(h, w, rng)
-    sprite, mask = blob_sprite(40, rng)
-    ys, xs = np.nonzero(mask > 0.5)
     path = [100.0] * 3 + [None] * 2 + [100.0, JUMP_X, JUMP_X + 20, JUMP_X + 40]
-    frames, boxes = [], []
-    for x in path:
-        img = bg.copy()
-        if x is not None:
-            m = np.array([[1.0, 0, x - 20], [0, 1.0, 100.0]])
-            k = cv2.warpAffine(mask, m, (w, h))[..., None]
-            img = bg * (1 - k) + cv2.warpAffine(sprite, m, (w, h)) * k
-            boxes.append([x - 20 + xs.min(), 100 + ys.min(), xs.max() + 1 - xs.min(), ys.max() + 1 - ys.min()])
-        else:
-            boxes.append(None)
-        frames.append(np.clip(img + rng.normal(0, 2, (h, w, 3)), 0, 255).astype(np.uint8))
+    frames, boxes = _sprite_path(path, seed=11)
 
     def iou_after_the_jump(settle):
         tr = create(model=trained["root"] / "model" / "et")
