@@ -179,8 +179,10 @@ def render(readme: str, root: Path) -> str:
     def section(m: re.Match) -> str:
         return f"{m.group(1)}\n{TABLES[m.group(2)](root)}\n{m.group(3)}"
 
-    return re.sub(r"(<!-- readme_tables\.py: (\w+) -->)\n.*?\n(<!-- /readme_tables\.py -->)", section, readme,
-                  flags=re.S)
+    # the lines between a marker pair, none of them a marker: an empty section must not reach
+    # over to the next section's end marker (it once swallowed a whole table)
+    return re.sub(r"(<!-- readme_tables\.py: (\w+) -->)\n(?:(?!<!-- /?readme_tables\.py)[^\n]*\n)*"
+                  r"(<!-- /readme_tables\.py -->)", section, readme)
 
 
 def build_parser() -> ArgumentParser:

@@ -108,6 +108,18 @@ def test_the_readme_tables_are_the_committed_results(tmp_path):
     assert readme_tables.main(["--write", "--readme", str(readme)]) == 0 and readme.read_text() == text
 
 
+def test_an_empty_readme_section_is_filled_and_the_next_one_kept():
+    """A new, empty section once reached over to the next section's end marker: --write
+    replaced both with one table and the other table vanished from the README."""
+    import readme_tables
+
+    text = ("a\n<!-- readme_tables.py: speed -->\n<!-- /readme_tables.py -->\nkept prose\n"
+            "<!-- readme_tables.py: engine -->\nold\n<!-- /readme_tables.py -->\nz\n")
+    out = readme_tables.render(text, readme_tables.REPO)
+    assert out.count("<!-- readme_tables.py: ") == 2 and "kept prose" in out and "old" not in out
+    assert out.index(readme_tables.speed_table(readme_tables.REPO)) < out.index("kept prose")
+
+
 @pytest.mark.skipif(not hasattr(__import__("os"), "sched_setaffinity"), reason="no CPU affinity here")
 def test_pin_threads_pins_every_thread_and_widens_again():
     import cv2
