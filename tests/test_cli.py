@@ -70,6 +70,20 @@ def test_demo_on_a_tiny_simulation(tmp_path, capsys):
     assert (out / "report" / "success_3d.png").is_file()
 
 
+def test_the_demo_runs_again_in_its_folder_after_a_change(tmp_path, capsys):
+    """./run.sh a second time after an update refused: its results folder held a run of another
+    configuration. The demo owns that folder and replaces its results."""
+    pytest.importorskip("track3d_sim")
+    from track3d_sim.cli import main as sim_main
+
+    out = tmp_path / "demo"
+    base = ["demo", "--out", str(out), "--preset", "tiny", "--sequences", "1", "--tracker", "kcf",
+            "--estimator", "baseline", "--quiet"]
+    assert sim_main(base + ["--frames", "4"]) == 0
+    assert sim_main(base + ["--frames", "3"]) == 0            # another configuration of the same run
+    assert json.loads((out / "summary.json").read_text())["frames_per_sequence"] == 3
+
+
 def test_runtime_demo_points_to_the_simulator(tmp_path, capsys):
     """The runtime never imports the simulator: `track3d demo` says where the demo is, in one line."""
     assert main(["demo", "--out", str(tmp_path / "d")]) == 2

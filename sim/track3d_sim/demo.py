@@ -25,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sequences", type=int, default=2, help="test sequences to simulate (default 2)")
     p.add_argument("--frames", type=int, default=40, help="frames per sequence (default 40)")
     p.add_argument("--threads", type=int, default=1, help="CPU threads of the models (default 1)")
-    p.add_argument("--tracker", help="2D tracker (default: the shipped SiamFC edge, else csrt)")
+    p.add_argument("--tracker", help="2D tracker (default: the shipped EdgeTrack, else csrt)")
     p.add_argument("--estimator", help="3D box estimator (default: the shipped A3BoxNet, else baseline)")
     p.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -113,7 +113,9 @@ def run_demo(a) -> int:
     exp = Experiment(data, "test", out / "results", out / "report", max_frames=a.frames)
     print(f"[demo] tracking with {spec.label} on {len(exp.sequences)} sequence(s), {a.threads} thread(s) ...",
           file=sys.stderr)
-    folders = exp.run(spec, overlay="gif", overlay_sequences=1, quiet=a.quiet)
+    # the demo's results folder is its own output: a re-run after an update (other models, loop
+    # options or --frames) replaces it instead of refusing, as an experiment folder would
+    folders = exp.run(spec, overlay="gif", overlay_sequences=1, quiet=a.quiet, replace=True)
     report = exp.report([spec.label], plots=True, trajectories=len(exp.sequences))
     ov = report["trackers"][spec.label]["overall"]
     summary = {"tracker": tracker, "estimator": estimator, "threads": a.threads, "warnings": warnings,
