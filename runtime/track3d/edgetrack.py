@@ -271,14 +271,14 @@ class EdgeTracker:
             self.lost_frames += 1
             self.timings_ms = {"crop": 1e3 * (t1 - t0), "net": 1e3 * (t2 - t1), "post": 1e3 * (time.perf_counter() - t2)}
             return False, self.box
-        found = not self.lost
-        self.settling = not found
+        was_tracking = not self.lost         # False: this frame re-acquires the target
+        self.settling = not was_tracking
         self.lost, self.lost_frames = False, 0
         lr = float(penalty[i, j] * prob[i, j] * self.size_lr)
         self.center = np.clip(at + (np.array([cx[i, j], cy[i, j]]) - size / 2.0) / scale, 0.0, [ww, hh])
         new_sz = np.array([w[i, j], h[i, j]]) / scale
         self.target_sz = np.maximum((1.0 - lr) * self.target_sz + lr * new_sz, self._min_sz)
-        if found:   # a re-acquisition's jump is not motion
+        if was_tracking:   # a re-acquisition's jump is not motion
             self.velocity = MOTION_SMOOTHING * self.velocity + (1.0 - MOTION_SMOOTHING) * (self.center - start)
         self.timings_ms = {"crop": 1e3 * (t1 - t0), "net": 1e3 * (t2 - t1), "post": 1e3 * (time.perf_counter() - t2)}
         return True, self.box
