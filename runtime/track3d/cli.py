@@ -89,7 +89,11 @@ def _parser() -> argparse.ArgumentParser:
                         "0 for stereo; track3d.tracker.fusion_weight_for)")
     t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
                    help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
-                        "itself; default: by the depth sensor, 0.1, 0 for stereo; track3d.tracker.frustum_margin_for)")
+                        "itself; default: by the depth sensor, 0.3, 0 for stereo; track3d.tracker.frustum_margin_for)")
+    t.add_argument("--no-depth-range", action="store_true",
+                   help="ignore the depth sensor's maximum range recorded with each sequence (meta.json "
+                        "depth_sensor.max_range_m); by default a body whose returns stop at that range is boxed from "
+                        "the image and its front face (track3d.range_cut)")
     t.add_argument("--threads", type=int, default=1, help="CPU threads of the ONNX models (default 1)")
     t.add_argument("--precision", choices=("fp32", "int8", "bf16", "auto"), default=None,
                    help="arithmetic of the networks (SiamFC, A3BoxNet); auto: the fastest this CPU allows, "
@@ -196,6 +200,8 @@ def _cmd_track(a) -> int:
     weight = fusion_weight_for("stereo") if a.weight_3d is None and a.depth == "stereo" else a.weight_3d
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
                        frustum_margin=margin,
+                       # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's
+                       depth_range=not a.no_depth_range and a.depth != "stereo",
                        tracker_options=topts, estimator_options=eopts, name=a.name)
     if a.depth == "stereo" and not a.name:
         spec.name = spec.label + "-stereo"   # keep the depth-map results of the same pair

@@ -230,6 +230,18 @@ class Sequence:
         name = sensor.get("name") if isinstance(sensor, dict) else sensor
         return str(name) if isinstance(name, str) else None
 
+    @property
+    def depth_range_m(self) -> float | None:
+        """The depth sensor's maximum range in metres (meta.json depth_sensor.max_range_m), None
+        when unlimited (ideal depth, stereo) or not recorded."""
+        sensor = self.meta.get("depth_sensor")
+        r = sensor.get("max_range_m") if isinstance(sensor, dict) else None
+        try:
+            r = float(r)
+        except (TypeError, ValueError):
+            return None
+        return r if np.isfinite(r) and r > 0 else None
+
     def image_path(self, i: int, side: str = LEFT_DIR) -> Path:
         return self.path / side / frame_name(i)
 

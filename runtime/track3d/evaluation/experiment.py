@@ -56,6 +56,7 @@ class TrackerSpec:
     fusion: bool = True
     weight_3d: float | None = None           # None: by the sequence's depth sensor (fusion_weight_for)
     frustum_margin: float | None = None      # None: by the sequence's depth sensor (frustum_margin_for)
+    depth_range: bool = True                 # the sequence's depth sensor range (Sequence.depth_range_m) to Track3D
     threads: int = 1
     tracker_options: dict = field(default_factory=dict)
     estimator_options: dict = field(default_factory=dict)
@@ -88,7 +89,8 @@ class TrackerSpec:
                               weight_3d=(fusion_weight_for(seq.depth_sensor) if self.weight_3d is None
                                          else self.weight_3d),
                               frustum_margin=(frustum_margin_for(seq.depth_sensor) if self.frustum_margin is None
-                                              else self.frustum_margin))
+                                              else self.frustum_margin),
+                              depth_range_m=seq.depth_range_m if self.depth_range else None)
 
     def unavailable(self, seq: Sequence) -> str | None:
         """None when this configuration builds here, else why not (a missing model or module):
