@@ -317,3 +317,63 @@ def test_the_frustum_margin_follows_the_depth_sensor(tmp_path):
     assert spec.build(a).weight_3d == WEIGHT_3D and spec.build(b).weight_3d == 0.0
     assert TrackerSpec("oracle", "baseline", weight_3d=0.5).build(b).weight_3d == 0.5   # an explicit weight wins
     assert TrackerSpec("oracle", "baseline", frustum_margin=0.3).build(b).frustum_margin == 0.3
+
+
+def test_fuse_section_hand_cases():
+    """The reverse fusion moves the 3D box's cross-section toward the 2D box's rectangle at the
+    box's centre depth; depth and size z stay the estimator's."""
+    from track3d.camera import Camera
+    from track3d.fusion import box2d_section, fuse_section
+
+    cam = Camera.from_intrinsics(100, 100, 100.0, 100.0, 50.0, 50.0)
+    b3 = np.array([0.0, 0.0, 10.0, 2.0, 2.0, 3.0])
+    b2 = np.array([60.0, 40.0, 20.0, 20.0])              # at 10 m: centre (2, 0), 2 m x 2 m
+    np.testing.assert_allclose(box2d_section(b2, cam, 10.0), [2.0, 0.0, 2.0, 2.0])
+    np.testing.assert_allclose(cam.project_box3d_section(np.array([2.0, 0.0, 10.0, 2.0, 2.0, 7.0])), b2)
+    np.testing.assert_allclose(fuse_section(b3, b2, cam, 0.5), [1.0, 0.0, 10.0, 2.0, 2.0, 3.0])
+    np.testing.assert_allclose(fuse_section(b3, np.array([40.0, 30.0, 20.0, 40.0]), cam, 1.0),
+                               [0.0, 0.0, 10.0, 2.0, 4.0, 3.0])
+    np.testing.assert_array_equal(fuse_section(b3, b2, cam, 0.0), b3)
+    nan = np.full(6, np.nan)
+    assert np.isnan(fuse_section(nan, b2, cam, 0.5)).all()
+    with pytest.raises(ValueError, match="weight_2d"):
+        fuse_section(b3, b2, cam, 1.5)
+
+
+def test_the_loop_reports_the_section_fused_box_and_fuses_2d_with_the_estimate(frames):
+    from track3d.fusion import fuse_section
+
+    gt2d = np.array([f[2] for f in frames])
+    t0 = Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"))
+    t1 = Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"), weight_2d=0.5)
+    for t in (t0, t1):
+        t.init(frames[0][0], gt2d[0], points=frames[0][1])
+    r0, r1 = t0.update(frames[1][0], frames[1][1]), t1.update(frames[1][0], frames[1][1])
+    np.testing.assert_allclose(r1.box3d, fuse_section(r0.box3d, gt2d[1], CAM, 0.5))
+    assert not np.allclose(r1.box3d, r0.box3d)
+    np.testing.assert_array_equal(r1.box2d, r0.box2d)       # the 2D fusion uses the estimator's box
+    assert t1.describe()["options"]["weight_2d"] == 0.5 and t0.describe()["options"]["weight_2d"] == 0.0
+    for bad in (-0.1, 2.0, float("nan")):
+        with pytest.raises(ValueError, match="weight_2d"):
+            Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"), weight_2d=bad)
+
+
+def test_the_section_weight_follows_the_depth_sensor(tmp_path):
+    import json
+
+    from track3d.dataset import Dataset
+    from track3d.evaluation import TrackerSpec
+    from track3d.synthetic import make_synthetic_dataset
+    from track3d.tracker import section_weight_for
+
+    assert section_weight_for("stereo") == 0.75
+    assert section_weight_for("ideal") == section_weight_for("tof") == section_weight_for(None) == 0.0
+    root = make_synthetic_dataset(tmp_path / "d", {"a": 4, "b": 4})
+    meta = root / "test" / "b" / "meta.json"
+    m = json.loads(meta.read_text())
+    m["depth_sensor"] = {"name": "stereo"}
+    meta.write_text(json.dumps(m))
+    a, b = Dataset(root).sequences("test")
+    spec = TrackerSpec("oracle", "baseline")
+    assert spec.build(a).weight_2d == 0.0 and spec.build(b).weight_2d == 0.75
+    assert TrackerSpec("oracle", "baseline", weight_2d=0.0).build(b).weight_2d == 0.0
