@@ -7,6 +7,7 @@ or a hang must fail a test, not kill the suite). The full run: `python benchmark
 """
 from __future__ import annotations
 
+import os
 import tempfile
 from pathlib import Path
 
@@ -25,7 +26,8 @@ from track3d.tracker import STATUSES, Track3D
 from track3d.trackers2d import create_tracker
 
 
-FAST = settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
+# FUZZ_EXAMPLES=2000 for a longer local run (CI keeps 40)
+FAST = settings(max_examples=int(os.environ.get("FUZZ_EXAMPLES", "40")), deadline=None, suppress_health_check=list(HealthCheck))
 coord = st.one_of(st.floats(-100, 100, width=32), st.sampled_from([np.nan, np.inf, -np.inf, 0.0, 1e30, -3e38, 1.0,
                                                                    45.0, 1e5]))
 clouds = hnp.arrays(np.float32, st.tuples(st.integers(0, 300), st.just(3)), elements=coord)
@@ -93,9 +95,11 @@ class _Scripted:
 
 @FAST
 @given(init_box=boxes, category=categories, tracked=st.lists(st.tuples(st.booleans(), boxes), min_size=1, max_size=3),
-       cloud=st.one_of(clouds, near_clouds), name=st.sampled_from(["baseline", "a3boxnet"]))
-def test_loop_never_raises_on_sensor_data(estimators, init_box, category, tracked, cloud, name):
-    t = Track3D(CAM, _Scripted([(ok, np.asarray(b)) for ok, b in tracked]), estimators[name])
+       cloud=st.one_of(clouds, near_clouds), name=st.sampled_from(["baseline", "a3boxnet"]),
+       depth_range=st.one_of(st.none(), st.floats(0.5, 60.0)), weight_2d=st.sampled_from([0.0, 0.75, 1.0]))
+def test_loop_never_raises_on_sensor_data(estimators, init_box, category, tracked, cloud, name, depth_range, weight_2d):
+    t = Track3D(CAM, _Scripted([(ok, np.asarray(b)) for ok, b in tracked]), estimators[name],
+                depth_range_m=depth_range, weight_2d=weight_2d)
     img = np.zeros((CAM.height, CAM.width, 3), np.uint8)
     try:
         t.init(img, init_box, category, points=cloud)
