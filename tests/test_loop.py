@@ -378,3 +378,64 @@ def test_the_section_weight_follows_the_depth_sensor(tmp_path):
     spec = TrackerSpec("oracle", "baseline")
     assert spec.build(a).weight_2d == 0.0 and spec.build(b).weight_2d == 0.75
     assert TrackerSpec("oracle", "baseline", weight_2d=0.0).build(b).weight_2d == 0.0
+
+
+def test_anchor_front_face_hand_cases():
+    from track3d.boxes import anchor_front_face
+
+    b = np.array([1.0, 2.0, 10.0, 2.0, 2.0, 4.0])          # z from 8 to 12
+    np.testing.assert_allclose(anchor_front_face(b, 9.0), [1.0, 2.0, 10.5, 2.0, 2.0, 3.0])
+    np.testing.assert_allclose(anchor_front_face(b, 7.0), [1.0, 2.0, 9.5, 2.0, 2.0, 5.0])
+    for bad in (12.0, 13.0, float("nan"), float("inf")):   # not in front of the back face
+        np.testing.assert_array_equal(anchor_front_face(b, bad), b)
+
+
+class _Offset:
+    """The points' enclosing box pushed 0.5 m back: an estimator whose front face is off."""
+
+    def estimate(self, points, category):
+        b = box3d_from_points(points)
+        b[2] += 0.5
+        return b
+
+
+def test_the_loop_anchors_the_front_face_at_the_nearest_return(frames):
+    from track3d.boxes import anchor_front_face
+
+    gt2d = np.array([f[2] for f in frames])
+    out = {}
+    for anchor in (False, True):
+        t = Track3D(CAM, OracleTracker(gt2d), _Offset(), anchor_front=anchor)
+        t.init(frames[0][0], gt2d[0])
+        out[anchor] = t.update(frames[1][0], frames[1][1])
+        assert t.describe()["options"]["anchor_front"] is anchor
+    assert out[True].box3d[2] - out[True].box3d[5] / 2 == pytest.approx(
+        out[False].box3d[2] - out[False].box3d[5] / 2 - 0.5, abs=1e-6)              # front back at the surface
+    assert out[True].box3d[2] + out[True].box3d[5] / 2 == pytest.approx(
+        out[False].box3d[2] + out[False].box3d[5] / 2)                              # back face kept
+    np.testing.assert_array_equal(out[True].box2d, out[False].box2d)           # the 2D fusion uses the estimate
+    np.testing.assert_allclose(out[True].box3d, anchor_front_face(out[False].box3d,
+                                                                  out[False].box3d[2] - out[False].box3d[5] / 2 - 0.5))
+    with pytest.raises(ValueError, match="anchor_front"):
+        Track3D(CAM, OracleTracker(gt2d), _Offset(), anchor_front="yes")
+
+
+def test_the_front_anchor_follows_the_depth_sensor(tmp_path):
+    import json
+
+    from track3d.dataset import Dataset
+    from track3d.evaluation import TrackerSpec
+    from track3d.synthetic import make_synthetic_dataset
+    from track3d.tracker import front_anchor_for
+
+    assert front_anchor_for("stereo") is False
+    assert front_anchor_for("ideal") is front_anchor_for("tof") is front_anchor_for(None) is True
+    root = make_synthetic_dataset(tmp_path / "d", {"a": 4, "b": 4})
+    meta = root / "test" / "b" / "meta.json"
+    m = json.loads(meta.read_text())
+    m["depth_sensor"] = {"name": "stereo"}
+    meta.write_text(json.dumps(m))
+    a, b = Dataset(root).sequences("test")
+    spec = TrackerSpec("oracle", "baseline")
+    assert spec.build(a).anchor_front is True and spec.build(b).anchor_front is False
+    assert TrackerSpec("oracle", "baseline", anchor_front=False).build(a).anchor_front is False

@@ -15,7 +15,7 @@ import numpy as np
 __all__ = [
     "SIZE_TEMPLATES", "NUM_SIZE_CLASSES",
     "iou_2d", "iou_3d", "iou_bev", "box3d_to_bev", "center_2d", "center_error_2d", "center_error_3d",
-    "size_class_of", "encode_size", "decode_size", "box3d_from_points", "clip_box2d",
+    "size_class_of", "encode_size", "decode_size", "box3d_from_points", "clip_box2d", "anchor_front_face",
 ]
 
 _T = 1.0 / 3.0
@@ -144,6 +144,18 @@ def box3d_from_points(points: np.ndarray) -> np.ndarray:
         raise ValueError("no points to enclose")
     lo, hi = p.min(axis=0), p.max(axis=0)
     return np.concatenate([(lo + hi) / 2.0, hi - lo])
+
+
+def anchor_front_face(box3d: np.ndarray, front_z: float) -> np.ndarray:
+    """The box (6,) float64 with its front face (smallest z) moved to `front_z` and its back face
+    kept; unchanged when `front_z` is not finite or not in front of the back face."""
+    b = np.array(box3d, dtype=np.float64).reshape(6)
+    back = b[2] + b[5] / 2.0
+    if not (np.isfinite(front_z) and front_z < back):
+        return b
+    b[5] = back - front_z
+    b[2] = front_z + b[5] / 2.0
+    return b
 
 
 def clip_box2d(box2d: np.ndarray, width: int, height: int) -> np.ndarray:
