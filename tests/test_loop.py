@@ -380,56 +380,60 @@ def test_the_section_weight_follows_the_depth_sensor(tmp_path):
     assert TrackerSpec("oracle", "baseline", weight_2d=0.0).build(b).weight_2d == 0.0
 
 
-def test_anchor_front_face_hand_cases():
-    from track3d.boxes import anchor_front_face
+def test_fit_measured_faces_hand_cases():
+    from track3d.boxes import fit_measured_faces
 
-    b = np.array([1.0, 2.0, 10.0, 2.0, 2.0, 4.0])          # z from 8 to 12
-    np.testing.assert_allclose(anchor_front_face(b, 9.0), [1.0, 2.0, 10.5, 2.0, 2.0, 3.0])
-    np.testing.assert_allclose(anchor_front_face(b, 7.0), [1.0, 2.0, 9.5, 2.0, 2.0, 5.0])
-    for bad in (12.0, 13.0, float("nan"), float("inf")):   # not in front of the back face
-        np.testing.assert_array_equal(anchor_front_face(b, bad), b)
+    b = np.array([1.0, 2.0, 10.0, 2.0, 2.0, 4.0])          # x 0..2, y 1..3, z 8..12
+    bounds = np.array([[0.5, 1.5, 9.0], [1.7, 2.9, 10.0]])  # the returns: x 0.5..1.7, y 1.5..2.9, nearest 9
+    np.testing.assert_allclose(fit_measured_faces(b, bounds), [1.1, 2.2, 10.5, 1.2, 1.4, 3.0])
+    # a nearer surface than the estimate's front face: the box grows toward the camera
+    np.testing.assert_allclose(fit_measured_faces(b, np.array([[0.0, 1.0, 7.0], [2.0, 3.0, 9.0]])),
+                               [1.0, 2.0, 9.5, 2.0, 2.0, 5.0])
+    # a front behind the back face keeps the estimate's depth; a flat axis keeps its extent
+    np.testing.assert_allclose(fit_measured_faces(b, np.array([[0.5, 2.0, 12.5], [1.5, 2.0, 13.0]])),
+                               [1.0, 2.0, 10.0, 1.0, 2.0, 4.0])
+    nan = np.array([[np.nan, 1.0, 9.0], [1.0, 2.0, 10.0]])
+    np.testing.assert_array_equal(fit_measured_faces(b, nan), b)
 
 
 class _Offset:
-    """The points' enclosing box pushed 0.5 m back: an estimator whose front face is off."""
+    """The points' enclosing box pushed 0.5 m back and 10% wide: an estimator whose faces are off."""
 
     def estimate(self, points, category):
         b = box3d_from_points(points)
         b[2] += 0.5
+        b[3:5] *= 1.1
         return b
 
 
-def test_the_loop_anchors_the_front_face_at_the_nearest_return(frames):
-    from track3d.boxes import anchor_front_face
-
+def test_the_loop_takes_the_faces_it_sees_from_the_returns(frames):
     gt2d = np.array([f[2] for f in frames])
     out = {}
-    for anchor in (False, True):
-        t = Track3D(CAM, OracleTracker(gt2d), _Offset(), anchor_front=anchor)
+    for on in (False, True):
+        t = Track3D(CAM, OracleTracker(gt2d), _Offset(), measured_faces=on)
         t.init(frames[0][0], gt2d[0])
-        out[anchor] = t.update(frames[1][0], frames[1][1])
-        assert t.describe()["options"]["anchor_front"] is anchor
-    assert out[True].box3d[2] - out[True].box3d[5] / 2 == pytest.approx(
-        out[False].box3d[2] - out[False].box3d[5] / 2 - 0.5, abs=1e-6)              # front back at the surface
-    assert out[True].box3d[2] + out[True].box3d[5] / 2 == pytest.approx(
-        out[False].box3d[2] + out[False].box3d[5] / 2)                              # back face kept
+        out[on] = t.update(frames[1][0], frames[1][1])
+        assert t.describe()["options"]["measured_faces"] is on
+    a, b = out[False].box3d, out[True].box3d
+    seen = box3d_from_points(extract_frustum(frames[1][1], gt2d[1], CAM.M))   # a lone sphere: the returns
+    np.testing.assert_allclose(b[[0, 1, 3, 4]], seen[[0, 1, 3, 4]], atol=1e-4)        # outline measured
+    assert b[2] - b[5] / 2 == pytest.approx(seen[2] - seen[5] / 2, abs=1e-4)         # front at the surface
+    assert b[2] + b[5] / 2 == pytest.approx(a[2] + a[5] / 2)                           # back face the estimate's
     np.testing.assert_array_equal(out[True].box2d, out[False].box2d)           # the 2D fusion uses the estimate
-    np.testing.assert_allclose(out[True].box3d, anchor_front_face(out[False].box3d,
-                                                                  out[False].box3d[2] - out[False].box3d[5] / 2 - 0.5))
-    with pytest.raises(ValueError, match="anchor_front"):
-        Track3D(CAM, OracleTracker(gt2d), _Offset(), anchor_front="yes")
+    with pytest.raises(ValueError, match="measured_faces"):
+        Track3D(CAM, OracleTracker(gt2d), _Offset(), measured_faces="yes")
 
 
-def test_the_front_anchor_follows_the_depth_sensor(tmp_path):
+def test_measured_faces_follow_the_depth_sensor(tmp_path):
     import json
 
     from track3d.dataset import Dataset
     from track3d.evaluation import TrackerSpec
     from track3d.synthetic import make_synthetic_dataset
-    from track3d.tracker import front_anchor_for
+    from track3d.tracker import measured_faces_for
 
-    assert front_anchor_for("stereo") is False
-    assert front_anchor_for("ideal") is front_anchor_for("tof") is front_anchor_for(None) is True
+    assert measured_faces_for("stereo") is False
+    assert measured_faces_for("ideal") is measured_faces_for("tof") is measured_faces_for(None) is True
     root = make_synthetic_dataset(tmp_path / "d", {"a": 4, "b": 4})
     meta = root / "test" / "b" / "meta.json"
     m = json.loads(meta.read_text())
@@ -437,5 +441,5 @@ def test_the_front_anchor_follows_the_depth_sensor(tmp_path):
     meta.write_text(json.dumps(m))
     a, b = Dataset(root).sequences("test")
     spec = TrackerSpec("oracle", "baseline")
-    assert spec.build(a).anchor_front is True and spec.build(b).anchor_front is False
-    assert TrackerSpec("oracle", "baseline", anchor_front=False).build(a).anchor_front is False
+    assert spec.build(a).measured_faces is True and spec.build(b).measured_faces is False
+    assert TrackerSpec("oracle", "baseline", measured_faces=False).build(a).measured_faces is False

@@ -119,7 +119,7 @@ def test_the_evaluation_tells_the_loop_its_sensors_range(tmp_path):
     assert TrackerSpec("oracle", "baseline").build(a).depth_range_m is None
 
 
-def test_track_cli_uses_the_recorded_range_and_the_front_anchor_unless_told_not_to(tmp_path, capsys):
+def test_track_cli_uses_the_recorded_range_and_the_measured_faces_unless_told_not_to(tmp_path, capsys):
     from track3d.cli import main
     from track3d.evaluation.results import read_run_record
     from track3d.synthetic import make_synthetic_dataset
@@ -134,8 +134,8 @@ def test_track_cli_uses_the_recorded_range_and_the_front_anchor_unless_told_not_
     assert main(["track", "--data", str(root), "--tracker", "oracle", "--results", str(res), "--quiet",
                  "--no-depth-range", "--name", "norange"]) == 0
     assert main(["track", "--data", str(root), "--tracker", "oracle", "--results", str(res), "--quiet",
-                 "--no-front-anchor", "--name", "nofront"]) == 0
+                 "--no-measured-faces", "--name", "nofront"]) == 0
     rec = read_run_record(res, "test", "oracle+baseline")
-    assert rec["track3d"]["options"]["depth_range_m"] == 30.0 and rec["track3d"]["options"]["anchor_front"] is True
+    assert rec["track3d"]["options"]["depth_range_m"] == 30.0 and rec["track3d"]["options"]["measured_faces"] is True
     assert read_run_record(res, "test", "norange")["track3d"]["options"]["depth_range_m"] is None
-    assert read_run_record(res, "test", "nofront")["track3d"]["options"]["anchor_front"] is False
+    assert read_run_record(res, "test", "nofront")["track3d"]["options"]["measured_faces"] is False

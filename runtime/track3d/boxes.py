@@ -15,7 +15,7 @@ import numpy as np
 __all__ = [
     "SIZE_TEMPLATES", "NUM_SIZE_CLASSES",
     "iou_2d", "iou_3d", "iou_bev", "box3d_to_bev", "center_2d", "center_error_2d", "center_error_3d",
-    "size_class_of", "encode_size", "decode_size", "box3d_from_points", "clip_box2d", "anchor_front_face",
+    "size_class_of", "encode_size", "decode_size", "box3d_from_points", "clip_box2d", "fit_measured_faces",
 ]
 
 _T = 1.0 / 3.0
@@ -146,15 +146,23 @@ def box3d_from_points(points: np.ndarray) -> np.ndarray:
     return np.concatenate([(lo + hi) / 2.0, hi - lo])
 
 
-def anchor_front_face(box3d: np.ndarray, front_z: float) -> np.ndarray:
-    """The box (6,) float64 with its front face (smallest z) moved to `front_z` and its back face
-    kept; unchanged when `front_z` is not finite or not in front of the back face."""
+def fit_measured_faces(box3d: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """The box (6,) float64 whose faces a depth sensor sees come from the returns and whose hidden
+    back face stays the estimate's: x and y extent = the returns' [min, max] (a lone body's
+    outline), front face = the nearest return, back face = box3d's. bounds (2, 3) [min; max] of
+    the returns. An axis whose measured extent is under 1 mm, or a front not in front of the
+    back face, keeps box3d's; a bound that is not finite changes nothing."""
     b = np.array(box3d, dtype=np.float64).reshape(6)
-    back = b[2] + b[5] / 2.0
-    if not (np.isfinite(front_z) and front_z < back):
+    lo, hi = (np.asarray(v, dtype=np.float64).reshape(3) for v in bounds)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         return b
-    b[5] = back - front_z
-    b[2] = front_z + b[5] / 2.0
+    for k in (0, 1):
+        if hi[k] - lo[k] >= 1e-3:
+            b[k], b[3 + k] = (lo[k] + hi[k]) / 2.0, hi[k] - lo[k]
+    back = b[2] + b[5] / 2.0
+    if lo[2] < back:
+        b[5] = back - lo[2]
+        b[2] = lo[2] + b[5] / 2.0
     return b
 
 

@@ -90,9 +90,9 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--weight-2d", type=bounded(float, 0, high=1), default=None,
                    help="weight of the 2D box in the 3D box's cross-section (the reverse fusion; default: by the "
                         "depth sensor, 0, 0.75 for stereo; track3d.tracker.section_weight_for)")
-    t.add_argument("--no-front-anchor", action="store_true",
-                   help="report the estimator's box as it is (default: its front face at the nearest return, except for "
-                        "stereo depth; track3d.tracker.front_anchor_for)")
+    t.add_argument("--no-measured-faces", action="store_true",
+                   help="report the estimator's box as it is (default: the faces the depth sensor sees, x / y extent "
+                        "and front, from the returns, except for stereo depth; track3d.tracker.measured_faces_for)")
     t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
                    help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
                         "itself; default: by the depth sensor, 0.3, 0 for stereo; track3d.tracker.frustum_margin_for)")
@@ -198,16 +198,16 @@ def _cmd_track(a) -> int:
         topts = {**arith, **topts}
     if a.estimator == "a3boxnet":
         eopts = {**arith, **eopts}
-    from .tracker import front_anchor_for, frustum_margin_for, fusion_weight_for, section_weight_for
+    from .tracker import measured_faces_for, frustum_margin_for, fusion_weight_for, section_weight_for
 
     # stereo computed here from the image pairs: the stereo sensor's margin; else the dataset's
     # sensor decides per sequence (None)
     margin = frustum_margin_for("stereo") if a.frustum_margin is None and a.depth == "stereo" else a.frustum_margin
     weight = fusion_weight_for("stereo") if a.weight_3d is None and a.depth == "stereo" else a.weight_3d
     weight_2d = section_weight_for("stereo") if a.weight_2d is None and a.depth == "stereo" else a.weight_2d
-    anchor = False if a.no_front_anchor else (front_anchor_for("stereo") if a.depth == "stereo" else None)
+    anchor = False if a.no_measured_faces else (measured_faces_for("stereo") if a.depth == "stereo" else None)
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
-                       weight_2d=weight_2d, anchor_front=anchor,
+                       weight_2d=weight_2d, measured_faces=anchor,
                        frustum_margin=margin,
                        # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's
                        depth_range=not a.no_depth_range and a.depth != "stereo",

@@ -40,13 +40,13 @@ from .camera import Camera
 from .estimators import BoxEstimator, create_estimator
 from .frames import MAX_COORD_M, check_category, check_image, check_init_box
 from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
-from .boxes import anchor_front_face
+from .boxes import fit_measured_faces
 from .fusion import WEIGHT_2D, WEIGHT_3D, fuse, fuse_section
 from .range_cut import box_from_view, is_range_cut
 from .trackers2d import Tracker2D, create_tracker
 
 __all__ = ["Track3D", "TrackResult", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES", "MIN_POINTS",
-           "FRUSTUM_MARGIN", "frustum_margin_for", "fusion_weight_for", "section_weight_for", "front_anchor_for"]
+           "FRUSTUM_MARGIN", "frustum_margin_for", "fusion_weight_for", "section_weight_for", "measured_faces_for"]
 
 TRACKING, NO_POINTS, LOST = "tracking", "no_points", "lost"
 STATUSES = (TRACKING, NO_POINTS, LOST)
@@ -113,21 +113,26 @@ def section_weight_for(depth_sensor: str | None) -> float:
     return SENSOR_SECTION_WEIGHTS.get(depth_sensor or "", WEIGHT_2D)
 
 
-# The front face of the reported box at the nearest return (the frustum's smallest z, from the
-# frustum pass: no extra work), its back face where the estimator put it. The visible surface
-# is measured to a few centimetres, while A3BoxNet's front face is off by ~0.1-0.2 m; the hidden
-# back is the estimator's guess either way. Measured one pass on held-out train-like sequences,
-# AO_3d without / with: EdgeTrack, ideal depth seeds 3 / 4 / 7 0.821 -> 0.839, 0.817 -> 0.829,
-# 0.823 -> 0.835; their held-out-shape sequences 0.789 -> 0.802, 0.782 -> 0.827, 0.837 -> 0.855;
-# flash-LiDAR 0.803 -> 0.817; ToF seeds 3 / 5 0.703 -> 0.710, 0.728 -> 0.731; NanoTrack v2 (ideal
-# seed 3) 0.821 -> 0.838; oracle 2D boxes 0.825 -> 0.843. Not for block-matching stereo, whose
-# nearest points are its noise (0.688 -> 0.677).
-SENSOR_FRONT_ANCHORS = {"stereo": False}
+# The faces of the reported box that the depth sensor sees come from the returns (the frustum
+# pass's [min; max], no extra work): x and y extent from the returns' outline, the front face at
+# the nearest return; only the hidden back face is the estimator's (boxes.fit_measured_faces).
+# A lone body's outline and visible surface are measured to centimetres, while A3BoxNet's faces
+# are off by ~0.1-0.2 m; the hidden depth is its guess either way. The 2D fusion keeps the
+# estimator's box, so a 2D box cut too tight does not feed back. Measured one pass on held-out
+# train-like sequences, AO_3d estimator's box / front face measured / all five faces measured,
+# EdgeTrack: ideal depth seeds 3 / 4 / 7 0.821 / 0.839 / 0.878, 0.817 / 0.829 / 0.862, 0.823 /
+# 0.835 / 0.871; their held-out-shape sequences 0.789 / 0.802 / 0.852, 0.782 / 0.827 / 0.822,
+# 0.837 / 0.855 / 0.883; flash-LiDAR 0.803 / 0.817 / 0.853; ToF seeds 3 / 5 0.703 / 0.710 / 0.715,
+# 0.728 / 0.731 / 0.731; NanoTrack v2 (ideal seed 3) 0.821 / 0.838 / 0.876. Not for
+# block-matching stereo, whose nearest and outermost points are its noise and its smearing
+# (0.688 / 0.677 / 0.685). It takes the frustum to hold the target alone (a body against space):
+# anything else inside it (a second body, a sensor artefact) becomes a face.
+SENSOR_MEASURED_FACES = {"stereo": False}
 
 
-def front_anchor_for(depth_sensor: str | None) -> bool:
-    """Whether the reported box's front face sits at the nearest return for this sensor."""
-    return SENSOR_FRONT_ANCHORS.get(depth_sensor or "", True)
+def measured_faces_for(depth_sensor: str | None) -> bool:
+    """Whether the reported box's visible faces come from the returns for this sensor."""
+    return SENSOR_MEASURED_FACES.get(depth_sensor or "", True)
 STATE_VERSION = 1
 
 
@@ -181,7 +186,7 @@ class Track3D:
                  weight_3d: float = WEIGHT_3D, z_range: tuple[float, float] = (Z_MIN, Z_MAX),
                  min_points: int = MIN_POINTS, lost_after: int = LOST_AFTER, min_score: float = 0.0,
                  frustum_margin: float = FRUSTUM_MARGIN, depth_range_m: float | None = None,
-                 weight_2d: float = WEIGHT_2D, anchor_front: bool = True):
+                 weight_2d: float = WEIGHT_2D, measured_faces: bool = True):
         if not isinstance(camera, Camera):
             raise TypeError(f"camera must be a track3d.Camera, got {type(camera).__name__}")
         if not 0.0 <= float(weight_3d) <= 1.0:
@@ -197,9 +202,9 @@ class Track3D:
         if not 0.0 <= float(weight_2d) <= 1.0:
             raise ValueError(f"weight_2d must be in [0, 1], got {weight_2d}")
         self.weight_2d = float(weight_2d)
-        if anchor_front not in (True, False):
-            raise ValueError(f"anchor_front must be True or False, got {anchor_front!r}")
-        self.anchor_front = bool(anchor_front)
+        if measured_faces not in (True, False):
+            raise ValueError(f"measured_faces must be True or False, got {measured_faces!r}")
+        self.measured_faces = bool(measured_faces)
         if depth_range_m is not None and not (np.isfinite(float(depth_range_m)) and float(depth_range_m) > 0.0):
             raise ValueError(f"depth_range_m must be a positive number of metres or None (unlimited), got {depth_range_m}")
         # the depth sensor's maximum range: a body reaching past it is boxed from the image (range_cut)
@@ -245,7 +250,7 @@ class Track3D:
                tracker_options: dict | None = None, estimator_options: dict | None = None,
                **options) -> "Track3D":
         """Build from registry names; `options` go to Track3D (fusion, weight_3d, z_range,
-        min_points, lost_after, min_score, frustum_margin, depth_range_m, weight_2d, anchor_front)."""
+        min_points, lost_after, min_score, frustum_margin, depth_range_m, weight_2d, measured_faces)."""
         t = cls(camera, create_tracker(tracker, **(tracker_options or {})),
                 create_estimator(estimator, **(estimator_options or {})), **options)
         t.tracker_name, t.estimator_name = str(tracker).lower(), str(estimator).lower()
@@ -297,9 +302,9 @@ class Track3D:
 
     def _reported_box(self, est: np.ndarray, bounds: np.ndarray, box2d: np.ndarray) -> np.ndarray:
         """The reported 3D box: `est`, or the box from the image when the body reaches past the
-        depth sensor's range (track3d.range_cut), else `est` with its front face at the nearest
-        return (`anchor_front`, boxes.anchor_front_face) and its cross-section fused with the 2D
-        box by `weight_2d` (fusion.fuse_section). The 2D fusion keeps `est`: the returns' cap, inside
+        depth sensor's range (track3d.range_cut), else `est` with the faces the sensor sees taken
+        from the returns (`measured_faces`, boxes.fit_measured_faces) and its cross-section fused
+        with the 2D box by `weight_2d` (fusion.fuse_section). The 2D fusion keeps `est`: the returns' cap, inside
         the body's outline, holds a 2D box that would otherwise grow with nothing to check it
         (measured one pass, EdgeTrack, held-out ToF sequences, AO_3d without the rule / with it
         fusing the image box / fusing `est`: seed 3 0.651 / 0.694 / 0.701, seed 5 0.674 / 0.702 /
@@ -310,8 +315,8 @@ class Track3D:
             b = box_from_view(box2d, self.camera, float(bounds[0][2]))
             if b is not None:
                 return b
-        if self.anchor_front:
-            est = anchor_front_face(est, float(bounds[0][2]))
+        if self.measured_faces:
+            est = fit_measured_faces(est, bounds)
         return fuse_section(est, box2d, self.camera, self.weight_2d) if self.weight_2d > 0.0 else est
 
     def init(self, image: np.ndarray, box2d: np.ndarray, category: int = -1,
@@ -504,7 +509,7 @@ class Track3D:
             "estimator_options": _plain_options(self.estimator_options),
             "options": {"fusion": self.fusion, "weight_3d": self.weight_3d, "z_range": list(self.z_range),
                         "frustum_margin": self.frustum_margin, "depth_range_m": self.depth_range_m,
-                        "weight_2d": self.weight_2d, "anchor_front": self.anchor_front,
+                        "weight_2d": self.weight_2d, "measured_faces": self.measured_faces,
                         "min_points": self.min_points, "lost_after": self.lost_after, "min_score": self.min_score},
             "models": models,
         }

@@ -31,7 +31,7 @@ from ..jsonable import write_json
 from ..dataset import RIGHT_DIR, Dataset, DatasetError, Sequence, read_rgb
 from ..machine import cpu_name
 from ..progress import Progress
-from ..tracker import LOST, STAGES, Track3D, front_anchor_for, frustum_margin_for, fusion_weight_for, section_weight_for
+from ..tracker import LOST, STAGES, Track3D, measured_faces_for, frustum_margin_for, fusion_weight_for, section_weight_for
 from .draw import OverlayWriter, draw_overlay
 from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, LostScore, SequenceScore, average_scores,
                       score_lost, score_sequence)
@@ -56,7 +56,7 @@ class TrackerSpec:
     fusion: bool = True
     weight_3d: float | None = None           # None: by the sequence's depth sensor (fusion_weight_for)
     weight_2d: float | None = None           # None: by the sequence's depth sensor (section_weight_for)
-    anchor_front: bool | None = None         # None: by the sequence's depth sensor (front_anchor_for)
+    measured_faces: bool | None = None         # None: by the sequence's depth sensor (measured_faces_for)
     frustum_margin: float | None = None      # None: by the sequence's depth sensor (frustum_margin_for)
     depth_range: bool = True                 # the sequence's depth sensor range (Sequence.depth_range_m) to Track3D
     threads: int = 1
@@ -95,8 +95,8 @@ class TrackerSpec:
                               depth_range_m=seq.depth_range_m if self.depth_range else None,
                               weight_2d=(section_weight_for(seq.depth_sensor) if self.weight_2d is None
                                          else self.weight_2d),
-                              anchor_front=(front_anchor_for(seq.depth_sensor) if self.anchor_front is None
-                                            else self.anchor_front))
+                              measured_faces=(measured_faces_for(seq.depth_sensor) if self.measured_faces is None
+                                            else self.measured_faces))
 
     def unavailable(self, seq: Sequence) -> str | None:
         """None when this configuration builds here, else why not (a missing model or module):
