@@ -359,22 +359,28 @@ def test_the_loop_reports_the_section_fused_box_and_fuses_2d_with_the_estimate(f
             Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"), weight_2d=bad)
 
 
-def test_the_section_weight_follows_the_depth_sensor(tmp_path):
+def _plain_and_stereo(tmp_path):
+    """Two sequences of a synthetic dataset, the second one's depth recorded as stereo."""
     import json
 
     from track3d.dataset import Dataset
-    from track3d.evaluation import TrackerSpec
     from track3d.synthetic import make_synthetic_dataset
-    from track3d.tracker import section_weight_for
 
-    assert section_weight_for("stereo") == 0.75
-    assert section_weight_for("ideal") == section_weight_for("tof") == section_weight_for(None) == 0.0
     root = make_synthetic_dataset(tmp_path / "d", {"a": 4, "b": 4})
     meta = root / "test" / "b" / "meta.json"
     m = json.loads(meta.read_text())
     m["depth_sensor"] = {"name": "stereo"}
     meta.write_text(json.dumps(m))
-    a, b = Dataset(root).sequences("test")
+    return Dataset(root).sequences("test")
+
+
+def test_the_section_weight_follows_the_depth_sensor(tmp_path):
+    from track3d.evaluation import TrackerSpec
+    from track3d.tracker import section_weight_for
+
+    assert section_weight_for("stereo") == 0.75
+    assert section_weight_for("ideal") == section_weight_for("tof") == section_weight_for(None) == 0.0
+    a, b = _plain_and_stereo(tmp_path)
     spec = TrackerSpec("oracle", "baseline")
     assert spec.build(a).weight_2d == 0.0 and spec.build(b).weight_2d == 0.75
     assert TrackerSpec("oracle", "baseline", weight_2d=0.0).build(b).weight_2d == 0.0
@@ -425,21 +431,12 @@ def test_the_loop_takes_the_faces_it_sees_from_the_returns(frames):
 
 
 def test_measured_faces_follow_the_depth_sensor(tmp_path):
-    import json
-
-    from track3d.dataset import Dataset
     from track3d.evaluation import TrackerSpec
-    from track3d.synthetic import make_synthetic_dataset
     from track3d.tracker import measured_faces_for
 
     assert measured_faces_for("stereo") is False
     assert measured_faces_for("ideal") is measured_faces_for("tof") is measured_faces_for(None) is True
-    root = make_synthetic_dataset(tmp_path / "d", {"a": 4, "b": 4})
-    meta = root / "test" / "b" / "meta.json"
-    m = json.loads(meta.read_text())
-    m["depth_sensor"] = {"name": "stereo"}
-    meta.write_text(json.dumps(m))
-    a, b = Dataset(root).sequences("test")
+    a, b = _plain_and_stereo(tmp_path)
     spec = TrackerSpec("oracle", "baseline")
     assert spec.build(a).measured_faces is True and spec.build(b).measured_faces is False
     assert TrackerSpec("oracle", "baseline", measured_faces=False).build(a).measured_faces is False
