@@ -400,10 +400,18 @@ def test_fit_measured_faces_hand_cases():
                                [1.0, 2.0, 10.0, 1.0, 2.0, 4.0])
     nan = np.array([[np.nan, 1.0, 9.0], [1.0, 2.0, 10.0]])
     np.testing.assert_array_equal(fit_measured_faces(b, nan), b)
+    # open sides (x min, y min, x max, y max): the body may go on past the view there, so that
+    # face is the farther of the two, and so is the front
+    np.testing.assert_allclose(fit_measured_faces(b, bounds, (True, False, False, False)),
+                               [0.85, 2.2, 10.0, 1.7, 1.4, 4.0])     # x 0..1.7, front the estimate's 8
+    np.testing.assert_allclose(fit_measured_faces(b, bounds, (False, False, False, True)),
+                               [1.1, 2.25, 10.0, 1.2, 1.5, 4.0])     # y 1.5..3
 
 
 class _Offset:
-    """The points' enclosing box pushed 0.5 m back and 10% wide: an estimator whose faces are off."""
+    """The points' enclosing box pushed 0.5 m back and 10% wide: an amodal estimator whose faces are off."""
+
+    amodal = True
 
     def estimate(self, points, category):
         b = box3d_from_points(points)
@@ -428,6 +436,15 @@ def test_the_loop_takes_the_faces_it_sees_from_the_returns(frames):
     np.testing.assert_array_equal(out[True].box2d, out[False].box2d)           # the 2D fusion uses the estimate
     with pytest.raises(ValueError, match="measured_faces"):
         Track3D(CAM, OracleTracker(gt2d), _Offset(), measured_faces="yes")
+    # an estimator that does not say its box is amodal is reported as it is (a plug-in's own box)
+    class Plain(_Offset):
+        amodal = False
+
+    t = Track3D(CAM, OracleTracker(gt2d), Plain())
+    t.init(frames[0][0], gt2d[0])
+    np.testing.assert_allclose(t.update(frames[1][0], frames[1][1]).box3d, out[False].box3d)
+    from track3d.boxnet import A3BoxNetEstimator
+    assert A3BoxNetEstimator.amodal is True
 
 
 def test_measured_faces_follow_the_depth_sensor(tmp_path):
@@ -440,3 +457,27 @@ def test_measured_faces_follow_the_depth_sensor(tmp_path):
     spec = TrackerSpec("oracle", "baseline")
     assert spec.build(a).measured_faces is True and spec.build(b).measured_faces is False
     assert TrackerSpec("oracle", "baseline", measured_faces=False).build(a).measured_faces is False
+
+
+def test_a_body_larger_than_the_view_keeps_the_estimate_past_the_border():
+    """A sphere cut by the bottom of the image: its returns stop at the border, the estimate
+    (here the truth) goes on; the measured faces keep the estimate's side there."""
+    from track3d.synthetic import render_sphere
+
+    img, depth, b2, b3 = render_sphere(CAM, (0.0, 3.0, 8.0), 1.5)     # reaches past the bottom
+    pts = CAM.backproject_depth(depth)
+    assert b2[1] + b2[3] >= CAM.height - 0.5
+
+    class Truth:
+        amodal = True
+
+        def estimate(self, points, category):
+            return b3.copy()
+
+    t = Track3D(CAM, OracleTracker(np.array([b2, b2])), Truth())
+    t.init(img, b2)
+    r = t.update(img, pts)
+    seen_hi_y = float(pts[:, 1].max())
+    assert seen_hi_y < b3[1] + b3[4] / 2 - 0.2                           # the returns stop short
+    assert r.box3d[1] + r.box3d[4] / 2 == pytest.approx(b3[1] + b3[4] / 2)  # the estimate's side kept
+    assert iou_3d(r.box3d, b3) > 0.95

@@ -146,23 +146,32 @@ def box3d_from_points(points: np.ndarray) -> np.ndarray:
     return np.concatenate([(lo + hi) / 2.0, hi - lo])
 
 
-def fit_measured_faces(box3d: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+def fit_measured_faces(box3d: np.ndarray, bounds: np.ndarray,
+                       open_sides: tuple[bool, bool, bool, bool] = (False, False, False, False)) -> np.ndarray:
     """The box (6,) float64 whose faces a depth sensor sees come from the returns and whose hidden
     back face stays the estimate's: x and y extent = the returns' [min, max] (a lone body's
     outline), front face = the nearest return, back face = box3d's. bounds (2, 3) [min; max] of
-    the returns. An axis whose measured extent is under 1 mm, or a front not in front of the
-    back face, keeps box3d's; a bound that is not finite changes nothing."""
+    the returns. open_sides (x min, y min, x max, y max): sides where the body may go on past
+    what was seen (its 2D box at the image border); there the face is the farther of the
+    returns' and the estimate's, and so is the front (the nearest part may be out of view).
+    An axis whose measured extent is under 1 mm, or a front not in front of the back face,
+    keeps box3d's; a bound that is not finite changes nothing."""
     b = np.array(box3d, dtype=np.float64).reshape(6)
-    lo, hi = (np.asarray(v, dtype=np.float64).reshape(3) for v in bounds)
+    lo, hi = (np.asarray(v, dtype=np.float64).reshape(3).copy() for v in bounds)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         return b
+    elo, ehi = b[:3] - b[3:] / 2.0, b[:3] + b[3:] / 2.0
     for k in (0, 1):
-        if hi[k] - lo[k] >= 1e-3:
-            b[k], b[3 + k] = (lo[k] + hi[k]) / 2.0, hi[k] - lo[k]
-    back = b[2] + b[5] / 2.0
-    if lo[2] < back:
-        b[5] = back - lo[2]
-        b[2] = lo[2] + b[5] / 2.0
+        if hi[k] - lo[k] < 1e-3:
+            continue
+        a0 = min(lo[k], elo[k]) if open_sides[k] else lo[k]
+        a1 = max(hi[k], ehi[k]) if open_sides[2 + k] else hi[k]
+        b[k], b[3 + k] = (a0 + a1) / 2.0, a1 - a0
+    front = min(lo[2], elo[2]) if any(open_sides) else lo[2]
+    back = ehi[2]
+    if front < back:
+        b[5] = back - front
+        b[2] = front + b[5] / 2.0
     return b
 
 

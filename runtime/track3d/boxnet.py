@@ -69,6 +69,8 @@ class A3BoxNetEstimator:
     name = KIND
     # estimate() takes the loop's frustum bounds (Track3D passes them: no second pass over the points)
     takes_bounds = True
+    # a guess of the whole body: the loop keeps its hidden back face and measures the rest
+    amodal = True
 
     def __init__(self, model: str | Path | None = None, threads: int = 1, num_points: int | None = None,
                  seed: int = 0, precision: str = "fp32", engine: str = "onnxruntime"):

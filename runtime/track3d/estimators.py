@@ -4,7 +4,11 @@
 
 An estimator with the class attribute ``takes_bounds = True`` also accepts
 ``estimate(points, category, bounds=)``, bounds the (2, 3) [min; max] of the points, which the
-loop's frustum pass has already computed (A3BoxNet's "frustum" coding reads them).
+loop's frustum pass has already computed (A3BoxNet's "frustum" coding reads them). One with
+``amodal = True`` answers with a guess of the whole body, seen and hidden: the loop then takes
+the faces the sensor sees from the returns and keeps only its hidden back face
+(``Track3D(measured_faces=True)``, track3d.boxes.fit_measured_faces); other estimators' boxes
+are reported as they are.
 
 Built-in names: ``"baseline"`` (the paper's 3D tracking baseline, section V-A: the minimum
 enclosing axis-aligned box of the frustum points, ``track3d.boxes.box3d_from_points``) and
