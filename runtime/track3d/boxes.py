@@ -157,7 +157,7 @@ def fit_measured_faces(box3d: np.ndarray, bounds: np.ndarray,
     An axis whose measured extent is under 1 mm, or a front not in front of the back face,
     keeps box3d's; a bound that is not finite changes nothing."""
     b = np.array(box3d, dtype=np.float64).reshape(6)
-    lo, hi = (np.asarray(v, dtype=np.float64).reshape(3).copy() for v in bounds)
+    lo, hi = (np.asarray(v, dtype=np.float64).reshape(3) for v in bounds)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         return b
     elo, ehi = b[:3] - b[3:] / 2.0, b[:3] + b[3:] / 2.0

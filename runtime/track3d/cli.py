@@ -198,16 +198,17 @@ def _cmd_track(a) -> int:
         topts = {**arith, **topts}
     if a.estimator == "a3boxnet":
         eopts = {**arith, **eopts}
-    from .tracker import measured_faces_for, frustum_margin_for, fusion_weight_for, section_weight_for
+    from .tracker import sensor_options
 
-    # stereo computed here from the image pairs: the stereo sensor's margin; else the dataset's
+    # stereo computed here from the image pairs: the stereo sensor's options; else the dataset's
     # sensor decides per sequence (None)
-    margin = frustum_margin_for("stereo") if a.frustum_margin is None and a.depth == "stereo" else a.frustum_margin
-    weight = fusion_weight_for("stereo") if a.weight_3d is None and a.depth == "stereo" else a.weight_3d
-    weight_2d = section_weight_for("stereo") if a.weight_2d is None and a.depth == "stereo" else a.weight_2d
-    anchor = False if a.no_measured_faces else (measured_faces_for("stereo") if a.depth == "stereo" else None)
+    stereo = sensor_options("stereo") if a.depth == "stereo" else {}
+    margin = a.frustum_margin if a.frustum_margin is not None else stereo.get("frustum_margin")
+    weight = a.weight_3d if a.weight_3d is not None else stereo.get("weight_3d")
+    weight_2d = a.weight_2d if a.weight_2d is not None else stereo.get("weight_2d")
+    faces = False if a.no_measured_faces else stereo.get("measured_faces")
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
-                       weight_2d=weight_2d, measured_faces=anchor,
+                       weight_2d=weight_2d, measured_faces=faces,
                        frustum_margin=margin,
                        # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's
                        depth_range=not a.no_depth_range and a.depth != "stereo",

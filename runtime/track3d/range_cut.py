@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from .camera import Camera
+from .fusion import box2d_section
 
 __all__ = ["is_range_cut", "box_from_view", "lateral_coverage", "RANGE_REACH", "MIN_COVERAGE", "DEPTH_RATIO"]
 
@@ -34,11 +35,6 @@ RANGE_REACH = 0.02
 # rule, 0.714 at 0.8, 0.718 at 0.9; another seed, data/engine-calib-tof5: 0.683, 0.752, 0.758).
 MIN_COVERAGE = 0.9
 DEPTH_RATIO = 1.0    # size z / mean(size x, size y) of a cut body
-
-
-def _centre_ray(box2d: np.ndarray, camera: Camera) -> np.ndarray:
-    x, y, w, h = box2d
-    return np.array([(x + w / 2.0 - camera.cx) / camera.fx, (y + h / 2.0 - camera.cy) / camera.fy, 1.0])
 
 
 def lateral_coverage(bounds: np.ndarray, box2d: np.ndarray, camera: Camera) -> float:
@@ -56,7 +52,8 @@ def is_range_cut(bounds: np.ndarray, box2d: np.ndarray, camera: Camera, range_m:
     unlimited sensor, never cut) and cover less than `min_coverage` of the 2D box."""
     if range_m is None:
         return False
-    z_range = float(range_m) / float(np.linalg.norm(_centre_ray(box2d, camera)))
+    cx, cy = box2d_section(box2d, camera, 1.0)[:2]          # the centre ray at z = 1
+    z_range = float(range_m) / float(np.sqrt(cx * cx + cy * cy + 1.0))
     if float(np.asarray(bounds)[1, 2]) < z_range * (1.0 - reach):
         return False
     return lateral_coverage(bounds, box2d, camera) < min_coverage
@@ -72,5 +69,5 @@ def box_from_view(box2d: np.ndarray, camera: Camera, front_z: float,
     if not (front_z > 0.0 and 0.0 <= a < 2.0):
         return None
     zc = front_z / (1.0 - a / 2.0)
-    ray = _centre_ray(np.array([x, y, w, h]), camera)
-    return np.array([ray[0] * zc, ray[1] * zc, zc, w / camera.fx * zc, h / camera.fy * zc, a * zc])
+    cx, cy, sx, sy = box2d_section(box2d, camera, zc)
+    return np.array([cx, cy, zc, sx, sy, a * zc])

@@ -46,7 +46,8 @@ from .range_cut import box_from_view, is_range_cut
 from .trackers2d import Tracker2D, create_tracker
 
 __all__ = ["Track3D", "TrackResult", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES", "MIN_POINTS",
-           "FRUSTUM_MARGIN", "frustum_margin_for", "fusion_weight_for", "section_weight_for", "measured_faces_for"]
+           "FRUSTUM_MARGIN", "frustum_margin_for", "fusion_weight_for", "section_weight_for", "measured_faces_for",
+           "sensor_options"]
 
 TRACKING, NO_POINTS, LOST = "tracking", "no_points", "lost"
 STATUSES = (TRACKING, NO_POINTS, LOST)
@@ -138,6 +139,13 @@ SENSOR_MEASURED_FACES = {"stereo": False}
 def measured_faces_for(depth_sensor: str | None) -> bool:
     """Whether the reported box's visible faces come from the returns for this sensor."""
     return SENSOR_MEASURED_FACES.get(depth_sensor or "", True)
+
+
+def sensor_options(depth_sensor: str | None) -> dict:
+    """Track3D's options chosen by the depth sensor (None: unknown): frustum_margin, weight_3d,
+    weight_2d, measured_faces (the four tables above)."""
+    return {"frustum_margin": frustum_margin_for(depth_sensor), "weight_3d": fusion_weight_for(depth_sensor),
+            "weight_2d": section_weight_for(depth_sensor), "measured_faces": measured_faces_for(depth_sensor)}
 STATE_VERSION = 1
 
 
@@ -311,8 +319,8 @@ class Track3D:
         """The reported 3D box: `est`, or the box from the image when the body reaches past the
         depth sensor's range (track3d.range_cut), else `est` with the faces the sensor sees taken
         from the returns (`measured_faces`, boxes.fit_measured_faces) and its cross-section fused
-        with the 2D box by `weight_2d` (fusion.fuse_section). The 2D fusion keeps `est`: the returns' cap, inside
-        the body's outline, holds a 2D box that would otherwise grow with nothing to check it
+        with the 2D box by `weight_2d` (fusion.fuse_section). The 2D fusion keeps `est`: the
+        returns' cap, inside the body's outline, holds a 2D box that would otherwise grow with nothing to check it
         (measured one pass, EdgeTrack, held-out ToF sequences, AO_3d without the rule / with it
         fusing the image box / fusing `est`: seed 3 0.651 / 0.694 / 0.701, seed 5 0.674 / 0.702 /
         0.710; seed 5 sequence 0004 0.19 / 0.08 / 0.33)."""

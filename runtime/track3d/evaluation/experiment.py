@@ -31,7 +31,7 @@ from ..jsonable import write_json
 from ..dataset import RIGHT_DIR, Dataset, DatasetError, Sequence, read_rgb
 from ..machine import cpu_name
 from ..progress import Progress
-from ..tracker import LOST, STAGES, Track3D, measured_faces_for, frustum_margin_for, fusion_weight_for, section_weight_for
+from ..tracker import LOST, STAGES, Track3D, sensor_options
 from .draw import OverlayWriter, draw_overlay
 from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, LostScore, SequenceScore, average_scores,
                       score_lost, score_sequence)
@@ -88,15 +88,14 @@ class TrackerSpec:
         return Track3D.create(seq.camera, self.tracker, self.estimator, tracker_options=topts,
                               estimator_options=self._options(self.estimator, self.estimator_options),
                               fusion=self.fusion,
-                              weight_3d=(fusion_weight_for(seq.depth_sensor) if self.weight_3d is None
-                                         else self.weight_3d),
-                              frustum_margin=(frustum_margin_for(seq.depth_sensor) if self.frustum_margin is None
-                                              else self.frustum_margin),
                               depth_range_m=seq.depth_range_m if self.depth_range else None,
-                              weight_2d=(section_weight_for(seq.depth_sensor) if self.weight_2d is None
-                                         else self.weight_2d),
-                              measured_faces=(measured_faces_for(seq.depth_sensor) if self.measured_faces is None
-                                            else self.measured_faces))
+                              **self.sensor_options(seq.depth_sensor))
+
+    def sensor_options(self, depth_sensor: str | None) -> dict:
+        """The sensor's defaults (track3d.tracker.sensor_options) with this spec's explicit values."""
+        opts = sensor_options(depth_sensor)
+        opts.update({k: getattr(self, k) for k in opts if getattr(self, k) is not None})
+        return opts
 
     def unavailable(self, seq: Sequence) -> str | None:
         """None when this configuration builds here, else why not (a missing model or module):
