@@ -65,6 +65,68 @@ def test_platt_fit_recovers_a_known_calibration():
     assert 0 < a < 20 and abs(b) < 5
 
 
+class _ScriptedRng:
+    """Stands in for a numpy Generator: integers() -> side, random() -> gone?, uniform() -> f."""
+
+    def __init__(self, side, gone, f):
+        self.side, self.gone, self.f = side, gone, f
+
+    def integers(self, n):
+        return self.side
+
+    def random(self):
+        return 0.0 if self.gone else 0.99
+
+    def uniform(self, lo, hi):
+        return self.f
+
+
+@pytest.mark.parametrize("side, kept, box", [
+    (0, (slice(None), slice(0, 105)), [80, 100, 105, 150]),    # padding right of x = 105
+    (1, (slice(None), slice(155, None)), [155, 100, 180, 150]),  # left of x = 155
+    (2, (slice(0, 113), slice(None)), [80, 100, 180, 112.5]),  # below y = 112.5 (row 112 partly kept)
+    (3, (slice(137, None), slice(None)), [80, 137.5, 180, 150]),  # above y = 137.5
+])
+def test_border_cut_fills_past_the_line_and_clips_the_box(side, kept, box):
+    from track3d_train.edgetrack.data import cut_at_border
+
+    crop = np.full((256, 256, 3), 10, np.uint8)
+    crop[100:150, 80:180] = 200
+    out, b = cut_at_border(crop, np.array([80, 100, 180, 150.0]), _ScriptedRng(side, False, 0.25))
+    assert b.tolist() == box                       # a quarter of the 100 x 50 box's extent is left
+    colour = crop.reshape(-1, 3).mean(0).round()
+    filled = np.ones(crop.shape[:2], bool)
+    filled[kept] = False
+    assert np.all(out[filled] == colour) and np.array_equal(out[kept], crop[kept])
+    assert crop[120, 170, 0] == 200                # the input is not written to
+
+
+def test_border_cut_before_the_target_is_a_negative_pair():
+    from track3d_train.edgetrack.data import cut_at_border
+
+    crop = np.full((64, 64, 3), 10, np.uint8)
+    crop[20:40, 20:40] = 200
+    out, b = cut_at_border(crop, np.array([20, 20, 40, 40.0]), _ScriptedRng(0, True, -0.25))
+    assert b is None and out[:, 15:].max() == out[0, 63].max() and out[25, 10, 0] == 10   # x >= 15 filled
+
+
+def test_sampler_border_cut_share_and_resume_keeps_it(tmp_path, trained):
+    from track3d_train.edgetrack.data import CropCache, PairSampler, load_background
+    from track3d_train.edgetrack.train import train
+
+    cache = trained["root"] / "cache"
+    c = CropCache(cache / "target")
+    for share in (0.0, 1.0):
+        s = PairSampler(c, load_background(cache), neg_other=0, neg_background=0, seed=1, border_cut=share)
+        z, x, boxes = s.sample(64)
+        gone = np.isnan(boxes[:, 0]).mean()
+        assert (gone == 0) if share == 0 else (0.1 < gone < 0.45)   # CUT_GONE = 0.25 of the cut pairs
+    cfg = EdgeTrackConfig(**TINY)
+    train(cfg, cache, tmp_path / "r", steps=2, batch=4, val_every=100, border_cut=0.5, progress=False)
+    train(cfg, cache, tmp_path / "r", steps=3, batch=4, val_every=100, progress=False)   # resumed
+    assert torch.load(str(tmp_path / "r" / "ckpt.pt"), weights_only=False)["border_cut"] == 0.5
+
+
 # -- training, export, runtime -------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
@@ -367,6 +429,16 @@ def test_cli_errors_are_one_line(tmp_path):
     r = subprocess.run([sys.executable, "-m", "track3d_train.cli", "edgetrack", "train", "--cache",
                         str(tmp_path / "none"), "--out", str(tmp_path / "r")], capture_output=True, text=True)
     assert r.returncode == 2 and "no EdgeTrack cache" in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("command", ["fit-threshold", "eval"])
+def test_cli_a_missing_model_is_one_line(tmp_path, tiny_dataset, command):
+    """A model prefix that names no file ended in a TrackerUnavailable traceback."""
+    r = subprocess.run([sys.executable, "-m", "track3d_train.cli", "edgetrack", command, "--model",
+                        str(tmp_path / "none"), "--data", str(tiny_dataset), "--split", "train"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "model" in r.stderr
 
 
 def test_shipped_edgetrack_carries_its_metadata_and_tracks_the_tiny_split(tiny_dataset):

@@ -45,11 +45,12 @@ def main(argv: list[str] | None = None) -> int:
     from track3d.argparsing import exit_for_missing_extra
     from track3d.dataset import DatasetError
     from track3d.onnxmodel import ModelError
+    from track3d.trackers2d import TrackerUnavailable
 
     try:
         module = importlib.import_module(COMMANDS[argv[0]][0])
         return int(module.main(argv[1:]) or 0)
-    except (DatasetError, ModelError, FileNotFoundError, ValueError) as e:  # a user's mistake: one line
+    except (DatasetError, ModelError, TrackerUnavailable, FileNotFoundError, ValueError) as e:  # a user's mistake: one line
         print(f"track3d-train {argv[0]}: error: {e}", file=sys.stderr)
         return 2
     except ModuleNotFoundError as e:

@@ -47,7 +47,7 @@ def _train(a) -> int:
     s = train(cfg, a.cache, a.out, steps=a.steps, batch=a.batch, lr=a.lr, seed=a.seed, threads=a.threads,
               time_budget_s=a.time_budget_min * 60 if a.time_budget_min else None,
               ckpt_every_s=a.ckpt_every_min * 60, val_every=a.val_every, max_gap=a.max_gap,
-              resume=not a.no_resume, init_from=a.init_from, progress=not a.quiet)
+              resume=not a.no_resume, init_from=a.init_from, border_cut=a.border_cut, progress=not a.quiet)
     print(json.dumps(s))
     return 0
 
@@ -217,6 +217,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
     t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None, help="stop (and checkpoint) after this much training time")
     t.add_argument("--init-from", help="start from another run's checkpoint (fine-tuning)")
+    t.add_argument("--border-cut", type=bounded(float, low=0.0, high=1.0), default=0.0,
+                   help="share of target pairs cut at a simulated image border (slivers of a body leaving "
+                        "the view; a resumed run keeps its own)")
     t.add_argument("--no-resume", action="store_true", help="start over even if <out>/ckpt.pt exists")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     hidden_alias(t, "--no-progress", "quiet", action="store_true")

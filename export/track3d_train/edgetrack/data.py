@@ -10,8 +10,12 @@
 
 The sampler draws (template, search, box) with the field's augmentations: search scale and shift
 jitter (the target anywhere in the search region), colour / brightness / gamma / low light,
-grayscale, Gaussian or motion blur, sensor noise, horizontal flip, and negative pairs (a search
-crop from another sequence or from the background cache: no target, all cells negative).
+grayscale, Gaussian or motion blur, sensor noise, horizontal flip, negative pairs (a search
+crop from another sequence or from the background cache: no target, all cells negative) and,
+optionally, border cuts: the search crop beyond a line through the target is filled with one
+colour, as the runtime pads a crop that reaches past the image, so the classifier sees the
+slivers of a body leaving or entering the view (positive, the box clipped at the line) and the
+frames just after it left (the line before the target: negative).
 """
 from __future__ import annotations
 
@@ -26,7 +30,7 @@ from track3d.siamfc import crop_square
 
 from ..siamfc.data import CropCache, build_cache, sequences_from_dataset, synthetic_sequences
 
-__all__ = ["prepare", "PairSampler", "CropCache", "CACHE_SIZE", "load_background"]
+__all__ = ["prepare", "PairSampler", "CropCache", "CACHE_SIZE", "load_background", "cut_at_border"]
 
 CACHE_SIZE = 384   # 3 x the default template's image extent
 
@@ -105,6 +109,42 @@ def load_background(cache_dir) -> np.ndarray:
     return np.load(p, mmap_mode="r") if p.is_file() else np.zeros((0, 256, 256, 3), np.uint8)
 
 
+# Of the border cuts, this share puts the line before the target (it has just left the view:
+# negative); the others leave 4-70% of its extent along the cut axis in view.
+CUT_GONE = 0.25
+CUT_VISIBLE = (0.04, 0.7)
+
+
+def cut_at_border(crop: np.ndarray, box: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray | None]:
+    """A search crop (S, S, 3) uint8 whose part beyond a line across the target box [x0, y0, x1, y1]
+    is filled with the crop's mean colour (what the runtime's padding looks like where the crop
+    reaches past the image). Returns (crop, the box clipped at the line, or None when the line
+    lies before the target and nothing of it is left)."""
+    out = np.array(crop)
+    size = out.shape[0]
+    side = int(rng.integers(4))              # the padding lies right / left / below / above
+    axis = side // 2                         # 0: a vertical line, 1: a horizontal one
+    lo, hi = float(box[axis]), float(box[axis + 2])
+    gone = rng.random() < CUT_GONE
+    f = rng.uniform(-0.5, 0.0) if gone else rng.uniform(*CUT_VISIBLE)
+    colour = out.reshape(-1, 3).mean(0).round().astype(np.uint8)
+    new = np.array(box, np.float64)
+    if side % 2 == 0:                        # keep [lo, line)
+        line = lo + f * (hi - lo)
+        k = int(np.clip(math.ceil(line), 0, size))
+        sl = (slice(None), slice(k, None)) if axis == 0 else (slice(k, None), slice(None))
+        new[axis + 2] = line
+    else:                                    # keep [line, hi)
+        line = hi - f * (hi - lo)
+        k = int(np.clip(math.floor(line), 0, size))
+        sl = (slice(None), slice(None, k)) if axis == 0 else (slice(None, k), slice(None))
+        new[axis] = line
+    out[sl] = colour
+    if gone:
+        return out, None
+    return out, new
+
+
 def _motion_kernel(rng, length):
     k = np.zeros((length, length), np.float32)
     k[length // 2] = 1.0
@@ -121,8 +161,9 @@ class PairSampler:
     def __init__(self, cache: CropCache, background: np.ndarray, exemplar_size: int = 128,
                  instance_size: int = 256, max_gap: int = 50, scale_jitter: float = 0.25,
                  shift: float | None = None, neg_other: float = 0.1, neg_background: float = 0.1,
-                 sequences=None, seed: int = 0, augment: bool = True):
+                 sequences=None, seed: int = 0, augment: bool = True, border_cut: float = 0.0):
         self.c = cache
+        self.border_cut = float(border_cut)
         self.bg = background
         self.ez, self.xz = exemplar_size, instance_size
         # the target anywhere within a quarter crop of the centre (64 px of a 256 search crop)
@@ -207,6 +248,8 @@ class PairSampler:
                     zc, xc = zc[:, ::-1], xc[:, ::-1]
                     if box is not None:
                         box = np.array([self.xz - box[2], box[1], self.xz - box[0], box[3]])
+            if box is not None and self.border_cut > 0 and r.random() < self.border_cut:
+                xc, box = cut_at_border(xc, box, r)
             z[k], x[k] = zc, xc
             if box is not None:
                 boxes[k] = box

@@ -152,17 +152,19 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
           weight_decay: float = 1e-4, seed: int = 0, threads: int = 1, time_budget_s: float | None = None,
           ckpt_every_s: float = 180.0, log_every: int = 10, val_every: int = 200, val_sequences: int = 2,
           val_pairs: int = 256, max_gap: int = 50, resume: bool = True, init_from: str | None = None,
-          progress: bool = True) -> dict:
+          border_cut: float = 0.0, progress: bool = True) -> dict:
     """Train (or resume) into out_dir; stops at `steps` or after `time_budget_s` of training time
-    (summed over resumed runs). Returns a summary dict."""
+    (summed over resumed runs). `border_cut`: the share of target pairs cut at a simulated image
+    border (`data.cut_at_border`; validation pairs the same). Returns a summary dict."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(int(threads))
     torch.manual_seed(seed)
     ck_path, log_path = out / "ckpt.pt", out / "log.jsonl"
     ck = torch.load(str(ck_path), map_location="cpu", weights_only=False) if resume and ck_path.is_file() else None
-    if ck is not None:   # the run's own architecture and calibration, whatever the caller's defaults
+    if ck is not None:   # the run's own architecture, calibration and sampling, whatever the caller's defaults
         cfg = EdgeTrackConfig.from_dict(ck["config"])
+        border_cut = float(ck.get("border_cut", 0.0))
     cache = CropCache(Path(cache_dir) / "target")
     bg = load_background(cache_dir)
     nseq = len(cache.index["sequences"])
@@ -170,11 +172,12 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
     train_ids, val_ids = list(range(nseq - nval)), list(range(nseq - nval, nseq))
     nbg_val = len(bg) // 5
     sampler = PairSampler(cache, bg[nbg_val:], cfg.exemplar_size, cfg.instance_size, max_gap=max_gap,
-                          sequences=train_ids, seed=seed)
+                          sequences=train_ids, seed=seed, border_cut=border_cut)
     val_batches = []
     if nval:
         vs = PairSampler(cache, bg[:nbg_val], cfg.exemplar_size, cfg.instance_size, max_gap=max_gap,
-                         sequences=val_ids, seed=10_000 + seed, neg_other=0.15, neg_background=0.25)
+                         sequences=val_ids, seed=10_000 + seed, neg_other=0.15, neg_background=0.25,
+                         border_cut=border_cut)
         val_batches = [vs.sample(min(64, val_pairs)) for _ in range(max(1, val_pairs // 64))]
     net = EdgeTrack(cfg)
     opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=weight_decay)
@@ -207,7 +210,7 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
     def checkpoint(elapsed):
         _save(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
                         "config": net.cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
-                        "batch": batch, "seed": seed, "calib": [net.cfg.calib_a, net.cfg.calib_b],
+                        "batch": batch, "seed": seed, "border_cut": border_cut, "calib": [net.cfg.calib_a, net.cfg.calib_b],
                         **data_info})
 
     net.train()
