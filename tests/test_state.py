@@ -92,6 +92,49 @@ def test_black_frames_turn_lost_after_k_and_held_frames_count():
     assert np.array_equal(outs[-1].box3d, t.box3d)
 
 
+class _SelfJudging:
+    """A 2D tracker that says itself whether it has lost the target (like EdgeTrack)."""
+
+    def __init__(self, lost: bool = False):
+        self.lost = lost
+
+    def init(self, image, box):
+        self.box = np.asarray(box, float)
+
+    def update(self, image):
+        return not self.lost, self.box.copy()
+
+
+def test_a_tracker_that_judges_its_loss_is_not_lost_for_want_of_points():
+    """A body past a ToF camera's range gives an empty frustum while the 2D tracker follows it:
+    the loop said "lost" after lost_after such frames (43 of 82 "lost" reports on held-out ToF
+    sequences). With a tracker that reports its own loss the frames stay "no_points" (3D held);
+    its own loss and dropped frames still make it lost; a tracker without the flag is unchanged."""
+    from track3d.estimators import create_estimator
+
+    img, pts, box = _frame(0)
+    empty = np.zeros((0, 3), np.float32)
+    judge = _SelfJudging()
+    t = Track3D(CAM, judge, create_estimator("baseline"), lost_after=3)
+    t.init(img, box, 0, points=pts)
+    outs = [t.update(img, empty) for _ in range(8)]
+    assert [o.status for o in outs] == [NO_POINTS] * 8 and outs[-1].held_frames == 8
+    assert [t.skip().status for _ in range(3)] == [NO_POINTS, NO_POINTS, LOST]   # dropped frames count
+    assert t.update(img, pts).status == TRACKING
+    judge.lost = True
+    assert t.update(img, pts).status == LOST                                    # its own word, at once
+
+    class Plain(_SelfJudging):
+        lost = property(lambda self: None)
+
+        def __init__(self):
+            pass
+
+    t = Track3D(CAM, Plain(), create_estimator("baseline"), lost_after=3)
+    t.init(img, box, 0, points=pts)
+    assert [t.update(img, empty).status for _ in range(4)] == [NO_POINTS, NO_POINTS, LOST, LOST]
+
+
 def test_skip_and_update_none_coast_without_raising():
     t = _make("kcf", "baseline", lost_after=3)
     img, pts, box = _frame(0)
