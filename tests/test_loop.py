@@ -481,3 +481,54 @@ def test_a_body_larger_than_the_view_keeps_the_estimate_past_the_border():
     assert seen_hi_y < b3[1] + b3[4] / 2 - 0.2                           # the returns stop short
     assert r.box3d[1] + r.box3d[4] / 2 == pytest.approx(b3[1] + b3[4] / 2)  # the estimate's side kept
     assert iou_3d(r.box3d, b3) > 0.95
+
+
+class _Depths:
+    """An amodal estimator whose boxes' depth extent follows a script (front face at z = 9)."""
+
+    amodal = True
+
+    def __init__(self, depths):
+        self.depths = list(depths)
+
+    def estimate(self, points, category):
+        d = self.depths.pop(0)
+        return np.array([0.0, 0.0, 9.0 + d / 2, 1.0, 1.0, d])
+
+
+def test_the_hidden_depth_is_averaged_over_frames_front_face_kept(frames):
+    gt2d = np.array([f[2] for f in frames])
+    img, pts = frames[1][0], frames[1][1]
+
+    def run(est, **kw):
+        t = Track3D(CAM, OracleTracker(np.tile(gt2d[1], (9, 1))), est, measured_faces=False, **kw)
+        t.init(img, gt2d[1])
+        return t, [t.update(img, pts).box3d.copy() for _ in range(len(est.depths))]
+
+    t, boxes = run(_Depths([2.0, 4.0, 2.0, 2.0]), depth_smoothing=0.5)
+    np.testing.assert_allclose([b[5] for b in boxes], [2.0, 3.0, 2.5, 2.25])     # 0.5 old + 0.5 new
+    np.testing.assert_allclose([b[2] - b[5] / 2 for b in boxes], 9.0)           # the front stays
+    assert t.describe()["options"]["depth_smoothing"] == 0.5
+    # a checkpoint carries the average: the restored tracker continues identically
+    t, _ = run(_Depths([2.0, 4.0]), depth_smoothing=0.5)
+    t2 = Track3D(CAM, OracleTracker(np.tile(gt2d[1], (9, 1))), _Depths([2.0]), measured_faces=False)
+    t2.set_state(t.get_state())
+    t.estimator.depths.append(2.0)
+    assert t2.update(img, pts).box3d[5] == t.update(img, pts).box3d[5] == 2.5
+    # off, and never for an estimator that does not call its box amodal (a plug-in's own box)
+    _, boxes = run(_Depths([2.0, 4.0]), depth_smoothing=0.0)
+    assert [b[5] for b in boxes] == [2.0, 4.0]
+
+    class Plain(_Depths):
+        amodal = False
+
+    _, boxes = run(Plain([2.0, 4.0]))
+    assert [b[5] for b in boxes] == [2.0, 4.0]
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(ValueError, match="depth_smoothing"):
+            Track3D(CAM, OracleTracker(gt2d), _Depths([]), depth_smoothing=bad)
+    # init() starts a new average
+    t, _ = run(_Depths([8.0]), depth_smoothing=0.5)
+    t.init(img, gt2d[1])
+    t.estimator.depths.append(2.0)
+    assert t.update(img, pts).box3d[5] == 2.0

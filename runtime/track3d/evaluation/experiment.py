@@ -59,6 +59,7 @@ class TrackerSpec:
     measured_faces: bool | None = None         # None: by the sequence's depth sensor (measured_faces_for)
     frustum_margin: float | None = None      # None: by the sequence's depth sensor (frustum_margin_for)
     depth_range: bool = True                 # the sequence's depth sensor range (Sequence.depth_range_m) to Track3D
+    depth_smoothing: float | None = None     # None: track3d.tracker.DEPTH_SMOOTHING
     threads: int = 1
     tracker_options: dict = field(default_factory=dict)
     estimator_options: dict = field(default_factory=dict)
@@ -89,6 +90,7 @@ class TrackerSpec:
                               estimator_options=self._options(self.estimator, self.estimator_options),
                               fusion=self.fusion,
                               depth_range_m=seq.depth_range_m if self.depth_range else None,
+                              **({} if self.depth_smoothing is None else {"depth_smoothing": self.depth_smoothing}),
                               **self.sensor_options(seq.depth_sensor))
 
     def sensor_options(self, depth_sensor: str | None) -> dict:
