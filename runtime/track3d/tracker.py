@@ -369,9 +369,10 @@ class Track3D:
             est = fit_measured_faces(est, bounds, (x <= 0.5, y <= 0.5, x + w >= W - 0.5, y + h >= H - 0.5))
         return fuse_section(est, box2d, self.camera, self.weight_2d) if self.weight_2d > 0.0 else est
 
-    def _averaged_depth(self, box: np.ndarray) -> np.ndarray:
-        """`box` with its depth extent replaced by the running average (DEPTH_SMOOTHING), its
-        front face where it was."""
+    def _report(self, est: np.ndarray, bounds: np.ndarray, box2d: np.ndarray) -> np.ndarray:
+        """This frame's reported box (`_reported_box`) with its depth extent replaced by the
+        running average (DEPTH_SMOOTHING), its front face where it was; updates the average."""
+        box = self._reported_box(est, bounds, box2d)
         if not self._smooth_depth:
             return box
         s = self.depth_smoothing
@@ -405,7 +406,7 @@ class Track3D:
             pts, bounds = self._frustum(points, b)
             est = self._estimate(pts, bounds)
             if est is not None:
-                self.box3d = self._averaged_depth(self._reported_box(est, bounds, b))
+                self.box3d = self._report(est, bounds, b)
 
     def _judge(self, r: TrackResult, estimated: bool, seen: bool = False) -> TrackResult:
         """Count held and bad frames; after `lost_after` bad frames in a row the target is lost.
@@ -480,7 +481,7 @@ class Track3D:
         if est is None:
             status = NO_POINTS
         else:
-            self.box3d = self._averaged_depth(self._reported_box(est, bounds, raw))
+            self.box3d = self._report(est, bounds, raw)
         t3 = time.perf_counter()
         ms["box3d"] = (t3 - t2) * 1e3
         box = raw
@@ -518,7 +519,8 @@ class Track3D:
             "estimator": self.estimator_name or type(self.estimator).__name__,
             "camera": self.camera.to_dict(),
             "category": self.category, "box2d": self.box2d, "box3d": self.box3d,
-            "bad_frames": self.bad_frames, "held_frames": self.held_frames, "depth_avg": self._depth_avg if np.isfinite(self._depth_avg) else None,
+            "bad_frames": self.bad_frames, "held_frames": self.held_frames,
+            "depth_avg": self._depth_avg if np.isfinite(self._depth_avg) else None,
             "tracker2d": get2d(), "estimator_state": get3d() if get3d is not None else None,
         })
 
@@ -580,7 +582,8 @@ class Track3D:
             "options": {"fusion": self.fusion, "weight_3d": self.weight_3d, "z_range": list(self.z_range),
                         "frustum_margin": self.frustum_margin, "depth_range_m": self.depth_range_m,
                         "weight_2d": self.weight_2d, "measured_faces": self.measured_faces,
-                        "depth_smoothing": self.depth_smoothing, "min_points": self.min_points, "lost_after": self.lost_after, "min_score": self.min_score},
+                        "depth_smoothing": self.depth_smoothing, "min_points": self.min_points,
+                        "lost_after": self.lost_after, "min_score": self.min_score},
             "models": models,
         }
 
