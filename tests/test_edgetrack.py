@@ -110,6 +110,80 @@ def test_border_cut_before_the_target_is_a_negative_pair():
     assert b is None and out[:, 15:].max() == out[0, 63].max() and out[25, 10, 0] == 10   # x >= 15 filled
 
 
+def test_border_cut_fills_with_the_pad_colour():
+    from track3d_train.edgetrack.data import PAD, cut_at_border
+
+    crop = np.full((64, 64, 3), 10, np.uint8)
+    crop[20:40, 20:40] = 200
+    out, b = cut_at_border(crop, np.array([20, 20, 40, 40.0]), _ScriptedRng(0, False, 0.5), PAD)
+    assert b.tolist() == [20, 20, 30, 40]
+    assert np.all(out[:, 30:] == [255, 0, 255]) and np.array_equal(out[:, :30], crop[:, :30])
+
+
+def test_prepare_pads_outside_the_image_and_records_the_colour(tmp_path, capsys):
+    """Target and background crops reach past the image (a 3x context region): filled with the
+    pad colour, recorded in both caches' indexes; the sampler cuts with it, the checkpoint and
+    the exported metadata carry it; None ('mean') keeps each frame's mean colour."""
+    from track3d_train.cli import main as train_main
+    from track3d_train.edgetrack.data import PAD, CropCache, PairSampler, load_background, prepare
+    from track3d_train.edgetrack.train import train
+
+    cache = tmp_path / "cache"
+    prepare(cache, synthetic=3, synthetic_frames=12, max_frames=36, progress=False)
+    assert json.loads((cache / "target" / "index.json").read_text())["pad"] == list(PAD)
+    assert json.loads((cache / "background" / "bg.json").read_text())["pad"] == list(PAD)
+    crops = np.load(cache / "target" / "crops.npy")
+    assert np.all(crops == [255, 0, 255], axis=-1).mean(axis=(1, 2)).max() > 0.05   # near a border
+    assert PairSampler(CropCache(cache / "target"), load_background(cache), seed=0).pad == PAD
+    train(EdgeTrackConfig(**TINY), cache, tmp_path / "run", steps=1, batch=4, val_every=100, progress=False)
+    assert torch.load(str(tmp_path / "run" / "ckpt.pt"), weights_only=False)["pad"] == PAD
+    assert train_main(["edgetrack", "export", "--checkpoint", str(tmp_path / "run" / "ckpt.pt"),
+                       "--out", str(tmp_path / "m" / "et")]) == 0
+    for part in ("template", "search"):
+        assert OnnxModel(tmp_path / "m" / f"et_{part}.onnx", 1, f"edgetrack-{part}").meta["pad"] == list(PAD)
+    assert train_main(["edgetrack", "prepare", "--synthetic", "2", "--synthetic-frames", "8", "--pad", "mean",
+                       "--out", str(tmp_path / "mean"), "--quiet"]) == 0
+    assert json.loads((tmp_path / "mean" / "target" / "index.json").read_text())["pad"] is None
+    assert not np.any(np.all(np.load(tmp_path / "mean" / "target" / "crops.npy") == [255, 0, 255], axis=-1))
+    with pytest.raises(ValueError, match="pad"):
+        prepare(tmp_path / "bad", synthetic=1, synthetic_frames=4, progress=False, pad=(300, 0, 0))
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as e:
+        train_main(["edgetrack", "prepare", "--synthetic", "1", "--pad", "1,2", "--out", str(tmp_path / "b")])
+    assert e.value.code == 2 and "--pad" in capsys.readouterr().err
+
+
+def test_the_runtime_crop_fills_outside_the_image_with_the_models_pad(trained, tmp_path, monkeypatch):
+    import shutil
+
+    import track3d.edgetrack as et
+    from track3d_train.onnx_meta import rewrite_metadata
+
+    for part in ("template", "search"):
+        shutil.copy(trained["root"] / "model" / f"et_{part}.onnx", tmp_path / f"et_{part}.onnx")
+    frames, gt, _ = _exit_and_return_sequence()
+    seen = []
+    real = et.crop_square
+    monkeypatch.setattr(et, "crop_square", lambda im, c, sz, out, border: seen.append(border) or real(im, c, sz, out, border))
+    tr = et.create(model=tmp_path / "et")                 # no pad in the metadata: the frame's mean colour
+    tr.init(frames[0], gt[0])
+    tr.update(frames[1])
+    assert seen[-1] == pytest.approx(cv2.mean(frames[0])[:3]) and tr.pad is None
+    for part in ("template", "search"):
+        path = tmp_path / f"et_{part}.onnx"
+        meta = OnnxModel(path, 1, f"edgetrack-{part}").meta
+        rewrite_metadata(path, {**meta, "pad": [255, 0, 255]})
+    tr = et.create(model=tmp_path / "et")
+    tr.init(frames[0], gt[0])
+    tr.update(frames[1])
+    assert seen[-2:] == [(255.0, 0.0, 255.0)] * 2 and tr.get_state()["avg_color"] == [255.0, 0.0, 255.0]
+    for bad in ([255, 0], [0, 0, 256], "magenta"):
+        meta = OnnxModel(tmp_path / "et_search.onnx", 1, "edgetrack-search").meta
+        rewrite_metadata(tmp_path / "et_search.onnx", {**meta, "pad": bad})
+        with pytest.raises(ValueError, match="pad must be three values"):
+            et.create(model=tmp_path / "et")
+
+
 def test_sampler_border_cut_share_and_resume_keeps_it(tmp_path, trained):
     from track3d_train.edgetrack.data import CropCache, PairSampler, load_background
     from track3d_train.edgetrack.train import train
@@ -136,8 +210,10 @@ def trained(tmp_path_factory):
     from track3d_train.edgetrack.train import load_checkpoint, train
 
     root = tmp_path_factory.mktemp("edgetrack")
+    # the frame's mean colour outside the image: the runtime tests' expectations were measured
+    # with this tiny model (the pad colour has its own test)
     info = prepare(root / "cache", synthetic=10, synthetic_frames=24, max_frames=400, exemplar_size=128,
-                   instance_size=256, progress=False)
+                   instance_size=256, progress=False, pad=None)
     assert info["target_crops"] > 100 and info["background_crops"] > 0
     cfg = EdgeTrackConfig(**TINY)
     summary = train(cfg, root / "cache", root / "run", steps=150, batch=16, lr=5e-3, val_every=50,
@@ -506,6 +582,7 @@ def test_export_records_the_training_data(trained, tmp_path, capsys):
     assert train_main(["edgetrack", "export", "--checkpoint", str(ck), "--out", str(tmp_path / "a" / "et")]) == 0
     meta = json.loads({p.key: p.value for p in onnx.load(str(tmp_path / "a" / "et_search.onnx")).metadata_props}["track3d"])
     assert meta["train_data_hash"] == want and meta["train_data"]
+    assert "pad" not in meta                       # a mean-colour cache: the runtime's default
     old = {k: v for k, v in torch.load(str(ck), map_location="cpu", weights_only=False).items()
            if k not in ("train_data_hash", "train_data")}
     torch.save(old, str(tmp_path / "old.pt"))

@@ -128,12 +128,14 @@ EDGETRACK_ENGINE = Recipe(
     name="edgetrack-engine",
     makes="{runs}/edgetrack/model/edgetrack_{{template,search}}.onnx",
     description="EdgeTrack, the default 2D tracker: 36 train sequences x 100 frames plus 120 shapes x 25 frames "
-                "in low light with motion blur; ~70 min on one thread; the lost threshold fitted on 12 held-out "
-                "train-like sequences (seed 3).",
+                "in low light with motion blur; ~70 min on one thread, then ~22 min fine-tuning with a distinct "
+                "colour outside the image and crops cut at a simulated image border; the motion weight and the "
+                "lost threshold fitted on 36 held-out train-like sequences (seeds 3, 4).",
     knobs={"preset": "small", "train": 36, "div_train": 120, "div_frames": 25, "max_frames": 3600,
-           "max_background": 1500, "steps": 30000, "batch": 32, "minutes": 70, "threads": 1, "workers": 2},
+           "max_background": 1500, "steps": 30000, "batch": 32, "minutes": 70, "pad_steps": 4000,
+           "border_cut": 0.3, "threads": 1, "workers": 2},
     tiny={"preset": "tiny", "train": 2, "div_train": 1, "div_frames": 4, "max_frames": 40, "max_background": 10,
-          "steps": 2, "batch": 4, "minutes": 5, "workers": 1},
+          "steps": 2, "batch": 4, "minutes": 5, "pad_steps": 3, "workers": 1},
     steps=(
         Step("data: train sequences", _a(
             "track3d-sim generate --preset {preset} --train {train} --test 0 --test-unseen 1 "
@@ -142,15 +144,23 @@ EDGETRACK_ENGINE = Recipe(
             "track3d-sim generate --preset {preset} --seed 1 --train {div_train} --test 0 --test-unseen 1 "
             "--frames {div_frames} --auto-exposure --motion-blur --out {data}/engine-train_div --workers {workers} "
             "--quiet")),
-        Step("cache: target and background crops", _a(
+        Step("cache: target and background crops, the frame's mean colour outside the image", _a(
             "track3d-train edgetrack prepare --data {data}/engine-train {data}/engine-train_div "
-            "--max-frames {max_frames} --max-background {max_background} --out {runs}/edgetrack/cache --quiet"),
-            done_when="{runs}/edgetrack/cache/background/bg.json"),
+            "--max-frames {max_frames} --max-background {max_background} --pad mean --out {runs}/edgetrack/cache "
+            "--quiet"), done_when="{runs}/edgetrack/cache/background/bg.json"),
         Step("train", _a(
             "track3d-train edgetrack train --cache {runs}/edgetrack/cache --out {runs}/edgetrack/run "
             "--max-steps {steps} --batch {batch} --time-budget-min {minutes} --threads {threads} --quiet")),
+        Step("cache: the same crops, magenta outside the image", _a(
+            "track3d-train edgetrack prepare --data {data}/engine-train {data}/engine-train_div "
+            "--max-frames {max_frames} --max-background {max_background} --out {runs}/edgetrack/cache-pad --quiet"),
+            done_when="{runs}/edgetrack/cache-pad/background/bg.json"),
+        Step("fine-tune on it with border cuts, from the first training", _a(
+            "track3d-train edgetrack train --cache {runs}/edgetrack/cache-pad --out {runs}/edgetrack/pad "
+            "--init-from {runs}/edgetrack/run/ckpt.pt --border-cut {border_cut} --lr 1e-3 --max-steps {pad_steps} "
+            "--batch {batch} --threads {threads} --quiet")),
         Step("export with a parity check", _a(
-            "track3d-train edgetrack export --checkpoint {runs}/edgetrack/run/ckpt.pt "
+            "track3d-train edgetrack export --checkpoint {runs}/edgetrack/pad/ckpt.pt "
             "--out {runs}/edgetrack/model/edgetrack")),
         Step("data: held-out sequences for the lost threshold", _a(
             "track3d-sim generate --preset small --seed 3 --train 12 --test 0 --test-unseen 1 --frames 60 "

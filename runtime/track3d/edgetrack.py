@@ -7,7 +7,9 @@ Two ONNX graphs (written by `track3d-train edgetrack export`):
     <name>_search.onnx    uint8 (1, N, N, 3) RGB search crop + kernel -> logit (1, n, n), ltrb (1, 4, n, n)
 
 Per frame: one search crop around the last centre (`track3d.siamfc.crop_square`: one
-cv2.warpAffine, or 2 x 2 box halvings + a bilinear resize when shrinking by more than 2), one ORT call, then
+cv2.warpAffine, or 2 x 2 box halvings + a bilinear resize when shrinking by more than 2; where it
+reaches past the image it is filled with the model's pad colour, metadata 'pad', else the frame's
+mean colour), one ORT call, then
 numpy: the box of every cell from its (l, t, r, b) distances, a size / aspect change penalty,
 a cosine window, the best cell, its logit calibrated into `score` (0..1), and a damped size
 update (SiamRPN / NanoTrack post-processing).
@@ -64,6 +66,19 @@ def model_paths(name: str = SHIPPED_NAME) -> tuple[Path, Path]:
     return shipped_model(f"{name}_template.onnx"), shipped_model(f"{name}_search.onnx")
 
 
+def _pad_colour(value) -> tuple[float, float, float] | None:
+    """The metadata's pad colour: None (the frame's mean colour) or three values in 0..255."""
+    if value is None:
+        return None
+    try:
+        c = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        c = ()
+    if len(c) != 3 or not all(0.0 <= v <= 255.0 for v in c):
+        raise ValueError(f"EdgeTrack metadata: pad must be three values in 0..255 (RGB), got {value!r}")
+    return c
+
+
 def _sigmoid(x):
     return 1.0 / (1.0 + np.exp(-x))
 
@@ -114,6 +129,7 @@ class EdgeTracker:
         if not 0.0 <= self.motion <= 2.0:
             raise ValueError(f"motion must be in 0..2, got {self.motion}")
         self.calib_a, self.calib_b = float(meta["score"]["a"]), float(meta["score"]["b"])
+        self.pad = _pad_colour(meta.get("pad"))
         self._grids = {}
         self._kernel = None
         self._kshape = None      # the template kernel's shape, found on the first set_state
@@ -147,7 +163,10 @@ class EdgeTracker:
     def init(self, image: np.ndarray, box) -> None:
         image = check_image(image)
         self._set_box(box)
-        self.avg_color = tuple(float(c) for c in cv2.mean(image)[:3])
+        # outside the image a crop is filled with the colour the model was trained with: one that
+        # neither sky nor shadow takes tells the network where the image ends (models without
+        # it in their metadata were trained with the frame's mean colour)
+        self.avg_color = self.pad if self.pad is not None else tuple(float(c) for c in cv2.mean(image)[:3])
         z = crop_square(image, self.center, self._z_sz(), self.exemplar_size, self.avg_color)
         self._kernel = self.template_net.run({"template": z[None]})[0]
         self.velocity = np.zeros(2)

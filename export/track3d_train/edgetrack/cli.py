@@ -29,7 +29,8 @@ def _prepare(a) -> int:
         raise ValueError("give --data ROOT (a dataset) or --synthetic N")
     t0 = time.perf_counter()
     info = prepare(a.out, data=a.data, split=a.split, synthetic=a.synthetic, synthetic_frames=a.synthetic_frames,
-                   max_frames=a.max_frames, max_background=a.max_background, seed=a.seed, progress=not a.quiet)
+                   max_frames=a.max_frames, max_background=a.max_background, seed=a.seed, progress=not a.quiet,
+                   pad=a.pad)
     print(f"cache {a.out}: {info['target_crops']} target crops, {info['background_crops']} background crops "
           f"in {time.perf_counter() - t0:.0f} s")
     return 0
@@ -76,7 +77,10 @@ def _export(a) -> int:
     data = a.data_note or ident["train_data"] or "track3d simulator train split"
     extra = {"train_data": data, "train_data_hash": ident["train_data_hash"],
              "training": {"steps": ck.get("step"), "batch": ck.get("batch"), "seed": ck.get("seed"),
-                          "elapsed_s": round(float(ck.get("elapsed_s", 0)), 1), "data": data}}
+                          "elapsed_s": round(float(ck.get("elapsed_s", 0)), 1), "data": data,
+                          "border_cut": float(ck.get("border_cut", 0.0))}}
+    if ck.get("pad") is not None:     # the colour the runtime's crop fills outside the image with
+        extra["pad"] = [float(v) for v in ck["pad"]]
     pz, px = export_onnx(net, a.out, extra)
     p = parity(net, pz, px)
     print(f"wrote {pz} ({pz.stat().st_size / 1e3:.0f} kB), {px} ({px.stat().st_size / 1e3:.0f} kB)")
@@ -98,6 +102,18 @@ def _eval(a) -> int:
         sequences = next(iter(rows.values()))["sequences"] if rows else 0
         Path(a.out).write_text(json.dumps({"data_split": a.split, "sequences": sequences, "trackers": rows}, indent=1))
     return 0
+
+
+def _pad(text: str):
+    if text.strip().lower() == "mean":
+        return None
+    try:
+        c = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        c = ()
+    if len(c) != 3 or not all(0.0 <= v <= 255.0 for v in c):
+        raise argparse.ArgumentTypeError(f"expected R,G,B in 0..255 or 'mean', got {text!r}")
+    return c
 
 
 def _grid(text: str) -> list[float]:
@@ -198,6 +214,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--synthetic", type=bounded(int, 0), default=0, help="N synthetic sequences instead of a dataset")
     q.add_argument("--synthetic-frames", type=bounded(int, 2), default=60, help="frames per synthetic sequence")
     q.add_argument("--seed", type=bounded(int, 0), default=0, help="random seed")
+    q.add_argument("--pad", type=_pad, default="255,0,255",
+                   help="colour of everything outside the image, R,G,B in 0..255 (the exported model "
+                        "carries it to the runtime's crop), or 'mean': each frame's mean colour")
     q.add_argument("--quiet", action="store_true", help="no progress bar")
     hidden_alias(q, "--no-progress", "quiet", action="store_true")
     q.set_defaults(fn=_prepare)

@@ -211,7 +211,7 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
         _save(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
                         "config": net.cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
                         "batch": batch, "seed": seed, "border_cut": border_cut, "calib": [net.cfg.calib_a, net.cfg.calib_b],
-                        **data_info})
+                        "pad": sampler.pad, **data_info})
 
     net.train()
     t_start = time.perf_counter()

@@ -47,11 +47,13 @@ def synthetic_sequences(n: int, frames: int = 60, seed: int = 0, h: int = 240, w
 
 def build_cache(sequences, out_dir, exemplar_size: int = 127, cache_size: int = CACHE_SIZE,
                 context_amount: float = 0.5, max_frames: int = 2000, progress: bool = True,
-                data_hash: str | None = None, data_name: str | None = None) -> Path:
+                data_hash: str | None = None, data_name: str | None = None,
+                pad: tuple | None = None) -> Path:
     """Write crops.npy (N, S, S, 3) uint8 + index.json. Sequences: iterable of
     (name, get_image(i), boxes, absent, stride). Frames beyond max_frames are subsampled evenly.
     data_hash / data_name identify the source data (recorded in index.json, then in the
-    checkpoints and the exported models' metadata)."""
+    checkpoints and the exported models' metadata). `pad`: the RGB colour of everything outside
+    the image (recorded in index.json); None: each frame's mean colour."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     seqs = []
@@ -83,8 +85,8 @@ def build_cache(sequences, out_dir, exemplar_size: int = 127, cache_size: int = 
             ctx = context_amount * (b[2] + b[3])
             z_sz = math.sqrt((b[2] + ctx) * (b[3] + ctx))
             x_sz = z_sz * cache_size / exemplar_size
-            avg = tuple(float(v) for v in cv2.mean(img)[:3])
-            crops[j] = crop_square(img, c, x_sz, cache_size, avg)
+            fill = tuple(pad) if pad is not None else tuple(float(v) for v in cv2.mean(img)[:3])
+            crops[j] = crop_square(img, c, x_sz, cache_size, fill)
             seq_of.append(s)
             frame_of.append(int(i))
             sizes.append((b[2:] * exemplar_size / z_sz).tolist())
@@ -99,7 +101,8 @@ def build_cache(sequences, out_dir, exemplar_size: int = 127, cache_size: int = 
     (out / "index.json").write_text(json.dumps({
         "sequences": [p[0] for p in plan], "seq": seq_of, "frame": frame_of, "size_in_crop": sizes,
         "cache_size": cache_size, "exemplar_size": exemplar_size, "context_amount": context_amount,
-        "data_hash": data_hash, "data_name": data_name}))
+        "data_hash": data_hash, "data_name": data_name,
+        "pad": None if pad is None else [float(v) for v in pad]}))
     return out
 
 
