@@ -277,7 +277,7 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--data", required=True, nargs="+",
                    help="dataset root(s) with absent frames, pooled (not the training data, not a test split)")
     f.add_argument("--split", default="train", help="dataset split (a test split is refused)")
-    f.add_argument("--grid", type=_grid, default=[0.02, 0.05, 0.1, 0.2, 0.3, 0.5],
+    f.add_argument("--grid", type=_grid, default=[0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7],
                    help="comma-separated candidate thresholds in (0, 1)")
     f.add_argument("--motion-grid", type=_grid, default=None,
                    help="comma-separated candidate motion weights in [0, 2], chosen first by one-pass AO_2d "
