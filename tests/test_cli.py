@@ -101,3 +101,16 @@ def test_runtime_never_imports_the_simulator_or_torch():
             "print(bad); sys.exit(1 if bad else 0)")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_track_passes_the_evidence_points_to_the_loop_and_records_them(synth, tmp_path):
+    from track3d.evaluation.results import read_run_record
+
+    res = tmp_path / "res"
+    assert main(["track", "--data", str(synth), "--tracker", "mosse", "--sequence", "a", "--evidence-points", "0",
+                 "--results", str(res), "--video", "none", "--quiet"]) == 0
+    rec = read_run_record(res, "test", "mosse+baseline")
+    assert json.dumps(rec).count('"evidence_points": 0') == 1, rec
+    with pytest.raises(SystemExit) as e:
+        main(["track", "--data", str(synth), "--evidence-points", "-1"])
+    assert e.value.code == 2

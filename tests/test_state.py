@@ -122,7 +122,7 @@ def test_a_tracker_that_judges_its_loss_is_not_lost_for_want_of_points():
     assert [t.skip().status for _ in range(3)] == [NO_POINTS, NO_POINTS, LOST]   # dropped frames count
     assert t.update(img, pts).status == TRACKING
     judge.lost = True
-    assert t.update(img, pts).status == LOST                                    # its own word, at once
+    assert t.update(img, empty).status == LOST                                  # its own word, at once
 
     class Plain(_SelfJudging):
         lost = property(lambda self: None)
@@ -133,6 +133,57 @@ def test_a_tracker_that_judges_its_loss_is_not_lost_for_want_of_points():
     t = Track3D(CAM, Plain(), create_estimator("baseline"), lost_after=3)
     t.init(img, box, 0, points=pts)
     assert [t.update(img, empty).status for _ in range(4)] == [NO_POINTS, NO_POINTS, LOST, LOST]
+
+
+def test_a_lost_2d_tracker_with_depth_returns_in_its_last_box_is_held_not_lost():
+    """EdgeTrack says "lost" on slivers of a body at the image border; the depth in the frustum of
+    the last box says the body is there (held-out sets: 0 returns after an exit, 55 or more on
+    14 of 21 false flags). With >= evidence_points returns the frame is held ("no_points",
+    num_points the returns, boxes unchanged) and counts towards lost_after; fewer returns, 0
+    (off), or a tracker that does not judge its own loss: "lost" as before."""
+    from track3d.estimators import create_estimator
+
+    img, pts, box = _frame(0)
+    assert len(pts) > 200
+    empty = np.zeros((0, 3), np.float32)
+    judge = _SelfJudging()
+    t = Track3D(CAM, judge, create_estimator("baseline"), lost_after=3)
+    t.init(img, box, 0, points=pts)
+    first = t.update(img, pts)
+    judge.lost = True
+    held = t.update(img, pts)
+    assert held.status == NO_POINTS and held.num_points >= 48
+    assert np.array_equal(held.box3d, first.box3d) and np.array_equal(held.box2d, first.box2d)
+    assert [t.update(img, pts).status for _ in range(2)] == [NO_POINTS, LOST]    # 3 bad frames
+    assert t.update(img, empty).status == LOST
+    few = pts[:47]
+    t = Track3D(CAM, _SelfJudging(), create_estimator("baseline"), lost_after=3)
+    t.init(img, box, 0, points=pts)
+    t.tracker2d.lost = True
+    assert t.update(img, few).status == LOST                                    # 47 < 48 returns
+    for tracker, kw in ((_SelfJudging(), {"evidence_points": 0}), (_Plain(), {})):
+        t = Track3D(CAM, tracker, create_estimator("baseline"), lost_after=3, **kw)
+        t.init(img, box, 0, points=pts)
+        tracker.lost_now = True
+        if isinstance(tracker, _SelfJudging):
+            tracker.lost = True
+        assert t.update(img, pts).status == LOST
+    assert Track3D(CAM, judge, create_estimator("baseline")).describe()["options"]["evidence_points"] == 48
+    for bad in (-1, 2.5, True, "48"):
+        with pytest.raises(ValueError, match="evidence_points"):
+            Track3D(CAM, judge, create_estimator("baseline"), evidence_points=bad)
+
+
+class _Plain:
+    """A 2D tracker without a `lost` attribute that fails its update when told to."""
+
+    lost_now = False
+
+    def init(self, image, box):
+        self.box = np.asarray(box, float)
+
+    def update(self, image):
+        return not self.lost_now, self.box.copy()
 
 
 def test_skip_and_update_none_coast_without_raising():
