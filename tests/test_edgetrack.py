@@ -526,6 +526,7 @@ def test_shipped_edgetrack_carries_its_metadata_and_tracks_the_tiny_split(tiny_d
         pytest.skip("no EdgeTrack model shipped")
     meta = OnnxModel(MODELS_DIR / "edgetrack_search.onnx", 1, "edgetrack-search").meta
     assert meta["exemplar_size"] == 128 and meta["total_stride"] == 16 and meta["training"]["steps"] > 0
+    assert meta["pad"] == [255.0, 0.0, 255.0]      # trained with it: the runtime's crop must fill with it
     assert OnnxModel(MODELS_DIR / "edgetrack_template.onnx", 1, "edgetrack-template").meta["config"] == meta["config"]
     seqs = Dataset(tiny_dataset).sequences("test")
     r = evaluate_2d(tiny_dataset, "test", [TrackerSpec("edgetrack", "none")])["edgetrack"]
