@@ -198,7 +198,9 @@ def _tracker_score(tracker2d) -> float | None:
 class TrackResult:
     """One frame's output. box2d (4,) float64 is the reported box (fused when fusion is on);
     box2d_raw (4,) the 2D tracker's own box; box3d (6,) float64 [cx, cy, cz, sx, sy, sz];
-    status one of STATUSES; num_points the frustum size; ms per-stage milliseconds (STAGES);
+    status one of STATUSES: "tracking" (a new 3D estimate), "no_points" (boxes held: no usable
+    estimate, a dropped frame, or a 2D loss with the body still in the depth of the last box),
+    "lost"; num_points the frustum size; ms per-stage milliseconds (STAGES);
     score the 2D tracker's confidence in 0..1 for this frame (None when it has none);
     held_frames how many frames the 3D box has been held without a new estimate (0: estimated
     on this frame); ``lost`` is True once the tracker has decided the target is lost."""
