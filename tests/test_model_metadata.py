@@ -97,3 +97,22 @@ def test_siamfc_cache_records_its_data(tmp_path):
     out = build_cache(synthetic_sequences(1, frames=3, seed=0, h=64, w=64), tmp_path / "c", cache_size=160,
                       max_frames=3, progress=False, data_hash="ab" * 32, data_name="synthetic")
     assert cache_data_info(out) == {"train_data_hash": "ab" * 32, "train_data": "synthetic"}
+
+
+def test_model_pair_resolves_a_prefix_either_file_or_explicit_paths():
+    """One resolver for the two-graph trackers (EdgeTrack: template / search, SiamFC: exemplar /
+    search): a prefix or either file of the pair names both; explicit paths win; one of two is
+    an error; neither is the shipped pair."""
+    from pathlib import Path
+
+    from track3d.onnxmodel import model_pair
+
+    parts = ("template", "search")
+    shipped = lambda: ("ship_t", "ship_s")   # noqa: E731
+    want = (Path("m/et_template.onnx"), Path("m/et_search.onnx"))
+    for given in ("m/et", "m/et_template.onnx", "m/et_search.onnx", Path("m/et.onnx")):
+        assert model_pair(given, None, None, parts, shipped) == want
+    assert model_pair("m/et", "x.onnx", None, parts, shipped) == ("x.onnx", want[1])
+    assert model_pair(None, None, None, parts, shipped) == ("ship_t", "ship_s")
+    with pytest.raises(ValueError, match="give both template_model and search_model"):
+        model_pair(None, "x.onnx", None, parts, shipped)

@@ -34,7 +34,7 @@ import cv2
 import numpy as np
 
 from .frames import check_image
-from .onnxmodel import load_model, shipped_model
+from .onnxmodel import load_model, model_pair, shipped_model
 from .siamfc import crop_square
 
 __all__ = ["EdgeTracker", "create", "model_paths", "TUNABLE", "SHIPPED_NAME"]
@@ -308,18 +308,7 @@ def create(threads: int = 1, model: str | Path | None = None, template_model: st
            **overrides) -> EdgeTracker:
     """An EdgeTrack tracker: the shipped model, or `model` a prefix `<dir>/<name>` of a pair
     `<name>_template.onnx` / `<name>_search.onnx`, or both explicit paths. Overrides: TUNABLE."""
-    if model is not None:
-        p = Path(model)
-        stem = p.name
-        for suffix in ("_template.onnx", "_search.onnx", ".onnx"):
-            if stem.endswith(suffix):
-                stem = stem[: -len(suffix)]
-                break
-        template_model = template_model or p.parent / f"{stem}_template.onnx"
-        search_model = search_model or p.parent / f"{stem}_search.onnx"
-    if (template_model is None) != (search_model is None):
-        raise ValueError("give both template_model and search_model, or neither")
-    if template_model is None:
-        template_model, search_model = model_paths()
+    template_model, search_model = model_pair(model, template_model, search_model, ("template", "search"),
+                                              model_paths)
     return EdgeTracker(template_model, search_model, threads=threads, precision=precision, engine=engine,
                        **overrides)

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 
-__all__ = ["META_KEY", "MODELS_DIR", "OnnxModel", "ModelError", "EngineUnavailable", "shipped_model",
+__all__ = ["META_KEY", "MODELS_DIR", "OnnxModel", "ModelError", "EngineUnavailable", "shipped_model", "model_pair",
            "is_model", "load_model", "models_of",
            "ENGINES", "PRECISIONS", "PARITY_TOLERANCE", "variant_path", "open_session"]
 
@@ -70,6 +70,27 @@ def shipped_model(name: str) -> Path:
         have = sorted(x.name for x in MODELS_DIR.glob("*.onnx")) if MODELS_DIR.is_dir() else []
         raise ModelError(f"no shipped model {name!r} (shipped: {', '.join(have) or 'none'})")
     return p
+
+
+def model_pair(model, first, search, parts: tuple[str, str], shipped) -> tuple[Path, Path]:
+    """The two files of a two-graph tracker: `model` a prefix `<dir>/<name>` (or either file of
+    the pair) -> `<name>_<parts[0]>.onnx`, `<name>_<parts[1]>.onnx`; else `first` and `search`
+    explicit paths, both or neither (an explicit path wins over the prefix's); neither: the
+    pair `shipped()` returns."""
+    if model is not None:
+        p = Path(model)
+        stem = p.name
+        for suffix in (f"_{parts[0]}.onnx", f"_{parts[1]}.onnx", ".onnx"):
+            if stem.endswith(suffix):
+                stem = stem[: -len(suffix)]
+                break
+        first = first or p.parent / f"{stem}_{parts[0]}.onnx"
+        search = search or p.parent / f"{stem}_{parts[1]}.onnx"
+    if (first is None) != (search is None):
+        raise ValueError(f"give both {parts[0]}_model and {parts[1]}_model, or neither")
+    if first is None:
+        return shipped()
+    return first, search
 
 
 def session_options(threads: int = 1) -> ort.SessionOptions:

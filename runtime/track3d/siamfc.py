@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from .frames import MAX_BOX_SCALE, check_image, check_init_box
-from .onnxmodel import load_model, shipped_model
+from .onnxmodel import load_model, model_pair, shipped_model
 
 __all__ = ["SiamFCTracker", "create", "crop_square", "model_paths", "VARIANT_FILES", "TUNABLE"]
 
@@ -293,17 +293,6 @@ def create(variant: str = "edge", threads: int = 1, exemplar_model: str | Path |
     `model` a prefix `<dir>/<name>` of a pair `<name>_exemplar.onnx` / `<name>_search.onnx`, or
     `exemplar_model` + `search_model` explicit paths (the fp32 files; their int8 twins are found
     beside them). precision / engine: see SiamFCTracker. Keyword overrides: see TUNABLE."""
-    if model is not None:
-        p = Path(model)
-        stem = p.name
-        for suffix in ("_exemplar.onnx", "_search.onnx", ".onnx"):
-            if stem.endswith(suffix):
-                stem = stem[: -len(suffix)]
-                break
-        exemplar_model = exemplar_model or p.parent / f"{stem}_exemplar.onnx"
-        search_model = search_model or p.parent / f"{stem}_search.onnx"
-    if (exemplar_model is None) != (search_model is None):
-        raise ValueError("give both exemplar_model and search_model, or neither")
-    if exemplar_model is None:
-        exemplar_model, search_model = model_paths(variant)
+    exemplar_model, search_model = model_pair(model, exemplar_model, search_model, ("exemplar", "search"),
+                                              lambda: model_paths(variant))
     return SiamFCTracker(exemplar_model, search_model, threads=threads, **overrides)
