@@ -55,6 +55,14 @@ def test_oracle_baseline_run_and_report(synth, tmp_path):
     assert r.status[3] == "lost"
     ov = report["trackers"]["oracle+baseline"]["overall"]
     assert 0.0 < ov["ao_3d"] < 1.0 and ov["ao_2d"] > 0.5 and ov["fps"] > 0
+    # its status 'lost' against the absent frames, in the report and its table: the one absent
+    # frame flagged, nothing else (hand count: 1 of 1, 1 reported)
+    lost = report["trackers"]["oracle+baseline"]["lost"]
+    assert (lost["lost_true"], lost["lost_reported"], lost["absent_frames"]) == (1, 1, 1)
+    assert ov["lost_precision"] == 1.0 and ov["lost_recall"] == 1.0
+    from track3d.evaluation.tables import summary_table
+    head, row = summary_table(report).splitlines()[:2]
+    assert "lost_P" in head and "lost_R" in head and "1.00    1.00" in row
     for name in ("success_2d", "success_bev", "success_3d", "precision_2d", "precision_3d",
                  "trajectory_s0001", "trajectory_s0002"):
         assert (tmp_path / "rep" / f"{name}.png").stat().st_size > 1000

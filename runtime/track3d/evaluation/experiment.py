@@ -416,7 +416,9 @@ class Experiment:
         return np.concatenate(rows) if rows else np.zeros((0, len(STAGES)))
 
     def report(self, names: list[str], plots: bool = True, trajectories: int = 4) -> dict:
-        """Scores, report.json and plots (success/precision curves, 3D trajectories) in report_dir."""
+        """Scores, report.json and plots (success/precision curves, 3D trajectories) in report_dir.
+        Each tracker's "lost" holds how its status "lost" matched the absent frames (score_lost:
+        from each sequence's first initialisation on; precision / recall also in "overall")."""
         self.report_dir.mkdir(parents=True, exist_ok=True)
         report: dict = {
             "dataset": str(self.dataset.root), "split": self.split, "sequences": [s.name for s in self.sequences],
@@ -434,8 +436,11 @@ class Experiment:
             overall[name] = ov
             lengths[name] = {seq.name: len(read_result(self.folder(name, seq.name), seq.name)) for seq in self.sequences}
             rec = runs[name] or {}
+            lost = self.score_lost(name).summary()
             report["trackers"][name] = {
-                "overall": {**ov.summary(), "result_frames": sum(lengths[name].values())},
+                "overall": {**ov.summary(), "lost_precision": lost["lost_precision"],
+                            "lost_recall": lost["lost_recall"], "result_frames": sum(lengths[name].values())},
+                "lost": lost,
                 "curves": ov.curves,
                 "sequences": {s.name: s.summary() for s in scores},
                 "stage_ms_mean": self._stage_means(name),

@@ -7,6 +7,7 @@ __all__ = ["TABLE_COLUMNS", "columns", "summary_table"]
 
 TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
                  ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
+                 ("lost_P", "lost_precision", "{:.2f}"), ("lost_R", "lost_recall", "{:.2f}"),
                  ("restarts", "restarts", "{:d}"), ("frames", "frames", "{:d}"), ("FPS", "fps", "{:.1f}"),
                  ("FPS_e2e", "fps_e2e", "{:.1f}"))
 
