@@ -472,6 +472,30 @@ def test_the_frame_after_a_reacquisition_searches_the_wide_region(trained):
     assert iou_after_the_jump(True) > 0.6             # measured 0.76
 
 
+def test_a_lost_tracker_reacquires_only_at_the_reacquisition_threshold(trained):
+    """Hysteresis: lost below `score_threshold`, found again only at `reacquire_threshold` or
+    above (default: the lost threshold). A tracker that can never reach it stays lost after the
+    exit; the default one finds the target when it returns; bad values are refused."""
+    from track3d.edgetrack import create
+
+    frames, gt, absent = _exit_and_return_sequence()
+
+    def run(**kw):
+        tr = create(model=trained["root"] / "model" / "et", **kw)
+        tr.init(frames[0], gt[0])
+        return [tr.update(f)[0] for f in frames[1:]], tr
+
+    oks, tr = run()
+    assert tr.reacquire_threshold == tr.score_threshold
+    first_lost = oks.index(False)
+    assert any(oks[first_lost:])                                   # found again after the exit
+    never, _ = run(reacquire_threshold=1.0)                        # a calibrated score is < 1
+    assert never[:first_lost] == oks[:first_lost] and not any(never[first_lost:])
+    for bad in (0.0, 1.5):
+        with pytest.raises(ValueError, match="reacquire_threshold"):
+            create(model=trained["root"] / "model" / "et", reacquire_threshold=bad)
+
+
 def test_registry_builds_edgetrack_and_says_when_no_model_is_shipped(trained, tmp_path, monkeypatch):
     from track3d import onnxmodel
     from track3d import trackers2d as T
@@ -634,3 +658,19 @@ def test_fit_threshold_runs_the_grid_picks_by_f1_and_writes_the_metadata(trained
         main(["fit-threshold", "--model", str(prefix), "--data", str(data), "--split", "test"])
     with pytest.raises(ValueError, match=r"lie in \(0, 1\)"):
         fit_threshold(prefix, data, "train", [0.0, 0.5])
+    # the re-acquisition threshold: fitted after the lost threshold by the same F1, values below
+    # it dropped, written into the metadata; the runtime takes it (old metadata: the threshold)
+    from track3d_train.edgetrack.threshold import fit_reacquire
+    assert t.reacquire_threshold == t.score_threshold
+    rf = fit_reacquire(prefix, data, "train", [0.05, 0.5, 0.99], threshold=0.1)
+    assert [r["reacquire_threshold"] for r in rf["rows"]] == [0.5, 0.99]
+    best = max(rf["rows"], key=lambda r: (round(r["f1"], 6), round(r["ao_2d"], 6), -r["reacquire_threshold"]))
+    assert rf["reacquire_threshold"] == best["reacquire_threshold"]
+    assert main(["fit-threshold", "--model", str(prefix), "--data", str(data), "--split", "train",
+                 "--grid", "0.1", "--reacquire-grid", "0.99", "--write", "--quiet"]) == 0
+    t = EdgeTracker(f"{prefix}_template.onnx", f"{prefix}_search.onnx")
+    assert (t.score_threshold, t.reacquire_threshold) == (0.1, 0.99)
+    assert t.meta["score"]["threshold_fit"]["reacquire"]["rows"][0]["reacquire_threshold"] == 0.99
+    assert graphs() == graph_before
+    with pytest.raises(ValueError, match="re-acquisition thresholds"):
+        fit_reacquire(prefix, data, "train", [0.05], threshold=0.1)

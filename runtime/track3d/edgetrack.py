@@ -18,7 +18,8 @@ Lost and found: when `score` falls below the threshold, `update` returns ok=Fals
 stays where it was; while lost the search crop is wider (`lost_instance_size` pixels at the
 same image scale, so the template still matches) and has no cosine window, and after
 SWEEP_AFTER lost frames every other search steps over a grid of the whole image; the first
-frame whose score passes the threshold again re-acquires the target there, and the frame after
+frame whose score reaches `reacquire_threshold` (metadata; at least the lost threshold)
+re-acquires the target there, and the frame after
 a re-acquisition searches the wide region too (the body's motion is not known yet).
 
 Every size and hyper-parameter comes from the models' metadata (key 'track3d'); keyword
@@ -41,7 +42,7 @@ __all__ = ["EdgeTracker", "create", "model_paths", "TUNABLE", "SHIPPED_NAME"]
 
 SHIPPED_NAME = "edgetrack"
 TUNABLE = ("instance_size", "lost_instance_size", "window_influence", "penalty_k", "size_lr",
-           "score_threshold", "context_amount", "motion")
+           "score_threshold", "reacquire_threshold", "context_amount", "motion")
 # Weight of the smoothed frame-to-frame motion added to the search centre (0: search at the last
 # centre, the behaviour of models whose metadata predates it). Fast bodies cross a search
 # region's half width (~120 px) in one frame; following them needs a prediction.
@@ -124,6 +125,13 @@ class EdgeTracker:
         self.penalty_k = float(hp["penalty_k"])
         self.size_lr = float(hp["size_lr"])
         self.score_threshold = float(hp["score_threshold"])
+        # while lost, a candidate re-acquires the target only at this score or above (hysteresis;
+        # models whose metadata predates it: the lost threshold itself). In the wide search just
+        # after an exit the frame is mostly pad and sky, and the edge between them scored 0.74-0.88
+        # on held-out sequences where the body was gone.
+        self.reacquire_threshold = float(hp.get("reacquire_threshold", self.score_threshold))
+        if not 0.0 < self.reacquire_threshold <= 1.0:
+            raise ValueError(f"reacquire_threshold must be in (0, 1], got {self.reacquire_threshold}")
         self.context_amount = float(hp["context_amount"])
         self.motion = float(hp.get("motion", 0.0))
         if not 0.0 <= self.motion <= 2.0:
@@ -284,7 +292,7 @@ class EdgeTracker:
             pscore = pscore * (1.0 - self.window_influence) + window * self.window_influence
         i, j = np.unravel_index(int(np.argmax(pscore)), pscore.shape)
         self.score = float(_sigmoid(self.calib_a * logit[i, j] + self.calib_b))
-        if self.score < self.score_threshold:
+        if self.score < (max(self.reacquire_threshold, self.score_threshold) if self.lost else self.score_threshold):
             # lost: the search stays where the target was last seen, without a motion guess
             self.lost, self.velocity, self.settling = True, np.zeros(2), False
             self.lost_frames += 1

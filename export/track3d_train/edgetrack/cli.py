@@ -125,7 +125,7 @@ def _grid(text: str) -> list[float]:
 
 def _fit_threshold(a) -> int:
     from ..onnx_meta import refuse_shipped
-    from .threshold import fit_motion, fit_threshold, write_threshold
+    from .threshold import fit_motion, fit_reacquire, fit_threshold, write_threshold
 
     if a.write:
         refuse_shipped([Path(f"{a.model}_template.onnx"), Path(f"{a.model}_search.onnx")], a.force, "--model")
@@ -146,6 +146,16 @@ def _fit_threshold(a) -> int:
     for r in fit["rows"]:
         print(f"{r['threshold']:9.3g} {r['f1']:5.3f} {r['lost_precision']:9.3f} {r['lost_recall']:6.3f} {r['ao_2d']:6.3f}")
     print(f"best: {fit['threshold']:g}")
+    reacquire = None
+    if a.reacquire_grid:
+        rfit = fit_reacquire(a.model, a.data, a.split, a.reacquire_grid, fit["threshold"], threads=a.threads,
+                             max_sequences=a.max_sequences or None, quiet=a.quiet, motion=motion)
+        print(f"{'reacquire':>9} {'F1':>5} {'precision':>9} {'recall':>6} {'AO_2d':>6}")
+        for r in rfit["rows"]:
+            print(f"{r['reacquire_threshold']:9.3g} {r['f1']:5.3f} {r['lost_precision']:9.3f} "
+                  f"{r['lost_recall']:6.3f} {r['ao_2d']:6.3f}")
+        reacquire = rfit["reacquire_threshold"]
+        print(f"best re-acquisition threshold: {reacquire:g}")
     if a.write:
         from track3d_train.boxnet.data import split_hash
         from track3d.dataset import Dataset
@@ -155,8 +165,12 @@ def _fit_threshold(a) -> int:
                 "criterion": "F1 of lost vs absent frames, one pass; AO_2d breaks ties", "rows": fit["rows"]}
         if motion is not None:
             note["motion"] = {"criterion": "one-pass AO_2d at the model's threshold", "rows": mfit["rows"]}
-        for p in write_threshold(a.model, fit["threshold"], note, motion=motion):
-            print(f"wrote the {'motion weight and ' if motion is not None else ''}threshold into {p}")
+        if reacquire is not None:
+            note["reacquire"] = {"criterion": "F1 of lost vs absent frames, one pass, at the fitted threshold; "
+                                              "AO_2d, then the lower value, break ties", "rows": rfit["rows"]}
+        for p in write_threshold(a.model, fit["threshold"], note, motion=motion, reacquire=reacquire):
+            print(f"wrote the {'motion weight and ' if motion is not None else ''}threshold"
+                  f"{' and the re-acquisition threshold' if reacquire is not None else ''} into {p}")
     return 0
 
 
@@ -282,9 +296,13 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--motion-grid", type=_grid, default=None,
                    help="comma-separated candidate motion weights in [0, 2], chosen first by one-pass AO_2d "
                         "(default: keep the model's)")
+    f.add_argument("--reacquire-grid", type=_grid, default=None,
+                   help="comma-separated candidate re-acquisition thresholds (the score a lost tracker needs to "
+                        "take a candidate; at least the lost threshold), fitted after it by the same F1 "
+                        "(default: keep the model's)")
     f.add_argument("--max-sequences", type=bounded(int, 0), default=0, help="only the first N sequences (0: all)")
     f.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
-    f.add_argument("--write", action="store_true", help="write the best threshold (and motion) into the model's metadata")
+    f.add_argument("--write", action="store_true", help="write the best threshold (and motion, re-acquisition threshold) into the model's metadata")
     f.add_argument("--force", action="store_true", help="allow --write on the shipped models in track3d/models")
     f.add_argument("--quiet", action="store_true", help="no progress bar")
     f.set_defaults(fn=_fit_threshold)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-__all__ = ["fit_threshold", "fit_motion", "write_threshold"]
+__all__ = ["fit_threshold", "fit_motion", "fit_reacquire", "write_threshold"]
 
 
 def _f1(p: float, r: float) -> float:
@@ -92,9 +92,33 @@ def fit_threshold(model: str | Path, data: str | Path, split: str, grid: list[fl
     return {"threshold": best["threshold"], "rows": rows}
 
 
-def write_threshold(model: str | Path, threshold: float, note: dict, motion: float | None = None) -> list[Path]:
+def fit_reacquire(model: str | Path, data: str | Path, split: str, grid: list[float], threshold: float,
+                  threads: int = 1, max_sequences: int | None = None, quiet: bool = True,
+                  motion: float | None = None) -> dict:
+    """{"reacquire_threshold": best, "rows": [...]}: one pass per value at the lost `threshold`
+    (values below it are the threshold itself: dropped); the F1 of lost vs absent frames decides,
+    then AO_2d, then the lower value."""
+    from track3d.evaluation import TrackerSpec
+
+    grid = [float(r) for r in grid if float(r) >= threshold]
+    if not grid or any(not 0.0 < r <= 1.0 for r in grid):
+        raise ValueError(f"re-acquisition thresholds must lie in [{threshold:g}, 1] (the lost threshold and above)")
+    extra = {} if motion is None else {"motion": float(motion)}
+    specs = [TrackerSpec("edgetrack", "none", threads=threads, name=f"re {r:g}",
+                         tracker_options={"model": str(model), "score_threshold": float(threshold),
+                                          "reacquire_threshold": r, **extra}) for r in grid]
+    res = _pooled(data, split, specs, max_sequences, quiet)
+    rows = [{"reacquire_threshold": r, "f1": _f1(res[s.label]["lost_precision"], res[s.label]["lost_recall"]),
+             **{k: res[s.label][k] for k in ("lost_precision", "lost_recall", "ao_2d", "reacquired_share")}}
+            for r, s in zip(grid, specs)]
+    best = max(rows, key=lambda x: (round(x["f1"], 6), round(x["ao_2d"], 6), -x["reacquire_threshold"]))
+    return {"reacquire_threshold": best["reacquire_threshold"], "rows": rows}
+
+
+def write_threshold(model: str | Path, threshold: float, note: dict, motion: float | None = None,
+                    reacquire: float | None = None) -> list[Path]:
     """Rewrite the threshold (tracking default and score block) of <model>_template/_search.onnx,
-    and the motion weight when given, weights untouched; ``note`` (data, split, rows) goes to
+    and the motion weight and the re-acquisition threshold when given, weights untouched; ``note`` (data, split, rows) goes to
     ``score.threshold_fit``."""
     import json
 
@@ -114,6 +138,8 @@ def write_threshold(model: str | Path, threshold: float, note: dict, motion: flo
             meta["tracking"]["score_threshold"] = float(threshold)
             if motion is not None:
                 meta["tracking"]["motion"] = float(motion)
+            if reacquire is not None:
+                meta["tracking"]["reacquire_threshold"] = float(reacquire)
         if "score" in meta:
             meta["score"]["threshold"] = float(threshold)
             meta["score"]["threshold_fit"] = note
