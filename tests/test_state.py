@@ -299,3 +299,30 @@ def test_a_damaged_state_is_one_value_error_and_changes_nothing(damage):
     with pytest.raises(ValueError, match="damaged Track3D state"):
         r.set_state(st)
     assert json.dumps(r.get_state()) == before
+
+
+def test_the_loop_raises_a_self_judging_trackers_reacquisition_threshold():
+    """Inside the loop (depth, depth check on) a tracker that judges its loss re-acquires only
+    at REACQUIRE_THRESHOLD or above: raised, never lowered; off with None, without the depth
+    check, in 2D-only mode, or for a tracker without the attribute."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import REACQUIRE_THRESHOLD
+
+    class Judging(_SelfJudging):
+        def __init__(self, own):
+            super().__init__()
+            self.reacquire_threshold = own
+
+    assert REACQUIRE_THRESHOLD == 0.9
+    est = create_estimator("baseline")
+    assert Track3D(CAM, Judging(0.6), est).tracker2d.reacquire_threshold == 0.9
+    assert Track3D(CAM, Judging(0.95), est).tracker2d.reacquire_threshold == 0.95
+    assert Track3D(CAM, Judging(0.6), est, reacquire_threshold=0.7).tracker2d.reacquire_threshold == 0.7
+    assert Track3D(CAM, Judging(0.6), est, reacquire_threshold=None).tracker2d.reacquire_threshold == 0.6
+    assert Track3D(CAM, Judging(0.6), est, evidence_points=0).tracker2d.reacquire_threshold == 0.6
+    assert Track3D(CAM, Judging(0.6), create_estimator("none")).tracker2d.reacquire_threshold == 0.6
+    t = Track3D(CAM, _Plain(), est)
+    assert not hasattr(t.tracker2d, "reacquire_threshold") and t.describe()["options"]["reacquire_threshold"] == 0.9
+    for bad in (0.0, 1.5, -1):
+        with pytest.raises(ValueError, match="reacquire_threshold"):
+            Track3D(CAM, Judging(0.6), est, reacquire_threshold=bad)

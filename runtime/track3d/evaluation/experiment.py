@@ -61,6 +61,7 @@ class TrackerSpec:
     depth_range: bool = True                 # the sequence's depth sensor range (Sequence.depth_range_m) to Track3D
     depth_smoothing: float | None = None     # None: track3d.tracker.DEPTH_SMOOTHING
     evidence_points: int | None = None       # None: track3d.tracker.EVIDENCE_POINTS
+    reacquire_threshold: float | None = None   # None: track3d.tracker.REACQUIRE_THRESHOLD; 0: the tracker's own
     threads: int = 1
     tracker_options: dict = field(default_factory=dict)
     estimator_options: dict = field(default_factory=dict)
@@ -93,6 +94,8 @@ class TrackerSpec:
                               depth_range_m=seq.depth_range_m if self.depth_range else None,
                               **({} if self.depth_smoothing is None else {"depth_smoothing": self.depth_smoothing}),
                               **({} if self.evidence_points is None else {"evidence_points": self.evidence_points}),
+                              **({} if self.reacquire_threshold is None else
+                                 {"reacquire_threshold": self.reacquire_threshold or None}),
                               **self.sensor_options(seq.depth_sensor))
 
     def sensor_options(self, depth_sensor: str | None) -> dict:
