@@ -38,7 +38,7 @@ from .frames import check_image
 from .onnxmodel import load_model, model_pair, shipped_model
 from .siamfc import crop_square
 
-__all__ = ["EdgeTracker", "create", "model_paths", "TUNABLE", "SHIPPED_NAME"]
+__all__ = ["EdgeTracker", "create", "model_paths", "pad_colour", "TUNABLE", "SHIPPED_NAME"]
 
 SHIPPED_NAME = "edgetrack"
 TUNABLE = ("instance_size", "lost_instance_size", "window_influence", "penalty_k", "size_lr",
@@ -67,8 +67,9 @@ def model_paths(name: str = SHIPPED_NAME) -> tuple[Path, Path]:
     return shipped_model(f"{name}_template.onnx"), shipped_model(f"{name}_search.onnx")
 
 
-def _pad_colour(value) -> tuple[float, float, float] | None:
-    """The metadata's pad colour: None (the frame's mean colour) or three values in 0..255."""
+def pad_colour(value) -> tuple[float, float, float] | None:
+    """A pad colour: None (the frame's mean colour) or three values in 0..255 (RGB), as a tuple of
+    floats; anything else is a ValueError. The one check of it (metadata, caches, command line)."""
     if value is None:
         return None
     try:
@@ -76,7 +77,7 @@ def _pad_colour(value) -> tuple[float, float, float] | None:
     except (TypeError, ValueError):
         c = ()
     if len(c) != 3 or not all(0.0 <= v <= 255.0 for v in c):
-        raise ValueError(f"EdgeTrack metadata: pad must be three values in 0..255 (RGB), got {value!r}")
+        raise ValueError(f"pad must be three values in 0..255 (RGB), got {value!r}")
     return c
 
 
@@ -137,7 +138,7 @@ class EdgeTracker:
         if not 0.0 <= self.motion <= 2.0:
             raise ValueError(f"motion must be in 0..2, got {self.motion}")
         self.calib_a, self.calib_b = float(meta["score"]["a"]), float(meta["score"]["b"])
-        self.pad = _pad_colour(meta.get("pad"))
+        self.pad = pad_colour(meta.get("pad"))
         self._grids = {}
         self._kernel = None
         self._kshape = None      # the template kernel's shape, found on the first set_state

@@ -105,15 +105,14 @@ def _eval(a) -> int:
 
 
 def _pad(text: str):
+    from track3d.edgetrack import pad_colour
+
     if text.strip().lower() == "mean":
         return None
     try:
-        c = tuple(float(x) for x in text.split(","))
+        return pad_colour(text.split(","))
     except ValueError:
-        c = ()
-    if len(c) != 3 or not all(0.0 <= v <= 255.0 for v in c):
-        raise argparse.ArgumentTypeError(f"expected R,G,B in 0..255 or 'mean', got {text!r}")
-    return c
+        raise argparse.ArgumentTypeError(f"expected R,G,B in 0..255 or 'mean', got {text!r}") from None
 
 
 def _grid(text: str) -> list[float]:

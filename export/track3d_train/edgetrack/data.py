@@ -26,6 +26,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from track3d.edgetrack import pad_colour
 from track3d.siamfc import crop_square
 
 from ..siamfc.data import CropCache, build_cache, sequences_from_dataset, synthetic_sequences
@@ -40,14 +41,6 @@ CACHE_SIZE = 384   # 3 x the default template's image extent
 # 3 / 4 / 7: the lost flag's precision 0.76 -> 0.88, 0.47 -> 0.82, 0.77 -> 0.85, AO_3d level).
 PAD = (255.0, 0.0, 255.0)
 
-
-def _check_pad(pad) -> tuple | None:
-    if pad is None:
-        return None
-    c = tuple(float(v) for v in pad)
-    if len(c) != 3 or not all(0.0 <= v <= 255.0 for v in c):
-        raise ValueError(f"pad must be three values in 0..255 (RGB), got {pad!r}")
-    return c
 
 
 def _background(sequences, out_dir: Path, exemplar_size: int, instance_size: int, context_amount: float,
@@ -106,7 +99,7 @@ def prepare(out_dir, data=None, split: str = "train", synthetic: int = 0, synthe
     exported model carries it to the runtime's crop); None: each frame's mean colour (the
     shipped model's first training stage)."""
     out = Path(out_dir)
-    pad = _check_pad(pad)
+    pad = pad_colour(pad)
     roots = [data] if isinstance(data, (str, Path)) else list(data or [])
 
     def seqs():
