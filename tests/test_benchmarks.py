@@ -203,3 +203,27 @@ def test_precision_accuracy_skips_a_variant_that_is_not_there(tmp_path):
     acc = bench_precision.bench_accuracy(data, "test", tmp_path, "edgetrack", only=["onnxruntime/int8"])
     assert "skipped" in acc["rows"]["onnxruntime/int8 edgetrack only"]
     assert "restart" in acc["rows"]["onnxruntime/fp32"]
+
+
+def test_bench_accumulation_carries_a_view_onto_the_body_in_a_later_frame(tiny_dataset, tmp_path):
+    """The true pose maps one frame's returns onto the body in another frame: inside its label
+    box there (the pose convention of meta.json's frame_data), and the run writes every variant."""
+    import bench_accumulation as bench
+    from track3d.dataset import Dataset
+    from track3d.frustum import extract_frustum
+
+    seq = Dataset(tiny_dataset).sequences("test")[0]
+    fd = seq.meta["frame_data"]
+    R, T = np.asarray(fd["R"]).reshape(-1, 3, 3), np.asarray(fd["T"])
+    i, j = [k for k in range(len(seq)) if not seq.absent[k]][:2]
+    pts = extract_frustum(seq.points(i), seq.gt2d[i], seq.camera.M)
+    moved = bench.to_camera(bench.to_body(pts, R[i], T[i]), R[j], T[j])
+    g = seq.gt3d[j]
+    assert np.all(np.abs(moved - g[:3]) <= g[3:] / 2 + 0.02)
+    wrong = bench.to_camera(bench.to_body(pts, R[i].T, T[i]), R[j].T, T[j])    # the transposed pose
+    if not np.allclose(R[i], R[j]):
+        assert not np.allclose(wrong, moved, atol=1e-3)
+    assert bench.main(["--data", str(tiny_dataset), "--split", "test", "--limit", "1", "--out", str(tmp_path)]) == 0
+    rec = json.loads((tmp_path / "accumulation.json").read_text())
+    assert set(rec["mean_iou_3d"]) == set(bench.VARIANTS)
+    assert all(0.0 <= v <= 1.0 for v in rec["mean_iou_3d"].values())

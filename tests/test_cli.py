@@ -114,3 +114,16 @@ def test_track_passes_the_evidence_points_to_the_loop_and_records_them(synth, tm
     with pytest.raises(SystemExit) as e:
         main(["track", "--data", str(synth), "--evidence-points", "-1"])
     assert e.value.code == 2
+
+
+def test_track_passes_the_hold_cut_size_to_the_loop_and_records_it(synth, tmp_path):
+    from track3d.evaluation.results import read_run_record
+
+    res = tmp_path / "res"
+    assert main(["track", "--data", str(synth), "--tracker", "mosse", "--sequence", "a", "--hold-cut-size", "0.5",
+                 "--results", str(res), "--video", "none", "--quiet"]) == 0
+    rec = read_run_record(res, "test", "mosse+baseline")
+    assert json.dumps(rec).count('"hold_cut_size": 0.5') == 1, rec
+    with pytest.raises(SystemExit) as e:
+        main(["track", "--data", str(synth), "--hold-cut-size", "2"])
+    assert e.value.code == 2

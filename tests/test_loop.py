@@ -408,6 +408,88 @@ def test_fit_measured_faces_hand_cases():
                                [1.1, 2.25, 10.0, 1.2, 1.5, 4.0])     # y 1.5..3
 
 
+def test_hold_cut_extent_hand_cases():
+    from track3d.boxes import hold_cut_extent
+
+    b = np.array([1.1, 2.2, 10.5, 1.2, 1.4, 3.0])           # x 0.5..1.7, y 1.5..2.9, z 9..12
+    bounds = np.array([[0.5, 1.5, 9.0], [1.7, 2.9, 10.0]])  # the returns
+    whole = np.array([0.0, 2.0, 10.0, 3.0, 2.0, 5.0])        # the last whole view: front 7.5, 5 m deep
+    # cut at x min, the returns a part (1.2 < 0.8 x 3): the seen face stays (1.7), the open one
+    # lies the whole 3 m away; y grows to its whole 2 m about its middle; the front is the nearer
+    # of the returns' (9) and the whole view's (7.5), the back at least the whole 5 m behind it
+    np.testing.assert_allclose(hold_cut_extent(b, bounds, (True, False, False, False), whole, 0.8),
+                               [0.2, 2.2, 10.0, 3.0, 2.0, 5.0])
+    np.testing.assert_allclose(hold_cut_extent(b, bounds, (False, False, True, False), whole, 0.8),
+                               [2.0, 2.2, 10.0, 3.0, 2.0, 5.0])          # cut at x max: x 0.5..3.5
+    # a cut axis whose returns span at least `below` of the whole (1.2 >= 0.8 x 1.4) is kept, and
+    # so is the depth; the closed axis still grows
+    np.testing.assert_allclose(hold_cut_extent(b, bounds, (True, False, False, False),
+                                               [0.0, 2.0, 10.0, 1.4, 2.0, 5.0], 0.8),
+                               [1.1, 2.2, 10.5, 1.2, 2.0, 3.0])
+    # an axis open on both sides (a body larger than the view) is kept; so is a closed axis wider
+    # than its whole extent
+    np.testing.assert_allclose(hold_cut_extent(b, bounds, (True, False, True, False),
+                                               [0.0, 2.0, 10.0, 3.0, 1.0, 5.0], 0.8), b)
+    # below = 1: a cut axis is held whenever it spans less than the whole; a whole view behind
+    # the returns and shallower than the box moves neither face (front 9, back 12)
+    np.testing.assert_allclose(hold_cut_extent(b, bounds, (False, True, False, False),
+                                               [0.0, 0.0, 12.0, 1.0, 1.5, 2.0], 1.0),
+                               [1.1, 2.15, 10.5, 1.2, 1.5, 3.0])          # y 1.4..2.9
+    nan = np.array([[np.nan, 1.5, 9.0], [1.7, 2.9, 10.0]])
+    np.testing.assert_array_equal(hold_cut_extent(b, nan, (True, False, False, False), whole, 0.8), b)
+    np.testing.assert_array_equal(hold_cut_extent(b, bounds, (True, False, False, False), [np.nan] * 6, 0.8), b)
+
+
+class _Enclosing:
+    """The returns' enclosing box, called amodal: what an estimator shown a sliver answers."""
+
+    amodal = True
+
+    def estimate(self, points, category):
+        return box3d_from_points(points)
+
+
+def test_a_body_cut_by_the_border_keeps_the_size_of_its_last_whole_view():
+    """A sphere seen whole, then leaving the view on the left with a sliver in view: its returns
+    (and an estimator shown them) span the sliver; the reported box keeps the whole view's
+    width from the face it sees, its height and its front, and a checkpoint carries that box."""
+    z, r = 8.0, 1.0
+    left = -CAM.cx / CAM.fx * z                              # the image's left border at depth z
+    views = [render_sphere(CAM, c, r) for c in ((0.0, 0.0, z), (left - r + 0.4, 0.0, z))]
+    pts = [CAM.backproject_depth(v[1]) for v in views]
+    b2 = np.array([v[2] for v in views])
+    assert b2[1][0] <= 0.5 and b2[0][0] > 0.5                 # the second view is cut at x min
+
+    def run(**kw):
+        t = Track3D(CAM, OracleTracker(b2), _Enclosing(), depth_smoothing=0.0, fusion=False, **kw)
+        t.init(views[0][0], b2[0], points=pts[0])
+        return t, t.update(views[1][0], pts[1]).box3d
+
+    t, held = run()
+    _, sliver = run(hold_cut_size=0.0)
+    whole = box3d_from_points(extract_frustum(pts[0], b2[0], CAM.M))
+    seen = box3d_from_points(extract_frustum(pts[1], b2[1], CAM.M))
+    assert sliver[3] == pytest.approx(seen[3]) and seen[3] < 0.5 * whole[3]
+    assert held[3] == pytest.approx(whole[3]) and held[4] == pytest.approx(whole[4])
+    # the nearest part is out of view: the front is the whole view's, the back the farther of the
+    # sliver's and the whole view's
+    assert held[2] - held[5] / 2 == pytest.approx(whole[2] - whole[5] / 2)
+    assert held[2] + held[5] / 2 == pytest.approx(max(seen[2] + seen[5] / 2, whole[2] + whole[5] / 2))
+    assert held[0] + held[3] / 2 == pytest.approx(seen[0] + seen[3] / 2)      # the seen face stays
+    assert iou_3d(held, views[1][3]) > iou_3d(sliver, views[1][3]) + 0.2
+    assert t.describe()["options"]["hold_cut_size"] == 0.8
+    # the restored tracker holds the same size
+    t0 = Track3D(CAM, OracleTracker(b2), _Enclosing(), depth_smoothing=0.0, fusion=False)
+    t0.init(views[0][0], b2[0], points=pts[0])
+    state = t0.get_state()
+    t2 = Track3D(CAM, OracleTracker(b2), _Enclosing(), depth_smoothing=0.0, fusion=False)
+    t2.set_state(state)
+    np.testing.assert_array_equal(t2.update(views[1][0], pts[1]).box3d, held)
+    for bad in (-0.1, 1.5):
+        with pytest.raises(ValueError, match="hold_cut_size"):
+            Track3D(CAM, OracleTracker(b2), _Enclosing(), hold_cut_size=bad)
+
+
 class _Offset:
     """The points' enclosing box pushed 0.5 m back and 10% wide: an amodal estimator whose faces are off."""
 

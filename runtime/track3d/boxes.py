@@ -16,6 +16,7 @@ __all__ = [
     "SIZE_TEMPLATES", "NUM_SIZE_CLASSES",
     "iou_2d", "iou_3d", "iou_bev", "box3d_to_bev", "center_2d", "center_error_2d", "center_error_3d",
     "size_class_of", "encode_size", "decode_size", "box3d_from_points", "clip_box2d", "fit_measured_faces",
+    "hold_cut_extent",
 ]
 
 _T = 1.0 / 3.0
@@ -172,6 +173,51 @@ def fit_measured_faces(box3d: np.ndarray, bounds: np.ndarray,
     if front < back:
         b[5] = back - front
         b[2] = front + b[5] / 2.0
+    return b
+
+
+def hold_cut_extent(box3d: np.ndarray, bounds: np.ndarray, open_sides: tuple[bool, bool, bool, bool],
+                    whole_box: np.ndarray, below: float) -> np.ndarray:
+    """The box (6,) float64 of a body cut by the image border, sized from the last view that saw
+    it whole: the returns of a cut body span only its visible part, and an estimator shown that
+    part sizes the part.
+
+    box3d: the box with its seen faces measured (`fit_measured_faces`); bounds (2, 3) [min; max]
+    of the returns; open_sides (x min, y min, x max, y max) as in `fit_measured_faces`;
+    whole_box (6,) the box of the last whole view; below: the fraction of the whole extent under
+    which a cut axis's returns count as a part. On an axis (x, y) open on one side whose returns
+    span less than `below` x its whole extent, the seen face stays where the returns put it and
+    the open one lies the whole extent away (the estimate's guess of it is dropped); on an axis
+    open on neither side, the extent grows to the whole one about the box's middle if shorter (a
+    cap cut off in x also spans less of y). When an axis was such a part, the nearest part of the
+    body may be out of view too: the front face is the nearer of the returns' and the whole
+    view's, and the box reaches back at least the whole depth from it. An axis open on both sides
+    (a body larger than the view) keeps box3d's. Bounds that are not finite change nothing."""
+    b = np.array(box3d, dtype=np.float64).reshape(6)
+    lo, hi = (np.asarray(v, dtype=np.float64).reshape(3) for v in bounds)
+    whole = np.asarray(whole_box, dtype=np.float64).reshape(6)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(np.isfinite(whole))):
+        return b
+    size = whole[3:]
+    part = False
+    for k in (0, 1):
+        o0, o1 = bool(open_sides[k]), bool(open_sides[2 + k])
+        if o0 and o1:
+            continue
+        if o0 or o1:
+            if hi[k] - lo[k] >= below * size[k]:
+                continue
+            part = True
+            a0, a1 = (min(lo[k], hi[k] - size[k]), hi[k]) if o0 else (lo[k], max(hi[k], lo[k] + size[k]))
+        elif size[k] > b[3 + k]:
+            a0, a1 = b[k] - size[k] / 2.0, b[k] + size[k] / 2.0
+        else:
+            continue
+        b[k], b[3 + k] = (a0 + a1) / 2.0, a1 - a0
+    if part:
+        front = min(lo[2], whole[2] - size[2] / 2.0)
+        back = max(b[2] + b[5] / 2.0, front + size[2])
+        b[2], b[5] = (front + back) / 2.0, back - front
     return b
 
 
