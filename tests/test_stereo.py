@@ -93,6 +93,30 @@ def test_stereo_leaves_holes_on_textureless_surfaces():
     assert (zs[textured] > 0).mean() > 0.7
 
 
+def test_a_body_at_the_left_border_has_depth_up_to_its_own_disparity():
+    """OpenCV leaves its first numDisparities columns (208 px here) without disparity; a left
+    pixel u needs only u - d >= 0. A textured sphere at the left border gets depth there, in the
+    full frame and in the box window alike, and no pixel left of its own disparity does."""
+    z_c = 9.0
+    left_x = -CAM.cx / CAM.fx * z_c                  # the image's left border at the sphere's depth
+    l, r, z = render_pair(CAM, (left_x + 1.5, 0.0, z_c), 2.0)
+    m = StereoMatcher(CAM)
+    u = np.arange(CAM.width)[None, :].repeat(CAM.height, 0)
+    d_true = CAM.disparity(np.where(z > 0, z, 1.0))
+    seen = (z > 0) & (u >= d_true + 8) & (u < m.num_disparities)   # in OpenCV's blind band, seen by both
+    assert seen.sum() > 5000
+    zf = m.depth(l, r)
+    assert (zf[seen] > 0).mean() > 0.8
+    ok = seen & (zf > 0)
+    assert np.median(np.abs(CAM.disparity(zf[ok]) - d_true[ok])) < 0.25
+    assert not np.any(zf[u < CAM.disparity(np.where(zf > 0, zf, np.inf))] > 0)   # u - d < 0: a hole
+    box = _box(z)
+    zw, (u0, _, v0, _) = m.depth_window(l, r, box)
+    assert u0 == 0
+    win = seen[v0:v0 + zw.shape[0], :zw.shape[1]]
+    assert (zw[win] > 0).mean() > 0.8
+
+
 def test_box_window_equals_full_frame_inside_the_box_and_matches_less(pair):
     """The window gives the full frame's depth inside the box while matching a fraction of the
     frame (the work, not a wall-clock time: a timed assertion failed on a loaded machine)."""

@@ -22,7 +22,10 @@ What makes a disparity valid (the rest are holes, 0):
 - a texture test: the left image's local standard deviation over the matching block must be at
   least `min_texture_dn` (SGBM's smoothness term otherwise fills textureless regions with
   interpolated disparities, which look like data but are not),
-- d >= `min_disparity_px` (z <= fx * B / min_disparity_px) and the depth within max_depth_m.
+- d >= `min_disparity_px` (z <= fx * B / min_disparity_px) and the depth within max_depth_m,
+- u - d >= 0: a left pixel whose match would lie left of the right image is not seen by the
+  right camera (the images are padded on the left before matching, so OpenCV's blind band of
+  `numDisparities` columns at the left border shrinks to these pixels).
 Sub-pixel disparities: SGBM's 1/16-pixel interpolation of the matching cost.
 
 Window mode: disparity is computed on the crop [x0 - D - m, x1 + m) x [y0 - m, y1 + m) of both
@@ -109,14 +112,28 @@ class StereoMatcher:
             raise ValueError(f"stereo images are {gl.shape} and {gr.shape}, the camera is {shape}")
         return gl, gr
 
-    def _disparity(self, gl: np.ndarray, gr: np.ndarray) -> np.ndarray:
-        """Disparity (float32 px, 0 = invalid) of a (crop of a) gray pair."""
+    def _disparity(self, gl: np.ndarray, gr: np.ndarray, pad: int = 0) -> np.ndarray:
+        """Disparity (float32 px, 0 = invalid) of a (crop of a) gray pair.
+
+        pad: black columns added to the left of both images before matching (the crop starts at
+        the image's left border): OpenCV leaves the first `numDisparities` columns of its input
+        without disparity, although a left pixel u only needs the right pixels u - d >= 0 of its
+        own disparity d (a body at 30 m: d ~ 10 px, not the 208 px searched). Matches that land
+        in the padding (u - d < 0: not seen by the right camera) are holes."""
         p = self.params
+        if pad > 0:
+            gl = cv2.copyMakeBorder(gl, 0, 0, pad, 0, cv2.BORDER_CONSTANT, value=0)
+            gr = cv2.copyMakeBorder(gr, 0, 0, pad, 0, cv2.BORDER_CONSTANT, value=0)
         if gl.shape[1] < self._min_width:
             # OpenCV refuses (or crashes on) images not wider than the search range plus the block;
             # no pixel of such an image has its full search range anyway
-            return np.zeros(gl.shape, np.float32)
+            return np.zeros((gl.shape[0], gl.shape[1] - pad), np.float32)
         d = self._sgbm.compute(gl, gr).astype(np.float32) / 16.0
+        if pad > 0:
+            d = np.ascontiguousarray(d[:, pad:])
+            gl = gl[:, pad:]
+            u = np.arange(d.shape[1], dtype=np.float32)
+            d[d > u[None, :]] = 0.0          # the match would lie left of the right image
         if p.min_texture_dn > 0:
             g = gl.astype(np.float32)
             k = (p.block_size, p.block_size)
@@ -128,7 +145,7 @@ class StereoMatcher:
 
     def disparity(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """(H, W) float32 disparity in pixels of the whole frame, 0 = no match."""
-        return self._disparity(*self._check(left, right))
+        return self._disparity(*self._check(left, right), pad=self.num_disparities)
 
     def depth(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """(H, W) float64 z in metres of the whole frame (left grid), 0 = no depth."""
@@ -162,7 +179,8 @@ class StereoMatcher:
         u0, u1, v0, v1 = win
         c0 = max(0, u0 - self.num_disparities)   # every right pixel the window can match
         c1 = min(self.camera.width, max(u1, c0 + self._min_width))   # OpenCV's minimum width
-        d = self._disparity(np.ascontiguousarray(gl[v0:v1, c0:c1]), np.ascontiguousarray(gr[v0:v1, c0:c1]))
+        pad = self.num_disparities - (u0 - c0)     # > 0 only at the image's left border
+        d = self._disparity(np.ascontiguousarray(gl[v0:v1, c0:c1]), np.ascontiguousarray(gr[v0:v1, c0:c1]), pad=pad)
         return self._to_depth(d[:, u0 - c0:u1 - c0]), win
 
     def points_window(self, left: np.ndarray, right: np.ndarray, box2d) -> np.ndarray:
