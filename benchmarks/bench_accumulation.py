@@ -21,11 +21,13 @@ Writes <out>/accumulation.json: mean IoU_3d per sequence and their mean, per var
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from benchlib.output import add_out_argument
 from benchlib.record import finish_record, start_record
 
-from track3d.argparsing import ArgumentParser, run_main
+from track3d.argparsing import ArgumentParser, bounded, run_main
 from track3d.boxes import fit_measured_faces, iou_3d
 from track3d.dataset import Dataset
 from track3d.estimators import create_estimator
@@ -50,7 +52,9 @@ def to_camera(points: np.ndarray, R: np.ndarray, T: np.ndarray) -> np.ndarray:
 
 def sequence_ious(seq, estimator, seen_angle_deg: float = 90.0, seed: int = 0) -> dict[str, list[float]]:
     """Per present frame, IoU_3d of each variant (VARIANTS) against the label."""
-    fd = seq.meta["frame_data"]
+    fd = seq.meta.get("frame_data")
+    if not isinstance(fd, dict) or "R" not in fd or "T" not in fd:
+        raise ValueError(f"{seq.path}: meta.json has no per-frame pose (frame_data R, T): a dataset of an older simulator")
     R = np.asarray(fd["R"], np.float64).reshape(-1, 3, 3)     # body -> camera
     T = np.asarray(fd["T"], np.float64).reshape(-1, 3)
     rng = np.random.default_rng(seed)
@@ -95,18 +99,22 @@ def sequence_ious(seq, estimator, seen_angle_deg: float = 90.0, seed: int = 0) -
     return out
 
 
-def main(argv=None) -> int:
+def build_parser() -> ArgumentParser:
     ap = ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--data", required=True, help="a dataset with depth and labels (track3d-sim generate)")
+    ap.add_argument("--data", type=Path, required=True, help="a dataset with depth and labels (track3d-sim generate)")
     ap.add_argument("--split", default="test_unseen", help="the split to measure (default: test_unseen)")
-    ap.add_argument("--limit", type=int, default=0, help="first N sequences only (0: all)")
-    ap.add_argument("--seen-angle", type=float, default=90.0,
+    ap.add_argument("--limit", type=bounded(int, 0), default=0, help="first N sequences only (0: all)")
+    ap.add_argument("--seen-angle", type=bounded(float, 0, high=180), default=90.0,
                     help="degrees between a past view and this one for `seen_back` to trust the views (default 90)")
     add_out_argument(ap, "accumulation")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
     seqs = Dataset(a.data).sequences(a.split)[: a.limit or None]
     estimator = create_estimator("a3boxnet")
-    rec = start_record("accumulation", data=a.data, split=a.split, variants=list(VARIANTS), seen_angle_deg=a.seen_angle)
+    rec = start_record("accumulation", data=a.data.as_posix(), split=a.split, variants=list(VARIANTS), seen_angle_deg=a.seen_angle)
     per = {}
     for seq in progress(seqs, desc="sequences"):
         ious = sequence_ious(seq, estimator, a.seen_angle)
@@ -122,4 +130,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(run_main(main, "bench_accumulation"))
+    raise SystemExit(run_main(main, "bench_accumulation.py"))

@@ -181,6 +181,7 @@ def test_every_benchmark_script_follows_the_conventions():
     ("bench_precision.py", ["--data", "no/such/dataset", "--no-speed", "--accuracy-data", "no/such/dataset"]),
     ("bench_boxnet.py", ["--cache", "no/such/cache.npz", "--no-speed"]),
     ("bench_latency.py", ["--data", "d", "--frames", "0"]),
+    ("bench_accumulation.py", ["--data", "no/such/dataset"]),
 ])
 def test_benchmark_mistakes_are_one_line(script, argv, tmp_path):
     r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *argv], capture_output=True, text=True,
