@@ -674,3 +674,4 @@ def test_fit_threshold_runs_the_grid_picks_by_f1_and_writes_the_metadata(trained
     assert graphs() == graph_before
     with pytest.raises(ValueError, match="re-acquisition thresholds"):
         fit_reacquire(prefix, data, "train", [0.05], threshold=0.1)
+

@@ -107,3 +107,16 @@ def test_nanotrack_without_its_peer_models_is_unavailable(monkeypatch):
     monkeypatch.delenv(T.NANOTRACK_ENV, raising=False)
     with pytest.raises(T.TrackerUnavailable, match="TRACK3D_NANOTRACK_DIR"):
         T.create_tracker("nano")
+
+
+def test_a_degenerate_candidate_is_penalised_without_a_warning():
+    """A zero-size candidate box (ratio 0) used to divide by zero (RuntimeWarning in the fuzz run)."""
+    import warnings
+
+    from track3d.edgetrack import _change
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        c = _change(np.array([0.0, 0.5, 1.0, 2.0]))
+    assert np.all(np.isfinite(c)) and c[0] >= 1e12
+    np.testing.assert_allclose(c[1:], [2.0, 1.0, 2.0])

@@ -86,6 +86,9 @@ def _sigmoid(x):
 
 
 def _change(r):
+    # a degenerate candidate (zero width or height: r = 0) gets a huge, finite change, so its
+    # penalty is 0 without a divide-by-zero warning (the fuzz run found one)
+    r = np.maximum(r, 1e-12)
     return np.maximum(r, 1.0 / r)
 
 
