@@ -415,14 +415,19 @@ def test_hold_cut_extent_hand_cases():
     bounds = np.array([[0.5, 1.5, 9.0], [1.7, 2.9, 10.0]])  # the returns
     whole = np.array([0.0, 2.0, 10.0, 3.0, 2.0, 5.0])        # the last whole view: front 7.5, 5 m deep
     # cut at x min, the returns a part (1.2 < 0.8 x 3): the seen face stays (1.7), the open one
-    # lies the whole 3 m away; y grows to its whole 2 m about its middle; the front is the nearer
-    # of the returns' (9) and the whole view's (7.5), the back at least the whole 5 m behind it
+    # lies the whole 3 m away; y grows to its whole 2 m about the whole view's middle (2.0; the
+    # returns 1.5..2.9 fit); the front is the nearer of the returns' (9) and the whole view's
+    # (7.5), the back at least the whole 5 m behind it
     np.testing.assert_allclose(hold_cut_extent(b, bounds, (True, False, False, False), whole, 0.8),
-                               [0.2, 2.2, 10.0, 3.0, 2.0, 5.0])
+                               [0.2, 2.0, 10.0, 3.0, 2.0, 5.0])
     np.testing.assert_allclose(hold_cut_extent(b, bounds, (False, False, True, False), whole, 0.8),
-                               [2.0, 2.2, 10.0, 3.0, 2.0, 5.0])          # cut at x max: x 0.5..3.5
+                               [2.0, 2.0, 10.0, 3.0, 2.0, 5.0])          # cut at x max: x 0.5..3.5
+    # a whole view whose middle would leave returns out is moved the least to hold them: y 1.5..3.5
+    np.testing.assert_allclose(hold_cut_extent(b, bounds, (True, False, False, False),
+                                               [0.0, 5.0, 10.0, 3.0, 2.0, 5.0], 0.8),
+                               [0.2, 2.5, 10.0, 3.0, 2.0, 5.0])
     # a cut axis whose returns span at least `below` of the whole (1.2 >= 0.8 x 1.4) is kept, and
-    # so is the depth; the closed axis still grows
+    # so is the depth; the closed axis still grows, about its own middle (no part seen)
     np.testing.assert_allclose(hold_cut_extent(b, bounds, (True, False, False, False),
                                                [0.0, 2.0, 10.0, 1.4, 2.0, 5.0], 0.8),
                                [1.1, 2.2, 10.5, 1.2, 2.0, 3.0])

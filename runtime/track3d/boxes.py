@@ -188,10 +188,12 @@ def hold_cut_extent(box3d: np.ndarray, bounds: np.ndarray, open_sides: tuple[boo
     which a cut axis's returns count as a part. On an axis (x, y) open on one side whose returns
     span less than `below` x its whole extent, the seen face stays where the returns put it and
     the open one lies the whole extent away (the estimate's guess of it is dropped); on an axis
-    open on neither side, the extent grows to the whole one about the box's middle if shorter (a
-    cap cut off in x also spans less of y). When an axis was such a part, the nearest part of the
-    body may be out of view too: the front face is the nearer of the returns' and the whole
-    view's, and the box reaches back at least the whole depth from it. An axis open on both sides
+    open on neither side, the extent grows to the whole one if shorter (a cap cut off in x also
+    spans less of y): about the box's middle, or, when another axis is such a part, about the
+    whole view's middle moved the least to hold the returns (a sliver's middle is not the
+    body's). When an axis is such a part, the nearest part of the body may be out of view too:
+    the front face is the nearer of the returns' and the whole view's, and the box reaches back
+    at least the whole depth from it. An axis open on both sides
     (a body larger than the view) keeps box3d's. Bounds that are not finite change nothing."""
     b = np.array(box3d, dtype=np.float64).reshape(6)
     lo, hi = (np.asarray(v, dtype=np.float64).reshape(3) for v in bounds)
@@ -199,7 +201,7 @@ def hold_cut_extent(box3d: np.ndarray, bounds: np.ndarray, open_sides: tuple[boo
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(np.isfinite(whole))):
         return b
     size = whole[3:]
-    part = False
+    part = any((bool(open_sides[k]) != bool(open_sides[2 + k])) and hi[k] - lo[k] < below * size[k] for k in (0, 1))
     for k in (0, 1):
         o0, o1 = bool(open_sides[k]), bool(open_sides[2 + k])
         if o0 and o1:
@@ -207,10 +209,11 @@ def hold_cut_extent(box3d: np.ndarray, bounds: np.ndarray, open_sides: tuple[boo
         if o0 or o1:
             if hi[k] - lo[k] >= below * size[k]:
                 continue
-            part = True
             a0, a1 = (min(lo[k], hi[k] - size[k]), hi[k]) if o0 else (lo[k], max(hi[k], lo[k] + size[k]))
         elif size[k] > b[3 + k]:
-            a0, a1 = b[k] - size[k] / 2.0, b[k] + size[k] / 2.0
+            # on a part of the body, the whole view's middle moved the least to hold the returns
+            c = min(max(whole[k], hi[k] - size[k] / 2.0), lo[k] + size[k] / 2.0) if part else b[k]
+            a0, a1 = c - size[k] / 2.0, c + size[k] / 2.0
         else:
             continue
         b[k], b[3 + k] = (a0 + a1) / 2.0, a1 - a0
