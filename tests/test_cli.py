@@ -103,27 +103,18 @@ def test_runtime_never_imports_the_simulator_or_torch():
     assert r.returncode == 0, r.stdout + r.stderr
 
 
-def test_track_passes_the_evidence_points_to_the_loop_and_records_them(synth, tmp_path):
+@pytest.mark.parametrize("flag,value,recorded,bad", [
+    ("--evidence-points", "0", '"evidence_points": 0', "-1"),
+    ("--hold-cut-size", "0.5", '"hold_cut_size": 0.5', "2"),
+])
+def test_track_passes_a_loop_option_to_the_loop_and_records_it(synth, tmp_path, flag, value, recorded, bad):
     from track3d.evaluation.results import read_run_record
 
     res = tmp_path / "res"
-    assert main(["track", "--data", str(synth), "--tracker", "mosse", "--sequence", "a", "--evidence-points", "0",
+    assert main(["track", "--data", str(synth), "--tracker", "mosse", "--sequence", "a", flag, value,
                  "--results", str(res), "--video", "none", "--quiet"]) == 0
     rec = read_run_record(res, "test", "mosse+baseline")
-    assert json.dumps(rec).count('"evidence_points": 0') == 1, rec
+    assert json.dumps(rec).count(recorded) == 1, rec
     with pytest.raises(SystemExit) as e:
-        main(["track", "--data", str(synth), "--evidence-points", "-1"])
-    assert e.value.code == 2
-
-
-def test_track_passes_the_hold_cut_size_to_the_loop_and_records_it(synth, tmp_path):
-    from track3d.evaluation.results import read_run_record
-
-    res = tmp_path / "res"
-    assert main(["track", "--data", str(synth), "--tracker", "mosse", "--sequence", "a", "--hold-cut-size", "0.5",
-                 "--results", str(res), "--video", "none", "--quiet"]) == 0
-    rec = read_run_record(res, "test", "mosse+baseline")
-    assert json.dumps(rec).count('"hold_cut_size": 0.5') == 1, rec
-    with pytest.raises(SystemExit) as e:
-        main(["track", "--data", str(synth), "--hold-cut-size", "2"])
+        main(["track", "--data", str(synth), flag, bad])
     assert e.value.code == 2

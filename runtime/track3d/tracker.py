@@ -177,9 +177,9 @@ DEPTH_SMOOTHING = 0.5
 # A body cut by the image border: on an image axis where the 2D box touches the border and the
 # returns span less than this fraction of the body's extent in the last view that saw it whole
 # (2D box off every border, not cut by the depth range), the reported box takes that extent from
-# the face it sees, the other image axis at least its whole extent, and the front face the
-# nearer of the returns' and the whole view's, the back at least the whole depth behind it
-# (boxes.hold_cut_extent). The returns of a sliver span the sliver, and A3BoxNet shown a sliver
+# the face it sees, the other image axis at least its whole extent about the whole view's middle
+# (moved the least to hold the returns), and the front face the nearer of the returns' and the
+# whole view's, the back at least the whole depth behind it (boxes.hold_cut_extent). The returns of a sliver span the sliver, and A3BoxNet shown a sliver
 # boxes a sliver (its open face was the estimate's guess before). Only with measured faces. Cut
 # frames are 11-26% of the calibration sets' frames with IoU_3d 0.66-0.82 against 0.88-0.91
 # whole. One pass on held-out sequences, EdgeTrack + A3BoxNet, AO_3d with the image axes only at
@@ -189,7 +189,8 @@ DEPTH_SMOOTHING = 0.5
 # cut for a whole sequence kept its first frame's size (flash-LiDAR seed 5, sequence 0003: 0.831
 # -> 0.735). The depth rule added at 0.8: seeds 3 / 7 0.8953 -> 0.8951, 0.8915 -> 0.8927,
 # flash-LiDAR / ToF seed 5 0.8143 -> 0.8177, 0.7494 -> 0.7528 (the whole view's depth and centre
-# instead: 0.8918, 0.8864, 0.8176, 0.7501). 0: off.
+# instead: 0.8918, 0.8864, 0.8176, 0.7501); the whole view's middle on the other axis then
+# +0.0002 to +0.0012 on all nine calibration sets (docs/runtime.md has every number). 0: off.
 HOLD_CUT_SIZE = 0.8
 
 
