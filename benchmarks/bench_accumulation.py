@@ -54,7 +54,8 @@ def sequence_ious(seq, estimator, seen_angle_deg: float = 90.0, seed: int = 0) -
     """Per present frame, IoU_3d of each variant (VARIANTS) against the label."""
     fd = seq.meta.get("frame_data")
     if not isinstance(fd, dict) or "R" not in fd or "T" not in fd:
-        raise ValueError(f"{seq.path}: meta.json has no per-frame pose (frame_data R, T): a dataset of an older simulator")
+        raise ValueError(f"{seq.path}: meta.json has no per-frame pose (frame_data R, T): "
+                         "a dataset of an older simulator")
     R = np.asarray(fd["R"], np.float64).reshape(-1, 3, 3)     # body -> camera
     T = np.asarray(fd["T"], np.float64).reshape(-1, 3)
     rng = np.random.default_rng(seed)
@@ -114,7 +115,8 @@ def main(argv=None) -> int:
     a = build_parser().parse_args(argv)
     seqs = Dataset(a.data).sequences(a.split)[: a.limit or None]
     estimator = create_estimator("a3boxnet")
-    rec = start_record("accumulation", data=a.data.as_posix(), split=a.split, variants=list(VARIANTS), seen_angle_deg=a.seen_angle)
+    rec = start_record("accumulation", data=a.data.as_posix(), split=a.split, variants=list(VARIANTS),
+                       seen_angle_deg=a.seen_angle)
     per = {}
     for seq in progress(seqs, desc="sequences"):
         ious = sequence_ious(seq, estimator, a.seen_angle)

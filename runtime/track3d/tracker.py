@@ -179,10 +179,10 @@ DEPTH_SMOOTHING = 0.5
 # (2D box off every border, not cut by the depth range), the reported box takes that extent from
 # the face it sees, the other image axis at least its whole extent about the whole view's middle
 # (moved the least to hold the returns), and the front face the nearer of the returns' and the
-# whole view's, the back at least the whole depth behind it (boxes.hold_cut_extent). The returns of a sliver span the sliver, and A3BoxNet shown a sliver
-# boxes a sliver (its open face was the estimate's guess before). Only with measured faces. Cut
-# frames are 11-26% of the calibration sets' frames with IoU_3d 0.66-0.82 against 0.88-0.91
-# whole. One pass on held-out sequences, EdgeTrack + A3BoxNet, AO_3d with the image axes only at
+# whole view's, the back at least the whole depth behind it (boxes.hold_cut_extent). The returns
+# of a sliver span the sliver, and A3BoxNet shown a sliver boxes a sliver (its open face was the
+# estimate's guess before). Only with measured faces. Cut frames are 11-26% of the calibration
+# sets' frames with IoU_3d 0.66-0.82 against 0.88-0.91 whole. One pass on held-out sequences, EdgeTrack + A3BoxNet, AO_3d with the image axes only at
 # 0.6 / 0.8 / 0.9 (off: first): ideal seed 3 0.8909 / 0.8941 / 0.8953 / 0.8966, seed 7 0.8870 /
 # 0.8905 / 0.8915 / 0.8907, flash-LiDAR seed 5 0.8112 / 0.8139 / 0.8143 / 0.8143, ToF seed 5
 # 0.7466 / 0.7488 / 0.7494 / 0.7498; without the fraction (every cut frame held) a body slightly
