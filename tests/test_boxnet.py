@@ -5,6 +5,7 @@ import json
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -343,6 +344,45 @@ def test_export_parity_and_metadata(exported, trained):
     torch_model, _ = load_checkpoint(trained[0] / "last.pt")
     worst = parity_check(torch_model, path, batches=(5,), num_points=300, seed=3)
     assert max(worst.values()) < 1e-4
+
+
+def test_an_exported_model_comes_back_into_torch_and_fine_tunes(exported, trained, tmp_path):
+    """The shipped model has no checkpoint: its ONNX (BatchNorm folded into the convolutions)
+    converts back, equal to the graph in eval mode; with calibration points a training-mode
+    batch like them sees about the same function; train(init_from=X.onnx) starts from it."""
+    from track3d_train.boxnet.export import parity_check
+    from track3d_train.boxnet.from_onnx import model_from_onnx
+    from track3d_train.boxnet.train import TrainConfig, load_checkpoint, train
+
+    path, _ = exported
+    src, _ = load_checkpoint(trained[0] / "last.pt")
+    model, ck = model_from_onnx(path)
+    assert max(parity_check(model, path, batches=(2,), num_points=200, seed=1).values()) < 1e-4
+    assert ck["model_config"] == src.config.to_dict() and ck["imported_from"]["file"] == path.name
+    rng = np.random.default_rng(0)
+    pts = (rng.normal(size=(32, 128, 3)) * [2.0, 1.0, 0.5]).astype(np.float32)
+    cat = torch.from_numpy(one_hot(np.zeros(32, int), 3))
+    cal, _ = model_from_onnx(path, calibration=pts)
+    assert max(parity_check(cal, path, batches=(2,), seed=1).values()) < 1e-4      # eval stays exact
+    with torch.no_grad():
+        ref = [o.numpy() for o in cal.eval()(torch.from_numpy(pts), cat)]
+        # the per-point layers only: in training mode their output on the calibration batch
+        # is the eval output (an identity BatchNorm without calibration would not be)
+        feats = {}
+        for name, m in (("cal", cal), ("plain", model)):
+            m.train()
+            feats[name] = m.center_net.mlp(torch.from_numpy(pts).transpose(1, 2)).numpy()
+            m.eval()
+        want = cal.center_net.mlp(torch.from_numpy(pts).transpose(1, 2)).numpy()
+    assert np.allclose(feats["cal"], want, atol=1e-3)
+    assert not np.allclose(feats["plain"], want, atol=1e-1)
+    assert all(np.all(np.isfinite(r)) for r in ref)
+    out, cfg, _ = trained
+    tune = TrainConfig(**{**cfg.__dict__, "out": str(tmp_path / "tune"), "epochs": 1, "max_steps": 1})
+    h = train(tune, progress=False, log=lambda *_: None, init_from=str(path))
+    assert h["init_from"]["file"] == path.name
+    with pytest.raises(ValueError, match="not an A3BoxNet model"):
+        model_from_onnx(Path(__file__).resolve().parents[1] / "runtime/track3d/models/edgetrack_search.onnx")
 
 
 def test_parity_detects_a_difference(exported, trained):

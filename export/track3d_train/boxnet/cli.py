@@ -149,7 +149,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sigma of a random per-axis log stretch of points and box about the box centre "
                         "(other body proportions, e.g. 0.3); three values: x, y, z (e.g. 0.3 0.3 0.5)")
     t.add_argument("--init-from", default=None,
-                   help="start from this A3BoxNet checkpoint's weights (fine-tuning; default: random)")
+                   help="start from these A3BoxNet weights: a checkpoint (.pt) or an exported model (.onnx, e.g. "
+                        "the shipped runtime/track3d/models/a3boxnet.onnx) (fine-tuning; default: random)")
     t.add_argument("--val-every", type=bounded(int, 0), default=8, help="every k-th train sequence is validation (0: none)")
     t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
     t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")

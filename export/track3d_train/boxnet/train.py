@@ -153,11 +153,22 @@ def _validate(model, val_ds, batch: int):
     return m
 
 
+def _onnx_source(path, train_ds, samples: int = 256) -> dict:
+    """An exported model (e.g. the shipped a3boxnet.onnx) as an init_from checkpoint; the folded
+    BatchNorms take their statistics from the first `samples` training items (from_onnx)."""
+    from .from_onnx import model_from_onnx
+
+    n = min(samples, len(train_ds))
+    pts = np.stack([train_ds[i][0] for i in range(n)]) if n >= 2 else None
+    return model_from_onnx(path, calibration=pts)[1]
+
+
 def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=print,
           init_from: str | None = None) -> dict:
     """Train (or resume) into cfg.out: last.pt, best.pt, history.json, loss_curve.png.
-    ``init_from``: a checkpoint whose weights start a new run (fine-tuning: a fresh optimiser and
-    schedule); ignored when the run resumes from its own last.pt."""
+    ``init_from``: a checkpoint, or an exported A3BoxNet .onnx such as the shipped model, whose
+    weights start a new run (fine-tuning: a fresh optimiser and schedule); ignored when the run
+    resumes from its own last.pt."""
     import torch
 
     from .data import BoxNetSamples, PointCache
@@ -215,7 +226,10 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
         start_epoch, step, best, history = ck["epoch"] + 1, ck["step"], ck["best"], ck["history"]
         log(f"resumed from {last}: epoch {start_epoch}, step {step}")
     elif init_from:
-        src = torch.load(str(init_from), map_location="cpu", weights_only=False)
+        if str(init_from).endswith(".onnx"):
+            src = _onnx_source(init_from, train_ds)
+        else:
+            src = torch.load(str(init_from), map_location="cpu", weights_only=False)
         # the weights carry over between box codings (same layers; the heads re-learn what their
         # outputs mean), not between architectures
         arch = {k: v for k, v in mcfg.to_dict().items() if k != "size_norm"}
