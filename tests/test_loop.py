@@ -308,14 +308,14 @@ def test_the_frustum_margin_follows_the_depth_sensor(tmp_path):
     assert (a.depth_sensor, b.depth_sensor) == (None, "stereo")
     spec = TrackerSpec("oracle", "baseline")
     assert spec.build(a).frustum_margin == FRUSTUM_MARGIN and spec.build(b).frustum_margin == 0.0
-    # the fusion weight likewise: stereo depth's 3D box would pull the 2D track off the body
+    # the fusion weight likewise: by the sensor (stereo and ToF fuse at 0.15)
     from track3d.fusion import WEIGHT_3D
     from track3d.tracker import fusion_weight_for
 
-    assert fusion_weight_for("stereo") == 0.0
+    assert fusion_weight_for("stereo") == 0.15
     assert fusion_weight_for("ideal") == fusion_weight_for("flash-lidar") == fusion_weight_for(None) == WEIGHT_3D == 0.3
     assert fusion_weight_for("tof") == 0.15
-    assert spec.build(a).weight_3d == WEIGHT_3D and spec.build(b).weight_3d == 0.0
+    assert spec.build(a).weight_3d == WEIGHT_3D and spec.build(b).weight_3d == 0.15
     assert TrackerSpec("oracle", "baseline", weight_3d=0.5).build(b).weight_3d == 0.5   # an explicit weight wins
     assert TrackerSpec("oracle", "baseline", frustum_margin=0.3).build(b).frustum_margin == 0.3
 

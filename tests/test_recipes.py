@@ -40,6 +40,9 @@ def test_tiny_recipe_runs_end_to_end(name, tmp_path):
     for p in made:
         assert OnnxModel(p, 1).meta["kind"]
     assert r.tiny and set(r.tiny) <= set(r.knobs)
+    if name == "a3boxnet-stereo":   # a fine-tune of the shipped model, for stereo clouds
+        meta = OnnxModel(made[-1], 1).meta
+        assert meta["depth_sensor"] == "stereo" and meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet.onnx"
     if name == "a3boxnet-engine":
         # a second run resumes: every step finds its work done or continues from its checkpoint
         assert main(["run", name, "--tiny", "--data", str(tmp_path / "d"), "--runs", str(tmp_path / "r")]) == 0

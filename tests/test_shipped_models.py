@@ -10,6 +10,7 @@ from track3d.onnxmodel import MODELS_DIR, OnnxModel
 
 SHIPPED = {
     "a3boxnet.onnx": "a3boxnet",
+    "a3boxnet_stereo.onnx": "a3boxnet",
     "siamfc_edge_exemplar.onnx": "siamfc-exemplar",
     "siamfc_edge_search.onnx": "siamfc-search",
     "siamfc_faithful_exemplar.onnx": "siamfc-exemplar",
@@ -24,6 +25,10 @@ def test_shipped_model_is_present_and_carries_its_metadata(name):
     if SHIPPED[name] == "a3boxnet":
         np.testing.assert_allclose(np.asarray(m.meta["size_templates"]), SIZE_TEMPLATES, atol=1e-6)
         assert m.meta["num_points"] >= 64 and len(m.meta["train_data_hash"]) == 64
+        # a sensor's own model says so, and is a fine-tune of the shared one
+        assert m.meta.get("depth_sensor") == ("stereo" if name == "a3boxnet_stereo.onnx" else None)
+        if name == "a3boxnet_stereo.onnx":
+            assert m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet.onnx"
     else:
         assert m.meta["exemplar_size"] == 127 and m.meta["total_stride"] == 8
 

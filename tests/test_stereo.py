@@ -240,3 +240,49 @@ def test_cli_track_with_stereo_depth(tmp_path, capsys):
     with pytest.raises(SystemExit):                          # argparse: one line, status 2
         main(["track", "--data", str(data), "--depth", "lidar", "--quiet"])
     assert "invalid choice: 'lidar'" in capsys.readouterr().err
+
+
+def test_stereo_clouds_get_the_stereo_a3boxnet(tmp_path):
+    """Block-matching stereo has a model of its own (track3d.boxnet.SENSOR_MODELS): chosen by the
+    sequence's sensor in the evaluation, by --depth stereo in the CLI, by depth_sensor= in
+    Track3D.from_default; an explicit model wins; every other sensor keeps the shared model."""
+    from track3d.boxnet import DEFAULT_MODEL, SENSOR_MODELS, A3BoxNetEstimator, model_for_sensor
+    from track3d.cli import main
+    from track3d.dataset import Dataset
+    from track3d.evaluation import TrackerSpec
+    from track3d.evaluation.results import read_run_record
+
+    stereo = SENSOR_MODELS["stereo"]
+    assert model_for_sensor("stereo").name == stereo and model_for_sensor("STEREO").name == stereo
+    for other in (None, "ideal", "tof", "flash-lidar", "sonar"):
+        assert model_for_sensor(other).name == DEFAULT_MODEL
+    assert A3BoxNetEstimator(depth_sensor="stereo").model.path.name == stereo
+    assert A3BoxNetEstimator(model_for_sensor(None), depth_sensor="stereo").model.path.name == DEFAULT_MODEL
+    t = Track3D.from_default(CAM, depth_sensor="stereo")
+    assert t.estimator.model.path.name == stereo
+    assert (t.frustum_margin, t.weight_3d, t.measured_faces) == (0.0, 0.15, False)
+    assert Track3D.from_default(CAM, depth_sensor="stereo", weight_3d=0.3).weight_3d == 0.3   # options win
+    assert Track3D.from_default(CAM).estimator.model.path.name == DEFAULT_MODEL
+
+    data = _stereo_dataset(tmp_path / "ds", CAM)
+    seq = Dataset(data).sequences("test")[0]
+    assert TrackerSpec("oracle", "a3boxnet").build(seq).estimator.model.path.name == DEFAULT_MODEL
+    meta = json.loads((data / "test" / "s1" / "meta.json").read_text())
+    (data / "test" / "s1" / "meta.json").write_text(json.dumps({**meta, "depth_sensor": {"name": "stereo"}}))
+    seq = Dataset(data).sequences("test")[0]
+    assert TrackerSpec("oracle", "a3boxnet").build(seq).estimator.model.path.name == stereo
+    mine = TrackerSpec("oracle", "a3boxnet", estimator_options={"model": str(model_for_sensor(None))})
+    assert mine.build(seq).estimator.model.path.name == DEFAULT_MODEL
+
+    res = tmp_path / "res"
+    assert main(["track", "--data", str(data), "--tracker", "oracle", "--estimator", "a3boxnet", "--depth", "stereo",
+                 "--results", str(res), "--video", "none", "--quiet"]) == 0
+    used = [m["file"] for m in read_run_record(res, "test", "oracle+a3boxnet-stereo")["track3d"]["models"]]
+    assert stereo in used and DEFAULT_MODEL not in used
+    # the option only picks a model, which the record's model hashes name: results of the same
+    # models share a folder whether the sensor was given or implied
+    from track3d.evaluation.results import run_config_key
+
+    def key(**o):
+        return run_config_key({"track3d": {"estimator_options": o, "models": [{"sha256": "ab"}]}})
+    assert key(depth_sensor="stereo", threads=2) == key() != key(model="x.onnx")

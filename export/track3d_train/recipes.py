@@ -210,7 +210,45 @@ SIAMFC = Recipe(
     ),
 )
 
-RECIPES: dict[str, Recipe] = {r.name: r for r in (A3BOXNET_ENGINE, EDGETRACK_ENGINE, SIAMFC)}
+A3BOXNET_STEREO = Recipe(
+    name="a3boxnet-stereo",
+    makes="{runs}/boxnet-stereo/a3boxnet_stereo.onnx",
+    description="A3BoxNet for block-matching stereo depth (track3d.boxnet.SENSOR_MODELS): the shipped A3BoxNet "
+                "fine-tuned on stereo bodies only, 180 sequences x 25 frames of every generator but the held-out "
+                "ones (two seeds), depth from track3d.stereo; ~45 min on one thread.",
+    knobs={"preset": "small", "train_a": 120, "train_b": 60, "frames": 25, "jitters": 3, "epoch_samples": 4000,
+           "batch": 32, "max_steps": 0, "minutes": 45, "threads": 1, "workers": 1, "parent": "a3boxnet.onnx"},
+    tiny={"preset": "tiny", "train_a": 1, "train_b": 1, "frames": 4, "jitters": 1, "epoch_samples": 16, "batch": 8,
+          "max_steps": 2, "minutes": 5},
+    steps=(
+        Step("data: stereo bodies (seed 2)", _a(
+            "track3d-sim generate --preset {preset} --seed 2 --train {train_a} --test 0 --test-unseen 1 "
+            "--frames {frames} --sensors stereo --out {data}/stereo-train-s2 --workers {workers} --quiet")),
+        Step("data: stereo bodies (seed 12)", _a(
+            "track3d-sim generate --preset {preset} --seed 12 --train {train_b} --test 0 --test-unseen 1 "
+            "--frames {frames} --sensors stereo --out {data}/stereo-train-s12 --workers {workers} --quiet")),
+        Step("cache: frustums of jittered ground-truth boxes (seed 2)", _a(
+            "track3d-train boxnet prepare --data {data}/stereo-train-s2 --split train --jitters {jitters} "
+            "--out {runs}/boxnet-stereo/cache/stereo-train-s2.npz --quiet"),
+            done_when="{runs}/boxnet-stereo/cache/stereo-train-s2.npz"),
+        Step("cache: frustums (seed 12)", _a(
+            "track3d-train boxnet prepare --data {data}/stereo-train-s12 --split train --jitters {jitters} "
+            "--out {runs}/boxnet-stereo/cache/stereo-train-s12.npz --quiet"),
+            done_when="{runs}/boxnet-stereo/cache/stereo-train-s12.npz"),
+        Step("train: fine-tune the shipped model (its ONNX) on the stereo bodies", _a(
+            "track3d-train boxnet train --cache {runs}/boxnet-stereo/cache/stereo-train-s2.npz "
+            "{runs}/boxnet-stereo/cache/stereo-train-s12.npz --num-points 512 --epochs 100 "
+            "--epoch-samples {epoch_samples} --batch {batch} --max-steps {max_steps} --flip-y --scale-aug 0.15 "
+            "--no-category --threads {threads} --quiet --out {runs}/boxnet-stereo/run --time-budget-min {minutes} "
+            "--stretch-aug 0.3 --size-norm extent --lr 3e-4 --init-from {parent}")),
+        Step("export with a parity check", _a(
+            "track3d-train boxnet export --checkpoint {runs}/boxnet-stereo/run/best.pt "
+            "--out {runs}/boxnet-stereo/a3boxnet_stereo.onnx --depth-sensor stereo")),
+    ),
+    notes=("`parent` is the shipped a3boxnet.onnx by name (or any A3BoxNet .onnx / checkpoint path).",),
+)
+
+RECIPES: dict[str, Recipe] = {r.name: r for r in (A3BOXNET_ENGINE, A3BOXNET_STEREO, EDGETRACK_ENGINE, SIAMFC)}
 
 
 def recipe(name: str) -> Recipe:

@@ -23,12 +23,23 @@ from .onnxmodel import ModelError, load_model, shipped_model
 from .size_coding import SIZE_CODINGS, SizeCoding, size_coding
 
 __all__ = [
-    "KIND", "DEFAULT_MODEL", "SIZE_NORMS", "MAX_EXTENT_M", "INPUT_POINTS", "INPUT_CATEGORY", "OUTPUTS",
+    "KIND", "DEFAULT_MODEL", "SENSOR_MODELS", "model_for_sensor", "SIZE_NORMS", "MAX_EXTENT_M", "INPUT_POINTS", "INPUT_CATEGORY", "OUTPUTS",
     "one_hot", "A3BoxNetEstimator", "create",
 ]
 
 KIND = "a3boxnet"
 DEFAULT_MODEL = "a3boxnet.onnx"
+# Depth sensors with a model of their own. Block-matching stereo is another kind of cloud than a
+# range sensor's: depth noise growing with z^2 (+-0.6 m per pixel at 30 m), smearing past the
+# silhouette; the one model for every sensor saw it in 8% of its frustums and overestimated the
+# hidden depth of noisy clouds. The stereo model is the shipped model fine-tuned on stereo bodies
+# only (recipe a3boxnet-stereo; docs/models.md); every other sensor keeps the shared model.
+SENSOR_MODELS = {"stereo": "a3boxnet_stereo.onnx"}
+
+
+def model_for_sensor(depth_sensor: str | None) -> Path:
+    """The shipped A3BoxNet file for clouds of this depth sensor (None or unknown: the shared one)."""
+    return shipped_model(SENSOR_MODELS.get(str(depth_sensor or "").lower(), DEFAULT_MODEL))
 SIZE_NORMS = tuple(SIZE_CODINGS)   # the box codings a model's metadata may name (track3d.size_coding)
 # ONNX interface: inputs and outputs by name (batch dimension dynamic).
 INPUT_POINTS = "points"        # (B, N, 3) float32, minus the coding's reference point
@@ -58,7 +69,8 @@ def one_hot(category, num_categories: int) -> np.ndarray:
 class A3BoxNetEstimator:
     """The box estimator behind the loop's seam: ``estimate(points (n,3), category) -> (6,)``.
 
-    model: path of an exported A3BoxNet ONNX file (default: the shipped one);
+    model: path of an exported A3BoxNet ONNX file (default: the shipped one for `depth_sensor`,
+    see SENSOR_MODELS; an explicit model wins);
     threads: onnxruntime intra-op threads; num_points: override of the model's N (only for
     models exported with a dynamic point axis, which ours are); seed: the sampling seed, fixed
     per call so that the same points always give the same box (deterministic); precision /
@@ -73,9 +85,10 @@ class A3BoxNetEstimator:
     amodal = True
 
     def __init__(self, model: str | Path | None = None, threads: int = 1, num_points: int | None = None,
-                 seed: int = 0, precision: str = "fp32", engine: str = "onnxruntime"):
+                 seed: int = 0, precision: str = "fp32", engine: str = "onnxruntime",
+                 depth_sensor: str | None = None):
         if model is None:
-            model = shipped_model(DEFAULT_MODEL)
+            model = model_for_sensor(depth_sensor)
         # a path or a model object (onnxmodel.load_model)
         self.model = load_model(model, threads, KIND, precision, engine)
         meta = self.model.meta

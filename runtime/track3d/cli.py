@@ -86,7 +86,7 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--no-fusion", action="store_true", help="report the 2D tracker's box, no 2D-3D fusion")
     t.add_argument("--weight-3d", type=bounded(float, 0, high=1), default=None,
                    help="fusion weight of the projected 3D box (default: by the depth sensor, the paper's 0.3, "
-                        "0.15 for ToF, 0 for stereo; track3d.tracker.fusion_weight_for)")
+                        "0.15 for ToF and stereo; track3d.tracker.fusion_weight_for)")
     t.add_argument("--weight-2d", type=bounded(float, 0, high=1), default=None,
                    help="weight of the 2D box in the 3D box's cross-section (the reverse fusion; default: by the "
                         "depth sensor, 0, 0.75 for stereo; track3d.tracker.section_weight_for)")
@@ -222,6 +222,8 @@ def _cmd_track(a) -> int:
     weight = a.weight_3d if a.weight_3d is not None else stereo.get("weight_3d")
     weight_2d = a.weight_2d if a.weight_2d is not None else stereo.get("weight_2d")
     faces = False if a.no_measured_faces else stereo.get("measured_faces")
+    if a.depth == "stereo" and a.estimator == "a3boxnet" and "model" not in eopts:
+        eopts.setdefault("depth_sensor", "stereo")   # the stereo model (track3d.boxnet.SENSOR_MODELS)
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
                        weight_2d=weight_2d, measured_faces=faces, depth_smoothing=a.depth_smoothing,
                        evidence_points=a.evidence_points, reacquire_threshold=a.reacquire_threshold,

@@ -4,11 +4,14 @@
     z = m.depth(left, right)                       # (H, W) float64 metres, 0 = no depth
     z, win = m.depth_window(left, right, box2d)    # only around a 2D box (faster)
     points = StereoCloud(camera).bind(left, right) # callable box2d -> (N, 3) float32 cloud
+    track = Track3D.from_default(camera, depth_sensor="stereo")
     out = track.update(left, points)               # Track3D computes only the tracked region
 
-Build that Track3D with ``frustum_margin=0`` (``track3d.tracker.frustum_margin_for("stereo")``):
-matched depth smears past the silhouette, so a frustum cut wider than the 2D box collects
-background points (measured: AO_3d -0.024 with the default margin on held-out stereo sequences).
+Build that Track3D for stereo depth (``depth_sensor="stereo"``): the stereo sensor's loop options
+(``track3d.tracker.sensor_options("stereo")``; e.g. ``frustum_margin=0``: matched depth smears
+past the silhouette, so a frustum cut wider than the 2D box collects background points, AO_3d
+-0.024 with the default margin on held-out stereo sequences) and A3BoxNet's stereo model
+(``track3d.boxnet.SENSOR_MODELS``).
 
 Both cameras have the same intrinsics and orientation, the right one at x = +baseline
 (`Camera.right_offset`), so a left pixel u matches the right pixel u - d and z = fx * B / d

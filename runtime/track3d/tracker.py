@@ -105,12 +105,15 @@ def frustum_margin_for(depth_sensor: str | None) -> float:
 # (data/engine-calib-stereo), AO_3d at weight 0.3 -> 0.15 -> 0: EdgeTrack 0.652 -> 0.657 ->
 # 0.661 (AO_2d 0.861 -> 0.877), SiamFC-edge 0.580 -> 0.607 at 0; flat with ideal, flash-LiDAR and
 # ToF depth (0.805 / 0.807 / 0.806, 0.792 / 0.793 / 0.791, 0.645 / 0.645 / 0.643): stereo depth
-# fuses nothing. ToF since the range cut (track3d.range_cut): a body past the range gives a cap,
+# fused nothing. With A3BoxNet's stereo model (track3d.boxnet.SENSOR_MODELS) its boxes help the 2D
+# track again: EdgeTrack one pass on the held-out stereo sequences of seeds 3 / 5, AO_3d at weight
+# 0 / 0.1 / 0.15 / 0.2 / 0.3: 0.714 / 0.720 / 0.719 / 0.722 / 0.719 and 0.677 / 0.688 / 0.694 /
+# 0.685 / 0.687 (AO_2d 0.785 -> 0.843 at 0.15 on seed 5); stereo fuses at 0.15. ToF since the range cut (track3d.range_cut): a body past the range gives a cap,
 # whose box, fused at 0.3, drew the 2D box onto the cap; one pass on held-out ToF sequences
 # (seeds 3 and 5, 12 each), AO_3d at 0.3 -> 0.15 -> 0: EdgeTrack 0.701 -> 0.703 -> 0.695 and
 # 0.710 -> 0.728 -> 0.697, SiamFC-edge (0.3 -> 0.15) 0.649 -> 0.658 and 0.619 -> 0.630: ToF fuses
 # at 0.15. The others keep the paper's 0.3.
-SENSOR_FUSION_WEIGHTS = {"stereo": 0.0, "tof": 0.15}
+SENSOR_FUSION_WEIGHTS = {"stereo": 0.15, "tof": 0.15}
 
 
 def fusion_weight_for(depth_sensor: str | None) -> float:
@@ -362,16 +365,22 @@ class Track3D:
 
     @classmethod
     def from_default(cls, camera: Camera, threads: int = 1, precision: str = "fp32", engine: str = "onnxruntime",
-                     **options) -> "Track3D":
+                     depth_sensor: str | None = None, **options) -> "Track3D":
         """The shipped models: EdgeTrack + A3BoxNet, on `threads` CPU threads (the paper's SiamFC:
         ``Track3D.create(camera, "siamfc-edge", "a3boxnet")``).
+
+        depth_sensor: the kind of depth the clouds come from ("ideal", "tof", "flash-lidar",
+        "stereo", or None: unknown): the loop options chosen for it (`sensor_options`) and its
+        A3BoxNet (track3d.boxnet.SENSOR_MODELS); `options` override the former.
 
         precision / engine: "fp32" | "int8" | "bf16" | "auto" and "onnxruntime" | "openvino" |
         "auto" (track3d.onnxmodel; "auto": the fastest variant this CPU allows, see describe()).
         Raises TrackerUnavailable / EstimatorUnavailable when the models are not shipped.
         """
         arith = {"threads": threads, "precision": precision, "engine": engine}
-        return cls.create(camera, DEFAULT_TRACKER, "a3boxnet", arith, dict(arith), **options)
+        options = {**(sensor_options(depth_sensor) if depth_sensor is not None else {}), **options}
+        sensor = {} if depth_sensor is None else {"depth_sensor": depth_sensor}
+        return cls.create(camera, DEFAULT_TRACKER, "a3boxnet", arith, {**arith, **sensor}, **options)
 
     # --- the loop --------------------------------------------------------------------------------
     def _frustum(self, points, box2d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -66,7 +66,7 @@ def _export(a) -> int:
     if not a.ckpt:
         raise ValueError("give --checkpoint CKPT (an A3BoxNet best.pt / last.pt)")
     refuse_shipped([Path(a.out)], a.force)
-    meta = export_checkpoint(a.ckpt, a.out, check=not a.no_parity, log=_log)
+    meta = export_checkpoint(a.ckpt, a.out, check=not a.no_parity, log=_log, depth_sensor=a.depth_sensor)
     if a.meta_json:
         Path(a.meta_json).write_text(json.dumps(meta, indent=1))
     return 0
@@ -149,8 +149,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sigma of a random per-axis log stretch of points and box about the box centre "
                         "(other body proportions, e.g. 0.3); three values: x, y, z (e.g. 0.3 0.3 0.5)")
     t.add_argument("--init-from", default=None,
-                   help="start from these A3BoxNet weights: a checkpoint (.pt) or an exported model (.onnx, e.g. "
-                        "the shipped runtime/track3d/models/a3boxnet.onnx) (fine-tuning; default: random)")
+                   help="start from these A3BoxNet weights: a checkpoint (.pt) or an exported model (.onnx; a bare "
+                        "name such as a3boxnet.onnx is the shipped model) (fine-tuning; default: random)")
     t.add_argument("--val-every", type=bounded(int, 0), default=8, help="every k-th train sequence is validation (0: none)")
     t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
     t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
@@ -173,6 +173,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--force", action="store_true", help="overwrite a shipped model in track3d/models")
     e.add_argument("--no-parity", action="store_true", help="skip the torch / onnxruntime parity check")
     e.add_argument("--meta-json", default=None, help="also write the metadata to this JSON file")
+    e.add_argument("--depth-sensor", default=None, choices=("ideal", "tof", "flash-lidar", "stereo"),
+                   help="the depth sensor the model was trained for (metadata depth_sensor; default: none, "
+                        "every sensor)")
     e.set_defaults(func=_export)
 
     v = sub.add_parser("eval", help="oracle row: the ONNX model on a frustum cache (+ the baseline)",

@@ -103,8 +103,10 @@ def parity_check(model, path: str | Path, batches=(1, 3), num_points: int | None
     return worst
 
 
-def export_checkpoint(ckpt: str | Path, out: str | Path, check: bool = True, log=print) -> dict:
-    """The one command: checkpoint -> ONNX with metadata (+ parity). Returns the metadata."""
+def export_checkpoint(ckpt: str | Path, out: str | Path, check: bool = True, log=print,
+                      depth_sensor: str | None = None) -> dict:
+    """The one command: checkpoint -> ONNX with metadata (+ parity). Returns the metadata.
+    depth_sensor: the sensor the model is for (metadata ``depth_sensor``; None: every sensor)."""
     from .train import load_checkpoint
 
     model, ck = load_checkpoint(ckpt)
@@ -119,6 +121,8 @@ def export_checkpoint(ckpt: str | Path, out: str | Path, check: bool = True, log
                          "fine_tuned_from": hist.get("init_from"),   # the run these weights started from
                          "val": last.get("val")},
              "exported": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    if depth_sensor:
+        extra["depth_sensor"] = str(depth_sensor)
     path = export_onnx(model, out, extra)
     meta = json.loads(json.dumps(model_metadata(model, extra)))
     if check:

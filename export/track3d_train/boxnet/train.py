@@ -153,6 +153,16 @@ def _validate(model, val_ds, batch: int):
     return m
 
 
+def _shipped_or_path(name: str | Path) -> Path:
+    """A file that exists, else a bare name of a shipped model ("a3boxnet.onnx": the package's)."""
+    p = Path(name)
+    if p.is_file() or p.name != str(name):
+        return p
+    from track3d.onnxmodel import shipped_model
+
+    return shipped_model(str(name))
+
+
 def _onnx_source(path, train_ds, samples: int = 256) -> dict:
     """An exported model (e.g. the shipped a3boxnet.onnx) as an init_from checkpoint; the folded
     BatchNorms take their statistics from the first `samples` training items (from_onnx)."""
@@ -227,6 +237,7 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
         log(f"resumed from {last}: epoch {start_epoch}, step {step}")
     elif init_from:
         if str(init_from).endswith(".onnx"):
+            init_from = _shipped_or_path(init_from)
             src = _onnx_source(init_from, train_ds)
         else:
             src = torch.load(str(init_from), map_location="cpu", weights_only=False)

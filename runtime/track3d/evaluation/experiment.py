@@ -89,8 +89,11 @@ class TrackerSpec:
         topts = self._options(self.tracker, self.tracker_options)
         if self.tracker == "oracle":
             topts.update(gt=seq.gt2d, absent=seq.absent)
+        eopts = self._options(self.estimator, self.estimator_options)
+        if self.estimator == "a3boxnet" and "model" not in eopts:
+            eopts.setdefault("depth_sensor", seq.depth_sensor)   # the sensor's own model (boxnet.SENSOR_MODELS)
         return Track3D.create(seq.camera, self.tracker, self.estimator, tracker_options=topts,
-                              estimator_options=self._options(self.estimator, self.estimator_options),
+                              estimator_options=eopts,
                               fusion=self.fusion,
                               depth_range_m=seq.depth_range_m if self.depth_range else None,
                               **({} if self.depth_smoothing is None else {"depth_smoothing": self.depth_smoothing}),

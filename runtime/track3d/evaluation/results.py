@@ -139,8 +139,11 @@ def run_config_key(rec: dict) -> dict:
     names, options, models (by hash), restart settings; not threads, dates or frame counts."""
     d = rec.get("track3d", {})
 
-    def opts(o: dict) -> dict:  # threads change speed only; arrays (the oracle's ground truth) are data
-        return {k: v for k, v in o.items() if k != "threads" and not (isinstance(v, str) and v.startswith("<array"))}
+    def opts(o: dict) -> dict:
+        # threads change speed only; depth_sensor only picks a model, which "models" names by hash;
+        # arrays (the oracle's ground truth) are data
+        return {k: v for k, v in o.items()
+                if k not in ("threads", "depth_sensor") and not (isinstance(v, str) and v.startswith("<array"))}
 
     return {"tracker": d.get("tracker"), "estimator": d.get("estimator"),
             "tracker_options": opts(d.get("tracker_options", {})),
