@@ -23,8 +23,8 @@ from .onnxmodel import ModelError, load_model, shipped_model
 from .size_coding import SIZE_CODINGS, SizeCoding, size_coding
 
 __all__ = [
-    "KIND", "DEFAULT_MODEL", "SENSOR_MODELS", "model_for_sensor", "SIZE_NORMS", "MAX_EXTENT_M", "INPUT_POINTS", "INPUT_CATEGORY", "OUTPUTS",
-    "one_hot", "A3BoxNetEstimator", "create",
+    "KIND", "DEFAULT_MODEL", "SENSOR_MODELS", "model_for_sensor", "SIZE_NORMS", "MAX_EXTENT_M", "INPUT_POINTS",
+    "INPUT_CATEGORY", "OUTPUTS", "one_hot", "A3BoxNetEstimator", "create",
 ]
 
 KIND = "a3boxnet"
@@ -40,6 +40,8 @@ SENSOR_MODELS = {"stereo": "a3boxnet_stereo.onnx"}
 def model_for_sensor(depth_sensor: str | None) -> Path:
     """The shipped A3BoxNet file for clouds of this depth sensor (None or unknown: the shared one)."""
     return shipped_model(SENSOR_MODELS.get(str(depth_sensor or "").lower(), DEFAULT_MODEL))
+
+
 SIZE_NORMS = tuple(SIZE_CODINGS)   # the box codings a model's metadata may name (track3d.size_coding)
 # ONNX interface: inputs and outputs by name (batch dimension dynamic).
 INPUT_POINTS = "points"        # (B, N, 3) float32, minus the coding's reference point

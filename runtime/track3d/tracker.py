@@ -108,8 +108,9 @@ def frustum_margin_for(depth_sensor: str | None) -> float:
 # fused nothing. With A3BoxNet's stereo model (track3d.boxnet.SENSOR_MODELS) its boxes help the 2D
 # track again: EdgeTrack one pass on the held-out stereo sequences of seeds 3 / 5, AO_3d at weight
 # 0 / 0.1 / 0.15 / 0.2 / 0.3: 0.714 / 0.720 / 0.719 / 0.722 / 0.719 and 0.677 / 0.688 / 0.694 /
-# 0.685 / 0.687 (AO_2d 0.785 -> 0.843 at 0.15 on seed 5); stereo fuses at 0.15. ToF since the range cut (track3d.range_cut): a body past the range gives a cap,
-# whose box, fused at 0.3, drew the 2D box onto the cap; one pass on held-out ToF sequences
+# 0.685 / 0.687 (AO_2d 0.785 -> 0.843 at 0.15 on seed 5); stereo fuses at 0.15. ToF since the
+# range cut (track3d.range_cut): a body past the range gives a cap, whose box, fused at 0.3, drew
+# the 2D box onto the cap; one pass on held-out ToF sequences
 # (seeds 3 and 5, 12 each), AO_3d at 0.3 -> 0.15 -> 0: EdgeTrack 0.701 -> 0.703 -> 0.695 and
 # 0.710 -> 0.728 -> 0.697, SiamFC-edge (0.3 -> 0.15) 0.649 -> 0.658 and 0.619 -> 0.630: ToF fuses
 # at 0.15. The others keep the paper's 0.3.

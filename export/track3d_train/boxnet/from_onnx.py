@@ -65,7 +65,8 @@ def model_from_onnx(path: str | Path, calibration: np.ndarray | None = None):
         for key in state:
             if key in init:
                 if tuple(init[key].shape) != tuple(state[key].shape):
-                    raise ValueError(f"{path}: {key} is {init[key].shape}, the architecture wants {tuple(state[key].shape)}")
+                    raise ValueError(f"{path}: {key} is {init[key].shape}, the architecture wants "
+                                     f"{tuple(state[key].shape)}")
                 state[key] = torch.from_numpy(np.array(init[key]))
         model.load_state_dict(state)
         folded = []   # (conv, its BatchNorm) in module order, matching the graph's Conv order
@@ -74,7 +75,8 @@ def model_from_onnx(path: str | Path, calibration: np.ndarray | None = None):
             folded += [(layers[i], layers[i + 1]) for i in range(0, len(layers), 3)]
         for (conv, bn), (w, b) in zip(folded, convs):
             if tuple(w.shape) != tuple(conv.weight.shape):
-                raise ValueError(f"{path}: a convolution is {w.shape}, the architecture wants {tuple(conv.weight.shape)}")
+                raise ValueError(f"{path}: a convolution is {w.shape}, the architecture wants "
+                                 f"{tuple(conv.weight.shape)}")
             conv.weight.copy_(torch.from_numpy(np.array(w)))
             conv.bias.copy_(torch.from_numpy(np.array(b)) if b is not None else torch.zeros_like(conv.bias))
             _set_bn(bn, torch.zeros(bn.num_features), torch.ones(bn.num_features) - bn.eps)
