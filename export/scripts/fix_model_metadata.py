@@ -17,13 +17,12 @@ What it fixes (the exporters now write all of this themselves):
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
-from track3d.onnxmodel import META_KEY, MODELS_DIR
+from track3d.onnxmodel import MODELS_DIR
 from track3d.size_coding import size_coding
-from track3d_train.onnx_meta import rewrite_metadata
+from track3d_train.onnx_meta import read_metadata, rewrite_metadata
 
 SIAMFC_DATA = ("track3d-sim generate --preset small --train 36 --test 18 --seed 0 (the 'med' dataset of "
                "the `siamfc` training recipe, track3d_train.recipes), split train")
@@ -58,8 +57,7 @@ def main(argv=None) -> int:
     # parents first: a variant records the hash of its parent file as rewritten here
     files = sorted(a.models.glob("*.onnx"), key=lambda f: (f.stem.endswith("_int8"), f.name))
     for f in files:
-        props = {p.key: p.value for p in onnx.load(str(f)).metadata_props}
-        meta = json.loads(props[META_KEY])
+        meta = read_metadata(onnx.load(str(f)))
         new = fixed(meta)
         parent = a.models / str(meta.get("parent_model", ""))
         if meta.get("parent_sha256") and parent.is_file():

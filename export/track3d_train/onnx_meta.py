@@ -7,7 +7,7 @@ from pathlib import Path
 
 from track3d.onnxmodel import META_KEY
 
-__all__ = ["attach_metadata", "set_fields", "rewrite_metadata", "doc_string", "file_hash", "hash_files",
+__all__ = ["attach_metadata", "set_fields", "read_metadata", "rewrite_metadata", "doc_string", "file_hash", "hash_files",
            "refuse_shipped", "PRODUCER", "check_portable"]
 
 PRODUCER = "track3d-train"
@@ -49,6 +49,15 @@ def set_fields(model, meta: dict) -> None:
     model.producer_version = _producer_version()
     model.model_version = int(float(meta["version"]))
     model.doc_string = doc_string(meta)
+
+
+def read_metadata(model) -> dict:
+    """The track3d metadata (META_KEY's JSON) of an onnx.ModelProto in memory; ValueError if it
+    has none (the reader beside set_fields, its writer)."""
+    props = {e.key: e.value for e in model.metadata_props}
+    if META_KEY not in props:
+        raise ValueError("no track3d metadata")
+    return json.loads(props[META_KEY])
 
 
 def attach_metadata(onnx_path: str | Path, meta: dict) -> None:

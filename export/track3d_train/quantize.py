@@ -30,16 +30,15 @@ decided by the accuracy rule in docs/models.md ("Arithmetic"), not here.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
-from track3d.onnxmodel import META_KEY, MODELS_DIR, variant_path
+from track3d.onnxmodel import MODELS_DIR, variant_path
 
 from track3d.argparsing import ArgumentParser, bounded
 
-from .onnx_meta import attach_metadata, file_hash, refuse_shipped
+from .onnx_meta import attach_metadata, file_hash, read_metadata, refuse_shipped
 
 __all__ = ["QUANT_RECIPE", "calibration_boxnet", "calibration_siamfc", "calibration_edgetrack", "quantize_file",
            "build_parser", "main"]
@@ -242,7 +241,7 @@ def quantize_file(fp32: Path, out: Path, feeds: list[dict], op_types: list[str],
     finally:
         if pre.exists():
             pre.unlink()
-    meta = json.loads({p.key: p.value for p in onnx.load(str(fp32)).metadata_props}[META_KEY])
+    meta = read_metadata(onnx.load(str(fp32)))
     recipe = {**QUANT_RECIPE, "method": {"minmax": "MinMax", "percentile": "Percentile",
                                          "entropy": "Entropy"}[calibration]}
     meta.update({"precision": "int8", "quantization": {**recipe, "op_types": op_types,

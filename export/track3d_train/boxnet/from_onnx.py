@@ -15,7 +15,6 @@ are and load by name.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -27,10 +26,11 @@ def _graph(path: Path):
     import onnx
     from onnx import numpy_helper
 
+    from ..onnx_meta import read_metadata
+
     m = onnx.load(str(path))
-    meta = {p.key: p.value for p in m.metadata_props}
     try:
-        meta = json.loads(meta.get("track3d", "{}"))
+        meta = read_metadata(m)
     except ValueError:
         meta = {}
     if meta.get("kind") != "a3boxnet":

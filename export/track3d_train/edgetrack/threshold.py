@@ -120,20 +120,16 @@ def write_threshold(model: str | Path, threshold: float, note: dict, motion: flo
     """Rewrite the threshold (tracking default and score block) of <model>_template/_search.onnx,
     and the motion weight and the re-acquisition threshold when given, weights untouched; ``note`` (data, split, rows) goes to
     ``score.threshold_fit``."""
-    import json
-
     import onnx
 
-    from track3d.onnxmodel import META_KEY
-
-    from ..onnx_meta import rewrite_metadata
+    from ..onnx_meta import read_metadata, rewrite_metadata
 
     paths = [Path(f"{model}_template.onnx"), Path(f"{model}_search.onnx")]
     for p in paths:
-        props = {e.key: e.value for e in onnx.load(str(p)).metadata_props}
-        if META_KEY not in props:
-            raise ValueError(f"{p}: no track3d metadata")
-        meta = json.loads(props[META_KEY])
+        try:
+            meta = read_metadata(onnx.load(str(p)))
+        except ValueError as e:
+            raise ValueError(f"{p}: {e}") from None
         if "tracking" in meta:
             meta["tracking"]["score_threshold"] = float(threshold)
             if motion is not None:
