@@ -1,6 +1,7 @@
 """2D tracker registry and adapters."""
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -96,11 +97,25 @@ def test_nano_with_missing_files_is_a_clear_error(tmp_path):
 
 @pytest.mark.skipif(T.nanotrack_dir() is None or not (T.nanotrack_dir() / "nanotrack_backbone_sim.onnx").is_file(),
                     reason="peer models absent (set TRACK3D_NANOTRACK_DIR)")
-def test_nano_peer_runs():
+def test_nano_peer_runs(capfd):
     tr = T.create_tracker("nano")
     tr.init(_image(), np.array([50, 40, 40, 30]))
     ok, box = tr.update(_image(x=52))
     assert box.shape == (4,)
+    # OpenCV's warning about its DNN target, once per creation, is not the user's business
+    assert "setPreferableTarget" not in capfd.readouterr().err
+
+
+def test_opencv_log_level_is_restored_after_the_block():
+    levels = cv2.utils.logging
+    before = levels.getLogLevel()
+    with T.opencv_log_level(levels.LOG_LEVEL_SILENT):
+        assert levels.getLogLevel() == levels.LOG_LEVEL_SILENT
+    assert levels.getLogLevel() == before
+    with pytest.raises(RuntimeError):
+        with T.opencv_log_level(levels.LOG_LEVEL_SILENT):
+            raise RuntimeError("inside")
+    assert levels.getLogLevel() == before
 
 
 def test_nanotrack_without_its_peer_models_is_unavailable(monkeypatch):

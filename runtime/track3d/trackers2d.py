@@ -35,8 +35,9 @@ from __future__ import annotations
 
 import importlib
 import os
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Protocol, runtime_checkable
+from typing import Callable, Iterator, Protocol, runtime_checkable
 
 import cv2
 import numpy as np
@@ -277,6 +278,17 @@ def _opencv(name: str) -> Callable[..., OpenCVTracker]:
     return factory
 
 
+@contextmanager
+def opencv_log_level(level: int) -> Iterator[None]:
+    """OpenCV's log level set to `level` inside the block, restored after it."""
+    before = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(level)
+    try:
+        yield
+    finally:
+        cv2.utils.logging.setLogLevel(before)
+
+
 def _nano(backbone: str | Path | None = None, neckhead: str | Path | None = None,
           correct: str = "none", threads: int = 1) -> OpenCVTracker:
     """NanoTrack v2 through OpenCV (peer model, for benchmarks only: never shipped)."""
@@ -296,7 +308,10 @@ def _nano(backbone: str | Path | None = None, neckhead: str | Path | None = None
         params = cv2.TrackerNano_Params()
         params.backbone = str(backbone)
         params.neckhead = str(neckhead)
-        return cv2.TrackerNano_create(params)
+        # OpenCV's NanoTrack asks its DNN engine for a target the new graph engine ignores and
+        # warns about it on stderr at every creation (twice per sequence, dozens of lines per run)
+        with opencv_log_level(cv2.utils.logging.LOG_LEVEL_ERROR):
+            return cv2.TrackerNano_create(params)
 
     return OpenCVTracker("nano", make, False, correct)
 
