@@ -521,3 +521,58 @@ def test_cli_missing_inputs_are_one_line_errors(cmd, tmp_path, capsys):
     assert main([c.format(x=tmp_path) for c in cmd]) == 2
     err = capsys.readouterr().err
     assert "error:" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_narrower_net_is_cut_from_a_wider_one_by_channel_importance(exported, trained, tmp_path):
+    """Hand case: silence (BatchNorm scale and shift 0) every channel a half-width net lacks;
+    the cut keeps exactly the others, so the narrow net computes the same function. Then a
+    fine-tune at --width 0.5 starts from the shipped-style .onnx of a wider net."""
+    from track3d_train.boxnet.narrow import narrow_checkpoint
+    from track3d_train.boxnet.train import TrainConfig, train
+
+    torch.manual_seed(0)
+    cfg = BoxNetConfig(num_points=64, width=0.5, use_category=True)
+    big = A3BoxNet(cfg).eval()
+    small_cfg = BoxNetConfig(**{**cfg.to_dict(), "width": 0.25})
+    small_shapes = {k: tuple(v.shape) for k, v in A3BoxNet(small_cfg).state_dict().items()}
+    rng = np.random.default_rng(3)
+    kept = {}
+    with torch.no_grad():
+        for m in big.modules():
+            if isinstance(m, torch.nn.BatchNorm1d):
+                m.weight.uniform_(0.5, 1.5)
+                m.running_var.uniform_(0.5, 2.0)
+        for name, branch in (("center", big.center_net), ("box", big.box_net)):
+            bns = [m for m in list(branch.mlp) + list(branch.fc) if isinstance(m, torch.nn.BatchNorm1d)]
+            for i, bn in enumerate(bns):
+                n = bn.num_features
+                keep = np.sort(rng.choice(n, max(8, round(n / 2)), replace=False))
+                off = np.setdiff1d(np.arange(n), keep)
+                bn.weight[off] = 0.0
+                bn.bias[off] = 0.0
+                kept[(name, i)] = keep
+    src = {"model": big.state_dict(), "model_config": cfg.to_dict(), "epoch": 4}
+    ck = narrow_checkpoint(src, 0.25)
+    assert ck["model_config"]["width"] == 0.25 and ck["narrowed_from"] == {"width": 0.5} and ck["epoch"] == 4
+    assert {k: tuple(v.shape) for k, v in ck["model"].items()} == small_shapes
+    small = A3BoxNet(small_cfg)
+    small.load_state_dict(ck["model"])
+    small.eval()
+    # the first box-net conv kept exactly the live channels, all three input columns
+    w0 = big.box_net.mlp[0].weight.detach().numpy()
+    assert np.array_equal(small.box_net.mlp[0].weight.detach().numpy(), w0[kept[("box", 0)]])
+    pts = torch.from_numpy(rng.normal(size=(3, 64, 3)).astype(np.float32))
+    cat = torch.from_numpy(one_hot(np.array([0, 1, 2]), 3))
+    with torch.no_grad():
+        for a, b in zip(big(pts, cat), small(pts, cat)):
+            assert torch.allclose(a, b, atol=1e-5)
+    with pytest.raises(ValueError, match="not narrower"):
+        narrow_checkpoint(src, 0.5)
+    # train(): a wider init is cut to the run's width (the fixture's net is width 0.25)
+    path, _ = exported
+    out, tcfg, _ = trained
+    tune = TrainConfig(**{**tcfg.__dict__, "out": str(tmp_path / "narrow"), "width": 0.125, "epochs": 1,
+                          "max_steps": 1})
+    logs = []
+    h = train(tune, progress=False, log=logs.append, init_from=str(path))
+    assert h["init_from"]["file"] == path.name and any("narrowing" in str(m) for m in logs)

@@ -150,7 +150,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "(other body proportions, e.g. 0.3); three values: x, y, z (e.g. 0.3 0.3 0.5)")
     t.add_argument("--init-from", default=None,
                    help="start from these A3BoxNet weights: a checkpoint (.pt) or an exported model (.onnx; a bare "
-                        "name such as a3boxnet.onnx is the shipped model) (fine-tuning; default: random)")
+                        "name such as a3boxnet.onnx is the shipped model) (fine-tuning; default: random); a wider "
+                        "model is cut to --width, keeping its most important channels")
     t.add_argument("--val-every", type=bounded(int, 0), default=8, help="every k-th train sequence is validation (0: none)")
     t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
     t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")

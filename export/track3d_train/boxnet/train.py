@@ -242,9 +242,17 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
         else:
             src = torch.load(str(init_from), map_location="cpu", weights_only=False)
         # the weights carry over between box codings (same layers; the heads re-learn what their
-        # outputs mean), not between architectures
+        # outputs mean), and to a narrower net (narrow.py: the channels that matter most), not
+        # between other architectures
         arch = {k: v for k, v in mcfg.to_dict().items() if k != "size_norm"}
         src_cfg = src.get("model_config") if isinstance(src, dict) else None
+        if (isinstance(src_cfg, dict) and float(src_cfg.get("width", 1.0)) > cfg.width
+                and {k: v for k, v in src_cfg.items() if k not in ("size_norm", "width")}
+                == {k: v for k, v in arch.items() if k != "width"}):
+            from .narrow import narrow_checkpoint
+            log(f"narrowing {Path(init_from).name} from width {src_cfg['width']} to {cfg.width}")
+            src = narrow_checkpoint(src, cfg.width)
+            src_cfg = src["model_config"]
         if not isinstance(src_cfg, dict) or {k: v for k, v in src_cfg.items() if k != "size_norm"} != arch:
             raise ValueError(f"{init_from} is not an A3BoxNet checkpoint of this model (N, width, category "
                              "must match)")
