@@ -83,14 +83,16 @@ def make_configs(args, torch_nets: TorchNets | None) -> tuple[list[dict], list[d
     configs, skipped = [], []
     for pair in pairs:
         if len(pair) != 2:
-            raise SystemExit(f"--config takes TRACKER:ESTIMATOR, got {':'.join(pair)!r}")
+            raise SystemExit(f"--config takes TRACKER:ESTIMATOR[@MODEL], got {':'.join(pair)!r}")
         tracker, estimator = pair
+        estimator, _, model = estimator.partition("@")
         topt, eopt = {}, {}
         if tracker in prefixes and prefixes[tracker] is not None:
             topt["model"] = str(prefixes[tracker])
-        if estimator == "a3boxnet" and args.boxnet_model is not None:
-            eopt["model"] = str(args.boxnet_model)
-        base = {"label": f"{tracker}:{estimator}", "tracker": tracker, "estimator": estimator,
+        if estimator == "a3boxnet" and (model or args.boxnet_model is not None):
+            eopt["model"] = model or str(args.boxnet_model)
+        label = f"{tracker}:{estimator}" + (f"@{Path(model).name}" if model else "")
+        base = {"label": label, "tracker": tracker, "estimator": estimator,
                 "tracker_options": topt, "estimator_options": eopt, "backend": "onnxruntime", "precision": "fp32"}
         configs.append(base)
         if torch_nets is not None:
@@ -190,8 +192,9 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--preload", type=int, default=400, help="frames kept in memory (looped over)")
     ap.add_argument("--sequences", type=bounded(int, 1), default=8, help="sequences preloaded")
     ap.add_argument("--threads", type=bounded(int, 1), nargs="+", default=[1, 2], help="thread counts to time")
-    ap.add_argument("--config", action="append", default=None, metavar="TRACKER:ESTIMATOR",
-                    help="configurations to run (default: siamfc-edge:a3boxnet siamfc:a3boxnet kcf:baseline)")
+    ap.add_argument("--config", action="append", default=None, metavar="TRACKER:ESTIMATOR[@MODEL]",
+                    help="configurations to run (default: siamfc-edge:a3boxnet siamfc:a3boxnet kcf:baseline); "
+                         "@MODEL: this configuration's A3BoxNet .onnx (e.g. two box nets side by side in one run)")
     ap.add_argument("--tag", default=None, help="result file name tag (default: the host name)")
     add_out_argument(ap, flag="--out-dir")
     ap.add_argument("--siamfc-edge-model", type=Path, default=None, metavar="PREFIX",

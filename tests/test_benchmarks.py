@@ -59,8 +59,14 @@ def test_bench_fps_times_the_networks_it_passes_in(tiny_dataset, tmp_path):
     out = tmp_path / "fps"
     assert bench_fps.main(["--data", str(tiny_dataset), "--frames", "5", "--preload", "40", "--threads", "1",
                            "--config", "siamfc-edge:a3boxnet", "--config", "kcf:baseline", "--tag", "t",
+                           "--config", f"kcf:a3boxnet@{MODELS_DIR / 'a3boxnet_stereo.onnx'}",
                            "--out-dir", str(out)]) == 0
     rows = {r["config"]: r for r in json.loads((out / "fps_t.json").read_text())["results"]}
+    # a configuration's own box net, side by side with the default one in the same run
+    other = rows["kcf:a3boxnet@a3boxnet_stereo.onnx"]
+    assert other["models"]["estimator_options"]["model"].endswith("a3boxnet_stereo.onnx")
+    assert other["stages"]["net3d"]["median_ms"] > 0
+    assert "model" not in rows["siamfc-edge:a3boxnet"]["models"]["estimator_options"]
     assert rows["siamfc-edge:a3boxnet"]["stages"]["net2d"]["median_ms"] > 0
     assert rows["siamfc-edge:a3boxnet"]["stages"]["net3d"]["median_ms"] > 0
     assert rows["kcf:baseline"]["stages"]["net2d"]["median_ms"] == 0 == rows["kcf:baseline"]["stages"]["net3d"]["median_ms"]
