@@ -91,7 +91,7 @@ def make_configs(args, torch_nets: TorchNets | None) -> tuple[list[dict], list[d
             topt["model"] = str(prefixes[tracker])
         if estimator == "a3boxnet" and (model or args.boxnet_model is not None):
             eopt["model"] = model or str(args.boxnet_model)
-        label = f"{tracker}:{estimator}" + (f"@{Path(model).name}" if model else "")
+        label = f"{tracker}:{estimator}" + (f"@{model}" if model else "")
         base = {"label": label, "tracker": tracker, "estimator": estimator,
                 "tracker_options": topt, "estimator_options": eopt, "backend": "onnxruntime", "precision": "fp32"}
         configs.append(base)

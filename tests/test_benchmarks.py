@@ -63,7 +63,7 @@ def test_bench_fps_times_the_networks_it_passes_in(tiny_dataset, tmp_path):
                            "--out-dir", str(out)]) == 0
     rows = {r["config"]: r for r in json.loads((out / "fps_t.json").read_text())["results"]}
     # a configuration's own box net, side by side with the default one in the same run
-    other = rows["kcf:a3boxnet@a3boxnet_stereo.onnx"]
+    other = rows[f"kcf:a3boxnet@{MODELS_DIR / 'a3boxnet_stereo.onnx'}"]
     assert other["models"]["estimator_options"]["model"].endswith("a3boxnet_stereo.onnx")
     assert other["stages"]["net3d"]["median_ms"] > 0
     assert "model" not in rows["siamfc-edge:a3boxnet"]["models"]["estimator_options"]
