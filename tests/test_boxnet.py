@@ -576,3 +576,32 @@ def test_a_narrower_net_is_cut_from_a_wider_one_by_channel_importance(exported, 
     logs = []
     h = train(tune, progress=False, log=logs.append, init_from=str(path))
     assert h["init_from"]["file"] == path.name and any("narrowing" in str(m) for m in logs)
+
+
+def test_distillation_loss_hand_case_and_a_run_with_a_teacher(exported, trained, tmp_path):
+    """Zero when the student says what the teacher says; a 0.3 m shift of the stage-1 centre
+    costs 0.5 x 0.3^2 twice (stage-1 and final centre, both in Huber's quadratic branch); a
+    run with --distill-from logs the teacher term."""
+    from track3d_train.boxnet.losses import distill_loss
+    from track3d_train.boxnet.train import TrainConfig, train
+
+    rng = np.random.default_rng(1)
+    t = tuple(torch.from_numpy(rng.normal(size=s).astype(np.float32)) for s in ((4, 3), (4, 3), (4, 14), (4, 14, 3)))
+    scale = torch.ones(4, 3)
+    total, terms = distill_loss(t, t, scale)
+    assert abs(float(total)) < 1e-6 and abs(terms["distill"]) < 1e-6
+    shifted = (t[0] + torch.tensor([0.3, 0.0, 0.0]),) + t[1:]
+    assert float(distill_loss(shifted, t, scale)[0]) == pytest.approx(2 * 0.5 * 0.09, abs=1e-5)
+    other = t[:2] + (t[2] + torch.from_numpy(rng.normal(size=(4, 14)).astype(np.float32)), t[3])
+    assert float(distill_loss(other, t, scale)[0]) > 0.01       # another size-class distribution
+    path, _ = exported
+    out, tcfg, _ = trained
+    run = TrainConfig(**{**tcfg.__dict__, "out": str(tmp_path / "distill"), "epochs": 1, "max_steps": 2,
+                         "distill_from": str(path), "distill_weight": 0.5})
+    logs = []
+    h = train(run, progress=False, log=logs.append, init_from=str(path))
+    assert any("distilling from" in str(m) for m in logs)
+    assert h["epochs"][-1]["train"]["distill"] > 0
+    bad = TrainConfig(**{**run.__dict__, "out": str(tmp_path / "bad"), "size_norm": "extent"})
+    with pytest.raises(ValueError, match="cannot teach"):
+        train(bad, progress=False, log=lambda *_: None)

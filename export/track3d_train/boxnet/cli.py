@@ -51,7 +51,7 @@ def _train(a) -> int:
                       epoch_samples=a.epoch_samples, batch=a.batch, lr=a.lr, flip=not a.no_flip,
                       cat_dropout=a.cat_dropout, flip_y=a.flip_y, scale_aug=a.scale_aug, stretch_aug=stretch,
                       val_every=a.val_every, seed=a.seed, threads=a.threads, max_minutes=a.max_minutes,
-                      max_steps=a.max_steps)
+                      max_steps=a.max_steps, distill_from=a.distill_from or "", distill_weight=a.distill_weight)
     _log(f"training A3BoxNet into {a.out}: {cfg}")
     h = train(cfg, resume=not a.no_resume, progress=not a.quiet, log=_log, init_from=a.init_from)
     _log(f"done: {len(h['epochs'])} epochs, {h['seconds'] / 60:.1f} min; curve in {Path(a.out) / 'loss_curve.png'}")
@@ -152,6 +152,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="start from these A3BoxNet weights: a checkpoint (.pt) or an exported model (.onnx; a bare "
                         "name such as a3boxnet.onnx is the shipped model) (fine-tuning; default: random); a wider "
                         "model is cut to --width, keeping its most important channels")
+    t.add_argument("--distill-from", default=None, metavar="ONNX_OR_PT",
+                   help="a teacher A3BoxNet (.onnx, a bare name such as a3boxnet.onnx = the shipped one, or .pt) "
+                        "whose outputs the net also learns, on the same augmented inputs (default: none)")
+    t.add_argument("--distill-weight", type=bounded(float, 0), default=1.0,
+                   help="weight of the teacher term (losses.distill_loss) when --distill-from is given")
     t.add_argument("--val-every", type=bounded(int, 0), default=8, help="every k-th train sequence is validation (0: none)")
     t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
     t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")

@@ -17,7 +17,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-__all__ = ["huber_norm", "boxnet_loss"]
+__all__ = ["huber_norm", "boxnet_loss", "distill_loss"]
 
 
 def huber_norm(v: torch.Tensor, delta: float) -> torch.Tensor:
@@ -44,3 +44,22 @@ def boxnet_loss(outputs, center_rel: torch.Tensor, size_cls: torch.Tensor, size_
     total = l_c1 + l_c2 + l_cls + l_res
     return total, {"center1": l_c1.item(), "center2": l_c2.item(), "size_cls": l_cls.item(),
                    "size_res": l_res.item(), "total": total.item()}
+
+
+def distill_loss(student, teacher, scale: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+    """How far a student's outputs are from a teacher's on the same inputs, in the terms of the
+    joint loss: the stage-1 and final centres (Huber, metres), the size-class distribution
+    (KL divergence of the student's softmax from the teacher's) and the residual of the
+    teacher's class (Huber, metres via ``scale`` as in boxnet_loss). Zero when they agree."""
+    s1, s2, s_scores, s_res = student
+    t1, t2, t_scores, t_res = (o.detach() for o in teacher)
+    l_c1 = huber_norm(t1 - s1, 1.0).mean()
+    l_c2 = huber_norm((t1 + t2) - (s1 + s2), 2.0).mean()
+    l_cls = F.kl_div(F.log_softmax(s_scores, dim=1), F.log_softmax(t_scores, dim=1), log_target=True,
+                     reduction="batchmean")
+    cls = t_scores.argmax(dim=1)
+    idx = torch.arange(len(cls), device=s_res.device)
+    l_res = huber_norm((t_res[idx, cls] - s_res[idx, cls]) * (scale if scale.dim() == 2 else scale[:, None]),
+                       1.0).mean()
+    total = l_c1 + l_c2 + l_cls + l_res
+    return total, {"distill": total.item()}

@@ -43,6 +43,8 @@ class TrainConfig:
     max_minutes: float = 0.0        # time budget: the cosine LR spans it, training stops there (0: none)
     max_steps: int = 0              # stop after this many steps (tests; 0: no limit)
     num_categories: int = 3
+    distill_from: str = ""          # a teacher A3BoxNet (.onnx or .pt) whose outputs the student also fits
+    distill_weight: float = 0.0     # weight of losses.distill_loss in the objective (0: none)
     extra: dict = field(default_factory=dict)
 
 
@@ -173,6 +175,31 @@ def _onnx_source(path, train_ds, samples: int = 256) -> dict:
     return model_from_onnx(path, calibration=pts)[1]
 
 
+def _teacher(cfg: TrainConfig, train_ds, log):
+    """The distillation teacher in eval mode (an .onnx, e.g. the shipped model, or a checkpoint)."""
+    import torch
+
+    from .model import A3BoxNet, BoxNetConfig
+
+    path = str(cfg.distill_from)
+    if path.endswith(".onnx"):
+        path = str(_shipped_or_path(path))
+        src = _onnx_source(path, train_ds)
+    else:
+        src = torch.load(path, map_location="cpu", weights_only=False)
+    tcfg = src.get("model_config") if isinstance(src, dict) else None
+    if (not isinstance(tcfg, dict) or tcfg.get("size_norm") != cfg.size_norm
+            or tcfg.get("use_category") != cfg.use_category):
+        raise ValueError(f"{path} cannot teach this run: its box coding and category input must be the run's")
+    teacher = A3BoxNet(BoxNetConfig(**tcfg))
+    teacher.load_state_dict(src["model"])
+    teacher.eval()
+    for p in teacher.parameters():
+        p.requires_grad_(False)
+    log(f"distilling from {Path(path).name} (weight {cfg.distill_weight})")
+    return teacher
+
+
 def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=print,
           init_from: str | None = None) -> dict:
     """Train (or resume) into cfg.out: last.pt, best.pt, history.json, loss_curve.png.
@@ -182,7 +209,7 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
     import torch
 
     from .data import BoxNetSamples, PointCache
-    from .losses import boxnet_loss
+    from .losses import boxnet_loss, distill_loss
     from .model import A3BoxNet, BoxNetConfig
 
     torch.set_num_threads(int(cfg.threads))
@@ -260,6 +287,7 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
         history["init_from"] = {"file": Path(init_from).name, "epoch": src.get("epoch"), "step": src.get("step"),
                                 "size_norm": src_cfg.get("size_norm")}
         log(f"initialised from {init_from} (epoch {src.get('epoch')}, step {src.get('step')})")
+    teacher = _teacher(cfg, train_ds, log) if cfg.distill_from and cfg.distill_weight > 0 else None
     t_session = time.time()
     t_before = history["seconds"]
     if budget_s > 0 and progress_at(step, t_before) >= 1.0:
@@ -284,7 +312,14 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
                 break
             for g in opt.param_groups:
                 g["lr"] = lr_at(frac)
-            loss, terms = boxnet_loss(model(pts, cat), crel, cls, res, scale)
+            out_s = model(pts, cat)
+            loss, terms = boxnet_loss(out_s, crel, cls, res, scale)
+            if teacher is not None:
+                with torch.no_grad():
+                    out_t = teacher(pts, cat)
+                d, dterms = distill_loss(out_s, out_t, scale)
+                loss = loss + cfg.distill_weight * d
+                terms = {**terms, **dterms, "total": loss.item()}
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
