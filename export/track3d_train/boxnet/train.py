@@ -175,18 +175,22 @@ def _onnx_source(path, train_ds, samples: int = 256) -> dict:
     return model_from_onnx(path, calibration=pts)[1]
 
 
-def _teacher(cfg: TrainConfig, train_ds, log):
-    """The distillation teacher in eval mode (an .onnx, e.g. the shipped model, or a checkpoint)."""
+def _load_source(path, train_ds) -> tuple[str, dict]:
+    """(resolved path, checkpoint dict) of the A3BoxNet a run starts from or learns from: an
+    exported .onnx (a bare name such as a3boxnet.onnx: the shipped one) or a checkpoint."""
     import torch
 
+    if str(path).endswith(".onnx"):
+        path = _shipped_or_path(path)
+        return str(path), _onnx_source(path, train_ds)
+    return str(path), torch.load(str(path), map_location="cpu", weights_only=False)
+
+
+def _teacher(cfg: TrainConfig, train_ds, log):
+    """The distillation teacher in eval mode (an .onnx, e.g. the shipped model, or a checkpoint)."""
     from .model import A3BoxNet, BoxNetConfig
 
-    path = str(cfg.distill_from)
-    if path.endswith(".onnx"):
-        path = str(_shipped_or_path(path))
-        src = _onnx_source(path, train_ds)
-    else:
-        src = torch.load(path, map_location="cpu", weights_only=False)
+    path, src = _load_source(cfg.distill_from, train_ds)
     tcfg = src.get("model_config") if isinstance(src, dict) else None
     if (not isinstance(tcfg, dict) or tcfg.get("size_norm") != cfg.size_norm
             or tcfg.get("use_category") != cfg.use_category):
@@ -263,11 +267,7 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
         start_epoch, step, best, history = ck["epoch"] + 1, ck["step"], ck["best"], ck["history"]
         log(f"resumed from {last}: epoch {start_epoch}, step {step}")
     elif init_from:
-        if str(init_from).endswith(".onnx"):
-            init_from = _shipped_or_path(init_from)
-            src = _onnx_source(init_from, train_ds)
-        else:
-            src = torch.load(str(init_from), map_location="cpu", weights_only=False)
+        init_from, src = _load_source(init_from, train_ds)
         # the weights carry over between box codings (same layers; the heads re-learn what their
         # outputs mean), and to a narrower net (narrow.py: the channels that matter most), not
         # between other architectures
