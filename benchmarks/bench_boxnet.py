@@ -31,6 +31,7 @@ from benchlib.paper import TABLE2, TABLE3_NO_CATEGORY
 from benchlib.record import finish_record, start_record
 
 from track3d.argparsing import ArgumentParser, hidden_alias, run_main
+from track3d.boxnet import DEFAULT_MODEL
 from track3d.jsonable import write_json
 from track3d.machine import START_CPUS, pin_threads
 from track3d.onnxmodel import MODELS_DIR
@@ -272,7 +273,7 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--data", default="data/small", help="dataset root")
     ap.add_argument("--split", default="test", help="dataset split")
     ap.add_argument("--cache", required=True, help="oracle frustum cache of the split (`boxnet prepare --jitters 0`)")
-    ap.add_argument("--model", default=str(MODELS_DIR / "a3boxnet.onnx"), help="A3BoxNet ONNX (default: the shipped one)")
+    ap.add_argument("--model", default=str(MODELS_DIR / DEFAULT_MODEL), help=f"A3BoxNet ONNX (default: the shipped {DEFAULT_MODEL})")
     ap.add_argument("--checkpoint", default=None, help="its torch checkpoint (for the ORT vs torch ratio)")
     hidden_alias(ap, "--ckpt", "checkpoint")
     ap.add_argument("--ablation", nargs="*", default=[], metavar="NAME=MODEL.onnx",

@@ -32,18 +32,19 @@ from benchlib.record import finish_record, start_record
 from track3d.argparsing import ArgumentParser, bounded, hidden_alias, run_main
 from track3d.jsonable import write_json
 from track3d.machine import START_CPUS, pin_threads
+from track3d.boxnet import DEFAULT_MODEL
 from track3d.onnxmodel import MODELS_DIR, ModelError, OnnxModel, openvino_version, variant_path
 from track3d.variant_choice import example_feeds, measure
 
 VARIANTS = (("onnxruntime", "fp32"), ("onnxruntime", "int8"), ("openvino", "fp32"), ("openvino", "bf16"))
-NETWORKS = {"a3boxnet": "a3boxnet.onnx", "edgetrack_search": "edgetrack_search.onnx",
+# the 2D networks measured one by one (with the box network, --boxnet-model)
+NETWORKS_2D = {"edgetrack_search": "edgetrack_search.onnx",
             "edgetrack_template": "edgetrack_template.onnx", "siamfc_edge_search": "siamfc_edge_search.onnx",
             "siamfc_edge_exemplar": "siamfc_edge_exemplar.onnx"}
 # the files of each 2D tracker's networks (the search one first) and of the box net
 TRACKER_FILES = {"edgetrack": ["edgetrack_search.onnx", "edgetrack_template.onnx"],
                  "siamfc-edge": ["siamfc_edge_search.onnx", "siamfc_edge_exemplar.onnx"],
-                 "siamfc": ["siamfc_faithful_search.onnx", "siamfc_faithful_exemplar.onnx"],
-                 "a3boxnet": ["a3boxnet.onnx"]}
+                 "siamfc": ["siamfc_faithful_search.onnx", "siamfc_faithful_exemplar.onnx"]}
 STAGES = ("net2d", "net3d", "end_to_end")
 
 
@@ -65,9 +66,9 @@ def available(path: Path) -> tuple[dict, list[str]]:
     return models, skipped
 
 
-def bench_networks(seconds: float) -> dict:
+def bench_networks(seconds: float, boxnet: str = DEFAULT_MODEL) -> dict:
     out = {}
-    for name, file in NETWORKS.items():
+    for name, file in {"a3boxnet": boxnet, **NETWORKS_2D}.items():
         path = MODELS_DIR / file
         models, skipped = available(path)
         ref = models[("onnxruntime", "fp32")]
@@ -90,33 +91,34 @@ def bench_networks(seconds: float) -> dict:
     return out
 
 
-def loop_configs(tracker: str = "edgetrack") -> list[dict]:
+def loop_configs(tracker: str = "edgetrack", boxnet: str = DEFAULT_MODEL) -> list[dict]:
     """One configuration per variant: each network at that engine / precision when it has it
     (else fp32 on that engine, said in the label), plus auto / auto."""
     cfgs = []
     for e, p in VARIANTS + (("auto", "auto"),):
-        topt, eopt = {"precision": p, "engine": e}, {"precision": p, "engine": e}
+        topt, eopt = {"precision": p, "engine": e}, {"precision": p, "engine": e, "model": boxnet}
         if p == "int8":
             if not variant_path(MODELS_DIR / TRACKER_FILES[tracker][0], "int8").is_file():
                 topt["precision"] = "fp32"
-            if not variant_path(MODELS_DIR / "a3boxnet.onnx", "int8").is_file():
+            if not variant_path(MODELS_DIR / boxnet, "int8").is_file():
                 eopt["precision"] = "fp32"
             if topt["precision"] == eopt["precision"] == "fp32":
                 continue
-        lab = f"{e}/{p}" if topt == eopt else f"{e}: {tracker} {topt['precision']}, a3boxnet {eopt['precision']}"
+        same = topt["precision"] == eopt["precision"]
+        lab = f"{e}/{p}" if same else f"{e}: {tracker} {topt['precision']}, a3boxnet {eopt['precision']}"
         cfgs.append({"label": lab, "tracker": tracker, "estimator": "a3boxnet", "backend": e,
                      "precision": p, "tracker_options": topt, "estimator_options": eopt})
     return cfgs
 
 
 def bench_loop(data: Path, split: str, frames: int, rounds: int, preload: int, sequences: int,
-               tracker: str = "edgetrack") -> dict:
+               tracker: str = "edgetrack", boxnet: str = DEFAULT_MODEL) -> dict:
     camera, seqs = load_frames(data, split, preload, sequences)
     per = max(frames // rounds, 20)
     runs: dict[str, list[dict]] = {}
     skipped = {}
     for r in range(rounds):
-        for cfg in loop_configs(tracker):
+        for cfg in loop_configs(tracker, boxnet):
             if cfg["label"] in skipped:
                 continue
             try:
@@ -141,27 +143,28 @@ def bench_loop(data: Path, split: str, frames: int, rounds: int, preload: int, s
     for lab, row in out.items():
         row["speedup_vs_ort_fp32"] = {k: base[k] / row["median_ms"][k] if base and row["median_ms"][k] > 0 else None
                                       for k in STAGES}
-    return {"tracker": tracker, "configs": out, "skipped": skipped}
+    return {"tracker": tracker, "boxnet": boxnet, "configs": out, "skipped": skipped}
 
 
 AO_TOL, ACE_TOL_M = 0.005, 0.01   # the shipping rule (docs/models.md, "Arithmetic")
 
 
-def accuracy_configs(tracker: str = "edgetrack") -> list[tuple[str, dict, dict]]:
+def accuracy_configs(tracker: str = "edgetrack", boxnet: str = DEFAULT_MODEL) -> list[tuple[str, dict, dict]]:
     """(label, 2D tracker options, A3BoxNet options): fp32 first, then each variant of one
-    network at a time and of both together."""
+    network at a time and of both together; the box network is the shipped file `boxnet`."""
     fp32 = {"precision": "fp32", "engine": "onnxruntime"}
-    out = [("onnxruntime/fp32", fp32, fp32)]
+    out = [("onnxruntime/fp32", fp32, {**fp32, "model": boxnet})]
     for e, p in VARIANTS[1:]:
         v = {"precision": p, "engine": e}
-        out += [(f"{e}/{p} {tracker} only", v, fp32), (f"{e}/{p} a3boxnet only", fp32, v), (f"{e}/{p} both", v, v)]
+        out += [(f"{e}/{p} {tracker} only", v, {**fp32, "model": boxnet}),
+                (f"{e}/{p} a3boxnet only", fp32, {**v, "model": boxnet}), (f"{e}/{p} both", v, {**v, "model": boxnet})]
     return out
 
 
 def bench_accuracy(data: Path, split: str, out_dir: Path, tracker: str = "edgetrack",
-                   only: list[str] | None = None) -> dict:
-    """AO_3d / ACE_3d of Track3D (`tracker` + a3boxnet) per variant, restart and one-pass rows,
-    and whether each variant passes the rule against fp32."""
+                   only: list[str] | None = None, boxnet: str = DEFAULT_MODEL) -> dict:
+    """AO_3d / ACE_3d of Track3D (`tracker` + A3BoxNet of the shipped file `boxnet`) per variant,
+    restart and one-pass rows, and whether each variant passes the rule against fp32."""
     import tempfile
 
     from track3d.estimators import EstimatorUnavailable
@@ -171,7 +174,7 @@ def bench_accuracy(data: Path, split: str, out_dir: Path, tracker: str = "edgetr
 
     rows: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(dir=out_dir) as tmp:
-        for lab, topt, eopt in accuracy_configs(tracker):
+        for lab, topt, eopt in accuracy_configs(tracker, boxnet):
             if only and lab != "onnxruntime/fp32" and not any(lab.startswith(o) for o in only):
                 continue
             name = lab.replace("/", "-").replace(" ", "_")
@@ -203,7 +206,7 @@ def bench_accuracy(data: Path, split: str, out_dir: Path, tracker: str = "edgetr
     from track3d.dataset import Dataset
 
     seqs = Dataset(data).sequences(split)
-    return {"tracker": tracker, "split": split, "sequences": len(seqs), "frames": int(sum(len(q) for q in seqs)),
+    return {"tracker": tracker, "boxnet": boxnet, "split": split, "sequences": len(seqs), "frames": int(sum(len(q) for q in seqs)),
             "rule": f"AO_3d >= fp32 - {AO_TOL}, ACE_3d <= fp32 + {ACE_TOL_M} m, restart and one-pass",
             "rows": rows}
 
@@ -220,7 +223,9 @@ def write_verdicts(accs: list[dict], models_dir: Path = MODELS_DIR) -> Path:
     data["rule"] = accs[0]["rule"] + (", on every split measured" if len(accs) > 1 else "")
     models = data.setdefault("models", {})
     merged: dict[tuple[str, str], dict] = {}
+    files_of = dict(TRACKER_FILES)
     for acc in accs:
+        files_of["a3boxnet"] = [acc.get("boxnet", DEFAULT_MODEL)]   # runs before the option: the default
         for lab, row in acc["rows"].items():
             if "passes" not in row or not lab.endswith(" only"):
                 continue
@@ -233,7 +238,7 @@ def write_verdicts(accs: list[dict], models_dir: Path = MODELS_DIR) -> Path:
                 "d_ao_3d": {k: round(v["d_ao_3d"], 5) for k, v in row["delta"].items()},
                 "d_ace_3d_m": {k: round(v["d_ace_3d"], 5) for k, v in row["delta"].items()}}
     for (variant, net), verdict in merged.items():
-        for f in TRACKER_FILES[net]:
+        for f in files_of[net]:
             # bound to the files measured: a later model under the same name gets no verdict
             models.setdefault(f, {})[variant] = {**verdict, **verdict_files(models_dir / f, variant)}
     path.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
@@ -261,7 +266,7 @@ def markdown(res: dict) -> str:
         for lab, why in res["loop"]["skipped"].items():
             lines.append(f"- skipped {lab}: {why}")
     for acc in res.get("accuracy") or []:
-        lines += ["", f"Track3D ({acc['tracker']} + a3boxnet) accuracy on {acc['sequences']} sequences / {acc['frames']} frames of "
+        lines += ["", f"Track3D ({acc['tracker']} + {acc.get('boxnet', DEFAULT_MODEL)}) accuracy on {acc['sequences']} sequences / {acc['frames']} frames of "
                       f"'{acc['split']}'; rule: {acc['rule']}", "",
                   "| variant | AO_3d restart | ACE_3d restart (m) | AO_3d one-pass | ACE_3d one-pass (m) | passes |",
                   "|---|---|---|---|---|---|"]
@@ -292,11 +297,14 @@ def build_parser() -> ArgumentParser:
                          "and the shipping rule (default: not measured)")
     ap.add_argument("--accuracy-split", nargs="+", default=["test"],
                     help="split(s) of --accuracy-data; a variant passes only on every one (default test)")
-    ap.add_argument("--tracker", default="edgetrack", choices=[t for t in TRACKER_FILES if t != "a3boxnet"],
+    ap.add_argument("--tracker", default="edgetrack", choices=list(TRACKER_FILES),
                     help="2D tracker of the loop and accuracy rows (default edgetrack, the default loop's)")
     hidden_alias(ap, "--accuracy-tracker", "tracker")
     ap.add_argument("--accuracy-variants", nargs="+", default=None, metavar="LABEL",
                     help="only the accuracy rows starting with these labels, e.g. onnxruntime/int8 (default: all)")
+    ap.add_argument("--boxnet-model", default=DEFAULT_MODEL, metavar="FILE",
+                    help=f"the shipped A3BoxNet file whose variants are measured (default {DEFAULT_MODEL}; "
+                         "e.g. a3boxnet_narrow.onnx)")
     ap.add_argument("--write-verdicts", action="store_true",
                     help="merge the accuracy verdicts into runtime/track3d/models/accuracy.json (read by auto)")
     ap.add_argument("--no-speed", action="store_true", help="skip the speed rows (accuracy only)")
@@ -309,14 +317,17 @@ def main(argv=None) -> int:
     a = build_parser().parse_args(argv)
     pin_threads(1)  # one thread, one core (as bench_fps --threads 1)
     res = start_record("track3d precision x engine", openvino=openvino_version(), threads=1)
-    res["networks"] = {} if a.no_speed else bench_networks(a.net_seconds)
+    if not (MODELS_DIR / a.boxnet_model).is_file():
+        raise ValueError(f"--boxnet-model {a.boxnet_model}: no such shipped model in {MODELS_DIR.name}/")
+    res["networks"] = {} if a.no_speed else bench_networks(a.net_seconds, a.boxnet_model)
     if a.data is not None and not a.no_speed:
-        res["loop"] = bench_loop(a.data, a.split, a.frames, a.rounds, a.preload, a.sequences, a.tracker)
+        res["loop"] = bench_loop(a.data, a.split, a.frames, a.rounds, a.preload, a.sequences, a.tracker,
+                                 a.boxnet_model)
         res["data_split"] = a.split
     if a.accuracy_data is not None:
         a.out_dir.mkdir(parents=True, exist_ok=True)
-        res["accuracy"] = [bench_accuracy(a.accuracy_data, split, a.out_dir, a.tracker, a.accuracy_variants)
-                           for split in a.accuracy_split]
+        res["accuracy"] = [bench_accuracy(a.accuracy_data, split, a.out_dir, a.tracker, a.accuracy_variants,
+                                          a.boxnet_model) for split in a.accuracy_split]
         if a.write_verdicts:
             print(f"wrote {write_verdicts(res['accuracy'])}")
     from track3d.boxnet import A3BoxNetEstimator
@@ -326,7 +337,7 @@ def main(argv=None) -> int:
     from track3d.onnxmodel import models_of
 
     res["auto"] = [m.describe() for m in models_of(trk).values()] + \
-        [A3BoxNetEstimator(precision="auto", engine="auto").model.describe()]
+        [A3BoxNetEstimator(a.boxnet_model, precision="auto", engine="auto").model.describe()]
     pin_threads(len(START_CPUS))
     tag = a.tag or platform.node()
     path = write_json(a.out_dir / f"precision_{tag}.json", finish_record(res))

@@ -168,7 +168,8 @@ def test_precision_verdicts_pass_only_on_every_split(tmp_path):
 
     def acc(split, passes_a3, passes_et):
         d = {"restart": {"d_ao_3d": -0.001, "d_ace_3d": 0.002}, "one_pass": {"d_ao_3d": -0.001, "d_ace_3d": 0.002}}
-        return {"tracker": "edgetrack", "split": split, "sequences": 9, "frames": 540, "rule": "r",
+        return {"tracker": "edgetrack", "boxnet": "a3boxnet.onnx", "split": split, "sequences": 9, "frames": 540,
+                "rule": "r",
                 "rows": {"onnxruntime/fp32": {}, "onnxruntime/int8 a3boxnet only": {"passes": passes_a3, "delta": d},
                          "onnxruntime/int8 edgetrack only": {"passes": passes_et, "delta": d},
                          "onnxruntime/int8 both": {"passes": True, "delta": d}}}
@@ -181,6 +182,17 @@ def test_precision_verdicts_pass_only_on_every_split(tmp_path):
     for f in ("edgetrack_search.onnx", "edgetrack_template.onnx"):
         assert models[f]["onnxruntime/int8"]["passes"] is True
         assert set(models[f]["onnxruntime/int8"]["splits"]) == {"test", "test_unseen"}
+
+
+def test_precision_loop_rows_are_labelled_by_variant_with_any_box_network():
+    """The loop rows of a box network chosen by --boxnet-model keep their plain labels (the
+    onnxruntime/fp32 row is every ratio's reference: a run without it crashed at the report)."""
+    import bench_precision
+
+    for boxnet in ("a3boxnet.onnx", "a3boxnet_narrow.onnx"):
+        cfgs = bench_precision.loop_configs("edgetrack", boxnet)
+        assert cfgs[0]["label"] == "onnxruntime/fp32" and cfgs[-1]["label"] == "auto/auto"
+        assert all(c["estimator_options"]["model"] == boxnet for c in cfgs)
 
 
 def test_engine_rows_name_their_models():

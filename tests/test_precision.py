@@ -14,7 +14,7 @@ from track3d.onnxmodel import (MODELS_DIR, PARITY_TOLERANCE, EngineUnavailable, 
                                variant_path)
 from track3d.variant_choice import choose
 
-NETWORKS = ["a3boxnet.onnx", "siamfc_edge_exemplar.onnx", "siamfc_edge_search.onnx",
+NETWORKS = ["a3boxnet_narrow.onnx", "a3boxnet.onnx", "siamfc_edge_exemplar.onnx", "siamfc_edge_search.onnx",
             "siamfc_faithful_exemplar.onnx", "siamfc_faithful_search.onnx"]
 AVX2_ONLY = frozenset({"avx2"})
 VNNI_BF16 = frozenset({"avx2", "avx512", "vnni", "avx512_bf16", "int8_dot", "bf16_dot"})

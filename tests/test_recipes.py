@@ -12,7 +12,8 @@ from track3d_train.recipes import RECIPES, commands, main, recipe  # noqa: E402
 
 _PARSERS = {("track3d-sim", None): "track3d_sim.cli", ("track3d-train", "boxnet"): "track3d_train.boxnet.cli",
             ("track3d-train", "edgetrack"): "track3d_train.edgetrack.cli",
-            ("track3d-train", "siamfc"): "track3d_train.siamfc.cli"}
+            ("track3d-train", "siamfc"): "track3d_train.siamfc.cli",
+            ("track3d-train", "quantize"): "track3d_train.quantize"}
 
 
 @pytest.mark.parametrize("name", list(RECIPES))
@@ -43,6 +44,10 @@ def test_tiny_recipe_runs_end_to_end(name, tmp_path):
     if name == "a3boxnet-stereo":   # a fine-tune of the shipped model, for stereo clouds
         meta = OnnxModel(made[-1], 1).meta
         assert meta["depth_sensor"] == "stereo" and meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet.onnx"
+    if name == "a3boxnet-narrow":   # the default: half width, distilled from the full-width model, an int8 twin
+        meta = OnnxModel(tmp_path / "r" / "boxnet-narrow" / "a3boxnet_narrow.onnx", 1).meta
+        assert meta["width"] == 0.5 and meta["trained"]["distilled_from"] == {"file": "a3boxnet.onnx", "weight": 1.0}
+        assert (tmp_path / "r" / "boxnet-narrow" / "a3boxnet_narrow_int8.onnx").is_file()
     if name == "a3boxnet-engine":
         # a second run resumes: every step finds its work done or continues from its checkpoint
         assert main(["run", name, "--tiny", "--data", str(tmp_path / "d"), "--runs", str(tmp_path / "r")]) == 0

@@ -9,6 +9,7 @@ from track3d.boxes import SIZE_TEMPLATES
 from track3d.onnxmodel import MODELS_DIR, OnnxModel
 
 SHIPPED = {
+    "a3boxnet_narrow.onnx": "a3boxnet",
     "a3boxnet.onnx": "a3boxnet",
     "a3boxnet_stereo.onnx": "a3boxnet",
     "siamfc_edge_exemplar.onnx": "siamfc-exemplar",
@@ -29,6 +30,10 @@ def test_shipped_model_is_present_and_carries_its_metadata(name):
         assert m.meta.get("depth_sensor") == ("stereo" if name == "a3boxnet_stereo.onnx" else None)
         if name == "a3boxnet_stereo.onnx":
             assert m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet.onnx"
+        # the default is the full-width model cut to half width and distilled from it
+        if name == "a3boxnet_narrow.onnx":
+            assert m.meta["width"] == 0.5 and m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet.onnx"
+            assert m.meta["trained"]["distilled_from"] == {"file": "a3boxnet.onnx", "weight": 1.0}
     else:
         assert m.meta["exemplar_size"] == 127 and m.meta["total_stride"] == 8
 
@@ -42,11 +47,13 @@ def _score(root, spec, tmp_path):
     return float(np.mean([s.ao_3d for s in scores])), scores
 
 
-def test_shipped_a3boxnet_beats_the_baseline_on_oracle_boxes(tiny_dataset, tmp_path):
+@pytest.mark.parametrize("model", ["a3boxnet_narrow.onnx", "a3boxnet.onnx"])
+def test_shipped_a3boxnet_beats_the_baseline_on_oracle_boxes(model, tiny_dataset, tmp_path):
     from track3d.evaluation import TrackerSpec
 
-    net, _ = _score(tiny_dataset, TrackerSpec("oracle", "a3boxnet", fusion=False), tmp_path)
-    base, _ = _score(tiny_dataset, TrackerSpec("oracle", "baseline", fusion=False), tmp_path)
+    net, _ = _score(tiny_dataset, TrackerSpec("oracle", "a3boxnet", fusion=False, estimator_options={"model": model}),
+                    tmp_path / "net")
+    base, _ = _score(tiny_dataset, TrackerSpec("oracle", "baseline", fusion=False), tmp_path / "base")
     assert net > base + 0.05, (net, base)
 
 
@@ -55,3 +62,20 @@ def test_default_track3d_tracks_the_tiny_test_split(tiny_dataset, tmp_path):
 
     ao3d, scores = _score(tiny_dataset, TrackerSpec("siamfc-edge", "a3boxnet"), tmp_path)
     assert ao3d > 0.4 and all(s.frames > 0 for s in scores)
+
+
+def test_a_shipped_model_is_chosen_by_its_bare_name(tmp_path, monkeypatch):
+    """`--estimator-option model=a3boxnet_narrow.onnx` (a name, not a path) loads the shipped file;
+    a file of that name in the working folder wins; a name shipped nowhere is a one-line error."""
+    import shutil
+
+    from track3d.boxnet import NARROW_MODEL, A3BoxNetEstimator
+    from track3d.onnxmodel import ModelError
+
+    monkeypatch.chdir(tmp_path)
+    est = A3BoxNetEstimator(model=NARROW_MODEL)
+    assert est.model.path == MODELS_DIR / NARROW_MODEL and est.model.meta["width"] == 0.5
+    shutil.copy(MODELS_DIR / "a3boxnet.onnx", tmp_path / NARROW_MODEL)
+    assert A3BoxNetEstimator(model=NARROW_MODEL).model.path.resolve() == (tmp_path / NARROW_MODEL).resolve()
+    with pytest.raises(ModelError, match="does not exist"):
+        A3BoxNetEstimator(model="a3boxnet_nowhere.onnx")

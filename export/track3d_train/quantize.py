@@ -1,7 +1,7 @@
 """`track3d-train quantize`: int8 twins of the shipped networks (static QDQ, onnxruntime.quantization).
 
     track3d-train quantize --data DATASET [--models-dir runtime/track3d/models] [--out-dir DIR]
-                           [--models a3boxnet siamfc_edge siamfc_faithful] [--samples 300] [--force]
+                           [--models a3boxnet a3boxnet_narrow siamfc_edge siamfc_faithful] [--samples 300] [--force]
 
 Writing over a shipped int8 file (the default --out-dir is the shipped models' folder, which
 holds a3boxnet_int8.onnx) needs --force, as every export does.
@@ -46,6 +46,8 @@ __all__ = ["QUANT_RECIPE", "calibration_boxnet", "calibration_siamfc", "calibrat
 QUANT_RECIPE = {"format": "QDQ", "method": "MinMax", "activations": "uint8", "weights": "int8 per channel",
                 "reduce_range": False, "tool": "onnxruntime.quantization.quantize_static"}
 SIAMFC_STEMS = {"siamfc_edge": "edge", "siamfc_faithful": "faithful"}
+# the A3BoxNet files: the default (full width) and the half-width one distilled from it
+BOXNET_STEMS = ("a3boxnet", "a3boxnet_narrow")
 
 
 def _frames(root, split: str, samples: int, seed: int):
@@ -254,7 +256,7 @@ def quantize_file(fp32: Path, out: Path, feeds: list[dict], op_types: list[str],
 
 def _outputs(stem: str, models_dir: Path, out_dir: Path) -> list[tuple[Path, Path]]:
     """(fp32 file, int8 file it becomes) of a model stem."""
-    parts = (["a3boxnet"] if stem == "a3boxnet" else [f"{stem}_template", f"{stem}_search"] if stem == "edgetrack"
+    parts = ([stem] if stem in BOXNET_STEMS else [f"{stem}_template", f"{stem}_search"] if stem == "edgetrack"
              else [f"{stem}_exemplar", f"{stem}_search"])
     return [(models_dir / f"{p}.onnx", out_dir / variant_path(models_dir / f"{p}.onnx", "int8").name) for p in parts]
 
@@ -266,9 +268,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--models-dir", type=Path, default=MODELS_DIR,
                     help="folder of the fp32 models (default: the shipped models)")
     ap.add_argument("--out-dir", type=Path, default=None, help="where the *_int8.onnx go (default: --models-dir)")
-    ap.add_argument("--models", nargs="+", default=["a3boxnet", "siamfc_edge", "siamfc_faithful"],
-                    help="stems to quantise: a3boxnet, edgetrack, siamfc_edge, siamfc_faithful "
-                         "(default: a3boxnet siamfc_edge siamfc_faithful)")
+    ap.add_argument("--models", nargs="+", default=[*BOXNET_STEMS, "siamfc_edge", "siamfc_faithful"],
+                    help=f"stems to quantise: {', '.join(BOXNET_STEMS)}, edgetrack, siamfc_edge, siamfc_faithful "
+                         f"(default: {' '.join(BOXNET_STEMS)} siamfc_edge siamfc_faithful)")
     ap.add_argument("--samples", type=bounded(int, 1), default=300, help="calibration samples per network (default 300)")
     ap.add_argument("--seed", type=bounded(int, 0), default=0, help="sampling seed (default 0)")
     ap.add_argument("--calibration", choices=CALIBRATIONS, default="minmax",
@@ -280,9 +282,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     a = ap.parse_args(argv)
-    unknown = [m for m in a.models if m not in ("a3boxnet", "edgetrack") and m not in SIAMFC_STEMS]
+    unknown = [m for m in a.models if m not in (*BOXNET_STEMS, "edgetrack") and m not in SIAMFC_STEMS]
     if unknown:
-        ap.error(f"unknown model stem(s) {', '.join(unknown)} (known: a3boxnet, edgetrack, {', '.join(SIAMFC_STEMS)})")
+        ap.error(f"unknown model stem(s) {', '.join(unknown)} "
+                 f"(known: {', '.join(BOXNET_STEMS)}, edgetrack, {', '.join(SIAMFC_STEMS)})")
     out_dir = a.out_dir or a.models_dir
     # Before any calibration work: a shipped file is only replaced when asked.
     refuse_shipped([q for stem in a.models for _, q in _outputs(stem, a.models_dir, out_dir)], a.force, "--out-dir")
@@ -292,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
 
     data_hash = split_hash(Dataset(a.data), a.split)
     for stem in a.models:
-        if stem == "a3boxnet":
+        if stem in BOXNET_STEMS:
             [(fp32, q)] = _outputs(stem, a.models_dir, out_dir)
             feeds = calibration_boxnet(fp32, a.data, a.split, a.samples, a.seed)
             out = quantize_file(fp32, q, feeds, ["Conv", "Gemm"], data_hash, a.split, float_heads=True,

@@ -276,10 +276,15 @@ def is_model(obj) -> bool:
 
 def load_model(model, threads: int = 1, kind: str | None = None, precision: str = "fp32",
                engine: str = "onnxruntime"):
-    """A path -> OnnxModel(path, ...); a model object (is_model) -> itself, its kind checked:
-    trackers and estimators take either, so a caller can pass the models it built."""
+    """A path -> OnnxModel(path, ...); a bare file name that is not a file here but a shipped
+    model's (e.g. "a3boxnet_narrow.onnx") -> the shipped one; a model object (is_model) ->
+    itself, its kind checked: trackers and estimators take either, so a caller can pass the
+    models it built."""
     if not is_model(model):
-        return OnnxModel(model, threads, kind, precision=precision, engine=engine)
+        p = Path(model)
+        if not p.is_file() and p.name == str(model) and (MODELS_DIR / p.name).is_file():
+            p = MODELS_DIR / p.name
+        return OnnxModel(p, threads, kind, precision=precision, engine=engine)
     if kind is not None and model.meta.get("kind") != kind:
         raise ModelError(f"a {model.meta.get('kind')!r} model was given where a {kind!r} model is expected")
     return model

@@ -103,6 +103,14 @@ def parity_check(model, path: str | Path, batches=(1, 3), num_points: int | None
     return worst
 
 
+def _teacher_record(train_config: dict) -> dict | None:
+    """{"file", "weight"} of the A3BoxNet these weights also learnt to imitate (--distill-from), or None."""
+    teacher, weight = train_config.get("distill_from"), float(train_config.get("distill_weight") or 0.0)
+    if not teacher or weight <= 0:
+        return None
+    return {"file": Path(str(teacher)).name, "weight": weight}
+
+
 def export_checkpoint(ckpt: str | Path, out: str | Path, check: bool = True, log=print,
                       depth_sensor: str | None = None) -> dict:
     """The one command: checkpoint -> ONNX with metadata (+ parity). Returns the metadata.
@@ -119,6 +127,7 @@ def export_checkpoint(ckpt: str | Path, out: str | Path, check: bool = True, log
                          "jitter": (hist.get("cache") or {}).get("jitter"),
                          "augment": {k: ck["train_config"].get(k) for k in ("flip", "flip_y", "scale_aug", "stretch_aug")},
                          "fine_tuned_from": hist.get("init_from"),   # the run these weights started from
+                         "distilled_from": _teacher_record(ck["train_config"]),
                          "val": last.get("val")},
              "exported": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     if depth_sensor:
