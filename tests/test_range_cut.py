@@ -8,7 +8,8 @@ import pytest
 
 from track3d.boxes import box3d_from_points, iou_3d
 from track3d.camera import Camera
-from track3d.range_cut import DEPTH_RATIO, MIN_COVERAGE, box_from_view, is_range_cut, lateral_coverage
+from track3d.range_cut import (DEPTH_RATIO, MIN_COVERAGE, box_from_view, deepen_to_view, is_range_cut,
+                               lateral_coverage, reaches_range)
 from track3d.synthetic import CAM, render_sphere
 from track3d.tracker import TRACKING, Track3D
 from track3d.trackers2d import OracleTracker
@@ -35,6 +36,24 @@ def test_box_from_view_hand_cases():
     assert box_from_view(np.array([40.0, 40.0, 20.0, 20.0]), CAM100, 0.0) is None
 
 
+def test_deepen_to_view_hand_cases():
+    # the view of a centred 20 x 20 px box with its front face at 10 m reaches back to
+    # 10 + 0.2 zc with zc = 10 / 0.9 (test above): 12.2222 m
+    box2d, back = np.array([40.0, 40.0, 20.0, 20.0]), 10.0 + 0.2 * 10.0 / 0.9
+    shallow = np.array([0.1, -0.2, 10.5, 2.0, 1.5, 1.0])        # front 10.0, back 11.0
+    got = deepen_to_view(shallow, box2d, CAM100, 10.0)
+    np.testing.assert_allclose(got, [0.1, -0.2, (10.0 + back) / 2, 2.0, 1.5, back - 10.0])
+    assert shallow[5] == 1.0                                      # the input is not changed
+    deep = np.array([0.0, 0.0, 11.5, 2.0, 2.0, 3.0])             # back 13.0: already deeper
+    np.testing.assert_allclose(deepen_to_view(deep, box2d, CAM100, 10.0), deep)
+    # the front face stays the box's own, only the back face moves
+    late = np.array([0.0, 0.0, 10.75, 2.0, 2.0, 0.5])             # front 10.5, back 11.0
+    g = deepen_to_view(late, box2d, CAM100, 10.0)
+    assert g[2] - g[5] / 2 == pytest.approx(10.5) and g[2] + g[5] / 2 == pytest.approx(back)
+    # no view (a box wider than twice the focal length): the box as it was
+    np.testing.assert_allclose(deepen_to_view(shallow, np.array([0.0, 0.0, 300.0, 300.0]), CAM100, 10.0), shallow)
+
+
 def test_coverage_and_cut_hand_cases():
     box = np.array([40.0, 40.0, 20.0, 20.0])            # 2 m x 2 m at 10 m
     full = np.array([[-1.0, -1.0, 10.0], [1.0, 1.0, 10.5]])
@@ -47,6 +66,8 @@ def test_coverage_and_cut_hand_cases():
     assert not is_range_cut(full, box, CAM100, 10.5)            # the whole body is seen
     assert not is_range_cut(half, box, CAM100, 12.0)            # the returns stop short of the range
     assert not is_range_cut(half, box, CAM100, None)            # an unlimited sensor is never cut
+    assert reaches_range(full, box, CAM100, 10.5) and reaches_range(half, box, CAM100, 10.5)
+    assert not reaches_range(full, box, CAM100, 12.0) and not reaches_range(full, box, CAM100, None)
     # the range is along the ray: off-centre, the same range reaches less far in z
     off = np.array([80.0, 40.0, 20.0, 20.0])                      # centre ray (0.4, 0, 1)
     cap = np.array([[3.5, -1.0, 10.0], [4.5, 1.0, 10.5]])
@@ -93,6 +114,46 @@ def test_the_loop_boxes_a_body_past_the_range_from_the_image():
     t = Track3D(CAM, OracleTracker(np.array([b2, b2])), _CapBox(), depth_range_m=45.0)
     t.init(img, b2)
     np.testing.assert_allclose(t.update(img, pts).box3d, box3d_from_points(pts))
+
+
+def test_a_body_reaching_the_range_with_its_outline_seen_keeps_a_deepened_box():
+    """A sphere of radius 3 m at 31 m behind a 30 m range: only the rim near the limb is past the
+    range, so the returns cover the outline (not cut) but stop at 30 m. The estimator shown that
+    cloud answers a 2 m deep box; the loop pushes its back face to the image's box's (5.8 m
+    deep), x / y and the front face its own."""
+    img, pts, b2, b3 = _cut_sphere(30.0, centre=(0.0, 0.0, 31.0))
+    bounds = np.stack([pts.min(axis=0), pts.max(axis=0)])
+    assert reaches_range(bounds, b2, CAM, 30.0) and not is_range_cut(bounds, b2, CAM, 30.0)
+    out = {}
+    for rng in (None, 30.0):
+        t = Track3D(CAM, OracleTracker(np.array([b2, b2])), _CapBox(), depth_range_m=rng, fusion=False)
+        t.init(img, b2)
+        out[rng] = t.update(img, pts).box3d
+    view = box_from_view(b2, CAM, float(bounds[0, 2]))
+    front = out[None][2] - out[None][5] / 2
+    assert out[30.0][2] - out[30.0][5] / 2 == pytest.approx(front)
+    assert out[30.0][2] + out[30.0][5] / 2 == pytest.approx(view[2] + view[5] / 2)
+    np.testing.assert_allclose(out[30.0][[0, 1, 3, 4]], out[None][[0, 1, 3, 4]])
+    assert iou_3d(out[30.0], b3) > 0.6 > 0.3 > iou_3d(out[None], b3)
+
+
+def test_the_deepened_box_is_as_deep_for_its_width_as_the_bodys_last_box_within_range():
+    """The same sphere first at 25 m (every return within the 30 m range: the estimator's box
+    sets the body's depth-to-width ratio, checkpointed with the state), then at 31 m (the returns
+    reach the range): the back face goes to that of the image's box at that ratio, not at 1."""
+    img_n, pts_n, b2_n, _ = _cut_sphere(30.0, centre=(0.0, 0.0, 25.0))
+    img_f, pts_f, b2_f, _ = _cut_sphere(30.0, centre=(0.0, 0.0, 31.0))
+    t = Track3D(CAM, OracleTracker(np.array([b2_n, b2_n, b2_f])), _CapBox(), depth_range_m=30.0, fusion=False,
+                depth_smoothing=0.0)
+    t.init(img_n, b2_n)
+    near = t.update(img_n, pts_n).box3d
+    ratio = near[5] / ((near[3] + near[4]) / 2)
+    assert 0.3 < ratio < 0.7                                       # a cap: about half as deep as wide
+    assert t.get_state()["depth_ratio"] == pytest.approx(ratio)
+    far = t.update(img_f, pts_f).box3d
+    view = box_from_view(b2_f, CAM, float(pts_f[:, 2].min()), ratio=ratio)
+    assert far[2] + far[5] / 2 == pytest.approx(view[2] + view[5] / 2)
+    assert far[5] < box_from_view(b2_f, CAM, float(pts_f[:, 2].min()))[5]
 
 
 @pytest.mark.parametrize("bad", [0.0, -5.0, float("nan"), float("inf")])

@@ -17,7 +17,9 @@ is status "no_points", as is a frustum the estimator refuses (ValueError, e.g. p
 more than A3BoxNet answers for); the 3D box then keeps the last estimate (nan before the first one).
 With ``depth_range_m`` (the depth sensor's maximum range, e.g. an AMCW ToF camera's unambiguous
 range) a body whose returns stop at that range and cover less of it than the 2D box shows is
-boxed from the image and its front face instead of by the estimator (track3d.range_cut).
+boxed from the image and its front face instead of by the estimator, and one whose returns
+reach that range while covering the outline keeps the estimator's box made at least as deep as
+the image's (track3d.range_cut).
 Each result also carries the 2D tracker's confidence (`score`, 0..1 or None), how many frames
 the 3D box has been held (`held_frames`); after `lost_after` consecutive frames without a usable
 estimate (or with a score below `min_score`) the status is "lost", except that a frame which a
@@ -47,7 +49,8 @@ from .frames import MAX_COORD_M, check_category, check_image, check_init_box
 from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import fit_measured_faces, hold_cut_extent
 from .fusion import WEIGHT_2D, WEIGHT_3D, fuse, fuse_section
-from .range_cut import box_from_view, is_range_cut
+from .range_cut import (DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_from_view, deepen_to_view,
+                        lateral_coverage, reaches_range)
 from .trackers2d import Tracker2D, create_tracker
 
 __all__ = ["Track3D", "TrackResult", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES", "MIN_POINTS",
@@ -305,6 +308,7 @@ class Track3D:
         self.hold_cut_size = float(hold_cut_size)
         self._hold_cut = self._fit_faces and self.hold_cut_size > 0.0
         self._whole_box: np.ndarray | None = None   # the reported box of the last whole view (6,)
+        self._depth_ratio = float("nan")   # size z / mean(size x, y) of the last box within the depth range
         if depth_range_m is not None and not (np.isfinite(float(depth_range_m)) and float(depth_range_m) > 0.0):
             raise ValueError(f"depth_range_m must be a positive number of metres or None (unlimited), got {depth_range_m}")
         # the depth sensor's maximum range: a body reaching past it is boxed from the image (range_cut)
@@ -413,20 +417,26 @@ class Track3D:
             return None
         return b
 
-    def _reported_box(self, est: np.ndarray, bounds: np.ndarray, box2d: np.ndarray) -> tuple[np.ndarray, bool]:
+    def _reported_box(self, est: np.ndarray, bounds: np.ndarray,
+                      box2d: np.ndarray) -> tuple[np.ndarray, bool, bool]:
         """The reported 3D box: `est`, or the box from the image when the body reaches past the
-        depth sensor's range (track3d.range_cut), else `est` with the faces the sensor sees taken
+        depth sensor's range and its returns cover less than the outline (track3d.range_cut), else `est` with the faces the sensor sees taken
         from the returns (`measured_faces`, boxes.fit_measured_faces) and its cross-section fused
         with the 2D box by `weight_2d` (fusion.fuse_section). The 2D fusion keeps `est`: the
         returns' cap, inside the body's outline, holds a 2D box that would otherwise grow with nothing to check it
         (measured one pass, EdgeTrack, held-out ToF sequences, AO_3d without the rule / with it
         fusing the image box / fusing `est`: seed 3 0.651 / 0.694 / 0.701, seed 5 0.674 / 0.702 /
         0.710; seed 5 sequence 0004 0.19 / 0.08 / 0.33). Also says whether the view was whole
-        (the 2D box off every image border, the body not cut by the depth range)."""
-        if is_range_cut(bounds, box2d, self.camera, self.depth_range_m):
+        (the 2D box off every image border, the body not cut by the depth range) and whether the
+        returns reached the range. When the returns reach the range but cover the outline, the
+        box's back face goes at least as far as the image's box's (range_cut.deepen_to_view)
+        with the depth-to-width ratio of the last box from returns within the range (1 before
+        one)."""
+        reach = reaches_range(bounds, box2d, self.camera, self.depth_range_m)
+        if reach and lateral_coverage(bounds, box2d, self.camera) < MIN_COVERAGE:
             b = box_from_view(box2d, self.camera, float(bounds[0][2]))
             if b is not None:
-                return b, False
+                return b, False, True
         x, y, w, h = (float(v) for v in box2d)
         W, H = self._size
         # a 2D box at the image border: the body may go on past the view on that side
@@ -436,13 +446,18 @@ class Track3D:
             if self._hold_cut and any(sides) and self._whole_box is not None:
                 est = hold_cut_extent(est, bounds, sides, self._whole_box, self.hold_cut_size)
         box = fuse_section(est, box2d, self.camera, self.weight_2d) if self.weight_2d > 0.0 else est
-        return box, not any(sides)
+        if reach:   # the outline is seen, the depth stops at the range: the body goes on past it
+            ratio = self._depth_ratio if np.isfinite(self._depth_ratio) else DEPTH_RATIO
+            return deepen_to_view(box, box2d, self.camera, float(bounds[0][2]), ratio), False, True
+        return box, not any(sides), False
 
     def _report(self, est: np.ndarray, bounds: np.ndarray, box2d: np.ndarray) -> np.ndarray:
         """This frame's reported box (`_reported_box`) with its depth extent replaced by the
         running average (DEPTH_SMOOTHING), its front face where it was; updates the average and,
         after a whole view, the size a cut body keeps (HOLD_CUT_SIZE)."""
-        box, whole = self._reported_box(est, bounds, box2d)
+        box, whole, reached = self._reported_box(est, bounds, box2d)
+        if not reached:   # a box from returns within the range: the body's own depth-to-width ratio
+            self._depth_ratio = float(min(box[5] / max((box[3] + box[4]) / 2.0, 1e-6), MAX_DEPTH_RATIO))
         if self._smooth_depth:
             s = self.depth_smoothing
             avg = box[5] if not np.isfinite(self._depth_avg) else s * self._depth_avg + (1.0 - s) * box[5]
@@ -473,6 +488,7 @@ class Track3D:
         self.held_frames = 0
         self._depth_avg = float("nan")
         self._whole_box = None
+        self._depth_ratio = float("nan")
         self._started = True
         if points is not None and self.needs_points:
             pts, bounds = self._frustum(points, b)
@@ -602,6 +618,7 @@ class Track3D:
             "bad_frames": self.bad_frames, "held_frames": self.held_frames,
             "depth_avg": self._depth_avg if np.isfinite(self._depth_avg) else None,
             "whole_box": None if self._whole_box is None else self._whole_box.tolist(),
+            "depth_ratio": self._depth_ratio if np.isfinite(self._depth_ratio) else None,
             "tracker2d": get2d(), "estimator_state": get3d() if get3d is not None else None,
         })
 
@@ -635,6 +652,8 @@ class Track3D:
             depth_avg = float("nan") if depth_avg is None else float(depth_avg)
             whole_box = st.get("whole_box")   # None: no whole view yet, or a state from before it
             whole_box = None if whole_box is None else np.asarray(whole_box, dtype=np.float64).reshape(6).copy()
+            depth_ratio = st.get("depth_ratio")   # None: no box within the range yet, or an older state
+            depth_ratio = float("nan") if depth_ratio is None else float(depth_ratio)
             tracker2d, estimator_state = st["tracker2d"], st.get("estimator_state")
         except (KeyError, TypeError, ValueError) as e:
             raise ValueError(f"damaged Track3D state: {type(e).__name__}: {e}") from None
@@ -644,6 +663,7 @@ class Track3D:
         self.category, self.box2d, self.box3d = category, box2d, box3d
         self.bad_frames, self.held_frames, self._depth_avg = bad, held, depth_avg
         self._whole_box = whole_box
+        self._depth_ratio = depth_ratio
         self._started = bool(np.isfinite(box2d).all())   # the state of a started tracker
 
     def __getstate__(self):
