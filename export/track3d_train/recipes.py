@@ -67,6 +67,25 @@ _BOXNET_TRAIN = ("track3d-train boxnet train --cache {runs}/boxnet-engine/cache/
                  "--epoch-samples {epoch_samples} --batch {batch} --max-steps {max_steps} --flip-y --scale-aug 0.15 --no-category "
                  "--threads {threads} --quiet ")
 
+# The points-only bodies and their frustum caches, shared by a3boxnet-engine and a3boxnet-narrow
+# (the same paths, so that one recipe finds the other's data done).
+_PO_DATA = Step("data: points-only bodies, range sensors mixed", _a(
+    "track3d-sim generate --preset {preset} --seed 1 --train {po_train} --test 0 --test-unseen 1 "
+    "--frames {frames} --points-only --sensors ideal,flash-lidar,tof --out {data}/engine-train-po "
+    "--workers {workers} --quiet"))
+_PO2_DATA = Step("data: more points-only bodies (another seed)", _a(
+    "track3d-sim generate --preset {preset} --seed 5 --train {po2_train} --test 0 --test-unseen 1 "
+    "--frames {frames} --points-only --sensors ideal,flash-lidar,tof --out {data}/engine-train-po2 "
+    "--workers {workers} --quiet"))
+_PO_CACHE = Step("cache: frustums of jittered ground-truth boxes (points-only)", _a(
+    "track3d-train boxnet prepare --data {data}/engine-train-po --split train --jitters {jitters} "
+    "--out {runs}/boxnet-engine/cache/engine-train-po.npz --quiet"),
+    done_when="{runs}/boxnet-engine/cache/engine-train-po.npz")
+_PO2_CACHE = Step("cache: frustums (more points-only bodies)", _a(
+    "track3d-train boxnet prepare --data {data}/engine-train-po2 --split train --jitters {jitters} "
+    "--out {runs}/boxnet-engine/cache/engine-train-po2.npz --quiet"),
+    done_when="{runs}/boxnet-engine/cache/engine-train-po2.npz")
+
 A3BOXNET_ENGINE = Recipe(
     name="a3boxnet-engine",
     makes="{runs}/boxnet-engine/a3boxnet.onnx",
@@ -80,25 +99,11 @@ A3BOXNET_ENGINE = Recipe(
           "epoch_samples": 16, "batch": 8,
           "max_steps": 2, "minutes": 5, "stretch_minutes": 5, "more_minutes": 5},
     steps=(
-        Step("data: points-only bodies, range sensors mixed", _a(
-            "track3d-sim generate --preset {preset} --seed 1 --train {po_train} --test 0 --test-unseen 1 "
-            "--frames {frames} --points-only --sensors ideal,flash-lidar,tof --out {data}/engine-train-po "
-            "--workers {workers} --quiet")),
+        _PO_DATA,
         Step("data: stereo bodies (images for the stereo matcher)", _a(
             "track3d-sim generate --preset {preset} --seed 2 --train {stereo_train} --test 0 --test-unseen 1 "
             "--frames {frames} --sensors stereo --out {data}/engine-train-stereo --workers {workers} --quiet")),
-        Step("data: more points-only bodies (another seed), for phase 3", _a(
-            "track3d-sim generate --preset {preset} --seed 5 --train {po2_train} --test 0 --test-unseen 1 "
-            "--frames {frames} --points-only --sensors ideal,flash-lidar,tof --out {data}/engine-train-po2 "
-            "--workers {workers} --quiet")),
-        Step("cache: frustums of jittered ground-truth boxes (points-only)", _a(
-            "track3d-train boxnet prepare --data {data}/engine-train-po --split train --jitters {jitters} "
-            "--out {runs}/boxnet-engine/cache/engine-train-po.npz --quiet"),
-            done_when="{runs}/boxnet-engine/cache/engine-train-po.npz"),
-        Step("cache: frustums (more points-only bodies)", _a(
-            "track3d-train boxnet prepare --data {data}/engine-train-po2 --split train --jitters {jitters} "
-            "--out {runs}/boxnet-engine/cache/engine-train-po2.npz --quiet"),
-            done_when="{runs}/boxnet-engine/cache/engine-train-po2.npz"),
+        _PO2_DATA, _PO_CACHE, _PO2_CACHE,
         Step("cache: frustums (stereo)", _a(
             "track3d-train boxnet prepare --data {data}/engine-train-stereo --split train --jitters {jitters} "
             "--out {runs}/boxnet-engine/cache/engine-train-stereo.npz --quiet"),
@@ -261,22 +266,7 @@ A3BOXNET_NARROW = Recipe(
     tiny={"preset": "tiny", "po_train": 2, "po2_train": 2, "frames": 4, "jitters": 1, "epoch_samples": 16,
           "batch": 8, "max_steps": 2, "minutes": 5},
     steps=(
-        Step("data: points-only bodies, range sensors mixed (as a3boxnet-engine)", _a(
-            "track3d-sim generate --preset {preset} --seed 1 --train {po_train} --test 0 --test-unseen 1 "
-            "--frames {frames} --points-only --sensors ideal,flash-lidar,tof --out {data}/engine-train-po "
-            "--workers {workers} --quiet")),
-        Step("data: more points-only bodies (another seed, as a3boxnet-engine)", _a(
-            "track3d-sim generate --preset {preset} --seed 5 --train {po2_train} --test 0 --test-unseen 1 "
-            "--frames {frames} --points-only --sensors ideal,flash-lidar,tof --out {data}/engine-train-po2 "
-            "--workers {workers} --quiet")),
-        Step("cache: frustums of jittered ground-truth boxes", _a(
-            "track3d-train boxnet prepare --data {data}/engine-train-po --split train --jitters {jitters} "
-            "--out {runs}/boxnet-engine/cache/engine-train-po.npz --quiet"),
-            done_when="{runs}/boxnet-engine/cache/engine-train-po.npz"),
-        Step("cache: frustums (more bodies)", _a(
-            "track3d-train boxnet prepare --data {data}/engine-train-po2 --split train --jitters {jitters} "
-            "--out {runs}/boxnet-engine/cache/engine-train-po2.npz --quiet"),
-            done_when="{runs}/boxnet-engine/cache/engine-train-po2.npz"),
+        _PO_DATA, _PO2_DATA, _PO_CACHE, _PO2_CACHE,
         Step("train: cut the teacher to the width, fine-tune on ground truth + the teacher's outputs", _a(
             "track3d-train boxnet train --cache {runs}/boxnet-engine/cache/engine-train-po.npz "
             "{runs}/boxnet-engine/cache/engine-train-po2.npz --num-points 512 --epochs 100 "
