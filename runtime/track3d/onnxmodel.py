@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 
-__all__ = ["META_KEY", "MODELS_DIR", "OnnxModel", "ModelError", "EngineUnavailable", "shipped_model", "model_pair",
-           "is_model", "load_model", "models_of",
+__all__ = ["META_KEY", "MODELS_DIR", "OnnxModel", "ModelError", "EngineUnavailable", "shipped_model", "model_path",
+           "model_pair", "is_model", "load_model", "models_of",
            "ENGINES", "PRECISIONS", "PARITY_TOLERANCE", "variant_path", "open_session"]
 
 META_KEY = "track3d"
@@ -69,6 +69,16 @@ def shipped_model(name: str) -> Path:
     if not p.is_file():
         have = sorted(x.name for x in MODELS_DIR.glob("*.onnx")) if MODELS_DIR.is_dir() else []
         raise ModelError(f"no shipped model {name!r} (shipped: {', '.join(have) or 'none'})")
+    return p
+
+
+def model_path(model: str | Path) -> Path:
+    """The file a model argument names: `model` itself when it is a file here or has a folder
+    part, else the shipped model of that bare name (e.g. "a3boxnet_narrow.onnx") when there is
+    one, else `model` as given (the caller says it does not exist)."""
+    p = Path(model)
+    if not p.is_file() and p.name == str(model) and (MODELS_DIR / p.name).is_file():
+        return MODELS_DIR / p.name
     return p
 
 
@@ -281,10 +291,7 @@ def load_model(model, threads: int = 1, kind: str | None = None, precision: str 
     itself, its kind checked: trackers and estimators take either, so a caller can pass the
     models it built."""
     if not is_model(model):
-        p = Path(model)
-        if not p.is_file() and p.name == str(model) and (MODELS_DIR / p.name).is_file():
-            p = MODELS_DIR / p.name
-        return OnnxModel(p, threads, kind, precision=precision, engine=engine)
+        return OnnxModel(model_path(model), threads, kind, precision=precision, engine=engine)
     if kind is not None and model.meta.get("kind") != kind:
         raise ModelError(f"a {model.meta.get('kind')!r} model was given where a {kind!r} model is expected")
     return model

@@ -155,16 +155,6 @@ def _validate(model, val_ds, batch: int):
     return m
 
 
-def _shipped_or_path(name: str | Path) -> Path:
-    """A file that exists, else a bare name of a shipped model ("a3boxnet.onnx": the package's)."""
-    p = Path(name)
-    if p.is_file() or p.name != str(name):
-        return p
-    from track3d.onnxmodel import shipped_model
-
-    return shipped_model(str(name))
-
-
 def _onnx_source(path, train_ds, samples: int = 256) -> dict:
     """An exported model (e.g. the shipped a3boxnet.onnx) as an init_from checkpoint; the folded
     BatchNorms take their statistics from the first `samples` training items (from_onnx)."""
@@ -181,7 +171,11 @@ def _load_source(path, train_ds) -> tuple[str, dict]:
     import torch
 
     if str(path).endswith(".onnx"):
-        path = _shipped_or_path(path)
+        from track3d.onnxmodel import model_path, shipped_model
+
+        path = model_path(path)
+        if not path.is_file() and path.name == str(path):   # a bare name shipped nowhere: say which are
+            shipped_model(path.name)
         return str(path), _onnx_source(path, train_ds)
     return str(path), torch.load(str(path), map_location="cpu", weights_only=False)
 
