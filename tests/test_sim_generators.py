@@ -166,3 +166,16 @@ def test_contact_sheet_cli(tmp_path):
     assert im.size[0] == 2 * 64 and im.size[1] > 2 * 64
     assert np.asarray(im).max() > 50  # bodies are lit
     assert main(["shapes", "--out", str(tmp_path / "x.png"), "--generator", "nope", "--no-progress"]) == 2
+
+
+def test_superellipsoid_distance_hand_cases():
+    """sd_superellipsoid: 0 on the semi-axes' ends, -min radius at the centre, for e1 = e2 = 1
+    (the ellipsoid) (|p / r| - 1) x min radius along an axis; small exponents fill the box's
+    corner, large ones cut it."""
+    from track3d_sim.bodies import sd_superellipsoid
+    r = np.array([2.0, 1.0, 0.5])
+    p = np.array([[2.0, 0, 0], [0, 1.0, 0], [0, 0, 0.5], [0, 0, 0], [4.0, 0, 0]], np.float32)
+    d = sd_superellipsoid(p, r, 1.0, 1.0)
+    np.testing.assert_allclose(d, [0, 0, 0, -0.5, 0.5], atol=1e-5)
+    corner = np.array([[1.6, 0.8, 0.4]], np.float32)             # 0.8 of the way to the box corner
+    assert sd_superellipsoid(corner, r, 0.25, 0.25)[0] < 0 < sd_superellipsoid(corner, r, 1.0, 1.0)[0]

@@ -280,4 +280,38 @@ def test_shipped_registry_holds_out_the_named_generators():
     assert unseen == seq_mod.UNSEEN_GENERATORS and "UNSEEN_GENERATORS" in note
     gens, _ = _check_splits(plan(90, 45, 12, unseen))
     assert gens["test_unseen"] == set(unseen)
-    assert gens["train"] == set(G.GENERATORS) - set(unseen)
+    assert gens["train"] == set(G.default_generators()) - set(unseen)
+
+
+def test_opt_in_generators_only_in_runs_that_name_them(tmp_path):
+    """An opt-in generator (superquadric) is in no default run: plan, fine categories, the
+    run's identity and dataset.json are those of the registry without it; --generators draws
+    train and test from the named ones only (test_unseen keeps the held-out rule)."""
+    assert "superquadric" in G.GENERATORS and "superquadric" not in G.default_generators()
+    unseen, _ = resolve_unseen(None, 4)
+    gens, _ = _check_splits(plan(60, 30, 4, unseen))
+    assert "superquadric" not in gens["train"] | gens["test"]
+    s = make_settings("tiny", 0, train=2, test=1, test_unseen=1, frames=1)
+    info = dataset_info(s, plan_of(s))
+    assert "superquadric" not in info["categories"]["generators"] and "shape_generators" not in info["categories"]
+    assert "superquadric" not in json.dumps(info)
+
+    s = make_settings("tiny", 0, train=12, test=4, test_unseen=2, frames=1,
+                      shape_generators="superquadric,bilobate")
+    specs = plan_of(s)
+    gens, _ = _check_splits(specs)
+    assert gens["train"] == gens["test"] == {"bilobate", "superquadric"}
+    assert gens["test_unseen"] == set(unseen)
+    info = dataset_info(s, specs)
+    assert info["categories"]["shape_generators"] == ["bilobate", "superquadric"]   # registry order
+    assert info["categories"]["generators"][-1] == "superquadric"
+    assert info["generator"]["settings"]["shape_generators"] == ["bilobate", "superquadric"]
+
+
+def test_generators_flag_errors_are_one_line(capsys, tmp_path):
+    for args, msg in ((["--generators", "cube"], "unknown shape generator 'cube' in --generators"),
+                      (["--generators", "fragment", "--test-unseen", "2"], "hold out every generator")):
+        rc = main(["generate", "--preset", "tiny", "--train", "1", "--test", "0", "--frames", "1",
+                   "--out", str(tmp_path / "d"), *args])
+        err = capsys.readouterr().err
+        assert rc != 0 and msg in err and "Traceback" not in err

@@ -15,7 +15,7 @@ from .implicit import SdfGrid, _norm, grid_size, mesh_grid, rotation, sd_ellipso
 from .shapes import Shape, scale_to_volume
 
 __all__ = ["make_bilobate", "make_elongated", "make_top_shape", "make_rubble_pile", "make_giant_craters",
-           "make_fragment"]
+           "make_fragment", "make_superquadric", "sd_superellipsoid"]
 
 _MARGIN = 0.3  # unit-scale room around the base primitives for noise, rims and perched boulders
 
@@ -201,3 +201,32 @@ def make_fragment(rng: np.random.Generator, volume: float, detail: int = 6) -> S
     _surface_detail(g, rng, p, _u(rng, 0.015, 0.035), int(rng.integers(4, 15)), 0.15,
                     int(rng.integers(5, 25)), _u(rng, 0.03, 0.05))
     return _finish(g, rng, "fragment", volume, detail, p)
+
+
+def sd_superellipsoid(p, radii, e1: float, e2: float, R=None):
+    """Superellipsoid (semi-axes radii (3,), exponents e1 along z and e2 about it; 1 / 1 is the
+    ellipsoid, towards 0 a box, 2 an octahedron; axes = columns of R): the inside-outside
+    function raised to e1 / 2, which is homogeneous of degree 1, so (that - 1) x the smallest
+    radius is distance-like near the surface (a bound, not exact)."""
+    q = p if R is None else p @ np.asarray(R, p.dtype)
+    r = np.asarray(radii, np.float64)
+    ax, ay, az = (np.abs(q[..., k]) / np.float32(r[k]) + np.float32(1e-9) for k in range(3))
+    xy = (ax ** np.float32(2.0 / e2) + ay ** np.float32(2.0 / e2)) ** np.float32(e2 / e1)
+    f = (xy + az ** np.float32(2.0 / e1)) ** np.float32(e1 / 2.0)
+    return (f - np.float32(1.0)) * np.float32(r.min())
+
+
+def make_superquadric(rng: np.random.Generator, volume: float, detail: int = 6) -> Shape:
+    """A superellipsoid from boxy to pinched, of any flattening and elongation (cobbles,
+    boulders, lenticular and flattened bodies), with the common skin. The training world's
+    other bodies are ellipsoid-like; these widen the range of hidden depths that go with a
+    visible front (a flat face, an edge, a pinch)."""
+    axes = np.array([1.0, _u(rng, 0.35, 1.0), _u(rng, 0.25, 0.9)])
+    axes[1:] = np.sort(axes[1:])[::-1]
+    e1, e2 = (float(np.exp(rng.uniform(np.log(0.25), np.log(1.6)))) for _ in range(2))
+    g = _grid(-axes, axes, detail)
+    g.union(lambda q: sd_superellipsoid(q, axes, e1, e2), -axes - 0.05, axes + 0.05)
+    p = dict(axes=axes.tolist(), e1=e1, e2=e2)
+    _surface_detail(g, rng, p, _u(rng, 0.015, 0.05), int(rng.integers(4, 25)), 0.2,
+                    int(rng.integers(5, 60)), _u(rng, 0.03, 0.05))
+    return _finish(g, rng, "superquadric", volume, detail, p)

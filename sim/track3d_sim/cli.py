@@ -8,7 +8,7 @@ from track3d.argparsing import ArgumentParser, apply_formatter, exit_for_missing
 
 from .errors import SimError
 from .generate import PRESETS
-from .generators import GENERATORS
+from .generators import GENERATORS, default_generators
 from .sensors import DEPTH_SENSORS
 
 
@@ -71,6 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--unseen-generators", dest="unseen_generators", metavar="A,B",
                    help=f"generators to hold out for --test-unseen (from {', '.join(GENERATORS)}; default: "
                         f"the rule of sequence.UNSEEN_GENERATORS, see docs/simulator.md 'Splits')")
+    g.add_argument("--generators", dest="shape_generators", metavar="A,B",
+                   help=f"shape generators of the train and test splits (from {', '.join(GENERATORS)}; default: "
+                        f"{', '.join(default_generators())}; the others are opt-in)")
     g.add_argument("--sensors", default=None, metavar="A,B",
                    help=f"depth sensors, cycled over the sequences (default: ideal; from "
                         f"{', '.join(DEPTH_SENSORS)})")
@@ -139,7 +142,8 @@ def main(argv=None) -> int:
                                      test_unseen=args.test_unseen, unseen_generators=args.unseen_generators,
                                      sensors=args.sensors, points_only=args.points_only or None,
                                      mesh_dir=args.mesh_dir, auto_exposure=args.auto_exposure or None,
-                                     motion_blur=args.motion_blur or None)
+                                     motion_blur=args.motion_blur or None,
+                                     shape_generators=args.shape_generators)
             generate(settings, args.out, workers=args.workers, overwrite=args.overwrite,
                      progress=not args.no_progress, ray=args.ray)
         elif args.cmd == "stats":

@@ -27,7 +27,7 @@ from . import __version__
 from .errors import SimError
 from .generators import GENERATORS
 from .scenes import SCENES
-from .sequence import (SPLITS, USER, body_sources, fine_name, plan, resolve_unseen, split_categories,
+from .sequence import (SPLITS, USER, body_sources, fine_name, plan, resolve_pool, resolve_unseen, split_categories,
                        write_sequence)
 from .sensors import DEPTH_SENSORS, SENSORS_NEEDING_IMAGES
 from .shapes import FAMILIES, load_user_mesh
@@ -83,7 +83,8 @@ def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
 
     Overrides besides the preset keys: meshes (list of paths or {"path", "size_m"}), mesh_dir
     (folder: every mesh file in it, cycled over the sequences), sensors (names or "a,b"),
-    points_only (bool), unseen_generators (names or "a,b"). Raises SimError (one line)."""
+    points_only (bool), unseen_generators (names or "a,b"), shape_generators (names or "a,b": the
+    generators of train and test; None = the default ones). Raises SimError (one line)."""
     if preset not in PRESETS:
         raise SimError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
     s = dict(PRESETS[preset])
@@ -132,7 +133,12 @@ def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
     if mesh_dir is not None:
         meshes += [_user_mesh(p, None) for p in _mesh_files(Path(mesh_dir))]
     s["meshes"] = meshes
-    unseen, note = resolve_unseen(_names(s.pop("unseen_generators", None)) or None, s["test_unseen"], bool(meshes))
+    pool = resolve_pool(_names(s.get("shape_generators")))
+    if pool is not None and meshes:
+        raise SimError("--generators chooses procedural generators; --mesh / --mesh-dir replace them")
+    s["shape_generators"] = list(pool) if pool is not None else None
+    unseen, note = resolve_unseen(_names(s.pop("unseen_generators", None)) or None, s["test_unseen"], bool(meshes),
+                                  pool)
     s["unseen_generators"] = list(unseen)
     s["unseen_note"] = note
     return s
@@ -152,14 +158,17 @@ def _identity(settings: dict) -> dict:
     keys = ("preset", "seed", "width", "height", "fov_x_deg", "train", "test", "test_unseen", "frames",
             "subdivisions", "sensors", "points_only", "unseen_generators", "auto_exposure", "motion_blur")
     # the registry is part of the plan: a run resumed after a generator was added is refused
-    return {"generator_version": __version__, "generators": list(GENERATORS), "meshes": _public_meshes(settings),
-            **{k: settings[k] for k in keys}}
+    # (an opt-in generator is part of it only in the runs that name it)
+    pool = settings.get("shape_generators")
+    return {"generator_version": __version__, "generators": body_sources(False, pool),
+            "meshes": _public_meshes(settings), **{k: settings[k] for k in keys},
+            **({"shape_generators": list(pool)} if pool is not None else {})}
 
 
 def plan_of(settings: dict):
     """The SeqSpecs of a run."""
     return plan(settings["train"], settings["test"], settings["test_unseen"], settings["unseen_generators"],
-                settings["sensors"], len(settings["meshes"]))
+                settings["sensors"], len(settings["meshes"]), settings.get("shape_generators"))
 
 
 def _atomic_write(path: Path, text: str) -> None:
@@ -173,7 +182,8 @@ def dataset_info(settings: dict, specs) -> dict:
     from track3d import dataset as ds
     cam = camera_of(settings)
     user = bool(settings["meshes"])
-    cats = split_categories(tuple(settings["unseen_generators"]), user)
+    pool = settings.get("shape_generators")
+    cats = split_categories(tuple(settings["unseen_generators"]), user, pool)
     splits = {split: [s.name for s in specs if s.split == split] for split in SPLITS}
     sensors = {split: dict(sorted(Counter(s.sensor for s in specs if s.split == split).items())) for split in SPLITS}
     return {
@@ -183,11 +193,12 @@ def dataset_info(settings: dict, specs) -> dict:
         "size_classes": boxes.SIZE_TEMPLATES.tolist(),
         "categories": {
             "shape_families": list(FAMILIES),
-            "generators": body_sources(user),
+            "generators": body_sources(user, pool),
             "generator_family": {g: (FAMILIES[GENERATORS[g].coarse] if g in GENERATORS else USER)
-                                 for g in body_sources(user)},
+                                 for g in body_sources(user, pool)},
+            **({"shape_generators": list(pool)} if pool is not None else {}),
             "textures": list(TEXTURES),
-            "fine": [fine_name(g, t) for g in body_sources(user) for t in range(len(TEXTURES))],
+            "fine": [fine_name(g, t) for g in body_sources(user, pool) for t in range(len(TEXTURES))],
             **{f"{split}_fine": [fine_name(g, t) for g, t in cats[split]] for split in SPLITS},
             "unseen_generators": list(settings["unseen_generators"]),
             "unseen_note": settings["unseen_note"],

@@ -20,7 +20,8 @@ import numpy as np
 from .errors import SimError
 from .shapes import FAMILIES, Shape, procedural_shape
 
-__all__ = ["Generator", "GENERATORS", "register", "make_body", "generator_names", "coarse_index"]
+__all__ = ["Generator", "GENERATORS", "register", "make_body", "generator_names", "default_generators",
+           "coarse_index"]
 
 
 @dataclass(frozen=True)
@@ -28,13 +29,16 @@ class Generator:
     """name: registry key (also `Shape.family` and the first half of the fine category);
     make(rng, volume_m3, detail) -> Shape; coarse: index into shapes.FAMILIES;
     star_shaped: whether every ray from the centre meets the surface once;
-    description: one line for `--help` and the docs."""
+    description: one line for `--help` and the docs; default: in the pool a run draws from
+    when `--generators` is not given (a generator added later is opt-in, so that every
+    dataset made before it keeps its bodies)."""
 
     name: str
     make: Callable[[np.random.Generator, float, int], Shape]
     coarse: int
     star_shaped: bool
     description: str
+    default: bool = True
 
 
 GENERATORS: dict[str, Generator] = {}
@@ -51,6 +55,11 @@ def register(gen: Generator) -> Generator:
 
 def generator_names() -> tuple[str, ...]:
     return tuple(GENERATORS)
+
+
+def default_generators() -> tuple[str, ...]:
+    """The generators a run draws from when it names none (registry order)."""
+    return tuple(n for n, g in GENERATORS.items() if g.default)
 
 
 def coarse_index(name: str) -> int:
@@ -98,3 +107,8 @@ register(Generator("giant_craters", _bodies.make_giant_craters, 2, False,
                    "lumpy ellipsoid with 2-5 craters as large as the body (Mathilde)"))
 register(Generator("fragment", _bodies.make_fragment, 2, False,
                    "flat or angular bevelled polyhedron with conchoidal scoops (collisional fragment)"))
+
+# Opt-in (not in the default pool; `track3d-sim generate --generators ...`).
+register(Generator("superquadric", _bodies.make_superquadric, 2, False,
+                   "superellipsoid from boxy to pinched, axes 1 : 0.35-1 : 0.25-0.9 (cobbles, boulders, "
+                   "flattened bodies; opt-in)", default=False))

@@ -5,7 +5,8 @@ Every random choice of a sequence comes from numpy generators seeded by
 of workers, the backend (processes or Ray) or on which sequences were rendered before.
 
 The plan is written against the generator registry (`generators.GENERATORS`): a generator
-registered later appears in the plan, the fine categories and the splits without a change here.
+registered later appears in the plan, the fine categories and the splits without a change here
+(an opt-in one, `Generator.default` False, only in runs that name it: `pool`).
 """
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ import numpy as np
 from track3d import dataset as ds
 
 from .errors import SimError
-from .generators import GENERATORS, coarse_index, make_body
+from .generators import GENERATORS, coarse_index, default_generators, make_body
 from .motion import FPS, make_motion
 from .render import (BASE_EXPOSURE_MS, BLUR_STEP_PX, MAX_BLUR_SUBSTEPS, BodyRenderer, auto_exposure, blur_substeps,
                      exposure_poses, hot_pixels, sensor)
@@ -70,12 +71,14 @@ def source_index(generator: str) -> int:
     return names.index(generator) if generator in names else 0
 
 
-def resolve_unseen(requested=None, n_unseen: int = 0, user_meshes: bool = False) -> tuple[tuple[str, ...], str]:
+def resolve_unseen(requested=None, n_unseen: int = 0, user_meshes: bool = False,
+                   pool=None) -> tuple[tuple[str, ...], str]:
     """The generators held out for test_unseen and a note saying how they were chosen.
 
-    requested: names from --unseen-generators (None = the default rule of UNSEEN_GENERATORS).
-    Raises SimError for unknown names, for holding out every generator, and for an unseen split
-    of user meshes."""
+    requested: names from --unseen-generators (None = the default rule of UNSEEN_GENERATORS);
+    pool: the generators train and test draw from (None = the default ones).
+    Raises SimError for unknown names, for holding out every generator of the pool, and for an
+    unseen split of user meshes."""
     if not requested and n_unseen <= 0:
         return (), "no test_unseen split"
     if user_meshes:
@@ -92,7 +95,7 @@ def resolve_unseen(requested=None, n_unseen: int = 0, user_meshes: bool = False)
         note = "held out by --unseen-generators"
     else:
         named = tuple(n for n in UNSEEN_GENERATORS if n in GENERATORS)
-        new = [n for n in GENERATORS if n not in LEGACY_GENERATORS]
+        new = [n for n in default_generators() if n not in LEGACY_GENERATORS]
         if named:
             names, note = named, "held out by UNSEEN_GENERATORS"
         elif len(new) >= UNSEEN_DEFAULT_COUNT:
@@ -104,17 +107,29 @@ def resolve_unseen(requested=None, n_unseen: int = 0, user_meshes: bool = False)
                     f"family {', '.join(names)} instead (its coarse category is then unseen in training)")
     if not names:
         raise SimError("no generator to hold out for test_unseen")
-    if len(names) >= len(GENERATORS):
+    if not [g for g in (pool or default_generators()) if g not in names]:
         raise SimError(f"--unseen-generators would hold out every generator ({', '.join(names)}): "
                        f"training needs at least one")
     return names, note
 
 
-def split_categories(unseen=(), user_meshes: bool = False) -> dict[str, list[tuple[str, int]]]:
+def resolve_pool(requested=None) -> tuple[str, ...] | None:
+    """The generators train and test draw from, in registry order: the names of --generators
+    (SimError for an unknown one), None when none are named (the default generators)."""
+    names = [str(n).strip() for n in (requested or ()) if str(n).strip()]
+    if not names:
+        return None
+    bad = [n for n in names if n not in GENERATORS]
+    if bad:
+        raise SimError(f"unknown shape generator {bad[0]!r} in --generators (choose from {', '.join(GENERATORS)})")
+    return tuple(g for g in GENERATORS if g in names)
+
+
+def split_categories(unseen=(), user_meshes: bool = False, pool=None) -> dict[str, list[tuple[str, int]]]:
     """Fine categories (body source, texture index) of each split, in the order sequences cycle
-    through them. train and test share no fine category and use the same sources; test_unseen
-    holds every texture of the held-out generators."""
-    pool = [USER] if user_meshes else [g for g in GENERATORS if g not in unseen]
+    through them. train and test share no fine category and use the same sources (`pool`, None =
+    the default generators); test_unseen holds every texture of the held-out generators."""
+    pool = [USER] if user_meshes else [g for g in (pool or default_generators()) if g not in unseen]
     held = {g: test_textures(source_index(g)) for g in pool}
     train = [(g, t) for g in pool for t in range(len(TEXTURES)) if t not in held[g]]
     test = [(g, held[g][j]) for j in range(2) for g in pool if j < len(held[g])]
@@ -122,9 +137,10 @@ def split_categories(unseen=(), user_meshes: bool = False) -> dict[str, list[tup
     return {"train": train, "test": test, "test_unseen": test_unseen}
 
 
-def body_sources(user_meshes: bool = False) -> list[str]:
-    """Every body source of a run, in the order of the fine-category list."""
-    return [USER] if user_meshes else list(GENERATORS)
+def body_sources(user_meshes: bool = False, pool=None) -> list[str]:
+    """Every body source of a run, in the order of the fine-category list: the default
+    generators and the opt-in ones of `pool` (registry order)."""
+    return [USER] if user_meshes else [g for g, v in GENERATORS.items() if v.default or g in (pool or ())]
 
 
 def fine_name(generator: str, texture: int) -> str:
@@ -160,10 +176,11 @@ class SeqSpec:
 
 
 def plan(n_train: int, n_test: int, n_test_unseen: int = 0, unseen=(), sensors=("ideal",),
-         n_meshes: int = 0) -> list[SeqSpec]:
+         n_meshes: int = 0, pool=None) -> list[SeqSpec]:
     """Every sequence of a run. Categories cycle through the split's fine categories, scenes
-    through all 9, sensors through `sensors` (offset by split), user meshes by sequence index."""
-    cats = split_categories(tuple(unseen), n_meshes > 0)
+    through all 9, sensors through `sensors` (offset by split), user meshes by sequence index;
+    pool: the generators of train and test (None = the default ones)."""
+    cats = split_categories(tuple(unseen), n_meshes > 0, pool)
     specs = []
     for split, n, off in (("train", n_train, 0), ("test", n_test, 4), ("test_unseen", n_test_unseen, 7)):
         if n > 0 and not cats[split]:
@@ -339,7 +356,7 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
         "generator": spec.generator, "family": family, "family_index": coarse,
         "texture": TEXTURES[spec.texture], "texture_index": spec.texture,
         "fine_category": spec.fine_category,
-        "fine_index": body_sources(bool(meshes)).index(spec.generator) * len(TEXTURES) + spec.texture,
+        "fine_index": body_sources(bool(meshes), settings.get("shape_generators")).index(spec.generator) * len(TEXTURES) + spec.texture,
         "sensor": spec.sensor, "points_only": points_only,
         "scene": SCENES[spec.scene], "scene_index": spec.scene,
         "shape": {"family": shape.family, "radius_m": shape.radius, "extent_m": shape.extent.tolist(),
