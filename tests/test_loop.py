@@ -445,6 +445,43 @@ def test_hold_cut_extent_hand_cases():
     np.testing.assert_array_equal(hold_cut_extent(b, bounds, (True, False, False, False), [np.nan] * 6, 0.8), b)
 
 
+def test_fit_measured_faces_pad_hand_cases():
+    """pad (x, y) per metre of depth: half on each measured face at the box's middle depth; an
+    open side is not padded (its face is not the outline)."""
+    from track3d.boxes import fit_measured_faces
+
+    b = np.array([1.0, 2.0, 10.0, 2.0, 2.0, 4.0])          # back face 12
+    bounds = np.array([[0.5, 1.5, 9.0], [1.7, 2.9, 10.0]])  # front 9: middle depth 10.5
+    np.testing.assert_allclose(fit_measured_faces(b, bounds, pad=(0.1, 0.2)),
+                               [1.1, 2.2, 10.5, 1.2 + 1.05, 1.4 + 2.1, 3.0])
+    # x min open: the front is the estimate's 8, middle depth 10; x 0 .. 1.7 + 0.5
+    np.testing.assert_allclose(fit_measured_faces(b, bounds, (True, False, False, False), pad=(0.1, 0.0)),
+                               [1.1, 2.2, 10.0, 2.2, 1.4, 4.0])
+    np.testing.assert_allclose(fit_measured_faces(b, bounds, pad=(0.0, 0.0)), fit_measured_faces(b, bounds))
+
+
+def test_the_edge_pad_puts_the_measured_outline_on_the_body():
+    """A sphere's returns are its pixels' centres, inside its outline: with the one-pixel edge pad
+    (the default) the reported width and height are nearer the sphere's diameter than without,
+    and the option is checked and recorded."""
+    r = 1.0
+    img, depth, b2, b3 = render_sphere(CAM, (0.0, 0.0, 10.0), r)
+    pts = CAM.backproject_depth(depth)
+    err = {}
+    for pad in (0.0, 1.0):
+        t = Track3D(CAM, OracleTracker(np.array([b2, b2])), _Enclosing(), depth_smoothing=0.0, fusion=False,
+                    edge_pad=pad)
+        t.init(img, b2, points=pts)
+        box = t.update(img, pts).box3d
+        err[pad] = abs(box[3] - 2 * r) + abs(box[4] - 2 * r)
+        assert t.describe()["options"]["edge_pad"] == pad
+    assert err[1.0] < 0.5 * err[0.0], err
+    assert Track3D(CAM, OracleTracker(np.array([b2])), _Enclosing()).edge_pad == 1.0
+    for bad in (-1.0, float("nan"), 11.0):
+        with pytest.raises(ValueError, match="edge_pad"):
+            Track3D(CAM, OracleTracker(np.array([b2])), _Enclosing(), edge_pad=bad)
+
+
 class _Enclosing:
     """The returns' enclosing box, called amodal: what an estimator shown a sliver answers."""
 
@@ -466,7 +503,8 @@ def test_a_body_cut_by_the_border_keeps_the_size_of_its_last_whole_view():
     assert b2[1][0] <= 0.5 and b2[0][0] > 0.5                 # the second view is cut at x min
 
     def run(**kw):
-        t = Track3D(CAM, OracleTracker(b2), _Enclosing(), depth_smoothing=0.0, fusion=False, **kw)
+        # edge_pad 0: the boxes below are compared with the returns' own enclosing boxes
+        t = Track3D(CAM, OracleTracker(b2), _Enclosing(), depth_smoothing=0.0, fusion=False, edge_pad=0.0, **kw)
         t.init(views[0][0], b2[0], points=pts[0])
         return t, t.update(views[1][0], pts[1]).box3d
 
@@ -484,10 +522,10 @@ def test_a_body_cut_by_the_border_keeps_the_size_of_its_last_whole_view():
     assert iou_3d(held, views[1][3]) > iou_3d(sliver, views[1][3]) + 0.2
     assert t.describe()["options"]["hold_cut_size"] == 0.8
     # the restored tracker holds the same size
-    t0 = Track3D(CAM, OracleTracker(b2), _Enclosing(), depth_smoothing=0.0, fusion=False)
+    t0 = Track3D(CAM, OracleTracker(b2), _Enclosing(), depth_smoothing=0.0, fusion=False, edge_pad=0.0)
     t0.init(views[0][0], b2[0], points=pts[0])
     state = t0.get_state()
-    t2 = Track3D(CAM, OracleTracker(b2), _Enclosing(), depth_smoothing=0.0, fusion=False)
+    t2 = Track3D(CAM, OracleTracker(b2), _Enclosing(), depth_smoothing=0.0, fusion=False, edge_pad=0.0)
     t2.set_state(state)
     np.testing.assert_array_equal(t2.update(views[1][0], pts[1]).box3d, held)
     for bad in (-0.1, 1.5):
@@ -511,7 +549,7 @@ def test_the_loop_takes_the_faces_it_sees_from_the_returns(frames):
     gt2d = np.array([f[2] for f in frames])
     out = {}
     for on in (False, True):
-        t = Track3D(CAM, OracleTracker(gt2d), _Offset(), measured_faces=on)
+        t = Track3D(CAM, OracleTracker(gt2d), _Offset(), measured_faces=on, edge_pad=0.0)   # the returns' own outline
         t.init(frames[0][0], gt2d[0])
         out[on] = t.update(frames[1][0], frames[1][1])
         assert t.describe()["options"]["measured_faces"] is on

@@ -148,31 +148,36 @@ def box3d_from_points(points: np.ndarray) -> np.ndarray:
 
 
 def fit_measured_faces(box3d: np.ndarray, bounds: np.ndarray,
-                       open_sides: tuple[bool, bool, bool, bool] = (False, False, False, False)) -> np.ndarray:
+                       open_sides: tuple[bool, bool, bool, bool] = (False, False, False, False),
+                       pad: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
     """The box (6,) float64 whose faces a depth sensor sees come from the returns and whose hidden
     back face stays the estimate's: x and y extent = the returns' [min, max] (a lone body's
     outline), front face = the nearest return, back face = box3d's. bounds (2, 3) [min; max] of
     the returns. open_sides (x min, y min, x max, y max): sides where the body may go on past
     what was seen (its 2D box at the image border); there the face is the farther of the
     returns' and the estimate's, and so is the front (the nearest part may be out of view).
-    An axis whose measured extent is under 1 mm, or a front not in front of the back face,
-    keeps box3d's; a bound that is not finite changes nothing."""
+    pad (x, y): metres per metre of depth added to a measured axis, half on each measured face,
+    at the box's middle depth: a depth map's returns are its pixels' centres, so the outline lies
+    on average half a pixel beyond the outermost ones (`Track3D(edge_pad=...)` passes one pixel,
+    1 / fx and 1 / fy). An axis whose measured extent is under 1 mm, or a front not in front of
+    the back face, keeps box3d's; a bound that is not finite changes nothing."""
     b = np.array(box3d, dtype=np.float64).reshape(6)
     lo, hi = (np.asarray(v, dtype=np.float64).reshape(3) for v in bounds)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         return b
     elo, ehi = b[:3] - b[3:] / 2.0, b[:3] + b[3:] / 2.0
-    for k in (0, 1):
-        if hi[k] - lo[k] < 1e-3:
-            continue
-        a0 = min(lo[k], elo[k]) if open_sides[k] else lo[k]
-        a1 = max(hi[k], ehi[k]) if open_sides[2 + k] else hi[k]
-        b[k], b[3 + k] = (a0 + a1) / 2.0, a1 - a0
     front = min(lo[2], elo[2]) if any(open_sides) else lo[2]
     back = ehi[2]
     if front < back:
         b[5] = back - front
         b[2] = front + b[5] / 2.0
+    for k in (0, 1):
+        if hi[k] - lo[k] < 1e-3:
+            continue
+        half = 0.5 * float(pad[k]) * max(float(b[2]), 0.0)
+        a0 = min(lo[k], elo[k]) if open_sides[k] else lo[k] - half
+        a1 = max(hi[k], ehi[k]) if open_sides[2 + k] else hi[k] + half
+        b[k], b[3 + k] = (a0 + a1) / 2.0, a1 - a0
     return b
 
 

@@ -108,6 +108,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="a body cut by the image border keeps, on the cut axis, its extent from the last whole view "
                         "when the returns span less than this fraction of it (0: off; default "
                         "track3d.tracker.HOLD_CUT_SIZE, 0.8; with measured faces)")
+    t.add_argument("--edge-pad", type=bounded(float, 0, high=10), default=None, metavar="PX",
+                   help="pixels added to the returns' extent across the line of sight (half on each side: the "
+                        "outline lies beyond the outermost pixel centres; 0: off; default "
+                        "track3d.tracker.EDGE_PAD, 1; with measured faces)")
     t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
                    help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
                         "itself; default: by the depth sensor, 0.3, 0 for stereo; track3d.tracker.frustum_margin_for)")
@@ -227,7 +231,7 @@ def _cmd_track(a) -> int:
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
                        weight_2d=weight_2d, measured_faces=faces, depth_smoothing=a.depth_smoothing,
                        evidence_points=a.evidence_points, reacquire_threshold=a.reacquire_threshold,
-                       hold_cut_size=a.hold_cut_size, frustum_margin=margin,
+                       hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad, frustum_margin=margin,
                        # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's
                        depth_range=not a.no_depth_range and a.depth != "stereo",
                        tracker_options=topts, estimator_options=eopts, name=a.name)
