@@ -374,6 +374,27 @@ def _plain_and_stereo(tmp_path):
     return Dataset(root).sequences("test")
 
 
+def test_the_edge_pad_follows_the_depth_sensor(tmp_path):
+    import json
+
+    from track3d.dataset import Dataset
+    from track3d.evaluation import TrackerSpec
+    from track3d.synthetic import make_synthetic_dataset
+    from track3d.tracker import edge_pad_for, sensor_options
+
+    assert edge_pad_for("tof") == 3.0 and edge_pad_for("ideal") == edge_pad_for(None) == 1.0
+    assert sensor_options("tof")["edge_pad"] == 3.0
+    root = make_synthetic_dataset(tmp_path / "d", {"a": 4, "b": 4})
+    meta = root / "test" / "b" / "meta.json"
+    m = json.loads(meta.read_text())
+    m["depth_sensor"] = {"name": "tof", "max_range_m": 30.0}
+    meta.write_text(json.dumps(m))
+    a, b = Dataset(root).sequences("test")
+    spec = TrackerSpec("oracle", "baseline")
+    assert spec.build(a).edge_pad == 1.0 and spec.build(b).edge_pad == 3.0
+    assert TrackerSpec("oracle", "baseline", edge_pad=0.0).build(b).edge_pad == 0.0
+
+
 def test_the_section_weight_follows_the_depth_sensor(tmp_path):
     from track3d.evaluation import TrackerSpec
     from track3d.tracker import section_weight_for

@@ -111,7 +111,7 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--edge-pad", type=bounded(float, 0, high=10), default=None, metavar="PX",
                    help="pixels added to the returns' extent across the line of sight (half on each side: the "
                         "outline lies beyond the outermost pixel centres; 0: off; default "
-                        "track3d.tracker.EDGE_PAD, 1; with measured faces)")
+                        "by the depth sensor, track3d.tracker.edge_pad_for: 1, ToF 3; with measured faces)")
     t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
                    help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
                         "itself; default: by the depth sensor, 0.3, 0 for stereo; track3d.tracker.frustum_margin_for)")

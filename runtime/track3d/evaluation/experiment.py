@@ -63,7 +63,7 @@ class TrackerSpec:
     evidence_points: int | None = None       # None: track3d.tracker.EVIDENCE_POINTS
     reacquire_threshold: float | None = None   # None: track3d.tracker.REACQUIRE_THRESHOLD; 0: the tracker's own
     hold_cut_size: float | None = None       # None: track3d.tracker.HOLD_CUT_SIZE
-    edge_pad: float | None = None            # None: track3d.tracker.EDGE_PAD
+    edge_pad: float | None = None            # None: by the sequence's depth sensor (edge_pad_for)
     threads: int = 1
     tracker_options: dict = field(default_factory=dict)
     estimator_options: dict = field(default_factory=dict)
@@ -102,7 +102,6 @@ class TrackerSpec:
                               **({} if self.reacquire_threshold is None else
                                  {"reacquire_threshold": self.reacquire_threshold or None}),
                               **({} if self.hold_cut_size is None else {"hold_cut_size": self.hold_cut_size}),
-                              **({} if self.edge_pad is None else {"edge_pad": self.edge_pad}),
                               **self.sensor_options(seq.depth_sensor))
 
     def sensor_options(self, depth_sensor: str | None) -> dict:
