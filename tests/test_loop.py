@@ -290,21 +290,12 @@ def test_frustum_margin_widens_the_cut_and_zero_is_the_box_itself(frames):
 def test_the_frustum_margin_follows_the_depth_sensor(tmp_path):
     """Stereo depth smears past the silhouette: no margin there; every other or unknown
     sensor gets the default. The evaluation builds each sequence's tracker by its sensor."""
-    import json
-
-    from track3d.dataset import Dataset
     from track3d.evaluation import TrackerSpec
-    from track3d.synthetic import make_synthetic_dataset
     from track3d.tracker import FRUSTUM_MARGIN, frustum_margin_for
 
     assert frustum_margin_for("stereo") == 0.0
     assert frustum_margin_for("ideal") == frustum_margin_for("tof") == frustum_margin_for(None) == FRUSTUM_MARGIN
-    root = make_synthetic_dataset(tmp_path / "d", {"a": 4, "b": 4})
-    meta = root / "test" / "b" / "meta.json"
-    m = json.loads(meta.read_text())
-    m["depth_sensor"] = {"name": "stereo", "block_size": 5}
-    meta.write_text(json.dumps(m))
-    a, b = Dataset(root).sequences("test")
+    a, b = _plain_and(tmp_path, {"name": "stereo", "block_size": 5})
     assert (a.depth_sensor, b.depth_sensor) == (None, "stereo")
     spec = TrackerSpec("oracle", "baseline")
     assert spec.build(a).frustum_margin == FRUSTUM_MARGIN and spec.build(b).frustum_margin == 0.0
@@ -359,8 +350,8 @@ def test_the_loop_reports_the_section_fused_box_and_fuses_2d_with_the_estimate(f
             Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"), weight_2d=bad)
 
 
-def _plain_and_stereo(tmp_path):
-    """Two sequences of a synthetic dataset, the second one's depth recorded as stereo."""
+def _plain_and(tmp_path, depth_sensor: dict):
+    """Two sequences of a synthetic dataset, the second one's depth sensor recorded as given."""
     import json
 
     from track3d.dataset import Dataset
@@ -369,27 +360,22 @@ def _plain_and_stereo(tmp_path):
     root = make_synthetic_dataset(tmp_path / "d", {"a": 4, "b": 4})
     meta = root / "test" / "b" / "meta.json"
     m = json.loads(meta.read_text())
-    m["depth_sensor"] = {"name": "stereo"}
+    m["depth_sensor"] = depth_sensor
     meta.write_text(json.dumps(m))
     return Dataset(root).sequences("test")
 
 
-def test_the_edge_pad_follows_the_depth_sensor(tmp_path):
-    import json
+def _plain_and_stereo(tmp_path):
+    return _plain_and(tmp_path, {"name": "stereo"})
 
-    from track3d.dataset import Dataset
+
+def test_the_edge_pad_follows_the_depth_sensor(tmp_path):
     from track3d.evaluation import TrackerSpec
-    from track3d.synthetic import make_synthetic_dataset
     from track3d.tracker import edge_pad_for, sensor_options
 
     assert edge_pad_for("tof") == 3.0 and edge_pad_for("ideal") == edge_pad_for(None) == 1.0
     assert sensor_options("tof")["edge_pad"] == 3.0
-    root = make_synthetic_dataset(tmp_path / "d", {"a": 4, "b": 4})
-    meta = root / "test" / "b" / "meta.json"
-    m = json.loads(meta.read_text())
-    m["depth_sensor"] = {"name": "tof", "max_range_m": 30.0}
-    meta.write_text(json.dumps(m))
-    a, b = Dataset(root).sequences("test")
+    a, b = _plain_and(tmp_path, {"name": "tof", "max_range_m": 30.0})
     spec = TrackerSpec("oracle", "baseline")
     assert spec.build(a).edge_pad == 1.0 and spec.build(b).edge_pad == 3.0
     assert TrackerSpec("oracle", "baseline", edge_pad=0.0).build(b).edge_pad == 0.0
