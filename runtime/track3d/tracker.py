@@ -207,9 +207,7 @@ HOLD_CUT_SIZE = 0.8
 # puts the fix, not a fitted value. Replayed on one pass's boxes (the reported box never feeds
 # the 2D fusion), EdgeTrack, AO_3d over present frames at 0 / 0.5 / 1 / 1.5 / 2 pixels: accuracy
 # set test 0.8739 / 0.8783 / 0.8809 / 0.8815 / 0.8803, held-out shapes 0.8112 / 0.8144 / 0.8165 /
-# 0.8173 / 0.8169, seed 9 held-out 0.8581 / 0.8627 / 0.8651 / 0.8650 / 0.8628; ToF seeds 3 / 9
-# 0.7213 / 0.7248 / 0.7279 / 0.7305 / 0.7324 and 0.7262 / 0.7301 / 0.7336 / 0.7364 / 0.7384
-# (the ToF sensor loses returns at grazing incidence near the limb, so more helps there).
+# 0.8173 / 0.8169, seed 9 held-out 0.8581 / 0.8627 / 0.8651 / 0.8650 / 0.8628 (ToF: below).
 # Camera pixels for every sensor: the simulated 128 x 128 flash LiDAR (5 camera pixels per pixel
 # of its own) returns the nearest surface of a pixel's whole footprint along the pixel's centre
 # ray, so its outermost returns are not inside the outline by half of its pixel: on its held-out

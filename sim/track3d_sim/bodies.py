@@ -203,14 +203,13 @@ def make_fragment(rng: np.random.Generator, volume: float, detail: int = 6) -> S
     return _finish(g, rng, "fragment", volume, detail, p)
 
 
-def sd_superellipsoid(p, radii, e1: float, e2: float, R=None):
-    """Superellipsoid (semi-axes radii (3,), exponents e1 along z and e2 about it; 1 / 1 is the
-    ellipsoid, towards 0 a box, 2 an octahedron; axes = columns of R): the inside-outside
-    function raised to e1 / 2, which is homogeneous of degree 1, so (that - 1) x the smallest
-    radius is distance-like near the surface (a bound, not exact)."""
-    q = p if R is None else p @ np.asarray(R, p.dtype)
+def sd_superellipsoid(p, radii, e1: float, e2: float):
+    """Superellipsoid about the origin, axis-aligned (semi-axes radii (3,), exponents e1 along z
+    and e2 about it; 1 / 1 is the ellipsoid, towards 0 a box, 2 an octahedron): the
+    inside-outside function raised to e1 / 2, which is homogeneous of degree 1, so (that - 1) x
+    the smallest radius is distance-like near the surface (a bound, not exact)."""
     r = np.asarray(radii, np.float64)
-    ax, ay, az = (np.abs(q[..., k]) / np.float32(r[k]) + np.float32(1e-9) for k in range(3))
+    ax, ay, az = (np.abs(p[..., k]) / np.float32(r[k]) + np.float32(1e-9) for k in range(3))
     xy = (ax ** np.float32(2.0 / e2) + ay ** np.float32(2.0 / e2)) ** np.float32(e2 / e1)
     f = (xy + az ** np.float32(2.0 / e1)) ** np.float32(e1 / 2.0)
     return (f - np.float32(1.0)) * np.float32(r.min())
