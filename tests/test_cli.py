@@ -15,18 +15,19 @@ def synth(tmp_path_factory):
 
 
 def test_track_then_eval(synth, tmp_path, capsys):
+    """Default estimator: A3BoxNet (Track3D's default pair, as the README says)."""
     res, rep = tmp_path / "res", tmp_path / "rep"
     assert main(["track", "--data", str(synth), "--tracker", "oracle", "--results", str(res), "--quiet"]) == 0
     assert main(["track", "--data", str(synth), "--tracker", "mosse", "--sequence", "a", "--no-fusion",
                  "--results", str(res), "--video", "none", "--quiet"]) == 0
-    assert (res / "test" / "oracle+baseline" / "a" / "a_overlay.gif").is_file()
-    assert (res / "test" / "mosse+baseline-nofusion" / "a" / "a_001.txt").is_file()
-    assert not (res / "test" / "mosse+baseline-nofusion" / "b").exists()
+    assert (res / "test" / "oracle+a3boxnet" / "a" / "a_overlay.gif").is_file()
+    assert (res / "test" / "mosse+a3boxnet-nofusion" / "a" / "a_001.txt").is_file()
+    assert not (res / "test" / "mosse+a3boxnet-nofusion" / "b").exists()
     capsys.readouterr()
     # Default: every tracker in the folder, on the sequences all of them have (only "a").
     assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "oracle+baseline" in out and "mosse+baseline-nofusion" in out and "AO_3d" in out
+    assert "oracle+a3boxnet" in out and "mosse+a3boxnet-nofusion" in out and "AO_3d" in out
     report = json.loads((rep / "report.json").read_text())
     assert report["sequences"] == ["a"]
     assert (rep / "success_3d.png").is_file() and (rep / "trajectory_a.png").is_file()
@@ -112,8 +113,8 @@ def test_track_passes_a_loop_option_to_the_loop_and_records_it(synth, tmp_path, 
     from track3d.evaluation.results import read_run_record
 
     res = tmp_path / "res"
-    assert main(["track", "--data", str(synth), "--tracker", "mosse", "--sequence", "a", flag, value,
-                 "--results", str(res), "--video", "none", "--quiet"]) == 0
+    assert main(["track", "--data", str(synth), "--tracker", "mosse", "--estimator", "baseline", "--sequence", "a",
+                 flag, value, "--results", str(res), "--video", "none", "--quiet"]) == 0
     rec = read_run_record(res, "test", "mosse+baseline")
     assert json.dumps(rec).count(recorded) == 1, rec
     with pytest.raises(SystemExit) as e:

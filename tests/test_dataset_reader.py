@@ -62,6 +62,27 @@ def test_clear_errors(tmp_path):
         ds.sequence("test", "nope")
 
 
+def test_frame_errors_name_the_file(tmp_path, capfd):
+    """A missing depth map printed OpenCV's own warning before the error; a frame of another size
+    than the camera said so without naming the file; an empty split was listed as available."""
+    _write_fake(tmp_path)
+    seq = D.Dataset(tmp_path).sequences("test")[0]
+    (seq.path / D.DEPTH_DIR / D.frame_name(1)).unlink()
+    with pytest.raises(D.DatasetError, match="missing depth map .*000002.png"):
+        seq.depth(1)
+    assert "WARN" not in capfd.readouterr().err
+    D.write_rgb(seq.path / D.RIGHT_DIR / D.frame_name(2), np.zeros((20, 30, 3), np.uint8))
+    with pytest.raises(D.DatasetError, match=r"right/000003.png is 30x20 but the dataset's camera is 32x24"):
+        seq.frame(2, right=True)
+    (seq.path / D.LEFT_DIR / D.frame_name(0)).unlink()
+    with pytest.raises(D.DatasetError, match="missing image"):
+        seq.image(0)
+    info = json.loads((tmp_path / D.DATASET_JSON).read_text())
+    (tmp_path / D.DATASET_JSON).write_text(json.dumps({**info, "splits": {"test": ["0001"], "test_unseen": []}}))
+    with pytest.raises(D.DatasetError, match=r"has: test, test_unseen \(empty\)"):
+        D.Dataset(tmp_path).sequences("train")
+
+
 def test_writer_and_reader_round_trip(tmp_path):
     """write_labels / write_dataset_json are the reader's counterpart: what one writes, the other
     reads back exactly (integers stay integers, 3D labels to the stated decimals)."""

@@ -70,9 +70,9 @@ def test_example_plugin_tracks_and_evaluates(tmp_path, capsys, synth):
     assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--no-plots",
                  "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "tm+baseline" in out
+    assert "tm+a3boxnet" in out
     report = json.loads((rep / "report.json").read_text())
-    assert report["trackers"]["tm+baseline"]["overall"]["ao_2d"] > 0.3
+    assert report["trackers"]["tm+a3boxnet"]["overall"]["ao_2d"] > 0.3
 
 
 def test_entry_points_are_loaded(tmp_path, monkeypatch, capsys):

@@ -23,7 +23,9 @@ def synth(tmp_path_factory):
 
 
 def _track(synth, res, *extra):
-    return main(["track", "--data", str(synth), "--results", str(res), "--video", "none", "--quiet", *extra])
+    # the baseline box (fast); an --estimator in `extra` comes later and wins
+    return main(["track", "--data", str(synth), "--results", str(res), "--video", "none", "--quiet",
+                 "--estimator", "baseline", *extra])
 
 
 def test_run_record_and_eval_read_it(synth, tmp_path, capsys):
@@ -151,3 +153,87 @@ def test_every_model_file_of_an_option_is_in_the_tag(tmp_path):
                      "search_model": str(d / "edge_search.onnx")}).label]
     assert tags[0] == tags[1] == tags[2] and tags[3] == tags[4] == tags[5]   # the same files, however named
     assert tags[0] != tags[3] and tags[0].startswith("edgetrack@edge-")
+
+
+def test_eval_refuses_results_made_on_another_dataset(synth, tmp_path, capsys):
+    """Results of a dataset with the same sequence names were scored against the wrong labels
+    without a word (AO_3d 0.007, exit 0)."""
+    other = make_synthetic_dataset(tmp_path / "other", {"a": 6, "b": 5}, radius=2.5)
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert _track(other, res, "--tracker", "oracle") == 0
+    capsys.readouterr()
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--no-plots"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "another dataset" in err[0] and "--data" in err[0]
+    assert not (rep / "report.json").exists()
+    # and `track` on this dataset does not silently replace them (unless --replace)
+    assert _track(synth, res, "--tracker", "oracle") == 2
+    assert "another dataset" in capsys.readouterr().err
+    assert _track(synth, res, "--tracker", "oracle", "--replace") == 0
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--no-plots"]) == 0
+
+
+def test_eval_frames_scores_only_the_first_frames(synth, tmp_path, capsys):
+    """`track3d eval --frames N` scored every frame while report.json said max_frames N."""
+    res = tmp_path / "res"
+    assert _track(synth, res, "--tracker", "kcf") == 0
+    reports = {}
+    for frames in ("3", None):
+        rep = tmp_path / f"rep{frames}"
+        argv = ["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--no-plots"]
+        assert main(argv + (["--frames", frames] if frames else [])) == 0
+        reports[frames] = json.loads((rep / "report.json").read_text())["trackers"]["kcf+baseline"]
+    # 2 sequences x frames 2..3 scored (the first is the initialisation) against 5 + 4
+    assert reports["3"]["overall"]["frames"] == 4 and reports[None]["overall"]["frames"] == 9
+    assert reports["3"]["overall"]["result_frames"] == 6
+
+
+def test_a_failed_run_leaves_no_folder_that_stops_eval(synth, tmp_path, capsys):
+    """A run that failed on a sequence left an empty result folder, and `track3d eval` of the
+    whole result folder then refused every tracker in it."""
+    broken = tmp_path / "broken"
+    shutil.copytree(synth, broken)
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert _track(broken, res, "--tracker", "oracle") == 0
+    for f in (broken / "test" / "a" / "depth").iterdir():
+        f.write_bytes(b"not an image")
+    # with its overlay on (the overlay writer makes the folder first)
+    assert main(["track", "--data", str(broken), "--results", str(res), "--quiet", "--estimator", "baseline",
+                 "--tracker", "kcf", "--video", "gif"]) == 2
+    assert not (res / "test" / "kcf+baseline" / "a").exists()
+    capsys.readouterr()
+    assert main(["eval", "--data", str(broken), "--results", str(res), "--out", str(rep), "--no-plots"]) == 0
+    out, err = capsys.readouterr()
+    assert "oracle+baseline" in out and "kcf+baseline" not in out
+
+
+def test_restart_skip_zero_is_refused_before_any_folder(synth, tmp_path):
+    with pytest.raises(SystemExit) as e:
+        _track(synth, tmp_path / "res", "--restart-skip", "0")
+    assert e.value.code == 2 and not (tmp_path / "res").exists()
+
+
+def test_eval_says_which_sequences_it_left_out(synth, tmp_path, capsys):
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert _track(synth, res, "--tracker", "oracle", "--sequence", "a") == 0
+    capsys.readouterr()
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--no-plots"]) == 0
+    assert "scored 1 of the split's 2 sequences" in capsys.readouterr().err
+    assert any("scored 1 of" in w for w in json.loads((rep / "report.json").read_text())["warnings"])
+
+
+@pytest.mark.parametrize("what", ["out_is_a_file", "results_is_the_split"])
+def test_eval_folder_mistakes_are_one_line(synth, tmp_path, capsys, what):
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert _track(synth, res, "--tracker", "oracle") == 0
+    if what == "out_is_a_file":
+        rep.write_text("mine")
+        argv, expect = ["--results", str(res), "--out", str(rep)], "is a file, not a folder"
+    else:
+        argv, expect = ["--results", str(res / "test"), "--out", str(rep)], f"--results is the folder"
+    capsys.readouterr()
+    assert main(["eval", "--data", str(synth), "--no-plots", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and expect in err[0], err
+    if what == "out_is_a_file":
+        assert rep.read_text() == "mine"

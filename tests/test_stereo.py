@@ -230,8 +230,8 @@ def test_cli_track_with_stereo_depth(tmp_path, capsys):
 
     data = _stereo_dataset(tmp_path / "ds", CAM)
     res = tmp_path / "res"
-    assert main(["track", "--data", str(data), "--tracker", "oracle", "--depth", "stereo", "--results", str(res),
-                 "--video", "none", "--quiet"]) == 0
+    assert main(["track", "--data", str(data), "--tracker", "oracle", "--estimator", "baseline", "--depth", "stereo",
+                 "--results", str(res), "--video", "none", "--quiet"]) == 0
     status = (res / "test" / "oracle+baseline-stereo" / "s1" / "s1_status.txt").read_text().split()
     assert status[0] == "init" and set(status[1:]) == {"tracking"}
     box3d = np.loadtxt(res / "test" / "oracle+baseline-stereo" / "s1" / "s1_3d_001.txt", delimiter=",")
@@ -263,6 +263,14 @@ def test_stereo_clouds_get_the_stereo_a3boxnet(tmp_path):
     assert (t.frustum_margin, t.weight_3d, t.measured_faces) == (0.0, 0.15, False)
     assert Track3D.from_default(CAM, depth_sensor="stereo", weight_3d=0.3).weight_3d == 0.3   # options win
     assert Track3D.from_default(CAM).estimator.model.path.name == DEFAULT_MODEL
+    # a user's sensor name: any case, the whole stereo setup (the model's lookup ignored case, the
+    # options' did not: "Stereo" got the stereo model with the range sensors' options)
+    t = Track3D.from_default(CAM, depth_sensor="Stereo")
+    assert t.estimator.model.path.name == stereo
+    assert (t.frustum_margin, t.weight_3d, t.measured_faces) == (0.0, 0.15, False)
+    for bad in ("lidar", "", 3):   # a typo was taken for an unknown sensor, with no word
+        with pytest.raises(ValueError, match="depth_sensor must be one of ideal, tof, flash-lidar, stereo"):
+            Track3D.from_default(CAM, depth_sensor=bad)
 
     data = _stereo_dataset(tmp_path / "ds", CAM)
     seq = Dataset(data).sequences("test")[0]

@@ -79,8 +79,10 @@ def _parser() -> argparse.ArgumentParser:
     t = sub.add_parser("track", help="run a 2D tracker x box estimator on a split or sequences; "
                                      "writes GOT-10k style results and an overlay video")
     _add_data_args(t)
-    t.add_argument("--tracker", default="kcf", help="2D tracker name (see `track3d trackers`; default kcf)")
-    t.add_argument("--estimator", default="baseline", help="3D box estimator name (default baseline)")
+    t.add_argument("--tracker", default="edgetrack",
+                   help="2D tracker name (see `track3d trackers`; default edgetrack, Track3D's default)")
+    t.add_argument("--estimator", default="a3boxnet",
+                   help="3D box estimator name (see `track3d trackers`; default a3boxnet)")
     t.add_argument("--tracker-option", action="append", metavar="KEY=VALUE", help="option of the 2D tracker")
     t.add_argument("--estimator-option", action="append", metavar="KEY=VALUE", help="option of the estimator")
     t.add_argument("--no-fusion", action="store_true", help="report the 2D tracker's box, no 2D-3D fusion")
@@ -119,9 +121,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="ignore the depth sensor's maximum range recorded with each sequence (meta.json "
                         "depth_sensor.max_range_m); by default a body whose returns stop at that range is boxed from "
                         "the image and its front face (track3d.range_cut)")
-    t.add_argument("--threads", type=int, default=1, help="CPU threads of the ONNX models (default 1)")
+    t.add_argument("--threads", type=bounded(int, 1), default=1, help="CPU threads of the ONNX models (default 1)")
     t.add_argument("--precision", choices=("fp32", "int8", "bf16", "auto"), default=None,
-                   help="arithmetic of the networks (SiamFC, A3BoxNet); auto: the fastest this CPU allows, "
+                   help="arithmetic of the networks (EdgeTrack, SiamFC, A3BoxNet); auto: the fastest this CPU allows, "
                         "measured once and cached (default fp32)")
     t.add_argument("--engine", choices=("onnxruntime", "openvino", "auto"), default=None,
                    help="inference engine of the networks; openvino needs track3d[openvino] (default onnxruntime)")
@@ -131,7 +133,7 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--replace", action="store_true",
                    help="replace results of another configuration or over other frames (--frames) under the same name "
                         "(default: refuse)")
-    t.add_argument("--restart-skip", type=int, default=1,
+    t.add_argument("--restart-skip", type=bounded(int, 1), default=1,
                    help="re-initialise this many frames after a zero-3D-IoU frame (default 1: the next)")
     t.add_argument("--no-restart", action="store_true", help="never re-initialise from the ground truth")
     t.add_argument("--depth", choices=("map", "stereo"), default="map",
@@ -166,8 +168,8 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--tracker-model", metavar="PREFIX",
                    help="<dir>/<name> prefix of the tracker's ONNX pair (EdgeTrack: <name>_template.onnx / _search.onnx; SiamFC: _exemplar / _search) (default: shipped)")
     b.add_argument("--boxnet-model", metavar="ONNX", help="an A3BoxNet ONNX file (default: shipped)")
-    b.add_argument("--frames", type=int, default=1000, help="timed frames per thread count (after 20 warm-up)")
-    b.add_argument("--threads", type=int, nargs="+", default=[1, 2], help="thread counts to time")
+    b.add_argument("--frames", type=bounded(int, 1), default=1000, help="timed frames per thread count (after 20 warm-up)")
+    b.add_argument("--threads", type=bounded(int, 1), nargs="+", default=[1, 2], help="thread counts to time")
     b.add_argument("--data", help="time on this dataset's first sequences instead of synthetic frames")
     b.add_argument("--split", default="test", help="dataset split with --data")
     b.add_argument("--sequence", "--sequences", dest="sequences", nargs="+", metavar="NAME",
@@ -213,7 +215,7 @@ def _cmd_track(a) -> int:
     video = _video_format(a.video)
     topts, eopts = _options(a.tracker_option), _options(a.estimator_option)
     arith = {k: v for k, v in (("precision", a.precision), ("engine", a.engine)) if v is not None}
-    if a.tracker.startswith("siamfc"):  # the networks; other trackers / estimators have no variants
+    if a.tracker.startswith("siamfc") or a.tracker == "edgetrack":  # the networks; the others have no variants
         topts = {**arith, **topts}
     if a.estimator == "a3boxnet":
         eopts = {**arith, **eopts}
@@ -274,8 +276,11 @@ def _video_format(choice: str) -> str | None:
 def _cmd_eval(a) -> int:
     from .evaluation import Experiment
     from .evaluation.results import result_folder
+    from .jsonable import write_json
 
     split_dir = Path(a.results) / a.split
+    if Path(a.out).exists() and not Path(a.out).is_dir():
+        raise ValueError(f"--out {a.out} is a file, not a folder")
     if a.trackers:
         names = _unique(a.trackers)
     elif split_dir.is_dir():
@@ -283,18 +288,34 @@ def _cmd_eval(a) -> int:
     else:
         names = []
     if not names:
-        raise FileNotFoundError(f"no results in {split_dir} (run `track3d track` first)")
+        hint = ""
+        if Path(a.results).name == a.split:
+            hint = f" (--results is the folder `track3d track --results` wrote: {Path(a.results).parent})"
+        raise FileNotFoundError(f"no results in {split_dir}{hint or ' (run `track3d track` first)'}")
     exp = Experiment(a.data, a.split, a.results, a.out, sequences=_unique(a.sequences), max_frames=a.frames)
+    notes = []
     if not a.sequences:
         # Default: the sequences every named tracker has results for.
-        have = [s for s in exp.sequences
-                if all((result_folder(a.results, a.split, n, s.name) / f"{s.name}_status.txt").is_file()
-                       for n in names)]
+        def done(n: str, s) -> bool:
+            return (result_folder(a.results, a.split, n, s.name) / f"{s.name}_status.txt").is_file()
+
+        if not a.trackers:   # folders with no finished sequence (a run that failed): left out, said so
+            empty = [n for n in names if not any(done(n, s) for s in exp.sequences)]
+            if empty and len(empty) < len(names):
+                names = [n for n in names if n not in empty]
+                notes.append(f"left out {', '.join(empty)}: no finished sequence of {a.data}/{a.split}")
+        have = [s for s in exp.sequences if all(done(n, s) for n in names)]
         if not have:
             raise FileNotFoundError(f"no sequence of {a.data}/{a.split} has results of {', '.join(names)} "
                                     f"in {a.results}")
+        if len(have) < len(exp.sequences):
+            notes.append(f"scored {len(have)} of the split's {len(exp.sequences)} sequences (those every "
+                         f"compared run has; --sequence to choose)")
         exp.sequences = have
     report = exp.report(names, plots=not a.no_plots, trajectories=a.trajectories)
+    if notes:   # into report.json as well
+        report["warnings"] = notes + report.get("warnings", [])
+        write_json(Path(a.out) / "report.json", report)
     print(summary_table(report))
     for w in report.get("warnings", []):
         print(f"track3d eval: WARNING: {w}", file=sys.stderr)

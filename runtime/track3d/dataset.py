@@ -63,6 +63,8 @@ def write_depth_png(path: str | Path, depth_m: np.ndarray) -> None:
 
 def read_depth_png(path: str | Path) -> np.ndarray:
     """16-bit millimetre PNG -> (H, W) float32 metres, 0 = no return."""
+    if not Path(path).is_file():   # before OpenCV, which prints a warning of its own
+        raise DatasetError(f"missing depth map {path}")
     mm = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if mm is None:
         raise DatasetError(f"cannot read depth map {path}")
@@ -80,6 +82,8 @@ def write_rgb(path: str | Path, rgb: np.ndarray) -> None:
 
 def read_rgb(path: str | Path) -> np.ndarray:
     """PNG -> (H, W, 3) uint8 RGB."""
+    if not Path(path).is_file():
+        raise DatasetError(f"missing image {path}")
     bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if bgr is None:
         raise DatasetError(f"cannot read image {path}")
@@ -249,10 +253,22 @@ class Sequence:
         if self.points_only:
             raise DatasetError(f"{self.path} is points-only data (depth and labels, no images): "
                                f"generate without --points-only to track in images")
-        return read_rgb(self.image_path(i))
+        return self._sized(read_rgb(self.image_path(i)), self.image_path(i))
+
+    def right_image(self, i: int) -> np.ndarray:
+        """(H, W, 3) uint8 RGB of the right camera (stereo pairs)."""
+        return self._sized(read_rgb(self.image_path(i, RIGHT_DIR)), self.image_path(i, RIGHT_DIR))
 
     def depth(self, i: int) -> np.ndarray:
-        return read_depth_png(self.path / DEPTH_DIR / frame_name(i))
+        path = self.path / DEPTH_DIR / frame_name(i)
+        return self._sized(read_depth_png(path), path)
+
+    def _sized(self, a: np.ndarray, path: Path) -> np.ndarray:
+        # a frame of another size than the dataset's camera: named here, with its file
+        w, h = int(self.camera.width), int(self.camera.height)
+        if a.shape[:2] != (h, w):
+            raise DatasetError(f"{path} is {a.shape[1]}x{a.shape[0]} but the dataset's camera is {w}x{h}")
+        return a
 
     def points(self, i: int) -> np.ndarray:
         """(M, 3) float32 point cloud of frame i, back-projected from its depth map."""
@@ -263,7 +279,7 @@ class Sequence:
             raise IndexError(f"frame {i} out of range for {self!r}")
         depth = self.depth(i)
         image = self.image(i)
-        return Frame(i, image, read_rgb(self.image_path(i, RIGHT_DIR)) if right else None, depth,
+        return Frame(i, image, self.right_image(i) if right else None, depth,
                      self.camera.backproject_depth(depth), self.gt2d[i].copy(), self.gt3d[i].copy(),
                      bool(self.absent[i]), bool(self.cut[i]))
 
@@ -343,7 +359,8 @@ class Dataset:
 
     def sequences(self, split: str) -> list[Sequence]:
         if split not in self.splits:
-            raise DatasetError(f"split {split!r} not in {self.root} (has: {', '.join(self.splits) or 'none'})")
+            has = ", ".join(f"{k}" if v else f"{k} (empty)" for k, v in self.splits.items())
+            raise DatasetError(f"split {split!r} not in {self.root} (has: {has or 'none'})")
         return [Sequence(self.root / split / name, self.camera, split, self.points_only or None)
                 for name in self.splits[split]]
 

@@ -55,7 +55,7 @@ from .trackers2d import Tracker2D, create_tracker
 
 __all__ = ["Track3D", "TrackResult", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES", "MIN_POINTS",
            "FRUSTUM_MARGIN", "frustum_margin_for", "fusion_weight_for", "section_weight_for", "measured_faces_for",
-           "sensor_options"]
+           "sensor_options", "DEPTH_SENSORS", "check_depth_sensor"]
 
 TRACKING, NO_POINTS, LOST = "tracking", "no_points", "lost"
 STATUSES = (TRACKING, NO_POINTS, LOST)
@@ -95,12 +95,32 @@ REACQUIRE_THRESHOLD = 0.9
 # background (foreground fattening) and a wider cut collects those points: measured on 12
 # held-out stereo sequences, AO_3d 0.637 -> 0.613 with a 0.1 margin (flash-LiDAR: 0.788 -> 0.789).
 FRUSTUM_MARGIN = 0.3
+# the depth sensors the simulator makes and the options below were chosen for
+DEPTH_SENSORS = ("ideal", "tof", "flash-lidar", "stereo")
 SENSOR_FRUSTUM_MARGINS = {"stereo": 0.0}
+
+
+def _sensor_key(depth_sensor: str | None) -> str:
+    # the tables' keys are lower case, as datasets write them; "Stereo" is stereo
+    return str(depth_sensor or "").lower()
+
+
+def check_depth_sensor(depth_sensor: str | None) -> str | None:
+    """A depth sensor name a user gave -> its lower-case name (None: unknown, allowed).
+    Raises ValueError for a name none of the tables knows: a typo would silently give the
+    default options of another sensor."""
+    if depth_sensor is None:
+        return None
+    key = _sensor_key(depth_sensor)
+    if not isinstance(depth_sensor, str) or key not in DEPTH_SENSORS:
+        raise ValueError(f"depth_sensor must be one of {', '.join(DEPTH_SENSORS)} or None (unknown), "
+                         f"got {depth_sensor!r}")
+    return key
 
 
 def frustum_margin_for(depth_sensor: str | None) -> float:
     """The frustum margin for depth maps of this sensor (None: unknown, the default margin)."""
-    return SENSOR_FRUSTUM_MARGINS.get(depth_sensor or "", FRUSTUM_MARGIN)
+    return SENSOR_FRUSTUM_MARGINS.get(_sensor_key(depth_sensor), FRUSTUM_MARGIN)
 
 
 # The fused box also becomes the 2D tracker's state (correct()), so a 3D box from noisy depth
@@ -122,7 +142,7 @@ SENSOR_FUSION_WEIGHTS = {"stereo": 0.15, "tof": 0.15}
 
 def fusion_weight_for(depth_sensor: str | None) -> float:
     """The 2D-3D fusion weight for depth maps of this sensor (None: unknown, the paper's 0.3)."""
-    return SENSOR_FUSION_WEIGHTS.get(depth_sensor or "", WEIGHT_3D)
+    return SENSOR_FUSION_WEIGHTS.get(_sensor_key(depth_sensor), WEIGHT_3D)
 
 
 # The reverse fusion (fusion.fuse_section): block-matching stereo smears depth past the body's
@@ -138,7 +158,7 @@ SENSOR_SECTION_WEIGHTS = {"stereo": 0.75}
 
 def section_weight_for(depth_sensor: str | None) -> float:
     """The weight of the 2D box in the 3D box's cross-section for this sensor (0: the estimator's)."""
-    return SENSOR_SECTION_WEIGHTS.get(depth_sensor or "", WEIGHT_2D)
+    return SENSOR_SECTION_WEIGHTS.get(_sensor_key(depth_sensor), WEIGHT_2D)
 
 
 # The faces of the reported box that the depth sensor sees come from the returns (the frustum
@@ -165,7 +185,7 @@ SENSOR_MEASURED_FACES = {"stereo": False}
 
 def measured_faces_for(depth_sensor: str | None) -> bool:
     """Whether the reported box's visible faces come from the returns for this sensor."""
-    return SENSOR_MEASURED_FACES.get(depth_sensor or "", True)
+    return SENSOR_MEASURED_FACES.get(_sensor_key(depth_sensor), True)
 
 
 # The hidden depth of the body (the reported box's extent along the line of sight, its front
@@ -225,7 +245,7 @@ SENSOR_EDGE_PADS = {"tof": 3.0}
 
 def edge_pad_for(depth_sensor: str | None) -> float:
     """The edge pad (camera pixels) for depth maps of this sensor (None: unknown, EDGE_PAD)."""
-    return SENSOR_EDGE_PADS.get(depth_sensor or "", EDGE_PAD)
+    return SENSOR_EDGE_PADS.get(_sensor_key(depth_sensor), EDGE_PAD)
 
 
 def sensor_options(depth_sensor: str | None) -> dict:
@@ -413,8 +433,10 @@ class Track3D:
 
         precision / engine: "fp32" | "int8" | "bf16" | "auto" and "onnxruntime" | "openvino" |
         "auto" (track3d.onnxmodel; "auto": the fastest variant this CPU allows, see describe()).
-        Raises TrackerUnavailable / EstimatorUnavailable when the models are not shipped.
+        Raises ValueError for an unknown depth_sensor name, TrackerUnavailable / EstimatorUnavailable
+        when the models are not shipped.
         """
+        depth_sensor = check_depth_sensor(depth_sensor)
         arith = {"threads": threads, "precision": precision, "engine": engine}
         options = {**(sensor_options(depth_sensor) if depth_sensor is not None else {}), **options}
         sensor = {} if depth_sensor is None else {"depth_sensor": depth_sensor}

@@ -19,6 +19,9 @@ same code on the same threshold grids (metrics).
 """
 from __future__ import annotations
 
+import hashlib
+import json
+import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +31,7 @@ import numpy as np
 
 from ..boxes import iou_3d
 from ..jsonable import write_json
-from ..dataset import RIGHT_DIR, Dataset, DatasetError, Sequence, read_rgb
+from ..dataset import Dataset, DatasetError, Sequence
 from ..machine import cpu_name
 from ..progress import Progress
 from ..tracker import LOST, STAGES, Track3D, sensor_options
@@ -38,7 +41,7 @@ from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, LostScor
 from .results import (INIT, SKIPPED, SequenceResult, read_result, read_run_record, result_folder, run_config_key,
                       write_result, write_run_record)
 
-__all__ = ["TrackerSpec", "Experiment", "run_sequence", "evaluate_2d", "cpu_name", "DEPTH_SOURCES"]
+__all__ = ["TrackerSpec", "Experiment", "run_sequence", "evaluate_2d", "cpu_name", "DEPTH_SOURCES", "labels_digest"]
 
 DEPTH_SOURCES = ("map", "stereo")   # where the point clouds come from (run_sequence's depth)
 
@@ -167,6 +170,15 @@ def _model_tag(options: dict) -> str:
     return f"@{stem}-{h.hexdigest()[:8]}"
 
 
+def labels_digest(seq: Sequence) -> str:
+    """16 hex digits identifying a sequence's ground truth (2D / 3D labels, absence flags): the run
+    record keeps it per sequence, so results are never scored against another dataset's labels."""
+    h = hashlib.sha256()
+    for a in (seq.gt2d, seq.gt3d, seq.absent):
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    return h.hexdigest()[:16]
+
+
 def _gt_ok(seq: Sequence, i: int) -> bool:
     b = seq.gt2d[i]
     return bool(not seq.absent[i] and np.all(np.isfinite(b)) and b[2] > 0 and b[3] > 0)
@@ -210,7 +222,7 @@ def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, ma
         elif stereo is None:
             points = seq.points(i)
         else:
-            points = stereo.bind(image, read_rgb(seq.image_path(i, RIGHT_DIR)))
+            points = stereo.bind(image, seq.right_image(i))
         t1 = time.perf_counter()
         if pending is not None:
             if i < pending or not _gt_ok(seq, i):
@@ -289,6 +301,10 @@ class Experiment:
         self.max_frames = max_frames
         self.restart = restart
         self.restart_skip = int(restart_skip)
+        if self.restart_skip < 1:   # here, not at the first sequence: no result folder made for nothing
+            raise ValueError(f"restart_skip must be >= 1, got {restart_skip}")
+        if max_frames is not None and int(max_frames) < 1:
+            raise ValueError(f"max_frames must be >= 1, got {max_frames}")
         if depth not in DEPTH_SOURCES:
             raise ValueError(f"depth must be one of {', '.join(DEPTH_SOURCES)}, got {depth!r}")
         self.depth = depth
@@ -323,8 +339,10 @@ class Experiment:
                 if overwrite or not (self.folder(name, seq.name) / f"{seq.name}_status.txt").is_file()]
         if old is not None and not replace:
             self._refuse_other_frames(name, old, todo)
+            self._refuse_other_labels(name, old, todo)
         if old is not None and run_config_key(old) == run_config_key(record):
             record["frames"] = {**old.get("frames", {}), **record["frames"]}
+            record["labels"] = {**old.get("labels", {}), **record["labels"]}
         folders = []
         for k, seq in enumerate(self.sequences):
             folder = self.folder(name, seq.name)
@@ -333,12 +351,20 @@ class Experiment:
                 continue
             n = self._frames(seq)
             record["frames"][seq.name] = n
+            made = not folder.exists()
             writer = None
             if overlay and k < overlay_sequences:
                 writer = OverlayWriter(folder / f"{seq.name}_overlay.{overlay}")
-            with Progress(n, f"{name} {seq.name}", enabled=False if quiet else None) as bar:
-                res = run_sequence(factory, seq, self.max_frames, self.restart, self.restart_skip, writer, bar,
-                                   depth=self.depth)
+            try:
+                with Progress(n, f"{name} {seq.name}", enabled=False if quiet else None) as bar:
+                    res = run_sequence(factory, seq, self.max_frames, self.restart, self.restart_skip, writer, bar,
+                                       depth=self.depth)
+            except BaseException:
+                if writer is not None:
+                    writer.close()
+                if made:   # a folder with no results would stop `track3d eval` of the whole result folder
+                    shutil.rmtree(folder, ignore_errors=True)
+                raise
             write_result(folder, res)
             if writer is not None:
                 writer.close()
@@ -360,6 +386,37 @@ class Experiment:
                                  f"{had[seq.name]} frames, this run covers {n} (--frames): pick another --name "
                                  "or pass --replace")
 
+    def _refuse_other_labels(self, name: str, old: dict, todo: list[Sequence]) -> None:
+        """Results of a sequence of the same name made on other ground truth (another dataset)
+        would be replaced by this run: ValueError (the caller passes it unless `replace`)."""
+        had = old.get("labels") or {}
+        for seq in todo:
+            if seq.name in had and had[seq.name] != labels_digest(seq):
+                raise ValueError(f"{self.result_dir / self.split / name} holds results of {seq.name} made on "
+                                 f"another dataset ({old.get('dataset') or 'unnamed'}): pick another --results "
+                                 "or --name, or pass --replace")
+
+    def check_labels(self, name: str) -> list[str]:
+        """Raises ValueError when the run record of `name` says its results of a sequence were made
+        on other ground truth than this dataset's (scoring them would be a silent wrong answer).
+        Returns warnings for records that cannot tell (written before records kept the labels)."""
+        rec = read_run_record(self.result_dir, self.split, name)
+        if not rec:
+            return []
+        had = rec.get("labels")
+        if had is None:
+            here = Path(self.dataset.root).resolve().name
+            if rec.get("dataset") and rec["dataset"] != here:
+                return [f"{name} was made on a dataset named {rec['dataset']!r}, this is {here!r} "
+                        "(its record keeps no label digests to check)"]
+            return []
+        other = [s.name for s in self.sequences if s.name in had and had[s.name] != labels_digest(s)]
+        if other:
+            raise ValueError(f"the results of {name} for {', '.join(other[:5])}{' ...' if len(other) > 5 else ''} "
+                             f"were made on another dataset ({rec.get('dataset') or 'unnamed'}) than "
+                             f"{self.dataset.root}: pass the --data they were made on")
+        return []
+
     def _run_record(self, factory, spec) -> dict:
         """What makes this run's results: Track3D.describe() of a tracker built for the first
         sequence, the restart settings, threads, versions; `frames` is filled per sequence."""
@@ -372,16 +429,18 @@ class Experiment:
         del track
         return {"track3d": desc, "threads": getattr(spec, "threads", None), "restart": self.restart,
                 "restart_skip": self.restart_skip, "max_frames": self.max_frames, "split": self.split,
-                "dataset": Path(self.dataset.root).name, "versions": versions(),
+                "dataset": Path(self.dataset.root).resolve().name, "versions": versions(),
+                "labels": {seq.name: labels_digest(seq) for seq in self.sequences},
                 "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
                 "frames": {}}
 
     # --- evaluation ----------------------------------------------------------------------------
     def _read(self, name: str, seq: Sequence):
+        """The results of `name` on `seq`, cut to the first max_frames frames when that is set."""
         res = read_result(self.folder(name, seq.name), seq.name)
         if len(res) > len(seq):
             raise ValueError(f"{name}/{seq.name}: {len(res)} result rows for a {len(seq)}-frame sequence")
-        return res
+        return res if self.max_frames is None else res.head(self.max_frames)
 
     def score(self, name: str, raw: bool = False) -> list[SequenceScore]:
         """Scores of one tracker's results against the ground truth, per sequence.
@@ -429,6 +488,7 @@ class Experiment:
         Each tracker's "lost" holds how its status "lost" matched the absent frames (score_lost:
         from each sequence's first initialisation on; precision / recall also in "overall")."""
         self.report_dir.mkdir(parents=True, exist_ok=True)
+        self._remove_old_plots()
         report: dict = {
             "dataset": str(self.dataset.root), "split": self.split, "sequences": [s.name for s in self.sequences],
             "max_frames": self.max_frames, "restart": self.restart, "restart_skip": self.restart_skip,
@@ -438,12 +498,13 @@ class Experiment:
         }
         overall = {}
         runs = {n: read_run_record(self.result_dir, self.split, n) for n in names}
+        label_warnings = [w for n in names for w in self.check_labels(n)]
         lengths = {}
         for name in names:
             scores = self.score(name)
             ov = average_scores(scores)
             overall[name] = ov
-            lengths[name] = {seq.name: len(read_result(self.folder(name, seq.name), seq.name)) for seq in self.sequences}
+            lengths[name] = {seq.name: len(self._read(name, seq)) for seq in self.sequences}
             rec = runs[name] or {}
             lost = self.score_lost(name).summary()
             report["trackers"][name] = {
@@ -456,7 +517,7 @@ class Experiment:
                 "run": rec or None,
                 "restart": rec.get("restart"), "restart_skip": rec.get("restart_skip"),
             }
-        report["warnings"] = _comparison_warnings(names, runs, lengths)
+        report["warnings"] = label_warnings + _comparison_warnings(names, runs, lengths)
         known = [(r["restart"], r["restart_skip"]) for r in runs.values() if r]
         if known and len(set(known)) == 1 and len(known) == len(names):
             report["restart"], report["restart_skip"] = known[0]
@@ -471,6 +532,21 @@ class Experiment:
             report["plots"] = [str(f) for f in files]
         write_json(self.report_dir / "report.json", report)
         return report
+
+    def _remove_old_plots(self) -> None:
+        """The plots a previous report in report_dir listed: a report of fewer sequences or without
+        plots must not sit beside them. Only files that report named, inside report_dir."""
+        old = self.report_dir / "report.json"
+        try:
+            files = json.loads(old.read_text()).get("plots") or []
+        except (OSError, ValueError, AttributeError):
+            return
+        here = self.report_dir.resolve()
+        for f in files:
+            p = Path(str(f))
+            p = p if p.is_absolute() else Path.cwd() / p
+            if p.resolve().parent == here and p.suffix.lower() in (".png", ".pdf", ".svg") and p.is_file():
+                p.unlink()
 
     def _stage_means(self, name: str) -> dict:
         a = self.stage_ms(name)

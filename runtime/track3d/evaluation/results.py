@@ -54,6 +54,12 @@ class SequenceResult:
     def __len__(self) -> int:
         return len(self.status)
 
+    def head(self, n: int) -> "SequenceResult":
+        """The first n frames (all of them when there are fewer)."""
+        n = max(int(n), 0)
+        return SequenceResult(self.name, self.box2d[:n], self.box2d_raw[:n], self.box3d[:n], self.status[:n],
+                              self.seconds[:n], self.e2e_seconds[:n], self.stage_ms[:n])
+
     @property
     def restarts(self) -> int:
         return max(int(np.sum(self.status == INIT)) - 1, 0)
