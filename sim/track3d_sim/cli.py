@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
 from track3d.argparsing import ArgumentParser, apply_formatter, exit_for_missing_extra, hidden_alias, package_version
@@ -59,12 +60,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="render with Ray, one task per sequence: without ADDRESS a local Ray instance, else a "
                         "running cluster (auto, HOST:6379, ray://HOST:10001; --out must be on a filesystem every "
                         "node mounts). Needs the 'cluster' extra; output bytes are the same (default: off)")
-    g.add_argument("--resolution", type=_resolution, help="WxH, e.g. 640x480 (overrides the preset)")
+    g.add_argument("--resolution", type=_resolution, help="WxH, e.g. 640x480 (default: from the preset)")
     g.add_argument("--fov", type=float, dest="fov_x_deg",
-                   help="horizontal perspective angle in degrees; the vertical follows for square pixels")
-    g.add_argument("--frames", type=int, help="frames per sequence")
-    g.add_argument("--train", type=int, help="number of training sequences")
-    g.add_argument("--test", type=int, help="number of test sequences (fine categories unseen in train)")
+                   help="horizontal perspective angle in degrees; the vertical follows for square pixels "
+                        "(default: from the preset)")
+    g.add_argument("--frames", type=int, help="frames per sequence (default: from the preset)")
+    g.add_argument("--train", type=int, help="number of training sequences (default: from the preset)")
+    g.add_argument("--test", type=int, help="number of test sequences (fine categories unseen in train; "
+                                            "default: from the preset)")
     g.add_argument("--test-unseen", type=int, dest="test_unseen",
                    help="number of unseen-shapes test sequences: generators held out of train and test "
                         "(default: the preset's, 0)")
@@ -85,7 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "noise that implies (docs/simulator.md 'Camera effects'; default: off, fixed camera)")
     g.add_argument("--motion-blur", action="store_true", dest="motion_blur",
                    help="blur fast frames by averaging sub-exposure renders (default: off)")
-    g.add_argument("--subdivisions", type=int, help="icosphere subdivisions of procedural meshes (6 = 82k faces)")
+    g.add_argument("--subdivisions", type=int, help="icosphere subdivisions of procedural meshes (6 = 82k faces; "
+                                                    "default: from the preset)")
     g.add_argument("--mesh", action="append", type=_mesh, default=[], metavar="PATH[:SIZE_M]",
                    help="use a user mesh (OBJ/PLY/STL...) as the shape of the sequences (repeat to cycle "
                         "through several); SIZE_M = largest extent in metres (default: the sampled box volume)")
@@ -98,13 +102,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("stats", help="the paper's Fig. 4 plots (size classes, box volumes, speeds, illumination)")
     s.add_argument("root", help="dataset folder (with dataset.json)")
-    s.add_argument("--out", required=True, help="output PNG")
+    s.add_argument("--out", required=True, help="output image: .png, or .pdf, .svg, ... (any format matplotlib "
+                                                "writes); its folder is created")
     s.add_argument("--split", choices=["train", "test", "test_unseen", "all"], default="all",
                    help="split to plot (default: all)")
 
     v = sub.add_parser("preview", help="contact sheet (PNG) or animation (GIF) of a sequence with its boxes")
     v.add_argument("sequence", help="sequence folder, e.g. DATA/train/0001")
-    v.add_argument("--out", required=True, help="output .png (contact sheet) or .gif (animation)")
+    v.add_argument("--out", required=True, help="output .png / .jpg (contact sheet) or .gif (animation); "
+                                                "its folder is created")
     v.add_argument("--frames", type=int, default=12, help="frames in the contact sheet, >= 1 (default 12)")
     v.add_argument("--gain", type=float, default=1.0, help="brightness gain (> 0) for viewing dark images (default 1)")
     v.add_argument("--right", action="store_true", help="add the right image beside the left")
@@ -115,9 +121,9 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("ply", help="export a frame's back-projected point cloud (with colours) as PLY")
     e.add_argument("sequence", help="sequence folder, e.g. DATA/train/0001")
     e.add_argument("--frame", type=int, default=1, help="1-based frame number (default 1)")
-    e.add_argument("--out", required=True, help="output .ply")
+    e.add_argument("--out", required=True, help="output .ply file; its folder is created")
     c = sub.add_parser("shapes", help="contact sheet (PNG) of bodies from the shape generators, lit by a sun")
-    c.add_argument("--out", required=True, help="output .png")
+    c.add_argument("--out", required=True, help="output .png / .jpg; its folder is created")
     c.add_argument("--generator", action="append", default=[], metavar="NAME",
                    help="generator to show (repeat for several; default: every registered generator)")
     c.add_argument("--count", type=int, default=6, help="bodies per generator (default 6)")
@@ -129,9 +135,26 @@ def build_parser() -> argparse.ArgumentParser:
     return apply_formatter(p)
 
 
+def _join_dash_values(argv: list[str]) -> list[str]:
+    """`--resolution -320x240` -> `--resolution=-320x240`: argparse takes a value starting with "-"
+    (other than a plain negative number) for a flag and says "expected one argument"; joined, the
+    value reaches its check, which names what is wrong with it."""
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] == "--resolution" and i + 1 < len(argv) and re.match(r"-\d", argv[i + 1]):
+            out.append(f"--resolution={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
 def main(argv=None) -> int:
+    from track3d.dataset import DatasetError
+
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_join_dash_values(sys.argv[1:] if argv is None else argv))
     try:
         if args.cmd == "generate":
             from .generate import generate, make_settings
@@ -167,7 +190,7 @@ def main(argv=None) -> int:
             from .contact_sheet import contact_sheet
             contact_sheet(args.out, args.generator or None, count=args.count, seed=args.seed, detail=args.detail,
                           cell=args.cell, progress=not args.no_progress)
-    except SimError as e:
+    except (SimError, DatasetError, OSError) as e:  # damaged data met while reading frames, an unwritable --out
         print(f"track3d-sim: error: {e}", file=sys.stderr)
         return 2
     except ModuleNotFoundError as e:

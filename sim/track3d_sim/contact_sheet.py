@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SimError
+from .outfile import check_out, make_parent
 
 __all__ = ["render_body", "contact_sheet"]
 
@@ -44,6 +45,7 @@ def contact_sheet(out: str | Path, generators: list[str] | None = None, count: i
     from PIL import Image, ImageDraw
 
     from .generators import GENERATORS, make_body
+    out = check_out(out, "contact sheet", (".png", ".jpg", ".jpeg"))
     names = list(generators) if generators else list(GENERATORS)
     for n in names:
         if n not in GENERATORS:
@@ -54,7 +56,6 @@ def contact_sheet(out: str | Path, generators: list[str] | None = None, count: i
         raise SimError(f"--detail must be 1..8, got {detail}")
     if cell < 16:  # smaller cells leave no room for a body under its label
         raise SimError(f"--cell must be >= 16 pixels, got {cell}")
-    out = Path(out)
     label_h = 18
     sheet = Image.new("RGB", (count * cell, len(names) * (cell + label_h)), (0, 0, 0))
     draw = ImageDraw.Draw(sheet)
@@ -75,6 +76,6 @@ def contact_sheet(out: str | Path, generators: list[str] | None = None, count: i
                 bar.update(1)
     if bar is not None:
         bar.close()
-    out.parent.mkdir(parents=True, exist_ok=True)
+    make_parent(out)
     sheet.save(out, optimize=True)
     return out

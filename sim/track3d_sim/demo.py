@@ -21,7 +21,10 @@ __all__ = ["add_arguments", "run_demo", "pick_models"]
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="track3d-demo", help="output folder (default ./track3d-demo)")
-    p.add_argument("--preset", default="small", help="simulator preset for camera and scenes (default small)")
+    from .generate import PRESETS
+
+    p.add_argument("--preset", choices=sorted(PRESETS), default="small",
+                   help="simulator preset for camera and scenes (default small)")
     p.add_argument("--sequences", type=int, default=2, help="test sequences to simulate (default 2)")
     p.add_argument("--frames", type=int, default=40, help="frames per sequence (default 40)")
     p.add_argument("--threads", type=int, default=1, help="CPU threads of the models (default 1)")
@@ -85,9 +88,9 @@ def _simulate(data: Path, a) -> None:
                            f"(missing: {', '.join(missing)})")
     from .generate import generate, make_settings
 
+    settings = make_settings(a.preset, a.seed, train=0, test=a.sequences, frames=a.frames)  # checked, then said
     print(f"[demo] simulating {a.sequences} test sequence(s) x {a.frames} frames ({a.preset} preset) "
           f"into {data} ...", file=sys.stderr)
-    settings = make_settings(a.preset, a.seed, train=0, test=a.sequences, frames=a.frames)
     generate(settings, data, workers=1, progress=not a.quiet)
 
 

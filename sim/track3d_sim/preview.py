@@ -6,30 +6,54 @@ the camera (its 8 corners, edges drawn). Yellow frame number; 'ABSENT' / 'CUT' f
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
 
 from .errors import SimError
+from .outfile import check_out, make_parent
 
 _EDGES = [(0, 1), (1, 3), (3, 2), (2, 0), (4, 5), (5, 7), (7, 6), (6, 4), (0, 4), (1, 5), (2, 6), (3, 7)]
 
 
 def _open_sequence(path: Path):
-    from track3d.camera import Camera
-    from track3d.dataset import DATASET_JSON, DatasetError, Sequence
-    path = Path(path)
+    """The sequence at `path` (absolute or relative, "." too) of a dataset two levels up; a dataset
+    root, a split folder or a folder outside any dataset is a one-line SimError saying which."""
+    from track3d.dataset import DATASET_JSON, Dataset, DatasetError, Sequence
+    given = Path(path)
+    path = Path(os.path.abspath(given))  # "0001" or "." from inside a dataset: its parents are real
+    if not path.is_dir():
+        raise SimError(f"sequence folder {given} does not exist")
+    if (path / DATASET_JSON).is_file():
+        raise SimError(f"{given} is a dataset root, not a sequence: pass a sequence folder, "
+                       f"e.g. {given / _first_sequence(path)}")
+    if (path.parent / DATASET_JSON).is_file():
+        first = next((d.name for d in sorted(path.iterdir()) if d.is_dir()), "0001")
+        raise SimError(f"{given} is a split folder, not a sequence: pass one of its sequence folders, "
+                       f"e.g. {given / first}")
     root = path.parent.parent
     if not (root / DATASET_JSON).is_file():
-        raise SimError(f"{path} is not a sequence of a dataset (no {DATASET_JSON} in {root})")
-    cam = Camera.from_dict(json.loads((root / DATASET_JSON).read_text())["camera"])
+        raise SimError(f"{given} is not a sequence of a dataset (no {DATASET_JSON} in {root})")
     try:
-        seq = Sequence(path, cam, path.parent.name)
+        data = Dataset(root)
+        # the user's spelling in messages, unless it has no folder name (".")
+        seq = Sequence(given if given.name == path.name else path, data.camera, path.parent.name,
+                       data.points_only or None)
     except DatasetError as e:
         raise SimError(str(e)) from None
     if seq.points_only:
-        raise SimError(f"{path} is points-only data (generated with --points-only): no images to show")
+        raise SimError(f"{given} is points-only data (generated with --points-only): no images to show")
     return seq
+
+
+def _first_sequence(root: Path) -> str:
+    """"test/0001": a sequence of the dataset at `root` to name in a message."""
+    try:
+        splits = json.loads((root / "dataset.json").read_text()).get("splits", {})
+        return next(f"{sp}/{names[0]}" for sp, names in splits.items() if names)
+    except Exception:  # an unreadable dataset.json: any example will do
+        return "test/0001"
 
 
 def draw_frame(seq, i: int, gain: float = 1.0, right: bool = False):
@@ -61,8 +85,8 @@ def draw_frame(seq, i: int, gain: float = 1.0, right: bool = False):
 
 def preview(sequence: str | Path, out: str | Path, n: int = 12, gain: float = 1.0, right: bool = False) -> Path:
     from PIL import Image, ImageDraw
+    out = check_out(out, "preview", (".png", ".jpg", ".jpeg", ".gif"))
     seq = _open_sequence(Path(sequence))
-    out = Path(out)
     N = len(seq)
     if N == 0:
         raise SimError(f"{sequence} has no frames")
@@ -72,10 +96,9 @@ def preview(sequence: str | Path, out: str | Path, n: int = 12, gain: float = 1.
         raise SimError(f"--gain must be a positive number, got {gain}")
     if out.suffix.lower() == ".gif":
         frames = [draw_frame(seq, i, gain, right) for i in range(N)]
+        make_parent(out)
         frames[0].save(out, save_all=True, append_images=frames[1:], duration=100, loop=0)
         return out
-    if out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
-        raise SimError(f"preview output must be .png, .jpg or .gif, got {out.name}")
     idx = np.unique(np.linspace(0, N - 1, max(1, min(n, N))).round().astype(int))
     tiles = [draw_frame(seq, int(i), gain, right) for i in idx]
     cols = min(4 if not right else 2, len(tiles))
@@ -88,6 +111,7 @@ def preview(sequence: str | Path, out: str | Path, n: int = 12, gain: float = 1.
     ImageDraw.Draw(sheet).text((4, 2), f"{seq.split}/{seq.name}: {m.get('fine_category')}  scene={m.get('scene')}  "
                                f"sun E={m.get('sun', {}).get('irradiance', 0):.2f} phase={m.get('sun', {}).get('phase_deg', 0):.0f}deg",
                                fill=(255, 255, 255))
+    make_parent(out)
     sheet.save(out)
     return out
 
@@ -95,6 +119,7 @@ def preview(sequence: str | Path, out: str | Path, n: int = 12, gain: float = 1.
 def export_ply(sequence: str | Path, frame: int, out: str | Path) -> Path:
     """Write the back-projected point cloud of a frame (left frame, metres) with the left image's
     colours as a binary little-endian PLY, for viewing in MeshLab / CloudCompare / Open3D."""
+    out = check_out(out, "point cloud (.ply)")
     seq = _open_sequence(Path(sequence))
     if not 1 <= frame <= len(seq):
         raise SimError(f"frame {frame} out of range 1..{len(seq)} of {sequence}")
@@ -110,7 +135,7 @@ def export_ply(sequence: str | Path, frame: int, out: str | Path) -> Path:
               f"comment track3d {seq.split}/{seq.name} frame {frame}, left camera frame, metres\n"
               f"element vertex {len(rec)}\nproperty float x\nproperty float y\nproperty float z\n"
               "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n")
-    out = Path(out)
+    make_parent(out)
     with open(out, "wb") as fh:
         fh.write(header.encode("ascii"))
         fh.write(rec.tobytes())

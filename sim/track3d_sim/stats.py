@@ -1,16 +1,29 @@
 """`track3d-sim stats`: the paper's Fig. 4 — size classes, box volumes, motion speeds, illumination."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 
 from .errors import SimError
+from .outfile import check_out, make_parent
+
+
+def image_suffixes() -> tuple[str, ...]:
+    """The file extensions matplotlib writes (".png", ".pdf", ".svg", ...): --out of `stats`."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    return tuple(f".{e}" for e in sorted(FigureCanvasAgg.get_supported_filetypes()))
 
 
 def collect(root: str | Path, split: str = "all") -> dict:
     from track3d import boxes
-    from track3d.dataset import Dataset, DatasetError
+    from track3d.dataset import DATASET_JSON, GT2D, LEFT_DIR, Dataset, DatasetError
+    r = Path(os.path.abspath(root))
+    if (r / GT2D).is_file() or (r / LEFT_DIR).is_dir():  # the runtime's message offers --sequence: stats has none
+        up = r.parent.parent
+        raise SimError(f"{root} is a sequence folder, not a dataset root: pass the folder holding {DATASET_JSON}"
+                       + (f" ({up})" if (up / DATASET_JSON).is_file() else ""))
     try:
         data = Dataset(root)
         splits = list(data.splits) if split == "all" else [split]
@@ -45,6 +58,7 @@ def plot_stats(root: str | Path, out: str | Path, split: str = "all") -> dict:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from track3d import boxes
+    out = check_out(out, "plot", image_suffixes())  # before reading the data, not after
     st = collect(root, split)
     fig, ax = plt.subplots(2, 2, figsize=(10, 7.5))
     nc = len(boxes.SIZE_TEMPLATES)
@@ -75,8 +89,9 @@ def plot_stats(root: str | Path, out: str | Path, split: str = "all") -> dict:
     ax2.set_ylabel("sequences", color="tab:red")
     ax[1, 1].legend(loc="upper right", fontsize=7)
     ax2.legend(loc="center right", fontsize=7)
-    fig.suptitle(f"{Path(root).name}: {st['n_seq']} sequences, {st['n_frames']} frames ({split})")
+    fig.suptitle(f"{Path(os.path.abspath(root)).name}: {st['n_seq']} sequences, {st['n_frames']} frames ({split})")
     fig.tight_layout()
+    make_parent(out)
     fig.savefig(out, dpi=90)
     plt.close(fig)
     return st
