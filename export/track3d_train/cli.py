@@ -1,11 +1,7 @@
 """`track3d-train`: train and export the networks (needs the `train` extra: torch, onnx).
 
-    track3d-train boxnet  ...   A3BoxNet (see `track3d-train boxnet --help`)
-    track3d-train siamfc  ...   SiamFC, faithful and edge variants
-    track3d-train --version
-    track3d-train quantize ...  int8 twins of the shipped models (see `track3d-train quantize --help`)
-    track3d-train edgetrack ... EdgeTrack, the fast edge 2D tracker
-    track3d-train recipe ...    the shipped models' training recipes, end to end (see `track3d-train recipe list`)
+usage: track3d-train COMMAND ...     (see track3d-train COMMAND --help)
+       track3d-train --version
 """
 from __future__ import annotations
 
@@ -26,6 +22,12 @@ COMMANDS = {
 EXTRA_MODULES = {"torch": "train", "onnx": "train", "tqdm": "train", "matplotlib": "train", "openvino": "openvino"}
 
 
+def help_text() -> str:
+    """The docstring's usage, then each command once, from COMMANDS (the one list of them)."""
+    rows = [f"  {name:10s}{text}" for name, (_, text) in COMMANDS.items()]
+    return "\n".join([__doc__.strip(), "", "commands:", *rows])
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "--version":
@@ -38,19 +40,14 @@ def main(argv: list[str] | None = None) -> int:
               f"(see track3d-train --help)", file=sys.stderr)
         return 2
     if not argv or argv[0] in ("-h", "--help"):
-        print(__doc__.strip())
-        for name, (_, text) in COMMANDS.items():
-            print(f"  {name:8s} {text}")
+        print(help_text())
         return 0 if argv else 2
-    from track3d.argparsing import exit_for_missing_extra
-    from track3d.dataset import DatasetError
-    from track3d.onnxmodel import ModelError
-    from track3d.trackers2d import TrackerUnavailable
+    from track3d.argparsing import USER_ERRORS, exit_for_missing_extra
 
     try:
         module = importlib.import_module(COMMANDS[argv[0]][0])
         return int(module.main(argv[1:]) or 0)
-    except (DatasetError, ModelError, TrackerUnavailable, FileNotFoundError, ValueError) as e:  # a user's mistake: one line
+    except USER_ERRORS as e:  # a user's mistake (a bad path, cache, dataset or model): one line
         print(f"track3d-train {argv[0]}: error: {e}", file=sys.stderr)
         return 2
     except ModuleNotFoundError as e:

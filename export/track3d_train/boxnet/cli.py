@@ -76,6 +76,7 @@ def _eval(a) -> int:
     import numpy as np
 
     from track3d.boxnet import A3BoxNetEstimator
+    from track3d.jsonable import jsonable, write_json
 
     from .data import PointCache
     from .evaluate import onnx_runner, oracle_metrics, predict
@@ -91,9 +92,9 @@ def _eval(a) -> int:
            "a3boxnet": oracle_metrics(pred, cache.field("gt3d"), cache.field("seq")),
            "baseline": oracle_metrics(cache.field("baseline"), cache.field("gt3d"), cache.field("seq")),
            "seconds": time.time() - t}
-    print(json.dumps(res, indent=1))
+    print(json.dumps(jsonable(res), indent=1))   # a missing number (nan) is null: JSON has no NaN
     if a.out:
-        Path(a.out).write_text(json.dumps(res, indent=1))
+        write_json(a.out, res)
     return 0
 
 
@@ -190,7 +191,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--model", required=True, help="ONNX model")
     v.add_argument("--cache", required=True, help="test .npz from `prepare --jitters 0`")
     v.add_argument("--all-boxes", action="store_true", help="also the jittered boxes of the cache")
-    v.add_argument("--num-points", type=bounded(int, 1), default=None, help="override N")
+    v.add_argument("--num-points", type=bounded(int, 1), default=None,
+                   help="N, the points sampled from each frustum as the model's input (default: the model's own, "
+                        "from its metadata)")
     v.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
     v.add_argument("--seed", type=bounded(int, 0), default=0, help="sampling seed")
     v.add_argument("--out", default=None, help="also write the result to this JSON file")

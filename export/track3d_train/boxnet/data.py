@@ -29,6 +29,7 @@ from track3d.boxnet import one_hot
 from track3d.size_coding import size_coding
 from track3d.dataset import GT2D, GT3D, META, Dataset
 
+from ..caches import load_npz, not_a_cache
 from ..onnx_meta import hash_files
 
 __all__ = ["JitterSpec", "jitter_box", "split_hash", "prepare_split", "PointCache", "BoxNetSamples"]
@@ -139,17 +140,41 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
     return out
 
 
+ITEM_FIELDS = ("gt3d", "baseline", "box2d", "category", "seq", "frame", "n_full", "jittered")
+
+
+def _read_cache(path: Path) -> dict:
+    """The arrays of a frustum cache, "info" decoded, checked against each other: a file that is
+    not a cache `prepare_split` wrote (missing, a folder, empty, truncated, another .npz or file)
+    is a CacheError (a ValueError: one line on the command line), whatever numpy would raise."""
+    kind, maker = "a frustum cache", "track3d-train boxnet prepare"
+    z = load_npz(path, kind, maker, ("info", "points", "offsets") + ITEM_FIELDS)
+    try:
+        info = json.loads(z["info"].tobytes().decode())
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        raise not_a_cache(path, kind, maker, "its info is not JSON") from None
+    if not isinstance(info, dict) or info.get("version") != CACHE_VERSION:
+        got = info.get("version") if isinstance(info, dict) else None
+        raise not_a_cache(path, kind, maker, f"cache version {got}, this track3d-train reads {CACHE_VERSION}")
+    z["info"] = info
+    n, pts, offs = len(z["gt3d"]), z["points"], z["offsets"]
+    if pts.ndim != 2 or pts.shape[1] != 3 or offs.shape != (n + 1,) or (n and int(offs[-1]) != len(pts)) \
+            or any(len(z[k]) != n for k in ITEM_FIELDS):
+        raise not_a_cache(path, kind, maker, "its arrays do not fit together: a damaged cache")
+    return z
+
+
 class PointCache:
     """A frustum cache (.npz) in memory: ``cache.points(i)`` -> (n_i, 3) float32."""
 
     def __init__(self, path: str | Path, indices: np.ndarray | None = None):
         self.path = Path(path)
-        z = np.load(self.path)
-        self.info: dict = json.loads(bytes(z["info"]).decode())
-        self._points = z["points"]
-        self._offsets = z["offsets"]
-        for k in ("gt3d", "baseline", "box2d", "category", "seq", "frame", "n_full", "jittered"):
-            setattr(self, k, z[k])
+        z = _read_cache(self.path)
+        self.info: dict = z.pop("info")
+        self._points = z.pop("points")
+        self._offsets = z.pop("offsets")
+        for k, v in z.items():
+            setattr(self, k, v)
         self.index = np.arange(len(self.gt3d)) if indices is None else np.asarray(indices, np.int64)
 
     @classmethod

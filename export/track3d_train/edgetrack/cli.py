@@ -1,11 +1,11 @@
-"""`track3d-train edgetrack prepare|train|export|eval|time`: the EdgeTrack pipeline.
+"""`track3d-train edgetrack prepare|train|export|eval|fit-threshold|time`: the EdgeTrack pipeline.
 
     track3d-train edgetrack prepare --data DATA --out CACHE
     track3d-train edgetrack train   --cache CACHE --out RUN --time-budget-min 180   # resumes from RUN/ckpt.pt
     track3d-train edgetrack export  --checkpoint RUN/ckpt.pt --out runtime/track3d/models/edgetrack --force
     track3d-train edgetrack eval    --model runtime/track3d/models/edgetrack --data DATA --split test --compare siamfc-edge
     track3d-train edgetrack time    --model runtime/track3d/models/edgetrack --pin
-    track3d-train edgetrack fit-threshold --model runtime/track3d/models/edgetrack --data data/engine-calib data/engine-calib2 \
+    track3d-train edgetrack fit-threshold --model runtime/track3d/models/edgetrack --data data/engine-calib data/engine-calib2 \\
         --split train --motion-grid 0,0.5,1,1.5 --write --force   # motion weight, lost threshold: held-out sequences
 
 The long-run recipe (resumable) is `track3d-train recipe run edgetrack-engine`;
@@ -71,7 +71,8 @@ def _export(a) -> int:
     ident = {k: ck.get(k) for k in ("train_data_hash", "train_data")}
     if ident["train_data_hash"] is None and a.cache:       # a checkpoint from before it recorded them
         from ..siamfc.data import cache_data_info
-        ident = cache_data_info(Path(a.cache) / "target")
+        from .data import MAKER
+        ident = cache_data_info(Path(a.cache) / "target", MAKER)
     if ident["train_data_hash"] is None:
         raise ValueError(f"{a.checkpoint} does not record its training data: give --cache (the run's cache folder)")
     data = a.data_note or ident["train_data"] or "track3d simulator train split"
@@ -96,11 +97,13 @@ def _eval(a) -> int:
     if a.model:
         specs.insert(0, TrackerSpec("edgetrack", "none", threads=a.threads, tracker_options={"model": a.model},
                                     name=f"model {Path(a.model).name}"))
+    from track3d.jsonable import jsonable, write_json
+
     rows = evaluate_2d(a.data, a.split, specs, max_sequences=a.max_sequences or None, quiet=a.quiet)
-    print(json.dumps(rows, indent=1))
+    print(json.dumps(jsonable(rows), indent=1))   # a missing number (nan) is null: JSON has no NaN
     if a.out:
         sequences = next(iter(rows.values()))["sequences"] if rows else 0
-        Path(a.out).write_text(json.dumps({"data_split": a.split, "sequences": sequences, "trackers": rows}, indent=1))
+        write_json(a.out, {"data_split": a.split, "sequences": sequences, "trackers": rows})
     return 0
 
 
@@ -247,7 +250,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--ckpt-every-min", type=bounded(float, above=0), default=3.0, help="minutes between atomic checkpoints")
     t.add_argument("--seed", type=bounded(int, 0), default=0, help="random seed")
     t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
-    t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None, help="stop (and checkpoint) after this much training time")
+    t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None,
+                   help="stop (and checkpoint) after this many minutes of training, summed over resumed runs "
+                        "(default: none, only --max-steps)")
     t.add_argument("--init-from", help="start from another run's checkpoint (fine-tuning)")
     t.add_argument("--border-cut", type=bounded(float, low=0.0, high=1.0), default=0.0,
                    help="share of target pairs cut at a simulated image border (slivers of a body leaving "

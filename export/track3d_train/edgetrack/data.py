@@ -29,6 +29,7 @@ import numpy as np
 from track3d.edgetrack import pad_colour
 from track3d.siamfc import crop_square
 
+from ..caches import load_npy, not_a_cache
 from ..siamfc.data import CropCache, build_cache, sequences_from_dataset, synthetic_sequences
 
 __all__ = ["prepare", "PairSampler", "CropCache", "CACHE_SIZE", "PAD", "load_background", "cut_at_border"]
@@ -118,9 +119,19 @@ def prepare(out_dir, data=None, split: str = "train", synthetic: int = 0, synthe
     return {"target_crops": nt, "background_crops": nb}
 
 
+MAKER = "track3d-train edgetrack prepare"   # the command that writes the caches (named in errors)
+
+
 def load_background(cache_dir) -> np.ndarray:
+    """The background crops (N, S, S, 3) uint8 of a cache (none if it has no background/bg.npy);
+    a bg.npy that is not such an array is a CacheError."""
     p = Path(cache_dir) / "background" / "bg.npy"
-    return np.load(p, mmap_mode="r") if p.is_file() else np.zeros((0, 256, 256, 3), np.uint8)
+    if not p.exists():
+        return np.zeros((0, 256, 256, 3), np.uint8)
+    bg = load_npy(p, "a background crop array", MAKER, mmap_mode="r")
+    if bg.ndim != 4 or bg.shape[3] != 3 or bg.dtype != np.uint8:
+        raise not_a_cache(p, "a background crop array", MAKER, f"a {bg.dtype} array of shape {bg.shape}")
+    return bg
 
 
 # Of the border cuts, this share puts the line before the target (it has just left the view:

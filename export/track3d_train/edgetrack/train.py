@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .data import CropCache, PairSampler, load_background
+from .data import MAKER, CropCache, PairSampler, load_background
 from .model import EdgeTrack, EdgeTrackConfig, cell_centres, edgetrack_loss
 
 __all__ = ["train", "load_checkpoint", "validate", "fit_platt", "plot_curves"]
@@ -165,7 +165,7 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
     if ck is not None:   # the run's own architecture, calibration and sampling, whatever the caller's defaults
         cfg = EdgeTrackConfig.from_dict(ck["config"])
         border_cut = float(ck.get("border_cut", 0.0))
-    cache = CropCache(Path(cache_dir) / "target")
+    cache = CropCache(Path(cache_dir) / "target", maker=MAKER)
     bg = load_background(cache_dir)
     nseq = len(cache.index["sequences"])
     nval = min(val_sequences, max(0, nseq - 1))
@@ -205,7 +205,7 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
             log_path.unlink()
 
     from ..siamfc.data import cache_data_info
-    data_info = cache_data_info(Path(cache_dir) / "target")   # the training data's identity, for the export
+    data_info = cache_data_info(Path(cache_dir) / "target", MAKER)   # the training data's identity, for the export
 
     def checkpoint(elapsed):
         _save(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,

@@ -112,12 +112,14 @@ def _export(a) -> int:
 def _eval(a) -> int:
     """One pass of the model through the runtime's evaluation toolkit (2D only)."""
     from track3d.evaluation import TrackerSpec, evaluate_2d
+    from track3d.jsonable import jsonable
 
     over = {k: getattr(a, k) for k in ("instance_size", "scale_num", "window_influence", "scale_lr")
             if getattr(a, k) is not None}
     spec = TrackerSpec("siamfc-edge", "none", threads=a.threads, tracker_options={"model": a.model, **over},
                        name="model")
-    print(json.dumps(evaluate_2d(a.data, a.split, [spec], max_sequences=a.max_sequences or None)["model"], indent=1))
+    row = evaluate_2d(a.data, a.split, [spec], max_sequences=a.max_sequences or None)["model"]
+    print(json.dumps(jsonable(row), indent=1))   # a missing number (nan) is null: JSON has no NaN
     return 0
 
 
@@ -143,8 +145,10 @@ def build_parser() -> argparse.ArgumentParser:
     for name, fn, hlp in (("train", _train, "train (resumes from <out>/ckpt.pt)"),):
         t = sub.add_parser(name, help=hlp)
         t.add_argument("--variant", choices=["faithful", "edge"], default="edge", help="network variant")
-        t.add_argument("--width", type=bounded(float, above=0), default=None, help="override the width multiplier")
-        t.add_argument("--train-instance-size", type=bounded(int, 1), default=None, help="search crop size in training")
+        t.add_argument("--width", type=bounded(float, above=0), default=None,
+                       help="channel width multiplier (default: the variant's, 0.25 for edge, 1.0 for faithful)")
+        t.add_argument("--train-instance-size", type=bounded(int, 1), default=None,
+                       help="search crop size in training (default: 239, SiamFC's 255 - 2 x 8)")
         t.add_argument("--cache", required=True, help="cache folder from `prepare`")
         t.add_argument("--out", required=True, help="run folder: ckpt.pt, log.jsonl, loss.png")
         t.add_argument("--max-steps", dest="steps", type=bounded(int, 1), default=2000,
@@ -156,7 +160,9 @@ def build_parser() -> argparse.ArgumentParser:
         t.add_argument("--max-gap", type=bounded(int, 1), default=50, help="max frame gap of a pair")
         t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
         t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
-        t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None, help="stop (and checkpoint) after this")
+        t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None,
+                       help="stop (and checkpoint) after this many minutes of training (default: none, "
+                            "only --max-steps)")
         t.add_argument("--init-from", help="start from another run's checkpoint (fine-tuning)")
         t.add_argument("--no-resume", action="store_true", help="start over even if <out>/ckpt.pt exists")
         t.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -17,9 +17,12 @@ import numpy as np
 
 from track3d.siamfc import crop_square
 
+from ..caches import load_npy, not_a_cache, read_json
+
 __all__ = ["CropCache", "build_cache", "sequences_from_dataset", "synthetic_sequences", "PairSampler"]
 
 CACHE_SIZE = 255
+MAKER = "track3d-train siamfc prepare"   # the command that writes the caches (named in errors)
 
 
 def _usable(box, absent, min_side=4.0):
@@ -106,22 +109,38 @@ def build_cache(sequences, out_dir, exemplar_size: int = 127, cache_size: int = 
     return out
 
 
-def cache_data_info(cache_dir) -> dict:
+def cache_data_info(cache_dir, maker: str = MAKER) -> dict:
     """{"train_data_hash", "train_data"} of a crop cache: the source data's hash recorded by
     build_cache, else a sha256 of the cache's index.json (older caches)."""
     import hashlib
 
-    raw = (Path(cache_dir) / "index.json").read_bytes()
-    index = json.loads(raw)
+    p = Path(cache_dir) / "index.json"
+    index = read_json(p, "a crop cache index", maker)
+    raw = p.read_bytes()
     return {"train_data_hash": index.get("data_hash") or hashlib.sha256(raw).hexdigest(),
             "train_data": index.get("data_name")}
 
 
 class CropCache:
-    def __init__(self, path):
+    """A crop cache folder (crops.npy + index.json from `build_cache`). A path that is not one is a
+    CacheError (one line on the command line) naming `maker`, the command that makes it."""
+
+    def __init__(self, path, maker: str = MAKER):
         self.path = Path(path)
-        self.crops = np.load(self.path / "crops.npy", mmap_mode="r")
-        self.index = json.loads((self.path / "index.json").read_text())
+        kind = "a crop cache folder"
+        if not self.path.exists():
+            raise FileNotFoundError(f"{self.path} does not exist: give {kind} made by `{maker}`")
+        if not self.path.is_dir():
+            raise not_a_cache(self.path, kind, maker, "a file, not a folder")
+        for name in ("crops.npy", "index.json"):
+            if not (self.path / name).exists():
+                raise not_a_cache(self.path, kind, maker, f"no {name} in it")
+        self.crops = load_npy(self.path / "crops.npy", "a crop cache's crops.npy", maker, mmap_mode="r")
+        self.index = read_json(self.path / "index.json", "a crop cache index", maker,
+                               ("sequences", "seq", "frame", "size_in_crop"))
+        if self.crops.ndim != 4 or self.crops.shape[3] != 3 or self.crops.dtype != np.uint8 \
+                or not (len(self.crops) == len(self.index["seq"]) == len(self.index["frame"])):
+            raise not_a_cache(self.path, kind, maker, "crops.npy and index.json do not fit together: a damaged cache")
         self.seq = np.asarray(self.index["seq"], np.int64)
         self.frame = np.asarray(self.index["frame"], np.int64)
         self.by_seq = [np.nonzero(self.seq == s)[0] for s in range(len(self.index["sequences"]))]
@@ -141,6 +160,8 @@ class PairSampler:
         self.max_gap, self.stretch, self.shift = max_gap, stretch, shift
         self.rng = np.random.default_rng(seed)
         self.src = cache.crops.shape[1]
+        if not cache.by_seq:
+            raise ValueError(f"the crop cache {cache.path} has no sequence with two usable frames")
 
     def _warp(self, crop, out, shift):
         r = self.rng

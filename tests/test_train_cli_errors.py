@@ -1,0 +1,175 @@
+"""`track3d-train`'s user-facing errors and help (an audit's findings): a path given as a cache that
+is not one is one `error:` line naming the command that makes the right cache (never numpy's or
+zipfile's traceback, nor numpy's hint to load it "unsafely"); an eval report is valid JSON (a
+missing number is null); every flag's help says its default; the top-level help lists each
+command once; the edgetrack help's example keeps its line continuation."""
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+
+from track3d.onnxmodel import MODELS_DIR  # noqa: E402
+from track3d_train.cli import COMMANDS  # noqa: E402
+from track3d_train.cli import main as train_main  # noqa: E402
+
+BOXNET_MODEL = str(MODELS_DIR / "a3boxnet_narrow.onnx")
+
+
+def _one_line(capsys, *needles) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert "error: " in err[0] and "allow_pickle" not in err[0], err
+    for n in needles:
+        assert n in err[0], err
+    return err[0]
+
+
+def _not_a_frustum_cache(tmp_path, kind: str):
+    """A path that is not a frustum cache, of one kind the audit found."""
+    p = tmp_path / f"{kind}.npz"
+    if kind == "empty":
+        p.write_bytes(b"")
+    elif kind == "truncated":
+        np.savez(p, points=np.zeros((500, 3), np.float32), offsets=np.arange(3))
+        p.write_bytes(p.read_bytes()[: p.stat().st_size // 2])
+    elif kind == "no-info":
+        np.savez(p, a=np.zeros(3))
+    elif kind == "folder":
+        p.mkdir()
+    elif kind == "garbage":
+        p.write_bytes(b"not a cache at all\n" * 20)
+    return p
+
+
+KINDS = {"empty": "an empty file", "truncated": "not a complete .npz archive",
+         "no-info": "without info", "folder": "a folder", "garbage": "not a complete .npz archive"}
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_boxnet_eval_and_train_name_a_file_that_is_not_a_frustum_cache(tmp_path, capsys, kind):
+    bad = _not_a_frustum_cache(tmp_path, kind)
+    assert train_main(["boxnet", "eval", "--model", BOXNET_MODEL, "--cache", str(bad)]) == 2
+    _one_line(capsys, f"{bad} is not a frustum cache made by `track3d-train boxnet prepare`", KINDS[kind])
+    assert train_main(["boxnet", "train", "--cache", str(bad), "--out", str(tmp_path / "run"), "--quiet"]) == 2
+    _one_line(capsys, f"{bad} is not a frustum cache made by `track3d-train boxnet prepare`", KINDS[kind])
+
+
+def test_a_frustum_cache_from_prepare_reads_and_a_damaged_one_is_named(tmp_path, capsys):
+    from track3d.synthetic import make_synthetic_dataset
+    from track3d_train.boxnet.data import PointCache, prepare_split
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 3})
+    good = prepare_split(root, "test", tmp_path / "c.npz", jitters=0, min_points=4, progress=False)
+    c = PointCache(good)
+    assert len(c) > 0 and c.info["split"] == "test" and c.points(0).shape[1] == 3
+    z = dict(np.load(good))
+    np.savez(tmp_path / "short.npz", **{**z, "gt3d": z["gt3d"][:-1]})   # arrays that do not fit together
+    info = json.loads(z["info"].tobytes())
+    np.savez(tmp_path / "v9.npz", **{**z, "info": np.frombuffer(json.dumps({**info, "version": 9}).encode(), np.uint8)})
+    for name, why in (("short.npz", "do not fit together"), ("v9.npz", "cache version 9")):
+        assert train_main(["boxnet", "eval", "--model", BOXNET_MODEL, "--cache", str(tmp_path / name)]) == 2
+        _one_line(capsys, "is not a frustum cache made by `track3d-train boxnet prepare`", why)
+
+
+def test_siamfc_and_edgetrack_train_name_a_path_that_is_not_a_crop_cache(tmp_path, capsys):
+    from track3d_train.siamfc.data import build_cache, synthetic_sequences
+
+    garbage = tmp_path / "garbage.npz"
+    garbage.write_bytes(b"not a cache at all\n" * 20)
+    run = ["--out", str(tmp_path / "run"), "--max-steps", "1", "--quiet"]
+    # a file where the cache folder belongs: NotADirectoryError's traceback before
+    assert train_main(["siamfc", "train", "--cache", str(garbage), *run]) == 2
+    _one_line(capsys, f"{garbage} is not a crop cache folder made by `track3d-train siamfc prepare`", "a file")
+    # a crops.npy that is no array: numpy's allow_pickle hint before
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "crops.npy").write_bytes(b"junk\n")
+    (bad / "index.json").write_text("{}")
+    assert train_main(["siamfc", "train", "--cache", str(bad), *run]) == 2
+    _one_line(capsys, "crops.npy is not a crop cache's crops.npy made by `track3d-train siamfc prepare`")
+    # EdgeTrack: an index without the cache's keys (a KeyError traceback before), a damaged background
+    cache = tmp_path / "et"
+    build_cache(synthetic_sequences(1, frames=3, seed=0, h=48, w=64), cache / "target", cache_size=64,
+                exemplar_size=32, progress=False)
+    index = (cache / "target" / "index.json").read_text()
+    (cache / "target" / "index.json").write_text(json.dumps({"cache_size": 64}))
+    assert train_main(["edgetrack", "train", "--cache", str(cache), *run]) == 2
+    _one_line(capsys, "is not a crop cache index made by `track3d-train edgetrack prepare`", "no sequences")
+    (cache / "target" / "index.json").write_text(index)
+    (cache / "background").mkdir()
+    (cache / "background" / "bg.npy").write_bytes(b"")
+    assert train_main(["edgetrack", "train", "--cache", str(cache), *run]) == 2
+    _one_line(capsys, "bg.npy is not a background crop array made by `track3d-train edgetrack prepare`",
+              "an empty file")
+
+
+def _strict_json(text: str):
+    def no_constant(c):
+        raise AssertionError(f"{c} in JSON")
+    return json.loads(text, parse_constant=no_constant)
+
+
+def test_edgetrack_eval_writes_valid_json_with_null_for_a_missing_number(tmp_path, capsys):
+    from track3d.synthetic import make_synthetic_dataset
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 3})   # no absent frame: lost precision undefined
+    out = tmp_path / "x.json"
+    assert train_main(["edgetrack", "eval", "--model", str(MODELS_DIR / "edgetrack"), "--data", str(root),
+                       "--split", "test", "--out", str(out), "--quiet"]) == 0
+    printed = _strict_json(capsys.readouterr().out)
+    report = _strict_json(out.read_text())
+    row = next(iter(report["trackers"].values()))
+    assert row["lost_precision"] is None and 0 <= row["ao_2d"] <= 1
+    assert next(iter(printed.values()))["lost_precision"] is None
+
+
+def _help(capsys, argv) -> str:
+    with pytest.raises(SystemExit) as e:
+        train_main(argv)
+    assert e.value.code == 0
+    return capsys.readouterr().out
+
+
+def _flag_help(text: str, flag: str) -> str:
+    """The help of `flag` in an argparse help text, on one line."""
+    m = re.search(rf"^  {re.escape(flag)}\b.*?(?=^  -|\Z)", text, re.M | re.S)
+    assert m, flag
+    return " ".join(m.group(0).split())
+
+
+def test_train_flags_say_their_defaults(capsys):
+    from track3d_train.siamfc.model import VARIANTS, SiamFCConfig
+
+    text = _help(capsys, ["siamfc", "train", "--help"])
+    width = _flag_help(text, "--width")
+    assert "default: the variant's" in width
+    for v in ("edge", "faithful"):
+        assert f"{VARIANTS[v]['width']} for {v}" in width
+    assert f"default: {SiamFCConfig().train_instance_size}" in _flag_help(text, "--train-instance-size")
+    assert "default: none" in _flag_help(text, "--time-budget-min")
+    text = _help(capsys, ["edgetrack", "train", "--help"])
+    assert "default: none" in _flag_help(text, "--time-budget-min")
+    num_points = _flag_help(_help(capsys, ["boxnet", "eval", "--help"]), "--num-points")
+    assert "override N" not in num_points and "points sampled from each frustum" in num_points
+    assert "default: the model's own" in num_points
+
+
+def test_top_level_help_lists_each_command_once(capsys):
+    assert train_main(["--help"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    rows = [ln.split()[0] for ln in lines if ln.startswith("  ") and ln.split()[0] in COMMANDS]
+    assert rows == list(COMMANDS)
+    for name in COMMANDS:
+        assert sum(bool(re.search(rf"\b{name}\b", ln)) for ln in lines) == 1, name
+    assert any("--version" in ln for ln in lines)
+
+
+def test_edgetrack_help_example_keeps_its_line_continuation(capsys):
+    text = _help(capsys, ["edgetrack", "--help"])
+    assert re.search(r"data/engine-calib2 \\\n +--split train", text), text[:1500]
+    assert not re.search(r"\S {4,}--split", text)
