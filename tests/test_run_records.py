@@ -237,3 +237,20 @@ def test_eval_folder_mistakes_are_one_line(synth, tmp_path, capsys, what):
     assert len(err) == 1 and expect in err[0], err
     if what == "out_is_a_file":
         assert rep.read_text() == "mine"
+
+
+def test_a_reused_report_folder_keeps_no_stale_plots(synth, tmp_path):
+    """`eval --out` reused for fewer sequences (or --no-plots) left the old plots beside the new
+    report.json; files of the user's in that folder stay."""
+    pytest.importorskip("matplotlib")
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert _track(synth, res, "--tracker", "oracle") == 0
+    base = ["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--quiet"]
+    assert main(base) == 0
+    assert (rep / "trajectory_b.png").is_file()
+    (rep / "mine.png").write_bytes(b"a user's file")
+    assert main(base + ["--sequence", "a"]) == 0
+    assert (rep / "trajectory_a.png").is_file() and not (rep / "trajectory_b.png").exists()
+    assert main(base + ["--no-plots"]) == 0
+    assert not list(rep.glob("trajectory_*.png")) and not (rep / "success_3d.png").exists()
+    assert (rep / "mine.png").read_bytes() == b"a user's file"
