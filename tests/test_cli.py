@@ -53,6 +53,7 @@ def test_trackers_lists_names(capsys):
     assert main(["trackers"]) == 0
     out = capsys.readouterr().out
     assert "kcf" in out and "oracle" in out and "baseline" in out
+    assert "nano needs the peer NanoTrack v2 models" in out and "TRACK3D_NANOTRACK_DIR" in out
 
 
 def test_demo_on_a_tiny_simulation(tmp_path, capsys):

@@ -327,10 +327,14 @@ def _cmd_eval(a) -> int:
 
 def _cmd_trackers(a) -> int:
     from .estimators import available_estimators
-    from .trackers2d import available_trackers
+    from .trackers2d import TRACKER_NEEDS, available_trackers
 
-    print("2D trackers:   " + ", ".join(available_trackers()))
+    names = available_trackers()
+    print("2D trackers:   " + ", ".join(names))
     print("3D estimators: " + ", ".join(available_estimators()))
+    for n in names:
+        if n in TRACKER_NEEDS:
+            print(f"  {n} needs {TRACKER_NEEDS[n]}")
     return 0
 
 

@@ -368,6 +368,10 @@ def _load_plugins() -> None:
     load_entry_points(TRACKER_GROUP, register_tracker)
 
 
+# what a registered tracker needs beyond the package (`track3d trackers` says it next to the names)
+TRACKER_NEEDS = {"nano": f"the peer NanoTrack v2 models (not shipped): set {NANOTRACK_ENV} to their folder"}
+
+
 def available_trackers() -> list[str]:
     """Registered tracker names, plug-ins included (some may still need model files to be built)."""
     _load_plugins()
