@@ -196,7 +196,7 @@ def test_track_cli_uses_the_recorded_range_and_the_measured_faces_unless_told_no
                  "--no-depth-range", "--name", "norange"]) == 0
     assert main(["track", "--data", str(root), "--tracker", "oracle", "--results", str(res), "--quiet",
                  "--no-measured-faces", "--name", "nofront"]) == 0
-    rec = read_run_record(res, "test", "oracle+baseline")
+    rec = read_run_record(res, "test", "oracle+a3boxnet")   # the default estimator
     assert rec["track3d"]["options"]["depth_range_m"] == 30.0 and rec["track3d"]["options"]["measured_faces"] is True
     assert read_run_record(res, "test", "norange")["track3d"]["options"]["depth_range_m"] is None
     assert read_run_record(res, "test", "nofront")["track3d"]["options"]["measured_faces"] is False
