@@ -438,10 +438,17 @@ def test_hold_cut_extent_hand_cases():
     np.testing.assert_allclose(hold_cut_extent(b, bounds, (True, False, False, False),
                                                [0.0, 2.0, 10.0, 1.4, 2.0, 5.0], 0.8),
                                [1.1, 2.2, 10.5, 1.2, 2.0, 3.0])
-    # an axis open on both sides (a body larger than the view) is kept; so is a closed axis wider
-    # than its whole extent
+    # an axis open on both sides (a body larger than the view) whose returns are a part of it
+    # (1.2 < 0.8 x 3): the whole 3 m about the whole view's middle moved the least to hold the
+    # returns (0 -> 0.2: x -1.3..1.7), the depth as for any part (front 7.5, back 12.5); a closed
+    # axis wider than its whole extent is kept (y). Before, the view's span was reported (a body
+    # filling the view at close approach shrank to the view, AO_3d 0.51 on such a sequence)
     np.testing.assert_allclose(hold_cut_extent(b, bounds, (True, False, True, False),
-                                               [0.0, 2.0, 10.0, 3.0, 1.0, 5.0], 0.8), b)
+                                               [0.0, 2.0, 10.0, 3.0, 1.0, 5.0], 0.8),
+                               [0.2, 2.2, 10.0, 3.0, 1.4, 5.0])
+    # ... and one whose returns span at least `below` of the whole (1.2 >= 0.8 x 1.4) is kept
+    np.testing.assert_allclose(hold_cut_extent(b, bounds, (True, False, True, False),
+                                               [0.0, 2.0, 10.0, 1.4, 1.0, 5.0], 0.8), b)
     # below = 1: a cut axis is held whenever it spans less than the whole; a whole view behind
     # the returns and shallower than the box moves neither face (front 9, back 12)
     np.testing.assert_allclose(hold_cut_extent(b, bounds, (False, True, False, False),

@@ -254,3 +254,37 @@ def test_a_reused_report_folder_keeps_no_stale_plots(synth, tmp_path):
     assert main(base + ["--no-plots"]) == 0
     assert not list(rep.glob("trajectory_*.png")) and not (rep / "success_3d.png").exists()
     assert (rep / "mine.png").read_bytes() == b"a user's file"
+
+
+def test_worst_sequences_hand_case():
+    from types import SimpleNamespace as S
+
+    from track3d.evaluation.plots import worst_sequences
+
+    def run(*ao):
+        return [S(name=f"s{i}", frames=0 if a is None else 5, ao_3d=a, ao_2d=0.5, two_d_only=False)
+                for i, a in enumerate(ao)]
+    # means over the runs: s0 0.75, s1 0.25, s2 0.5 (one run without scored frames), s3 0.25
+    scores = {"x": run(0.75, 0.25, None, 0.5), "y": run(0.75, 0.25, 0.5, 0.0)}
+    assert worst_sequences(scores, 3) == ["s1", "s3", "s2"]          # a tie keeps the split's order
+    assert worst_sequences(scores, 0) == [] and worst_sequences({}, 2) == []
+    two_d = {"x": [S(name="a", frames=3, ao_3d=float("nan"), ao_2d=0.9, two_d_only=True),
+                   S(name="b", frames=3, ao_3d=float("nan"), ao_2d=0.1, two_d_only=True)]}
+    assert worst_sequences(two_d, 1) == ["b"]                          # 2D-only runs: by AO_2d
+
+
+def test_eval_plots_the_worst_sequences_and_ao_per_sequence(synth, tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert _track(synth, res, "--tracker", "oracle") == 0
+    # make b the worst: its 3D boxes far off
+    f = res / "test" / "oracle+baseline" / "b" / "b_3d_001.txt"
+    boxes = np.loadtxt(f, delimiter=",")
+    boxes[1:, :3] += 5.0
+    np.savetxt(f, boxes, delimiter=",", fmt="%.6f")
+    base = ["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--quiet", "--trajectories", "1"]
+    assert main(base) == 0
+    assert (rep / "sequences.png").is_file() and (rep / "trajectory_b.png").is_file()
+    assert not (rep / "trajectory_a.png").exists()
+    assert main(base + ["--trajectories-of", "first"]) == 0
+    assert (rep / "trajectory_a.png").is_file() and not (rep / "trajectory_b.png").exists()

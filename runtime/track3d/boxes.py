@@ -199,7 +199,9 @@ def hold_cut_extent(box3d: np.ndarray, bounds: np.ndarray, open_sides: tuple[boo
     body's). When an axis is such a part, the nearest part of the body may be out of view too:
     the front face is the nearer of the returns' and the whole view's, and the box reaches back
     at least the whole depth from it. An axis open on both sides (a body larger than the view)
-    keeps box3d's. Bounds that are not finite change nothing."""
+    whose returns span less than `below` x its whole extent is such a part too: the whole extent
+    about the whole view's middle moved the least to hold the returns. Bounds that are not finite
+    change nothing."""
     b = np.array(box3d, dtype=np.float64).reshape(6)
     lo, hi = (np.asarray(v, dtype=np.float64).reshape(3) for v in bounds)
     whole = np.asarray(whole_box, dtype=np.float64).reshape(6)
@@ -207,11 +209,16 @@ def hold_cut_extent(box3d: np.ndarray, bounds: np.ndarray, open_sides: tuple[boo
         return b
     size = whole[3:]
     opens = [(bool(open_sides[k]), bool(open_sides[2 + k])) for k in (0, 1)]
-    # an axis open on one side whose returns are a part of the body's whole extent
-    cut = [(o0 != o1) and hi[k] - lo[k] < below * size[k] for k, (o0, o1) in enumerate(opens)]
+    # an open axis whose returns are a part of the body's whole extent
+    cut = [(o0 or o1) and hi[k] - lo[k] < below * size[k] for k, (o0, o1) in enumerate(opens)]
     part = any(cut)
     for k, (o0, o1) in enumerate(opens):
-        if cut[k]:
+        if cut[k] and o0 and o1:
+            # a body larger than the view: the whole extent about the whole view's middle moved
+            # the least to hold the returns (the view's middle is not the body's)
+            c = min(max(whole[k], hi[k] - size[k] / 2.0), lo[k] + size[k] / 2.0)
+            a0, a1 = c - size[k] / 2.0, c + size[k] / 2.0
+        elif cut[k]:
             a0, a1 = (min(lo[k], hi[k] - size[k]), hi[k]) if o0 else (lo[k], max(hi[k], lo[k] + size[k]))
         elif o0 or o1:
             continue

@@ -149,7 +149,11 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--trackers", nargs="+", help="result names to compare (default: all in the folder)")
     e.add_argument("--out", default="reports", help="report folder (default ./reports)")
     e.add_argument("--no-plots", action="store_true", help="skip the plots (no matplotlib needed)")
-    e.add_argument("--trajectories", type=bounded(int, 0), default=4, help="sequences with a 3D trajectory plot")
+    e.add_argument("--trajectories", type=bounded(int, 0), default=4,
+                   help="sequences with a 3D trajectory plot: the worst ones, lowest AO_3d averaged over the "
+                        "compared runs (default 4)")
+    e.add_argument("--trajectories-of", choices=("worst", "first"), default="worst",
+                   help="which sequences get trajectory plots: the worst (default) or the split's first")
 
     # The demo simulates its data, so it lives with the simulator (`track3d-sim demo`): the
     # runtime never imports the simulator. This entry only says where it went.
@@ -312,7 +316,8 @@ def _cmd_eval(a) -> int:
             notes.append(f"scored {len(have)} of the split's {len(exp.sequences)} sequences (those every "
                          f"compared run has; --sequence to choose)")
         exp.sequences = have
-    report = exp.report(names, plots=not a.no_plots, trajectories=a.trajectories)
+    report = exp.report(names, plots=not a.no_plots, trajectories=a.trajectories,
+                        worst_first=a.trajectories_of == "worst")
     if notes:   # into report.json as well
         report["warnings"] = notes + report.get("warnings", [])
         write_json(Path(a.out) / "report.json", report)

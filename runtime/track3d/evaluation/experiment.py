@@ -483,8 +483,10 @@ class Experiment:
             rows.append(res.stage_ms[res.tracked])
         return np.concatenate(rows) if rows else np.zeros((0, len(STAGES)))
 
-    def report(self, names: list[str], plots: bool = True, trajectories: int = 4) -> dict:
-        """Scores, report.json and plots (success/precision curves, 3D trajectories) in report_dir.
+    def report(self, names: list[str], plots: bool = True, trajectories: int = 4, worst_first: bool = True) -> dict:
+        """Scores, report.json and plots (success/precision curves, AO per sequence, 3D trajectories
+        of `trajectories` sequences: the worst ones, lowest mean AO over the runs, unless
+        `worst_first` is False, then the first ones) in report_dir.
         Each tracker's "lost" holds how its status "lost" matched the absent frames (score_lost:
         from each sequence's first initialisation on; precision / recall also in "overall")."""
         self.report_dir.mkdir(parents=True, exist_ok=True)
@@ -500,8 +502,10 @@ class Experiment:
         runs = {n: read_run_record(self.result_dir, self.split, n) for n in names}
         label_warnings = [w for n in names for w in self.check_labels(n)]
         lengths = {}
+        per_sequence = {}
         for name in names:
             scores = self.score(name)
+            per_sequence[name] = scores
             ov = average_scores(scores)
             overall[name] = ov
             lengths[name] = {seq.name: len(self._read(name, seq)) for seq in self.sequences}
@@ -527,7 +531,9 @@ class Experiment:
             from . import plots as P
 
             files = P.curve_plots(overall, self.report_dir)
-            seq_names = [s.name for s in self.sequences[:trajectories]]
+            files.append(P.sequence_plot(per_sequence, self.report_dir))
+            seq_names = P.worst_sequences(per_sequence, trajectories) if worst_first else \
+                [s.name for s in self.sequences[:trajectories]]
             files += P.trajectory_plots(self, names, seq_names, self.report_dir)
             report["plots"] = [str(f) for f in files]
         write_json(self.report_dir / "report.json", report)

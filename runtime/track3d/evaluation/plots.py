@@ -12,7 +12,7 @@ import numpy as np
 from .metrics import CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, OverallScore
 from .results import INIT, read_result
 
-__all__ = ["pyplot", "curve_plots", "trajectory_plot", "trajectory_plots"]
+__all__ = ["pyplot", "curve_plots", "trajectory_plot", "trajectory_plots", "sequence_plot", "worst_sequences"]
 
 
 def pyplot():
@@ -142,3 +142,55 @@ def trajectory_plots(exp, names: list[str], seq_names: list[str], out_dir: str |
         files.append(trajectory_plot(seq.gt3d[:n], tracks, Path(out_dir) / f"trajectory_{sn}.png",
                                      f"3D trajectory, sequence {sn}", seq.absent[:n], restarts))
     return files
+
+
+def _per_sequence_key(scores: dict[str, list]) -> str:
+    """"ao_3d" when some run has 3D scores, else "ao_2d" (2D-only runs)."""
+    return "ao_2d" if all(s.two_d_only for ss in scores.values() for s in ss) else "ao_3d"
+
+
+def worst_sequences(scores: dict[str, list], n: int) -> list[str]:
+    """The n sequence names with the lowest AO (3D, or 2D for 2D-only runs) averaged over the
+    compared runs (scores: run name -> its SequenceScore list, one per sequence, same order);
+    sequences without scored frames last; ties in sequence order."""
+    key = _per_sequence_key(scores)
+    runs = list(scores.values())
+    if not runs:
+        return []
+    names = [s.name for s in runs[0]]
+    mean = []
+    for i, name in enumerate(names):
+        v = [getattr(r[i], key) for r in runs if r[i].frames > 0]
+        v = [x for x in v if np.isfinite(x)]
+        mean.append(float(np.mean(v)) if v else np.inf)
+    order = sorted(range(len(names)), key=lambda i: (mean[i], i))
+    return [names[i] for i in order[:max(int(n), 0)]]
+
+
+def sequence_plot(scores: dict[str, list], out_dir: str | Path) -> Path:
+    """sequences.png: AO per sequence (3D, or 2D for 2D-only runs), one bar per run, the worst
+    sequence (lowest mean over the runs) at the top: where a person looks first."""
+    plt = pyplot()
+    key = _per_sequence_key(scores)
+    order = worst_sequences(scores, len(next(iter(scores.values()), [])))
+    colour = _colours(scores)
+    runs = sorted(scores)
+    rows = len(order)
+    h = 0.8 / max(len(runs), 1)
+    fig, ax = plt.subplots(figsize=(6, 1.0 + 0.28 * rows * max(1, len(runs) / 2)), dpi=100)
+    for k, name in enumerate(runs):
+        by = {s.name: s for s in scores[name]}
+        y = np.arange(rows) + (k - (len(runs) - 1) / 2) * h
+        v = [getattr(by[sn], key) if by[sn].frames > 0 else np.nan for sn in order]
+        ax.barh(y, np.nan_to_num(v, nan=0.0), height=h, color=colour[name], label=name)
+    ax.set_yticks(np.arange(rows), order, fontsize=7)
+    ax.invert_yaxis()
+    ax.set(xlim=(0, 1), xlabel=f"AO_{key[3:]} per sequence", title="Sequences, worst first")
+    ax.grid(axis="x", alpha=0.3)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.08 - 0.4 / max(rows, 4)), ncol=2)
+    path = Path(out_dir) / "sequences.png"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
