@@ -97,12 +97,18 @@ def test_the_loop_boxes_a_body_past_the_range_from_the_image():
     gt2d = np.array([b2, b2])
     out = {}
     for rng in (None, 30.0):
-        t = Track3D(CAM, OracleTracker(gt2d), _CapBox(), depth_range_m=rng)
+        t = Track3D(CAM, OracleTracker(gt2d), _CapBox(), depth_range_m=rng, silhouette=0.0)
         t.init(img, b2)
         r = t.update(img, pts)
         assert r.status == TRACKING
         out[rng] = r
         assert t.describe()["options"]["depth_range_m"] == rng
+    # the returns' outline is the cap's: with the range known, the loop starts from the image's box
+    t = Track3D(CAM, OracleTracker(gt2d), _CapBox(), depth_range_m=30.0, silhouette=0.5)
+    t.init(img, b2)
+    r = t.update(img, pts)
+    np.testing.assert_array_equal(r.box3d, out[30.0].box3d)
+    np.testing.assert_array_equal(r.box2d, out[30.0].box2d)
     cap = box3d_from_points(pts[(np.abs(pts[:, 0]) < 10)])
     np.testing.assert_allclose(out[None].box3d, cap)
     lo = pts.min(axis=0)

@@ -48,6 +48,7 @@ from .estimators import BoxEstimator, create_estimator
 from .frames import MAX_COORD_M, check_category, check_image, check_init_box
 from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import fit_measured_faces, hold_cut_extent
+from .silhouette import silhouette_box
 from .fusion import WEIGHT_2D, WEIGHT_3D, fuse, fuse_section
 from .range_cut import (DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_from_view, deepen_to_view,
                         lateral_coverage, reaches_range)
@@ -250,12 +251,24 @@ def edge_pad_for(depth_sensor: str | None) -> float:
     return SENSOR_EDGE_PADS.get(_sensor_key(depth_sensor), EDGE_PAD)
 
 
+# The body's outline from the returns (track3d.silhouette): the 2D box the frustum, the box's
+# measured faces and the fusion start from is the bounding box of the connected returns that
+# overlap the 2D tracker's box, searched in that box grown by this fraction on each side (0: off).
+SILHOUETTE = 0.5
+SENSOR_SILHOUETTES = {"stereo": 0.0, "tof": 0.0}
+
+
+def silhouette_for(depth_sensor: str | None) -> float:
+    """The silhouette search growth for depth maps of this sensor (None: unknown, SILHOUETTE)."""
+    return SENSOR_SILHOUETTES.get(_sensor_key(depth_sensor), SILHOUETTE)
+
+
 def sensor_options(depth_sensor: str | None) -> dict:
     """Track3D's options chosen by the depth sensor (None: unknown): frustum_margin, weight_3d,
-    weight_2d, measured_faces, edge_pad (the five tables above)."""
+    weight_2d, measured_faces, edge_pad, silhouette (the six tables above)."""
     return {"frustum_margin": frustum_margin_for(depth_sensor), "weight_3d": fusion_weight_for(depth_sensor),
             "weight_2d": section_weight_for(depth_sensor), "measured_faces": measured_faces_for(depth_sensor),
-            "edge_pad": edge_pad_for(depth_sensor)}
+            "edge_pad": edge_pad_for(depth_sensor), "silhouette": silhouette_for(depth_sensor)}
 STATE_VERSION = 1
 
 
@@ -320,7 +333,7 @@ class Track3D:
                  weight_2d: float = WEIGHT_2D, measured_faces: bool = True,
                  depth_smoothing: float = DEPTH_SMOOTHING, evidence_points: int = EVIDENCE_POINTS,
                  reacquire_threshold: float | None = REACQUIRE_THRESHOLD, hold_cut_size: float = HOLD_CUT_SIZE,
-                 edge_pad: float = EDGE_PAD):
+                 edge_pad: float = EDGE_PAD, silhouette: float = SILHOUETTE):
         if not isinstance(camera, Camera):
             raise TypeError(f"camera must be a track3d.Camera, got {type(camera).__name__}")
         if not 0.0 <= float(weight_3d) <= 1.0:
@@ -361,6 +374,9 @@ class Track3D:
         if not (np.isfinite(float(edge_pad)) and 0.0 <= float(edge_pad) <= 10.0):
             raise ValueError(f"edge_pad must be in [0, 10] pixels (0: off), got {edge_pad}")
         self.edge_pad = float(edge_pad)
+        if not (np.isfinite(float(silhouette)) and 0.0 <= float(silhouette) <= 4.0):
+            raise ValueError(f"silhouette must be in [0, 4] (the search region's growth; 0: off), got {silhouette}")
+        self.silhouette = float(silhouette)
         self._pad = (self.edge_pad / camera.fx, self.edge_pad / camera.fy)
         self._whole_box: np.ndarray | None = None   # the reported box of the last whole view (6,)
         self._depth_ratio = float("nan")   # size z / mean(size x, y) of the last box within the depth range
@@ -626,7 +642,24 @@ class Track3D:
             ms["total"] = (time.perf_counter() - t0) * 1e3
             r = TrackResult(raw.copy(), raw.copy(), self.box3d.copy(), TRACKING, 0, ms, _tracker_score(self.tracker2d))
             return self._judge(r, estimated=False)
-        pts, bounds = self._frustum(points, raw)
+        seen, cloud = raw, points
+        if self.silhouette > 0.0 and not callable(points):
+            outline, near, region = silhouette_box(points, raw, self._M, self._size, self.z_range, self.silhouette)
+            if outline is not None:
+                seen = outline
+                # the frustum from the search region's returns when it holds the widened box (no
+                # second pass over the whole cloud)
+                grow = seen[2:] * self.frustum_margin / 2.0
+                if (seen[0] - grow[0] >= region[0] and seen[1] - grow[1] >= region[1]
+                        and seen[0] + seen[2] + grow[0] <= region[0] + region[2]
+                        and seen[1] + seen[3] + grow[1] <= region[1] + region[3]):
+                    cloud = near
+        pts, bounds = self._frustum(cloud, seen)
+        if seen is not raw and reaches_range(bounds, seen, self.camera, self.depth_range_m):
+            # returns stopped by the sensor's range outline a cap, not the body: the range cut
+            # (_reported_box) needs the image's box
+            seen = raw
+            pts, bounds = self._frustum(points, seen)
         t2 = time.perf_counter()
         ms["frustum"] = (t2 - t1) * 1e3
         est = self._estimate(pts, bounds)
@@ -634,12 +667,12 @@ class Track3D:
         if est is None:
             status = NO_POINTS
         else:
-            self.box3d = self._report(est, bounds, raw)
+            self.box3d = self._report(est, bounds, seen)
         t3 = time.perf_counter()
         ms["box3d"] = (t3 - t2) * 1e3
-        box = raw
+        box = seen
         if self.fusion and est is not None:
-            box = fuse(raw, est, self.camera, self.weight_3d)
+            box = fuse(seen, est, self.camera, self.weight_3d)
             if self._correct is not None:
                 self._correct(box)
         self.box2d = box.copy()
@@ -747,7 +780,8 @@ class Track3D:
                         "lost_after": self.lost_after, "min_score": self.min_score,
                         "evidence_points": self.evidence_points,
                         "reacquire_threshold": self.reacquire_threshold,
-                        "hold_cut_size": self.hold_cut_size, "edge_pad": self.edge_pad},
+                        "hold_cut_size": self.hold_cut_size, "edge_pad": self.edge_pad,
+                        "silhouette": self.silhouette},
             "models": models,
         }
 

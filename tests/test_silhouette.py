@@ -1,0 +1,99 @@
+"""The body's outline from the depth returns (track3d.silhouette) and its use in the loop."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from track3d.boxes import iou_2d
+from track3d.camera import Camera
+from track3d.silhouette import silhouette_box
+
+CAM = Camera.from_fov(160, 120, 45.0)
+
+
+def _cloud(mask: np.ndarray, z: float = 10.0) -> np.ndarray:
+    """(n, 3) float32 returns of the pixels set in `mask` (H, W), all at depth z."""
+    depth = np.where(mask, z, 0.0).astype(np.float32)
+    return CAM.backproject_depth(depth)
+
+
+def _box(points, box, grow=0.5):
+    return silhouette_box(points, np.asarray(box, float), CAM.M, (CAM.width, CAM.height), (0.1, 100.0), grow)[0]
+
+
+def test_a_body_wider_than_the_box_is_found_whole():
+    mask = np.zeros((120, 160), bool)
+    mask[40:70, 30:110] = True            # the body: pixels x 30..109, y 40..69
+    pts = _cloud(mask)
+    # the tracker boxed its left half: the outline is the whole body (pixel edges)
+    np.testing.assert_allclose(_box(pts, [30, 40, 40, 30], grow=1.0), [30, 40, 80, 30], atol=1e-3)
+    # the search region (the box grown by half its size on each side: x 10..90) bounds it
+    np.testing.assert_allclose(_box(pts, [30, 40, 40, 30]), [30, 40, 60, 30], atol=1e-3)
+    # a box off the body: nothing overlaps it, the caller keeps its box
+    assert _box(pts, [130, 90, 10, 10], grow=0.2) is None
+
+
+def test_a_separate_speck_is_left_out_and_a_sparse_grid_is_one_body():
+    mask = np.zeros((120, 160), bool)
+    mask[40:70, 30:90] = True
+    mask[45:51, 100:106] = True           # 6 x 6 returns apart from the body, inside the search region
+    np.testing.assert_allclose(_box(_cloud(mask), [40, 42, 50, 26]), [30, 40, 60, 30], atol=1e-3)
+    # a box holding a fair share of both (16% of its occupied cells the speck's): two parts
+    np.testing.assert_allclose(_box(_cloud(mask), [80, 40, 30, 30]), [65, 40, 41, 30], atol=1e-3)
+    # a flash LiDAR's returns every 4 pixels read as one body (centres x 30..106, y 40..68)
+    sparse = np.zeros((120, 160), bool)
+    sparse[40:70:4, 30:110:4] = True
+    np.testing.assert_allclose(_box(_cloud(sparse), [30, 40, 40, 30], grow=1.0), [30, 40, 77, 29], atol=1e-3)
+
+
+def test_returns_at_the_image_border_put_the_box_there():
+    mask = np.zeros((120, 160), bool)
+    mask[40:70, 2:60:4] = True            # a coarse grid's first column 2 px inside the border
+    np.testing.assert_allclose(_box(_cloud(mask), [10, 40, 30, 30], grow=1.0), [0, 40, 59, 30], atol=1e-3)
+
+
+def test_the_loop_reports_the_outline_not_the_trackers_half():
+    """A 2D tracker boxing part of the body (a bilobate body's one lobe) kept the loop's box on that
+    part: the frustum, the measured faces and the fusion all started from it."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import Track3D
+
+    class Half:
+        """A 2D tracker that always answers the left half of the body."""
+        def init(self, image, box):
+            pass
+
+        def update(self, image):
+            return True, np.array([30.0, 40.0, 40.0, 30.0])
+
+    mask = np.zeros((120, 160), bool)
+    mask[40:70, 30:110] = True
+    pts = _cloud(mask)
+    image = np.zeros((120, 160, 3), np.uint8)
+    truth = np.array([[30.0, 40.0, 80.0, 30.0]])
+    boxes = {}
+    for grow in (0.0, 1.0):
+        t = Track3D(CAM, Half(), create_estimator("baseline"), silhouette=grow)
+        t.init(image, [30, 40, 80, 30], points=pts)
+        boxes[grow] = t.update(image, pts).box2d
+    assert iou_2d(boxes[1.0][None], truth)[0] > 0.98 > 0.8 > iou_2d(boxes[0.0][None], truth)[0]
+
+
+def test_the_silhouette_option_is_checked_recorded_and_by_sensor(tmp_path):
+    from track3d.estimators import create_estimator
+    from track3d.evaluation import TrackerSpec
+    from track3d.tracker import SILHOUETTE, Track3D, sensor_options, silhouette_for
+    from track3d.trackers2d import create_tracker
+
+    assert silhouette_for("ideal") == silhouette_for("flash-lidar") == silhouette_for(None) == SILHOUETTE == 0.5
+    assert silhouette_for("stereo") == silhouette_for("ToF") == 0.0 and sensor_options("stereo")["silhouette"] == 0.0
+    for bad in (-0.1, 5.0, float("nan")):
+        with pytest.raises(ValueError, match="silhouette must be in"):
+            Track3D(CAM, create_tracker("kcf"), create_estimator("baseline"), silhouette=bad)
+    t = Track3D(CAM, create_tracker("kcf"), create_estimator("baseline"), silhouette=0.25)
+    assert t.describe()["options"]["silhouette"] == 0.25
+    from test_loop import _plain_and
+    a, b = _plain_and(tmp_path, {"name": "tof", "max_range_m": 30.0})
+    spec = TrackerSpec("oracle", "baseline")
+    assert spec.build(a).silhouette == 0.5 and spec.build(b).silhouette == 0.0
+    assert TrackerSpec("oracle", "baseline", silhouette=1.0).build(b).silhouette == 1.0
