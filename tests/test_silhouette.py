@@ -12,8 +12,10 @@ CAM = Camera.from_fov(160, 120, 45.0)
 
 
 def _cloud(mask: np.ndarray, z: float = 10.0) -> np.ndarray:
-    """(n, 3) float32 returns of the pixels set in `mask` (H, W), all at depth z."""
-    depth = np.where(mask, z, 0.0).astype(np.float32)
+    """(n, 3) float32 returns of the pixels set in `mask` (H, W), at depth z to z + 0.2 (a surface,
+    not a plane: a box estimator needs some depth)."""
+    rows, cols = np.indices(mask.shape)
+    depth = np.where(mask, z + 0.05 * ((rows + cols) % 5), 0.0).astype(np.float32)
     return CAM.backproject_depth(depth)
 
 
@@ -97,3 +99,45 @@ def test_the_silhouette_option_is_checked_recorded_and_by_sensor(tmp_path):
     spec = TrackerSpec("oracle", "baseline")
     assert spec.build(a).silhouette == 0.5 and spec.build(b).silhouette == 0.0
     assert TrackerSpec("oracle", "baseline", silhouette=1.0).build(b).silhouette == 1.0
+
+
+def test_find_body_hand_cases():
+    from track3d.silhouette import find_body
+
+    mask = np.zeros((120, 160), bool)
+    mask[40:70, 100:130] = True           # a body at x 100..129
+    mask[10:20, 10:20] = True             # a second one, smaller (10 x 10 of 30 x 30 cells' worth)
+    pts = _cloud(mask)
+
+    def find(near):
+        return find_body(pts, np.asarray(near, float), CAM.M, (CAM.width, CAM.height), (0.1, 100.0))
+    np.testing.assert_allclose(find([60, 40, 20, 20]), [100, 40, 30, 30], atol=1e-3)   # nearer the box
+    np.testing.assert_allclose(find([0, 0, 20, 20]), [10, 10, 10, 10], atol=1e-3)
+    assert find_body(np.zeros((0, 3), np.float32), np.array([0.0, 0, 10, 10]), CAM.M, (160, 120),
+                     (0.1, 100.0)) is None
+
+
+def test_the_loop_finds_a_body_the_2d_search_lost():
+    """A body swinging faster than the 2D search left the tracker's box on empty space: the loop
+    reported 'no_points' there until the body came back (SiamFC-edge, an engine test sequence:
+    AO_3d 0.03 one pass); the depth shows where it went."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import NO_POINTS, TRACKING, Track3D
+
+    class Stuck:
+        def init(self, image, box):
+            pass
+
+        def update(self, image):
+            return True, np.array([10.0, 40.0, 30.0, 30.0])
+
+    mask = np.zeros((120, 160), bool)
+    mask[40:70, 100:130] = True
+    pts = _cloud(mask)
+    image = np.zeros((120, 160, 3), np.uint8)
+    for grow, status in ((0.0, NO_POINTS), (0.5, TRACKING)):
+        t = Track3D(CAM, Stuck(), create_estimator("baseline"), silhouette=grow)
+        t.init(image, [100, 40, 30, 30], points=pts)
+        r = t.update(image, pts)
+        assert r.status == status
+    assert iou_2d(r.box2d[None], np.array([[100.0, 40, 30, 30]]))[0] > 0.98

@@ -19,7 +19,7 @@ import numpy as np
 
 from .frustum import extract_frustum
 
-__all__ = ["CELL_MIN_PX", "GRID_CELLS", "MIN_SHARE", "RASTER_POINTS", "silhouette_box"]
+__all__ = ["CELL_MIN_PX", "GRID_CELLS", "MIN_SHARE", "RASTER_POINTS", "silhouette_box", "find_body"]
 
 CELL_MIN_PX = 2.5     # pixels: a cell spans at least this (gaps of a coarse sensor grid close)
 GRID_CELLS = 96       # cells on the longer side of the search region at most (cost bound)
@@ -42,6 +42,64 @@ def _project(pts: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             (f(m[1, 0]) * x + f(m[1, 1]) * y + f(m[1, 2]) * z + f(m[1, 3])) / w)
 
 
+class _Raster:
+    """The returns of a search region (x, y, w, h) on a coarse grid, closed by one cell, labelled
+    into connected components (cv2, 8-connected)."""
+
+    def __init__(self, pts: np.ndarray, region: np.ndarray, M: np.ndarray):
+        self.u, self.v = _project(pts, M)
+        self.x0, self.y0 = float(region[0]), float(region[1])
+        self.cell = max(CELL_MIN_PX, max(float(region[2]), float(region[3])) / GRID_CELLS)
+        self.nx, self.ny = int(np.ceil(region[2] / self.cell)), int(np.ceil(region[3] / self.cell))
+        # every k-th return at most RASTER_POINTS of them: a dense depth map puts several returns
+        # in a cell, and the closing fills what the stride leaves out
+        k = max(1, -(-len(pts) // RASTER_POINTS))
+        occ = np.zeros(self.ny * self.nx, np.uint8)
+        occ[self._cells(self.u[::k], self.v[::k])] = 1
+        self.occ = occ.reshape(self.ny, self.nx)
+        closed = cv2.dilate(self.occ, np.ones((3, 3), np.uint8))
+        self.n, self.lab = cv2.connectedComponents(closed, connectivity=8)
+
+    def _cells(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        inv = np.float32(1.0 / self.cell)
+        cx = np.clip((u - np.float32(self.x0)) * inv, 0, self.nx - 1).astype(np.intp)
+        cy = np.clip((v - np.float32(self.y0)) * inv, 0, self.ny - 1).astype(np.intp)
+        return cy * self.nx + cx
+
+    def counts(self, box: np.ndarray | None = None) -> np.ndarray:
+        """(n,) occupied cells of each component (inside `box` [x, y, w, h] if given); 0: none."""
+        lab, occ = self.lab, self.occ
+        if box is not None:
+            x, y, w, h = (float(b) for b in box)
+            bx0, by0 = int(max((x - self.x0) / self.cell, 0)), int(max((y - self.y0) / self.cell, 0))
+            bx1 = int(min((x + w - self.x0) / self.cell, self.nx - 1))
+            by1 = int(min((y + h - self.y0) / self.cell, self.ny - 1))
+            lab, occ = lab[by0:by1 + 1, bx0:bx1 + 1], occ[by0:by1 + 1, bx0:bx1 + 1]
+        c = np.bincount((lab * occ).reshape(-1), minlength=self.n)
+        c[0] = 0
+        return c
+
+    def box(self, keep: np.ndarray, image_size: tuple[int, int]) -> np.ndarray | None:
+        """[x, y, w, h] of the returns in the components `keep` (n,) bool: their projections'
+        extent (pixel centres, half a pixel out), at the image border when within a cell of it."""
+        W, H = image_size
+        if keep[1:].all():   # every component (one, mostly): no per-point selection
+            us, vs = self.u, self.v
+        else:
+            sel = keep[self.lab.reshape(-1)[self._cells(self.u, self.v)]]
+            us, vs = self.u[sel], self.v[sel]
+        if not len(us):
+            return None
+        x0, y0 = float(us.min()) - 0.5, float(vs.min()) - 0.5
+        x1, y1 = float(us.max()) + 0.5, float(vs.max()) + 0.5
+        # a coarse sensor grid's outermost returns lie a few pixels inside the image border: the
+        # loop's open-side tests need the box at the border
+        c = self.cell
+        x0, y0 = (0.0 if x0 < c else x0), (0.0 if y0 < c else y0)
+        x1, y1 = (float(W) if x1 > W - c else x1), (float(H) if y1 > H - c else y1)
+        return np.array([x0, y0, x1 - x0, y1 - y0]) if x1 > x0 and y1 > y0 else None
+
+
 def silhouette_box(points: np.ndarray, box2d: np.ndarray, M: np.ndarray, image_size: tuple[int, int],
                    z_range: tuple[float, float], grow: float) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
     """(box (4,) float64 [x, y, w, h] or None, search points (n, 3) float32, search region (4,)).
@@ -49,9 +107,9 @@ def silhouette_box(points: np.ndarray, box2d: np.ndarray, M: np.ndarray, image_s
     points: the frame's cloud (N, 3) in the camera frame of M (3, 4); box2d: the 2D tracker's
     box; image_size (W, H); grow: the search region is box2d grown by this fraction of its width
     and height on each side (clipped to the image). None when no returns in the region overlap
-    box2d (the caller keeps its box). The search points (the frustum of the region, [x, y, w, h])
-    are returned so that the caller cuts its own frustum from them, not from the whole cloud again,
-    when its box lies in the region."""
+    box2d (the caller keeps its box, or looks in the whole view: `find_body`). The search points
+    (the frustum of the region, [x, y, w, h]) are returned so that the caller cuts its own
+    frustum from them, not from the whole cloud again, when its box lies in the region."""
     W, H = image_size
     x, y, w, h = (float(v) for v in box2d)
     gx0, gy0 = max(0.0, x - grow * w), max(0.0, y - grow * h)
@@ -60,43 +118,37 @@ def silhouette_box(points: np.ndarray, box2d: np.ndarray, M: np.ndarray, image_s
     pts = extract_frustum(points, region, M, *z_range)
     if len(pts) == 0 or region[2] <= 0 or region[3] <= 0:
         return None, pts, region
-    u, v = _project(pts, M)
-    cell = max(CELL_MIN_PX, max(region[2], region[3]) / GRID_CELLS)
-    nx, ny = int(np.ceil(region[2] / cell)), int(np.ceil(region[3] / cell))
-    inv = np.float32(1.0 / cell)
-    # the raster from every k-th return at most RASTER_POINTS of them: a dense depth map puts
-    # several returns in a cell, and the closing fills what the stride leaves out
-    k = max(1, -(-len(pts) // RASTER_POINTS))
-    cx = np.clip((u[::k] - np.float32(gx0)) * inv, 0, nx - 1).astype(np.intp)
-    cy = np.clip((v[::k] - np.float32(gy0)) * inv, 0, ny - 1).astype(np.intp)
-    flat = cy * nx + cx
-    occ = np.zeros(ny * nx, np.uint8)
-    occ[flat] = 1
-    closed = cv2.dilate(occ.reshape(ny, nx), np.ones((3, 3), np.uint8))
-    n, lab = cv2.connectedComponents(closed, connectivity=8)
-    # the tracker's box in cells: the components there are the body's (by their share of its cells)
-    bx0, by0 = int(max((x - gx0) / cell, 0)), int(max((y - gy0) / cell, 0))
-    bx1, by1 = int(min((x + w - gx0) / cell, nx - 1)), int(min((y + h - gy0) / cell, ny - 1))
-    inbox = lab[by0:by1 + 1, bx0:bx1 + 1] * occ.reshape(ny, nx)[by0:by1 + 1, bx0:bx1 + 1]   # occupied, not closed
-    counts = np.bincount(inbox.reshape(-1), minlength=n)
-    counts[0] = 0
+    r = _Raster(pts, region, M)
+    counts = r.counts(np.array([x, y, w, h]))
     total = int(counts.sum())
     if total == 0:
         return None, pts, region
-    keep = counts >= MIN_SHARE * total
-    if keep[1:].all():   # every component is the body's (one, mostly): no per-point selection
-        us, vs = u, v
-    else:   # every return's own cell (the raster's were every k-th)
-        ax = np.clip((u - np.float32(gx0)) * inv, 0, nx - 1).astype(np.intp)
-        ay = np.clip((v - np.float32(gy0)) * inv, 0, ny - 1).astype(np.intp)
-        sel = keep[lab.reshape(-1)[ay * nx + ax]]
-        us, vs = u[sel], v[sel]
-    x0, y0, x1, y1 = float(us.min()) - 0.5, float(vs.min()) - 0.5, float(us.max()) + 0.5, float(vs.max()) + 0.5
-    # returns within a cell of the image border: the body may go on past the view there, and a
-    # coarse sensor grid's outermost returns lie a few pixels inside it (the loop's open-side
-    # tests need the box at the border)
-    x0, y0 = (0.0 if x0 < cell else x0), (0.0 if y0 < cell else y0)
-    x1, y1 = (float(W) if x1 > W - cell else x1), (float(H) if y1 > H - cell else y1)
-    if x1 <= x0 or y1 <= y0:
-        return None, pts, region
-    return np.array([x0, y0, x1 - x0, y1 - y0]), pts, region
+    return r.box(counts >= MIN_SHARE * total, image_size), pts, region
+
+
+def find_body(points: np.ndarray, near: np.ndarray, M: np.ndarray, image_size: tuple[int, int],
+              z_range: tuple[float, float]) -> np.ndarray | None:
+    """The box [x, y, w, h] of the body in the whole view: of the connected returns holding at
+    least MIN_SHARE of the largest one's cells, the one nearest `near`'s centre (the last box);
+    None without returns. For a frame whose 2D box holds none: a range sensor in space sees
+    only bodies, so the body that left the tracker's search is found in the depth."""
+    W, H = image_size
+    region = np.array([0.0, 0.0, float(W), float(H)])
+    pts = extract_frustum(points, region, M, *z_range)
+    if len(pts) == 0:
+        return None
+    r = _Raster(pts, region, M)
+    counts = r.counts()
+    if counts.max() <= 0:
+        return None
+    big = np.nonzero(counts >= MIN_SHARE * counts.max())[0]
+    if len(big) > 1:   # the one nearest the last box: its cells' mean position
+        ys, xs = np.nonzero(r.occ)
+        lab = r.lab[ys, xs]
+        cx, cy = near[0] + near[2] / 2.0, near[1] + near[3] / 2.0
+        d = [np.hypot((xs[lab == c].mean() + 0.5) * r.cell - cx, (ys[lab == c].mean() + 0.5) * r.cell - cy)
+             for c in big]
+        big = big[[int(np.argmin(d))]]
+    keep = np.zeros(r.n, bool)
+    keep[big] = True
+    return r.box(keep, image_size)

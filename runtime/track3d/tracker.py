@@ -48,7 +48,7 @@ from .estimators import BoxEstimator, create_estimator
 from .frames import MAX_COORD_M, check_category, check_image, check_init_box
 from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import fit_measured_faces, hold_cut_extent
-from .silhouette import silhouette_box
+from .silhouette import find_body, silhouette_box
 from .fusion import WEIGHT_2D, WEIGHT_3D, fuse, fuse_section
 from .range_cut import (DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_from_view, deepen_to_view,
                         lateral_coverage, reaches_range)
@@ -645,7 +645,13 @@ class Track3D:
         seen, cloud = raw, points
         if self.silhouette > 0.0 and not callable(points):
             outline, near, region = silhouette_box(points, raw, self._M, self._size, self.z_range, self.silhouette)
-            if outline is not None:
+            if outline is None:
+                # no returns at the tracker's box: the body, if in view, is elsewhere (a fast swing
+                # the 2D search did not follow); the depth finds it
+                seen = find_body(points, raw, self._M, self._size, self.z_range)
+                if seen is None:
+                    seen = raw
+            else:
                 seen = outline
                 # the frustum from the search region's returns when it holds the widened box (no
                 # second pass over the whole cloud)
