@@ -141,3 +141,39 @@ def test_the_loop_finds_a_body_the_2d_search_lost():
         r = t.update(image, pts)
         assert r.status == status
     assert iou_2d(r.box2d[None], np.array([[100.0, 40, 30, 30]]))[0] > 0.98
+
+
+def test_a_lost_tracker_with_the_body_in_depth_gets_the_outlines_3d_box():
+    """EdgeTrack calls the body lost when a sliver is left at the image border; the depth held
+    the frame ('no_points') with the last 3D box. The 3D box now comes from the returns' outline
+    at the last box; the 2D box and the tracker stay as they were."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import NO_POINTS, Track3D
+
+    class Losing:
+        lost = False
+
+        def init(self, image, box):
+            pass
+
+        def update(self, image):
+            self.lost = True
+            return False, np.array([60.0, 40.0, 30.0, 30.0])
+
+    mask = np.zeros((120, 160), bool)
+    mask[40:70, 60:90] = True
+    whole = _cloud(mask)
+    mask[:, 70:] = False                   # next frame: only a 10-pixel sliver still in view
+    sliver = _cloud(mask)
+    image = np.zeros((120, 160, 3), np.uint8)
+    boxes = {}
+    for grow in (0.0, 0.5):
+        t = Track3D(CAM, Losing(), create_estimator("baseline"), silhouette=grow, evidence_points=16)
+        t.init(image, [60, 40, 30, 30], points=whole)
+        before = t.box3d.copy()
+        r = t.update(image, sliver)
+        assert r.status == NO_POINTS
+        np.testing.assert_array_equal(r.box2d, [60, 40, 30, 30])
+        boxes[grow] = r.box3d
+    np.testing.assert_array_equal(boxes[0.0], before)                 # held
+    assert boxes[0.5][0] < before[0] and not np.array_equal(boxes[0.5], before)   # the sliver's side

@@ -631,8 +631,10 @@ class Track3D:
                 # the body may still be in view (a sliver at the border): ask the depth, in the
                 # frustum of the last box; held, not lost, when it answers
                 n = int(len(self._frustum(points, self.box2d.copy())[0]))
-                ms["frustum"] = (time.perf_counter() - t0) * 1e3 - ms["track2d"]
                 status = NO_POINTS if n >= self.evidence_points else LOST
+                if status == NO_POINTS and self.silhouette > 0.0 and not callable(points):
+                    self._held_outline(points)
+                ms["frustum"] = (time.perf_counter() - t0) * 1e3 - ms["track2d"]
             ms["total"] = (time.perf_counter() - t0) * 1e3
             r = TrackResult(self.box2d.copy(), raw, self.box3d.copy(), status, n, ms, _tracker_score(self.tracker2d))
             return self._judge(r, estimated=False)
@@ -688,6 +690,21 @@ class Track3D:
         r = TrackResult(box.copy(), raw.copy(), self.box3d.copy(), status, int(len(pts)), ms,
                         _tracker_score(self.tracker2d))
         return self._judge(r, estimated=est is not None, seen=_judges_loss(self.tracker2d))
+
+    def _held_outline(self, points: np.ndarray) -> None:
+        """A frame the 2D tracker calls lost while the depth holds the body at its last box (a
+        sliver at the image border): the 3D box from the returns' outline there. The 2D box and
+        the tracker stay as they were: corrected onto a sliver, the tracker did not re-acquire
+        the body when it came back whole."""
+        outline = silhouette_box(points, self.box2d, self._M, self._size, self.z_range, self.silhouette)[0]
+        if outline is None:
+            return
+        pts, bounds = self._frustum(points, outline)
+        if reaches_range(bounds, outline, self.camera, self.depth_range_m):
+            return
+        est = self._estimate(pts, bounds)
+        if est is not None:
+            self.box3d = self._report(est, bounds, outline)
 
     # --- checkpoints and self-description ------------------------------------------------------
     def get_state(self) -> dict:
