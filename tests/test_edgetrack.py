@@ -675,3 +675,18 @@ def test_fit_threshold_runs_the_grid_picks_by_f1_and_writes_the_metadata(trained
     with pytest.raises(ValueError, match="re-acquisition thresholds"):
         fit_reacquire(prefix, data, "train", [0.05], threshold=0.1)
 
+
+
+def test_a_huge_corrected_box_is_capped_not_a_crash():
+    """correct([0, 0, 1, 1e200]) overflowed the crop size to 0: update() raised ZeroDivisionError
+    (found by the fuzz test in the loop); the state box is capped at MAX_BOX_SCALE x the image,
+    as SiamFC's."""
+    from track3d.edgetrack import create
+    from track3d.frames import MAX_BOX_SCALE
+
+    t = create()
+    image = np.zeros((120, 160, 3), np.uint8)
+    t.init(image, [10.0, 10.0, 20.0, 20.0])
+    t.correct([0.0, 0.0, 1.0, 1e200])
+    ok, box = t.update(image)
+    assert np.all(np.isfinite(box)) and box[3] <= MAX_BOX_SCALE * 160

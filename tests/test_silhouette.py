@@ -79,6 +79,11 @@ def test_the_loop_reports_the_outline_not_the_trackers_half():
         t.init(image, [30, 40, 80, 30], points=pts)
         boxes[grow] = t.update(image, pts).box2d
     assert iou_2d(boxes[1.0][None], truth)[0] > 0.98 > 0.8 > iou_2d(boxes[0.0][None], truth)[0]
+    # without fusion the reported 2D box stays the tracker's own (the "2D alone" rows of Table 2
+    # scored the outline: AO_2d 1.000)
+    t = Track3D(CAM, Half(), create_estimator("baseline"), silhouette=1.0, fusion=False)
+    t.init(image, [30, 40, 80, 30], points=pts)
+    np.testing.assert_array_equal(t.update(image, pts).box2d, [30.0, 40.0, 40.0, 30.0])
 
 
 def test_the_silhouette_option_is_checked_recorded_and_by_sensor(tmp_path):

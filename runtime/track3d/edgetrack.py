@@ -34,7 +34,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .frames import check_image
+from .frames import MAX_BOX_SCALE, check_image
 from .onnxmodel import load_model, model_pair, shipped_model
 from .siamfc import crop_square
 
@@ -144,6 +144,7 @@ class EdgeTracker:
         self.pad = pad_colour(meta.get("pad"))
         self._grids = {}
         self._kernel = None
+        self._max_side = float("inf")   # MAX_BOX_SCALE x the image, set by init()
         self._kshape = None      # the template kernel's shape, found on the first set_state
         self.score = float("nan")
         self.lost = False
@@ -165,7 +166,9 @@ class EdgeTracker:
         if b.shape != (4,) or not np.all(np.isfinite(b)) or b[2] <= 0 or b[3] <= 0:
             raise ValueError(f"box must be [x, y, w, h], finite with positive size, got {b.tolist()}")
         self.center = b[:2] + b[2:] / 2.0
-        self.target_sz = b[2:].copy()
+        # a (fused or corrected) state box beyond MAX_BOX_SCALE x the image is capped there, as
+        # SiamFC's: a side of 1e200 overflowed the crop size to 0 (ZeroDivisionError in update)
+        self.target_sz = np.minimum(b[2:], self._max_side)
         self._min_sz = max(2.0, 0.2 * float(self.target_sz.min()))
 
     def _z_sz(self) -> float:
@@ -174,6 +177,7 @@ class EdgeTracker:
 
     def init(self, image: np.ndarray, box) -> None:
         image = check_image(image)
+        self._max_side = MAX_BOX_SCALE * max(image.shape[:2])
         self._set_box(box)
         # outside the image a crop is filled with the colour the model was trained with: one that
         # neither sky nor shadow takes tells the network where the image ends (models without
@@ -263,6 +267,9 @@ class EdgeTracker:
         image = check_image(image)
         t0 = time.perf_counter()
         hh, ww = image.shape[:2]
+        # a state restored or corrected without init() on this image size: the same cap
+        self._max_side = MAX_BOX_SCALE * max(hh, ww)
+        self.target_sz = np.minimum(self.target_sz, self._max_side)
         wide = self.lost or self.settling
         size = self.lost_instance_size if wide else self.instance_size
         scale = self.exemplar_size / self._z_sz()            # crop pixels per image pixel

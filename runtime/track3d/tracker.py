@@ -678,7 +678,8 @@ class Track3D:
             self.box3d = self._report(est, bounds, seen)
         t3 = time.perf_counter()
         ms["box3d"] = (t3 - t2) * 1e3
-        box = seen
+        # without fusion the reported 2D box is the 2D tracker's own (the outline only feeds the 3D box)
+        box = seen if self.fusion else raw
         if self.fusion and est is not None:
             box = fuse(seen, est, self.camera, self.weight_3d)
             if self._correct is not None:
