@@ -19,6 +19,18 @@ def _cloud(mask: np.ndarray, z: float = 10.0) -> np.ndarray:
     return CAM.backproject_depth(depth)
 
 
+def _answering(box):
+    """A 2D tracker class whose every update answers `box`."""
+    class Fixed:
+        def init(self, image, box):
+            pass
+
+        def update(self, image):
+            return True, np.array(answer, dtype=np.float64)
+    answer = list(box)
+    return Fixed
+
+
 def _box(points, box, grow=0.5):
     return silhouette_box(points, np.asarray(box, float), CAM.M, (CAM.width, CAM.height), (0.1, 100.0), grow)[0]
 
@@ -60,14 +72,7 @@ def test_the_loop_reports_the_outline_not_the_trackers_half():
     from track3d.estimators import create_estimator
     from track3d.tracker import Track3D
 
-    class Half:
-        """A 2D tracker that always answers the left half of the body."""
-        def init(self, image, box):
-            pass
-
-        def update(self, image):
-            return True, np.array([30.0, 40.0, 40.0, 30.0])
-
+    Half = _answering([30.0, 40.0, 40.0, 30.0])   # the left half of the body
     mask = np.zeros((120, 160), bool)
     mask[40:70, 30:110] = True
     pts = _cloud(mask)
@@ -129,13 +134,7 @@ def test_the_loop_finds_a_body_the_2d_search_lost():
     from track3d.estimators import create_estimator
     from track3d.tracker import NO_POINTS, TRACKING, Track3D
 
-    class Stuck:
-        def init(self, image, box):
-            pass
-
-        def update(self, image):
-            return True, np.array([10.0, 40.0, 30.0, 30.0])
-
+    Stuck = _answering([10.0, 40.0, 30.0, 30.0])  # on empty space
     mask = np.zeros((120, 160), bool)
     mask[40:70, 100:130] = True
     pts = _cloud(mask)
