@@ -230,7 +230,7 @@ def test_eval_folder_mistakes_are_one_line(synth, tmp_path, capsys, what):
         rep.write_text("mine")
         argv, expect = ["--results", str(res), "--out", str(rep)], "is a file, not a folder"
     else:
-        argv, expect = ["--results", str(res / "test"), "--out", str(rep)], f"--results is the folder"
+        argv, expect = ["--results", str(res / "test"), "--out", str(rep)], "--results is the folder"
     capsys.readouterr()
     assert main(["eval", "--data", str(synth), "--no-plots", *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()

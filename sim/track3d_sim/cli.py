@@ -179,7 +179,6 @@ def main(argv=None) -> int:
             from .preview import export_ply
             export_ply(args.sequence, args.frame, args.out)
         elif args.cmd == "demo":
-            from track3d.dataset import DatasetError
             from track3d.onnxmodel import ModelError
             from .demo import run_demo
             try:
