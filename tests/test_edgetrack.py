@@ -298,12 +298,18 @@ def _exit_and_return_sequence():
     return frames, np.array(boxes), np.array(absent)
 
 
-def test_runtime_follows_reports_lost_and_recovers(trained):
+# The runtime's follow / lost / re-acquire logic is tested with the shipped network: the tiny
+# model of the `trained` fixture is too weak to follow this sequence with any margin, and how weak
+# moves with the host's BLAS code path (on an Intel host with AVX-512 it lost the blob on the first
+# frames, IoU 0.04; the same training with MKL held to its AVX2 path 0.56): a test of the training,
+# not of the runtime. The shipped model holds it by a wide margin (IoU 0.85 before the exit, 0.82
+# after the return).
+def test_runtime_follows_reports_lost_and_recovers():
     from track3d.edgetrack import create
     from track3d.trackers2d import Tracker2D
 
     frames, gt, absent = _exit_and_return_sequence()
-    tr = create(model=trained["root"] / "model" / "et")
+    tr = create()
     assert isinstance(tr, Tracker2D)
     tr.init(frames[0], gt[0])
     oks, ious, scores = [], [], []
@@ -472,7 +478,7 @@ def test_the_frame_after_a_reacquisition_searches_the_wide_region(trained):
     assert iou_after_the_jump(True) > 0.6             # measured 0.76
 
 
-def test_a_lost_tracker_reacquires_only_at_the_reacquisition_threshold(trained):
+def test_a_lost_tracker_reacquires_only_at_the_reacquisition_threshold():
     """Hysteresis: lost below `score_threshold`, found again only at `reacquire_threshold` or
     above (default: the lost threshold). A tracker that can never reach it stays lost after the
     exit; the default one finds the target when it returns; bad values are refused."""
@@ -481,7 +487,7 @@ def test_a_lost_tracker_reacquires_only_at_the_reacquisition_threshold(trained):
     frames, gt, absent = _exit_and_return_sequence()
 
     def run(**kw):
-        tr = create(model=trained["root"] / "model" / "et", **kw)
+        tr = create(**kw)      # the shipped network (see the test above)
         tr.init(frames[0], gt[0])
         return [tr.update(f)[0] for f in frames[1:]], tr
 
@@ -493,7 +499,7 @@ def test_a_lost_tracker_reacquires_only_at_the_reacquisition_threshold(trained):
     assert never[:first_lost] == oks[:first_lost] and not any(never[first_lost:])
     for bad in (0.0, 1.5):
         with pytest.raises(ValueError, match="reacquire_threshold"):
-            create(model=trained["root"] / "model" / "et", reacquire_threshold=bad)
+            create(reacquire_threshold=bad)
 
 
 def test_registry_builds_edgetrack_and_says_when_no_model_is_shipped(trained, tmp_path, monkeypatch):

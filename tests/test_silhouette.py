@@ -181,3 +181,40 @@ def test_a_lost_tracker_with_the_body_in_depth_gets_the_outlines_3d_box():
         boxes[grow] = r.box3d
     np.testing.assert_array_equal(boxes[0.0], before)                 # held
     assert boxes[0.5][0] < before[0] and not np.array_equal(boxes[0.5], before)   # the sliver's side
+
+
+def test_past_border_hand_cases():
+    from track3d.silhouette import past_border
+
+    W, H = CAM.width, CAM.height
+    # the outline at the left and bottom borders, the tracker's box past them: its sides there
+    np.testing.assert_allclose(past_border(np.array([0.0, 50, 40, 70]), np.array([-20.0, 60, 50, 80]), (W, H)),
+                               [-20, 50, 40 + 20, 90])
+    # a side off the border keeps the outline's, even when the tracker's reaches farther
+    np.testing.assert_allclose(past_border(np.array([10.0, 10, 30, 30]), np.array([0.0, 0, 60, 60]), (W, H)),
+                               [10, 10, 30, 30])
+    # a tracker's box inside the outline at the border does not shrink it
+    np.testing.assert_allclose(past_border(np.array([0.0, 0, 30, 30]), np.array([5.0, 5, 10, 10]), (W, H)),
+                               [0, 0, 30, 30])
+
+
+def test_a_body_coming_into_view_keeps_the_trackers_box_past_the_border():
+    """The outline stops at the image border; the loop took it as the 2D box and corrected the
+    tracker onto the visible part of a body coming into view (the ./run.sh demo lost it: one
+    restart)."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import Track3D
+
+    Past = _answering([-30.0, 40.0, 60.0, 30.0])   # the body's left half beyond the border
+    mask = np.zeros((120, 160), bool)
+    mask[40:70, 0:30] = True
+    pts = _cloud(mask)
+    image = np.zeros((120, 160, 3), np.uint8)
+    t = Track3D(CAM, Past(), create_estimator("baseline"), silhouette=0.5, weight_3d=0.0)
+    t.init(image, [-30, 40, 60, 30], points=pts)
+    r = t.update(image, pts)
+    # the loop (and the tracker it corrects) keeps the box past the border
+    assert t.box2d[0] < -25 and abs(t.box2d[0] + t.box2d[2] - 30) < 1.5
+    # the reported box is clipped to the image, as the labels are; the tracker's own box is not
+    np.testing.assert_allclose(r.box2d, [0, 40, t.box2d[0] + t.box2d[2], 30])
+    np.testing.assert_array_equal(r.box2d_raw, [-30, 40, 60, 30])

@@ -126,6 +126,24 @@ def silhouette_box(points: np.ndarray, box2d: np.ndarray, M: np.ndarray, image_s
     return r.box(counts >= MIN_SHARE * total, image_size), pts, region
 
 
+def past_border(outline: np.ndarray, box2d: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """The outline (4,) [x, y, w, h], reaching past the image border with `box2d` (the 2D
+    tracker's box) on each side where the outline touches the border: the returns stop at the
+    border, the body need not (a body coming into view). Without it the loop corrected the 2D
+    tracker onto the visible part and lost the body as it came in (the `./run.sh` demo,
+    sequence 0001 frame 37: one restart)."""
+    W, H = image_size
+    x0, y0 = float(outline[0]), float(outline[1])
+    x1, y1 = x0 + float(outline[2]), y0 + float(outline[3])
+    bx0, by0 = float(box2d[0]), float(box2d[1])
+    bx1, by1 = bx0 + float(box2d[2]), by0 + float(box2d[3])
+    x0 = min(x0, bx0) if x0 <= 0.0 else x0
+    y0 = min(y0, by0) if y0 <= 0.0 else y0
+    x1 = max(x1, bx1) if x1 >= W else x1
+    y1 = max(y1, by1) if y1 >= H else y1
+    return np.array([x0, y0, x1 - x0, y1 - y0])
+
+
 def find_body(points: np.ndarray, near: np.ndarray, M: np.ndarray, image_size: tuple[int, int],
               z_range: tuple[float, float]) -> np.ndarray | None:
     """The box [x, y, w, h] of the body in the whole view: of the connected returns holding at

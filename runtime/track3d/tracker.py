@@ -47,8 +47,8 @@ from .camera import Camera
 from .estimators import BoxEstimator, create_estimator
 from .frames import MAX_COORD_M, check_category, check_image, check_init_box
 from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
-from .boxes import fit_measured_faces, hold_cut_extent
-from .silhouette import find_body, silhouette_box
+from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
+from .silhouette import find_body, past_border, silhouette_box
 from .fusion import WEIGHT_2D, WEIGHT_3D, fuse, fuse_section
 from .range_cut import (DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_from_view, deepen_to_view,
                         lateral_coverage, reaches_range)
@@ -292,8 +292,9 @@ def _tracker_score(tracker2d) -> float | None:
 
 @dataclass
 class TrackResult:
-    """One frame's output. box2d (4,) float64 is the reported box (fused when fusion is on);
-    box2d_raw (4,) the 2D tracker's own box; box3d (6,) float64 [cx, cy, cz, sx, sy, sz];
+    """One frame's output. box2d (4,) float64 is the reported box (fused when fusion is on),
+    clipped to the image as the labels are (a box wholly outside it is reported as it is);
+    box2d_raw (4,) the 2D tracker's own box, unclipped; box3d (6,) float64 [cx, cy, cz, sx, sy, sz];
     status one of STATUSES: "tracking" (a new 3D estimate), "no_points" (boxes held: no usable
     estimate, a dropped frame, or a 2D loss with the body still in the depth of the last box),
     "lost"; num_points the frustum size; ms per-stage milliseconds (STAGES);
@@ -594,7 +595,7 @@ class Track3D:
         `lost_after` bad frames have passed. ``update(None, points)`` does the same.
         Before init(): ValueError (there is no box to coast), as for update()."""
         self._check_started("skip()")
-        r = TrackResult(self.box2d.copy(), self.box2d.copy(), self.box3d.copy(), NO_POINTS, 0,
+        r = TrackResult(self._shown(self.box2d), self.box2d.copy(), self.box3d.copy(), NO_POINTS, 0,
                         dict.fromkeys(STAGES, 0.0), None)
         return self._judge(r, estimated=False)
 
@@ -636,13 +637,15 @@ class Track3D:
                     self._held_outline(points)
                 ms["frustum"] = (time.perf_counter() - t0) * 1e3 - ms["track2d"]
             ms["total"] = (time.perf_counter() - t0) * 1e3
-            r = TrackResult(self.box2d.copy(), raw, self.box3d.copy(), status, n, ms, _tracker_score(self.tracker2d))
+            r = TrackResult(self._shown(self.box2d), raw, self.box3d.copy(), status, n, ms,
+                            _tracker_score(self.tracker2d))
             return self._judge(r, estimated=False)
 
         if not self.needs_points:   # 2D only: the tracker's box is the answer, no 3D box
             self.box2d = raw.copy()
             ms["total"] = (time.perf_counter() - t0) * 1e3
-            r = TrackResult(raw.copy(), raw.copy(), self.box3d.copy(), TRACKING, 0, ms, _tracker_score(self.tracker2d))
+            r = TrackResult(self._shown(raw), raw.copy(), self.box3d.copy(), TRACKING, 0, ms,
+                            _tracker_score(self.tracker2d))
             return self._judge(r, estimated=False)
         seen, cloud = raw, points
         if self.silhouette > 0.0 and not callable(points):
@@ -654,14 +657,8 @@ class Track3D:
                 if seen is None:
                     seen = raw
             else:
-                seen = outline
-                # the frustum from the search region's returns when it holds the widened box (no
-                # second pass over the whole cloud)
-                grow = seen[2:] * self.frustum_margin / 2.0
-                if (seen[0] - grow[0] >= region[0] and seen[1] - grow[1] >= region[1]
-                        and seen[0] + seen[2] + grow[0] <= region[0] + region[2]
-                        and seen[1] + seen[3] + grow[1] <= region[1] + region[3]):
-                    cloud = near
+                seen = past_border(outline, raw, self._size)
+                cloud = self._region_cloud(seen, near, region, points)
         pts, bounds = self._frustum(cloud, seen)
         if seen is not raw and reaches_range(bounds, seen, self.camera, self.depth_range_m):
             # returns stopped by the sensor's range outline a cap, not the body: the range cut
@@ -688,19 +685,43 @@ class Track3D:
         t4 = time.perf_counter()
         ms["fusion"] = (t4 - t3) * 1e3
         ms["total"] = (t4 - t0) * 1e3
-        r = TrackResult(box.copy(), raw.copy(), self.box3d.copy(), status, int(len(pts)), ms,
+        r = TrackResult(self._shown(box), raw.copy(), self.box3d.copy(), status, int(len(pts)), ms,
                         _tracker_score(self.tracker2d))
         return self._judge(r, estimated=est is not None, seen=_judges_loss(self.tracker2d))
+
+    def _shown(self, box: np.ndarray) -> np.ndarray:
+        """The reported 2D box: `box` clipped to the image, as the labels are (docs/dataset.md:
+        the visible silhouette's box). The loop keeps the whole box (a body coming into view
+        goes on past the border; the 2D tracker is corrected with it). A box wholly outside the
+        image is reported as it is (clipping would leave no box)."""
+        b = np.array(box, dtype=np.float64)
+        W, H = self._size
+        if b[0] >= 0 and b[1] >= 0 and b[0] + b[2] <= W and b[1] + b[3] <= H:
+            return b   # inside: as it is (x + w - x need not give w back in floats)
+        c = clip_box2d(b, W, H)
+        return c if c[2] > 0 and c[3] > 0 else b
+
+    def _region_cloud(self, box: np.ndarray, near: np.ndarray, region: np.ndarray,
+                      points: np.ndarray) -> np.ndarray:
+        """The search region's returns `near` when the region holds `box` widened by the frustum
+        margin (no second pass over the whole cloud), else the whole cloud `points`."""
+        grow = box[2:] * self.frustum_margin / 2.0
+        if (box[0] - grow[0] >= region[0] and box[1] - grow[1] >= region[1]
+                and box[0] + box[2] + grow[0] <= region[0] + region[2]
+                and box[1] + box[3] + grow[1] <= region[1] + region[3]):
+            return near
+        return points
 
     def _held_outline(self, points: np.ndarray) -> None:
         """A frame the 2D tracker calls lost while the depth holds the body at its last box (a
         sliver at the image border): the 3D box from the returns' outline there. The 2D box and
         the tracker stay as they were: corrected onto a sliver, the tracker did not re-acquire
         the body when it came back whole."""
-        outline = silhouette_box(points, self.box2d, self._M, self._size, self.z_range, self.silhouette)[0]
+        outline, near, region = silhouette_box(points, self.box2d, self._M, self._size, self.z_range,
+                                               self.silhouette)
         if outline is None:
             return
-        pts, bounds = self._frustum(points, outline)
+        pts, bounds = self._frustum(self._region_cloud(outline, near, region, points), outline)
         if reaches_range(bounds, outline, self.camera, self.depth_range_m):
             return
         est = self._estimate(pts, bounds)
