@@ -218,3 +218,50 @@ def test_a_body_coming_into_view_keeps_the_trackers_box_past_the_border():
     # the reported box is clipped to the image, as the labels are; the tracker's own box is not
     np.testing.assert_allclose(r.box2d, [0, 40, t.box2d[0] + t.box2d[2], 30])
     np.testing.assert_array_equal(r.box2d_raw, [-30, 40, 60, 30])
+
+
+def test_a_lost_tracker_is_taken_to_the_body_the_depth_shows_whole():
+    """EdgeTrack lost a body that swung back into view (accuracy set test 0005: 15 frames lost
+    while the depth showed it whole). With the outline on, a frame the tracker calls lost with
+    no returns at its last box goes on from the body in the whole view's depth, and the tracker
+    is corrected onto it; a body at the image border, no depth, or the outline off keep 'lost'."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import LOST, TRACKING, Track3D
+
+    class Losing:
+        lost = False
+
+        def init(self, image, box):
+            self.corrected = None
+
+        def update(self, image):
+            self.lost = True
+            return False, np.array([10.0, 10.0, 20.0, 20.0])
+
+        def correct(self, box):
+            self.corrected = np.array(box, dtype=np.float64)
+
+    start = np.zeros((120, 160), bool)
+    start[10:30, 10:30] = True
+    elsewhere = np.zeros((120, 160), bool)
+    elsewhere[60:90, 100:130] = True        # the body, whole, far from the last box
+    at_border = np.zeros((120, 160), bool)
+    at_border[60:90, 140:160] = True        # the body cut by the right border
+    image = np.zeros((120, 160, 3), np.uint8)
+
+    def run(mask, silhouette=0.5, empty=False):
+        tr = Losing()
+        t = Track3D(CAM, tr, create_estimator("baseline"), silhouette=silhouette, weight_3d=0.0)
+        t.init(image, [10, 10, 20, 20], points=_cloud(start))
+        pts = np.zeros((0, 3), np.float32) if empty else _cloud(mask)
+        return t.update(image, pts), tr
+
+    r, tr = run(elsewhere)
+    assert r.status == TRACKING
+    np.testing.assert_allclose(r.box2d, [99.5, 59.5, 31, 31], atol=1.0)   # the returns' outline
+    np.testing.assert_allclose(tr.corrected, r.box2d)
+    assert 10.0 < r.box3d[2] < 10.5
+    for kw in ({"mask": at_border}, {"mask": elsewhere, "silhouette": 0.0}, {"mask": elsewhere, "empty": True}):
+        r, tr = run(**kw)
+        assert r.status == LOST and tr.corrected is None
+        np.testing.assert_array_equal(r.box2d, [10, 10, 20, 20])
