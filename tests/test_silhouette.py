@@ -265,3 +265,35 @@ def test_a_lost_tracker_is_taken_to_the_body_the_depth_shows_whole():
         r, tr = run(**kw)
         assert r.status == LOST and tr.corrected is None
         np.testing.assert_array_equal(r.box2d, [10, 10, 20, 20])
+
+
+def test_a_lost_tracker_with_returns_at_its_last_box_is_not_moved():
+    """The body-in-view rule is for a body elsewhere: returns at the last box (fewer than the
+    depth-held rule's evidence) leave the frame 'lost' and the tracker where it was (it failed
+    test_state's 47-return case when it ran on any lost frame)."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import LOST, Track3D
+
+    class Losing:
+        lost = False
+        corrected = None
+
+        def init(self, image, box):
+            pass
+
+        def update(self, image):
+            self.lost = True
+            return False, np.array([10.0, 10.0, 20.0, 20.0])
+
+        def correct(self, box):
+            self.corrected = box
+
+    mask = np.zeros((120, 160), bool)
+    mask[10:30, 10:30] = True
+    pts = _cloud(mask)
+    image = np.zeros((120, 160, 3), np.uint8)
+    for evidence in (0, 10 ** 6):    # off, or more returns than the body has
+        t = Track3D(CAM, Losing(), create_estimator("baseline"), silhouette=0.5, evidence_points=evidence)
+        t.init(image, [10, 10, 20, 20], points=pts)
+        r = t.update(image, pts)
+        assert r.status == LOST and t.tracker2d.corrected is None

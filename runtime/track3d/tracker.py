@@ -626,17 +626,17 @@ class Track3D:
         if not ok or raw.shape != (4,) or not _valid_box2d(raw):
             # Lost in 2D: report the last box, keep the last 3D estimate.
             raw = raw if raw.shape == (4,) and _valid_box2d(raw) else self.box2d.copy()
-            status, n = LOST, 0
+            status, n, asked = LOST, 0, False
             if (self.evidence_points and self.needs_points and points is not None
                     and _judges_loss(self.tracker2d) and _valid_box2d(self.box2d)):
                 # the body may still be in view (a sliver at the border): ask the depth, in the
                 # frustum of the last box; held, not lost, when it answers
-                n = int(len(self._frustum(points, self.box2d.copy())[0]))
+                n, asked = int(len(self._frustum(points, self.box2d.copy())[0])), True
                 status = NO_POINTS if n >= self.evidence_points else LOST
                 if status == NO_POINTS and self.silhouette > 0.0 and not callable(points):
                     self._held_outline(points)
                 ms["frustum"] = (time.perf_counter() - t0) * 1e3 - ms["track2d"]
-            body = self._whole_body(points) if status == LOST else None
+            body = self._whole_body(points, n if asked else None) if status == LOST else None
             if body is None:
                 ms["total"] = (time.perf_counter() - t0) * 1e3
                 r = TrackResult(self._shown(self.box2d), raw, self.box3d.copy(), status, n, ms,
@@ -692,8 +692,9 @@ class Track3D:
                         _tracker_score(self.tracker2d))
         return self._judge(r, estimated=est is not None, seen=_judges_loss(self.tracker2d))
 
-    def _whole_body(self, points) -> np.ndarray | None:
-        """For a frame the 2D tracker calls lost with no returns left at its last box: the box
+    def _whole_body(self, points, at_last: int | None) -> np.ndarray | None:
+        """For a frame the 2D tracker calls lost with no returns left at its last box (`at_last`:
+        the returns counted in its frustum, None: not counted yet): the box
         [x, y, w, h] of the body in the whole view's depth (`silhouette.find_body`) when it lies
         whole inside the image, else None. With the body's outline on (a range sensor against
         empty space) a body in the depth is the body: a lost EdgeTrack whose template no longer
@@ -703,6 +704,10 @@ class Track3D:
         whole (held-out 0011)."""
         if (not self.silhouette > 0.0 or points is None or callable(points) or not self.needs_points
                 or not _judges_loss(self.tracker2d) or not _valid_box2d(self.box2d)):
+            return None
+        if at_last is None:
+            at_last = len(self._frustum(points, self.box2d.copy())[0])
+        if at_last > 0:   # returns at the last box: the depth-held rule's case, not a body elsewhere
             return None
         b = find_body(points, self.box2d, self._M, self._size, self.z_range)
         W, H = self._size
