@@ -260,6 +260,7 @@ def test_a_lost_tracker_is_taken_to_the_body_the_depth_shows_whole():
     assert r.status == TRACKING
     np.testing.assert_allclose(r.box2d, [99.5, 59.5, 31, 31], atol=1.0)   # the returns' outline
     np.testing.assert_allclose(tr.corrected, r.box2d)
+    np.testing.assert_array_equal(r.box2d_raw, [10, 10, 20, 20])          # the tracker's own answer
     assert 10.0 < r.box3d[2] < 10.5
     for kw in ({"mask": at_border}, {"mask": elsewhere, "silhouette": 0.0}, {"mask": elsewhere, "empty": True}):
         r, tr = run(**kw)

@@ -615,6 +615,7 @@ class Track3D:
         t0 = time.perf_counter()
         image = self.camera.undistort_image(check_image(image, self._size))
         res = self.tracker2d.update(image)
+        own = None   # the tracker's own box when the loop went on from another (the depth's body)
         try:
             ok, raw = res
             raw = np.asarray(raw, dtype=np.float64).reshape(-1)
@@ -642,7 +643,7 @@ class Track3D:
                 r = TrackResult(self._shown(self.box2d), raw, self.box3d.copy(), status, n, ms,
                                 _tracker_score(self.tracker2d))
                 return self._judge(r, estimated=False)
-            raw = body   # the depth shows the body whole elsewhere: the loop goes on from it
+            own, raw = raw, body   # the depth shows the body whole elsewhere: the loop goes on from it
 
         if not self.needs_points:   # 2D only: the tracker's box is the answer, no 3D box
             self.box2d = raw.copy()
@@ -688,7 +689,8 @@ class Track3D:
         t4 = time.perf_counter()
         ms["fusion"] = (t4 - t3) * 1e3
         ms["total"] = (t4 - t0) * 1e3
-        r = TrackResult(self._shown(box), raw.copy(), self.box3d.copy(), status, int(len(pts)), ms,
+        r = TrackResult(self._shown(box), (raw if own is None else own).copy(), self.box3d.copy(), status,
+                        int(len(pts)), ms,
                         _tracker_score(self.tracker2d))
         return self._judge(r, estimated=est is not None, seen=_judges_loss(self.tracker2d))
 
