@@ -31,6 +31,26 @@ def _answering(box):
     return Fixed
 
 
+def _losing(box):
+    """A 2D tracker class that judges its loss and calls every frame lost at `box`, recording
+    the box the loop corrects it onto (None: not corrected)."""
+    class Losing:
+        lost = False
+        corrected = None
+
+        def init(self, image, box):
+            pass
+
+        def update(self, image):
+            self.lost = True
+            return False, np.array(answer, dtype=np.float64)
+
+        def correct(self, box):
+            self.corrected = np.array(box, dtype=np.float64)
+    answer = list(box)
+    return Losing
+
+
 def _box(points, box, grow=0.5):
     return silhouette_box(points, np.asarray(box, float), CAM.M, (CAM.width, CAM.height), (0.1, 100.0), grow)[0]
 
@@ -228,19 +248,7 @@ def test_a_lost_tracker_is_taken_to_the_body_the_depth_shows_whole():
     from track3d.estimators import create_estimator
     from track3d.tracker import LOST, TRACKING, Track3D
 
-    class Losing:
-        lost = False
-
-        def init(self, image, box):
-            self.corrected = None
-
-        def update(self, image):
-            self.lost = True
-            return False, np.array([10.0, 10.0, 20.0, 20.0])
-
-        def correct(self, box):
-            self.corrected = np.array(box, dtype=np.float64)
-
+    Losing = _losing([10.0, 10.0, 20.0, 20.0])
     start = np.zeros((120, 160), bool)
     start[10:30, 10:30] = True
     elsewhere = np.zeros((120, 160), bool)
@@ -275,20 +283,7 @@ def test_a_lost_tracker_with_returns_at_its_last_box_is_not_moved():
     from track3d.estimators import create_estimator
     from track3d.tracker import LOST, Track3D
 
-    class Losing:
-        lost = False
-        corrected = None
-
-        def init(self, image, box):
-            pass
-
-        def update(self, image):
-            self.lost = True
-            return False, np.array([10.0, 10.0, 20.0, 20.0])
-
-        def correct(self, box):
-            self.corrected = box
-
+    Losing = _losing([10.0, 10.0, 20.0, 20.0])
     mask = np.zeros((120, 160), bool)
     mask[10:30, 10:30] = True
     pts = _cloud(mask)
