@@ -150,6 +150,24 @@ def test_concat_caches_keeps_items_and_makes_sequences_unique(tiny_cache):
     assert PointCache.concat([tiny_cache[0]]).info["data_hash"] == a.info["data_hash"]
 
 
+def test_data_name_names_every_concatenated_dataset(tiny_cache, tmp_path):
+    """A model fine-tuned on three caches recorded only the first dataset as its train_data."""
+    from track3d_train.boxnet.data import PointCache, data_name
+
+    a = PointCache(tiny_cache[0])
+    assert data_name(a.info) == Path(a.info["root"]).name
+    other = tmp_path / "other"
+    other.mkdir()
+    z = dict(np.load(tiny_cache[0], allow_pickle=False))
+    info = json.loads(z["info"].tobytes().decode())
+    info["root"] = str(tmp_path / "engine-train-sq")
+    z["info"] = np.frombuffer(json.dumps(info).encode(), dtype=np.uint8)
+    np.savez(other / "sq.npz", **z)
+    c = PointCache.concat([tiny_cache[0], other / "sq.npz"])
+    assert data_name(c.info) == Path(a.info["root"]).name + "+engine-train-sq"
+    assert data_name({}) is None
+
+
 def test_category_dropout_zeroes_some_vectors(tiny_cache):
     from track3d_train.boxnet.data import BoxNetSamples, PointCache
 

@@ -164,6 +164,15 @@ def _read_cache(path: Path) -> dict:
     return z
 
 
+def data_name(info: dict) -> str | None:
+    """The training data's name for a model's metadata: the dataset folder of a cache, or the
+    folders of every part of concatenated caches joined by "+" (a model trained on three
+    datasets must not name only the first)."""
+    parts = info.get("parts") or [info]
+    names = [Path(str(p["root"])).name for p in parts if p.get("root")]
+    return "+".join(names) if names else None
+
+
 class PointCache:
     """A frustum cache (.npz) in memory: ``cache.points(i)`` -> (n_i, 3) float32."""
 

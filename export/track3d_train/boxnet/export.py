@@ -115,13 +115,13 @@ def export_checkpoint(ckpt: str | Path, out: str | Path, check: bool = True, log
                       depth_sensor: str | None = None) -> dict:
     """The one command: checkpoint -> ONNX with metadata (+ parity). Returns the metadata.
     depth_sensor: the sensor the model is for (metadata ``depth_sensor``; None: every sensor)."""
+    from .data import data_name
     from .train import load_checkpoint
 
     model, ck = load_checkpoint(ckpt)
     hist = ck.get("history", {})
     last = hist.get("epochs", [{}])[-1] if hist.get("epochs") else {}
-    root = (hist.get("cache") or {}).get("root")
-    extra = {"train_data_hash": hist.get("data_hash"), "train_data": Path(root).name if root else None,
+    extra = {"train_data_hash": hist.get("data_hash"), "train_data": data_name(hist.get("cache") or {}),
              "trained": {"epochs": ck.get("epoch", -1) + 1, "steps": ck.get("step"), "seconds": hist.get("seconds"),
                          "items": hist.get("train_items"), "batch": ck["train_config"].get("batch"),
                          "jitter": (hist.get("cache") or {}).get("jitter"),
