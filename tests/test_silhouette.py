@@ -131,6 +131,55 @@ def test_the_silhouette_option_is_checked_recorded_and_by_sensor(tmp_path):
     assert TrackerSpec("oracle", "baseline", silhouette=1.0).build(b).silhouette == 1.0
 
 
+def test_the_outline_share_pulls_only_the_2d_fusions_box():
+    """With the outline off (stereo), a share of it still corrects a 2D box grown past the body
+    (EdgeTrack's box 207 px tall on a 127 px body, a stereo sequence); the frustum and so the
+    3D box keep the tracker's box."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import Track3D
+
+    Tall = _answering([30.0, 25.0, 80.0, 60.0])   # rows 25..85 around a body of rows 40..70
+    mask = np.zeros((120, 160), bool)
+    mask[40:70, 30:110] = True                    # the outline: [30, 40, 80, 30]
+    pts = _cloud(mask)
+    image = np.zeros((120, 160, 3), np.uint8)
+    res = {}
+    for share in (0.0, 0.3, 1.0):
+        t = Track3D(CAM, Tall(), create_estimator("baseline"), silhouette=0.0, outline_share=share, weight_3d=0.0)
+        t.init(image, [30, 40, 80, 30], points=pts)
+        res[share] = t.update(image, pts)
+    np.testing.assert_allclose(res[0.0].box2d, [30.0, 25.0, 80.0, 60.0], atol=1e-9)
+    # 0.3 * [30, 40, 80, 30] + 0.7 * [30, 25, 80, 60], by hand
+    np.testing.assert_allclose(res[0.3].box2d, [30.0, 29.5, 80.0, 51.0], atol=1e-3)
+    np.testing.assert_allclose(res[1.0].box2d, [30.0, 40.0, 80.0, 30.0], atol=1e-3)
+    np.testing.assert_array_equal(res[0.3].box3d, res[0.0].box3d)
+    # with the outline on, the share has nothing to add: the outline is the box already
+    a, b = (Track3D(CAM, Tall(), create_estimator("baseline"), silhouette=0.5, outline_share=s, weight_3d=0.0)
+            for s in (0.0, 0.3))
+    for t in (a, b):
+        t.init(image, [30, 40, 80, 30], points=pts)
+    np.testing.assert_array_equal(a.update(image, pts).box2d, b.update(image, pts).box2d)
+
+
+def test_the_outline_share_option_is_checked_recorded_and_by_sensor(tmp_path):
+    from track3d.estimators import create_estimator
+    from track3d.evaluation import TrackerSpec
+    from track3d.tracker import Track3D, outline_share_for, sensor_options
+    from track3d.trackers2d import create_tracker
+
+    assert outline_share_for("stereo") == 0.3 and sensor_options("stereo")["outline_share"] == 0.3
+    assert outline_share_for("ideal") == outline_share_for("ToF") == outline_share_for(None) == 0.0
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="outline_share must be in"):
+            Track3D(CAM, create_tracker("kcf"), create_estimator("baseline"), outline_share=bad)
+    t = Track3D(CAM, create_tracker("kcf"), create_estimator("baseline"), outline_share=0.25)
+    assert t.describe()["options"]["outline_share"] == 0.25
+    from test_loop import _plain_and
+    a, b = _plain_and(tmp_path, {"name": "tof", "max_range_m": 30.0})
+    assert TrackerSpec("oracle", "baseline").build(b).outline_share == 0.0
+    assert TrackerSpec("oracle", "baseline", outline_share=0.5).build(b).outline_share == 0.5
+
+
 def test_find_body_hand_cases():
     from track3d.silhouette import find_body
 

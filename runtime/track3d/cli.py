@@ -117,7 +117,11 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--silhouette", type=bounded(float, 0, high=4), default=None, metavar="GROW",
                    help="start from the body's outline in the depth returns: the connected returns overlapping the "
                         "2D box, searched in the box grown by GROW of its size on each side (0: off; default by the "
-                        "depth sensor, track3d.tracker.silhouette_for: 0.5, stereo 0)")
+                        "depth sensor, track3d.tracker.silhouette_for: 0.5, stereo and ToF 0)")
+    t.add_argument("--outline-share", type=bounded(float, 0, high=1), default=None, metavar="S",
+                   help="with the outline off (--silhouette 0), its share in the box the 2D fusion starts from and "
+                        "the 2D tracker is corrected with (0: none; default by the depth sensor, "
+                        "track3d.tracker.outline_share_for: stereo 0.3, others 0)")
     t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
                    help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
                         "itself; default: by the depth sensor, 0.3, 0 for stereo; track3d.tracker.frustum_margin_for)")
@@ -238,12 +242,15 @@ def _cmd_track(a) -> int:
     faces = False if a.no_measured_faces else stereo.get("measured_faces")
     if a.depth == "stereo" and a.silhouette is None:
         a.silhouette = stereo.get("silhouette")
+    if a.depth == "stereo" and a.outline_share is None:
+        a.outline_share = stereo.get("outline_share")
     if a.depth == "stereo" and a.estimator == "a3boxnet" and "model" not in eopts:
         eopts.setdefault("depth_sensor", "stereo")   # the stereo model (track3d.boxnet.SENSOR_MODELS)
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
                        weight_2d=weight_2d, measured_faces=faces, depth_smoothing=a.depth_smoothing,
                        evidence_points=a.evidence_points, reacquire_threshold=a.reacquire_threshold,
                        hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad, silhouette=a.silhouette,
+                       outline_share=a.outline_share,
                        frustum_margin=margin,
                        # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's
                        depth_range=not a.no_depth_range and a.depth != "stereo",

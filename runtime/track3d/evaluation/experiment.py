@@ -68,6 +68,7 @@ class TrackerSpec:
     hold_cut_size: float | None = None       # None: track3d.tracker.HOLD_CUT_SIZE
     edge_pad: float | None = None            # None: by the sequence's depth sensor (edge_pad_for)
     silhouette: float | None = None          # None: by the sequence's depth sensor (silhouette_for)
+    outline_share: float | None = None       # None: by the sequence's depth sensor (outline_share_for)
     threads: int = 1
     tracker_options: dict = field(default_factory=dict)
     estimator_options: dict = field(default_factory=dict)
