@@ -60,10 +60,14 @@ def test_oracle_baseline_run_and_report(synth, tmp_path):
     lost = report["trackers"]["oracle+baseline"]["lost"]
     assert (lost["lost_true"], lost["lost_reported"], lost["absent_frames"]) == (1, 1, 1)
     assert ov["lost_precision"] == 1.0 and ov["lost_recall"] == 1.0
-    from track3d.evaluation.tables import summary_table
+    from track3d.evaluation.tables import axis_table, summary_table
     head, row = summary_table(report).splitlines()[:2]
     assert "lost_P" in head and "lost_R" in head and "1.00    1.00" in row
-    for name in ("success_2d", "success_bev", "success_3d", "precision_2d", "precision_3d",
+    head, row = axis_table(report).splitlines()
+    assert head.split()[:4] == ["3D", "error", "(m)", "bias"] and row.split()[0] == "oracle+baseline"
+    assert len(row.split()) == 13 and row.split()[1:13] == [f"{v:+.3f}" for v in ov["bias_3d"]] + \
+        [f"{v:.3f}" for v in ov["mae_3d"]]
+    for name in ("success_2d", "success_bev", "success_3d", "precision_2d", "precision_3d", "errors_3d",
                  "trajectory_s0001", "trajectory_s0002"):
         assert (tmp_path / "rep" / f"{name}.png").stat().st_size > 1000
 
@@ -178,6 +182,8 @@ def test_two_d_only_one_pass_is_the_2d_protocol_and_reads_no_depth(tiny_dataset,
     assert ov.two_d_only and "ao_3d" not in ov.summary()
     rep = exp.report(["kcf"], plots=False)
     assert "ao_3d" not in rep["trackers"]["kcf"]["overall"]
+    from track3d.evaluation.tables import axis_table
+    assert axis_table(rep) == "" and "bias_3d" not in rep["trackers"]["kcf"]["overall"]
 
 
 def test_lost_is_scored_from_the_results(synth, tmp_path):

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from track3d.evaluation.metrics import (CE2D_THRESHOLDS, IOU_THRESHOLDS, LostScore, average_scores,
-                                        precision_curve, score_lost, score_sequence, success_curve)
+                                        axis_errors_3d, precision_curve, score_lost, score_sequence,
+                                        success_curve)
 
 
 def test_success_curve_hand_case():
@@ -48,6 +49,27 @@ def test_score_sequence_hand_case():
     np.testing.assert_allclose(s.curves["success_2d"][[0, 50, 100]], [1.0, 0.5, 0.0])
     np.testing.assert_allclose(s.curves["precision_2d"][[0, 4, 5]], [0.5, 0.5, 1.0])  # 0 px, 4 px, 5 px
     assert s.curves["precision_3d"][-1] == pytest.approx(0.5)  # 10 m is beyond the 4 m axis
+    # prediction - truth: frame 1 cx -1, frame 2 cx +10, every other coordinate 0
+    np.testing.assert_allclose(s.bias_3d, [4.5, 0, 0, 0, 0, 0])
+    np.testing.assert_allclose(s.mae_3d, [5.5, 0, 0, 0, 0, 0])
+
+
+def test_axis_errors_hand_case():
+    pred = np.array([[0, 0, 11, 2, 2, 3], [0, 1, 9, 2, 2, 1], [np.nan] * 6], float)
+    gt = np.array([[0, 0, 10, 2, 2, 2], [0, 0, 10, 2, 2, 2], [0, 0, 10, 2, 2, 2]], float)
+    bias, mae = axis_errors_3d(pred, gt)   # the frame without a box is left out
+    np.testing.assert_allclose(bias, [0, 0.5, 0, 0, 0, 0])
+    np.testing.assert_allclose(mae, [0, 0.5, 1.0, 0, 0, 1.0])
+    assert np.isnan(axis_errors_3d(pred[2:], gt[2:])[0]).all()
+    # over sequences: each sequence weighs the same, a sequence without boxes is left out
+    a = score_sequence("a", np.ones((2, 4)), pred[:2], np.ones((2, 4)), gt[:2], np.ones(2, bool))
+    b = score_sequence("b", np.ones((1, 4)), np.array([[0, 0, 14, 2, 2, 2.0]]), np.ones((1, 4)), gt[:1],
+                       np.ones(1, bool))
+    c = score_sequence("c", np.ones((1, 4)), pred[2:], np.ones((1, 4)), gt[2:], np.ones(1, bool))
+    ov = average_scores([a, b, c])
+    np.testing.assert_allclose(ov.values["bias_3d"], [0, 0.25, 2.0, 0, 0, 0])
+    np.testing.assert_allclose(ov.values["mae_3d"], [0, 0.25, 2.5, 0, 0, 0.5])
+    assert ov.summary()["mae_3d"] == ov.values["mae_3d"]
 
 
 def test_identical_boxes_score_perfectly():
@@ -110,6 +132,7 @@ def test_two_d_only_scores_have_no_3d_values_and_the_same_2d_values():
     assert np.isnan([s.ao_bev, s.ao_3d, s.sr50_3d, s.ace_3d]).all()
     assert sorted(s.curves) == ["precision_2d", "success_2d"]
     assert "ao_3d" not in s.summary() and s.summary()["ao_2d"] == full.ao_2d
+    assert "bias_3d" not in s.summary() and "mae_3d" not in average_scores([s]).summary()
     ov = average_scores([s, s])
     assert ov.two_d_only and "ace_3d" not in ov.summary() and ov.values["ao_2d"] == pytest.approx(s.ao_2d)
     assert not average_scores([full]).two_d_only and "ao_3d" in average_scores([full]).summary()

@@ -16,7 +16,7 @@ from .argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias, 
 
 __all__ = ["main"]
 
-from .evaluation.tables import summary_table  # noqa: E402  (the one table of a report)
+from .evaluation.tables import axis_table, summary_table  # noqa: E402  (the tables of a report)
 from .threads import set_threads  # noqa: E402
 
 def _options(pairs: list[str] | None) -> dict:
@@ -336,6 +336,9 @@ def _cmd_eval(a) -> int:
         report["warnings"] = notes + report.get("warnings", [])
         write_json(Path(a.out) / "report.json", report)
     print(summary_table(report))
+    axes = axis_table(report)
+    if axes:
+        print(axes)
     for w in report.get("warnings", []):
         print(f"track3d eval: WARNING: {w}", file=sys.stderr)
     print(f"report: {Path(a.out) / 'report.json'}")

@@ -534,6 +534,9 @@ class Experiment:
 
             files = P.curve_plots(overall, self.report_dir)
             files.append(P.sequence_plot(per_sequence, self.report_dir))
+            axes = P.axis_error_plot(overall, self.report_dir)
+            if axes is not None:
+                files.append(axes)
             seq_names = P.worst_sequences(per_sequence, trajectories) if worst_first else \
                 [s.name for s in self.sequences[:trajectories]]
             files += P.trajectory_plots(self, names, seq_names, self.report_dir)

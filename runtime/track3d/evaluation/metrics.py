@@ -19,6 +19,11 @@ frames it calls lost against the frames where the target is absent, and re-acqui
 share of the target's returns into view after which the tracker, within `reacquire_frames`
 frames, reports a box (not lost) with IoU > REACQUIRE_IOU (:func:`score_lost`).
 
+Where the 3D error lies (bias_3d, mae_3d): per box coordinate [cx, cy, cz, sx, sy, sz] (the
+camera frame: z along the line of sight), the mean and the mean absolute of prediction minus
+ground truth over the scored frames that have a prediction (:func:`axis_errors_3d`). A box
+estimator that guesses the hidden depth of a body shows it in cz and sz.
+
 Over sequences: the mean of the per-sequence values (paper eq. for AO^3d and ACE^3d: every
 sequence weighs the same), curves averaged likewise; restarts are summed; FPS is frames over
 time summed over all sequences. IoU and centre error come from track3d.boxes (one formula).
@@ -34,7 +39,7 @@ from ..boxes import center_error_2d, center_error_3d, iou_2d, iou_3d, iou_bev
 __all__ = [
     "IOU_THRESHOLDS", "CE2D_THRESHOLDS", "CE3D_THRESHOLDS", "success_curve", "precision_curve",
     "SequenceScore", "OverallScore", "score_sequence", "average_scores", "KINDS", "SCALARS", "SCALARS_2D",
-    "LostScore", "score_lost", "REACQUIRE_IOU",
+    "LostScore", "score_lost", "REACQUIRE_IOU", "AXES_3D", "axis_errors_3d",
 ]
 
 IOU_THRESHOLDS = np.linspace(0.0, 1.0, 101)
@@ -59,6 +64,19 @@ def precision_curve(errors: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
         return np.zeros(len(thresholds))
     e = np.where(np.isnan(e), np.inf, e)
     return (e[:, None] <= np.asarray(thresholds)[None, :]).mean(axis=0)
+
+
+AXES_3D = ("cx", "cy", "cz", "sx", "sy", "sz")   # a 3D box's coordinates, the order of bias_3d / mae_3d
+
+
+def axis_errors_3d(pred3d: np.ndarray, gt3d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(bias, mae), each (6,) float64 in AXES_3D order: the mean and the mean absolute value of
+    pred3d - gt3d (both (T, 6)) over the frames where both boxes are finite; nan where none is."""
+    d = np.asarray(pred3d, np.float64).reshape(-1, 6) - np.asarray(gt3d, np.float64).reshape(-1, 6)
+    d = d[np.all(np.isfinite(d), axis=1)]
+    if not len(d):
+        return np.full(6, np.nan), np.full(6, np.nan)
+    return d.mean(axis=0), np.abs(d).mean(axis=0)
 
 
 def _mean_or_nan(v: np.ndarray) -> float:
@@ -89,6 +107,8 @@ class SequenceScore:
     timed_frames: int = 0
     two_d_only: bool = False        # no 3D boxes were scored: the 3D values are nan
     curves: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    bias_3d: list[float] = field(default_factory=lambda: [float("nan")] * 6)   # AXES_3D, metres
+    mae_3d: list[float] = field(default_factory=lambda: [float("nan")] * 6)
 
     @property
     def fps(self) -> float:
@@ -101,7 +121,7 @@ class SequenceScore:
     def summary(self) -> dict:
         """Plain values (no curves); a 2D-only score leaves out the 3D values it does not have."""
         d = {k: v for k, v in asdict(self).items()
-             if k not in ("curves", "two_d_only") and not (self.two_d_only and k in _SCALARS_3D)}
+             if k not in ("curves", "two_d_only") and not (self.two_d_only and k in _SCALARS_3D + _AXES)}
         d["fps"], d["fps_e2e"] = self.fps, self.fps_e2e
         return d
 
@@ -137,6 +157,8 @@ def score_sequence(name: str, pred2d: np.ndarray, pred3d: np.ndarray | None, gt2
     if not two_d_only:
         curves["precision_3d"] = precision_curve(ce3, CE3D_THRESHOLDS)
 
+    bias, mae = axis_errors_3d(p3, g3)
+
     def ao(k):
         return float(ious[k].mean()) if len(p2) and k in ious else float("nan")
 
@@ -149,12 +171,14 @@ def score_sequence(name: str, pred2d: np.ndarray, pred3d: np.ndarray | None, gt2
         ao_bev=ao("bev"), sr50_bev=sr("bev", 0.5), sr75_bev=sr("bev", 0.75),
         ao_3d=ao("3d"), sr50_3d=sr("3d", 0.5), sr75_3d=sr("3d", 0.75), ace_3d=_mean_or_nan(ce3),
         tracker_seconds=float(tracker_seconds), e2e_seconds=float(e2e_seconds),
-        timed_frames=int(timed_frames), two_d_only=two_d_only, curves=curves)
+        timed_frames=int(timed_frames), two_d_only=two_d_only, curves=curves,
+        bias_3d=[float(v) for v in bias], mae_3d=[float(v) for v in mae])
 
 
 SCALARS_2D = ("ao_2d", "sr50_2d", "sr75_2d", "ace_2d")
 _SCALARS_3D = ("ao_bev", "sr50_bev", "sr75_bev", "ao_3d", "sr50_3d", "sr75_3d", "ace_3d")
 SCALARS = SCALARS_2D + _SCALARS_3D
+_AXES = ("bias_3d", "mae_3d")   # per-coordinate values (lists in AXES_3D order)
 
 
 @dataclass
@@ -172,7 +196,7 @@ class OverallScore:
 
     def summary(self) -> dict:
         """Plain values (no curves); a 2D-only score leaves out the 3D values it does not have."""
-        values = {k: v for k, v in self.values.items() if not (self.two_d_only and k in _SCALARS_3D)}
+        values = {k: v for k, v in self.values.items() if not (self.two_d_only and k in _SCALARS_3D + _AXES)}
         return {"sequences": self.sequences, "frames": self.frames, "restarts": self.restarts,
                 **values, "fps": self.fps, "fps_e2e": self.fps_e2e}
 
@@ -184,6 +208,9 @@ def average_scores(scores: list[SequenceScore]) -> OverallScore:
     for k in SCALARS:
         v = np.array([getattr(s, k) for s in used], dtype=np.float64)
         values[k] = _mean_or_nan(v)
+    for k in _AXES:   # per coordinate, the mean over the sequences that have one
+        a = np.array([getattr(s, k) for s in used], dtype=np.float64).reshape(-1, 6)
+        values[k] = [_mean_or_nan(a[:, j]) for j in range(6)]
     curves = {}
     if used:
         for k in used[0].curves:

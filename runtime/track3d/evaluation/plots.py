@@ -9,10 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .metrics import CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, OverallScore
+from .metrics import AXES_3D, CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, OverallScore
 from .results import INIT, read_result
 
-__all__ = ["pyplot", "curve_plots", "trajectory_plot", "trajectory_plots", "sequence_plot", "worst_sequences"]
+__all__ = ["pyplot", "curve_plots", "trajectory_plot", "trajectory_plots", "sequence_plot", "worst_sequences",
+           "axis_error_plot"]
 
 
 def pyplot():
@@ -189,6 +190,41 @@ def sequence_plot(scores: dict[str, list], out_dir: str | Path) -> Path:
     ax.grid(axis="x", alpha=0.3)
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.08 - 0.4 / max(rows, 4)), ncol=2)
     path = Path(out_dir) / "sequences.png"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def axis_error_plot(overall: dict[str, OverallScore], out_dir: str | Path) -> Path | None:
+    """errors_3d.png: each run's mean |error| per 3D box coordinate (bars) and its bias (prediction -
+    truth, black ticks), camera frame: where the 3D error lies (a hidden depth guessed wrong shows in
+    cz and sz). None when no run has 3D boxes."""
+    runs = sorted(n for n, ov in overall.items() if not ov.two_d_only and "mae_3d" in ov.values)
+    if not runs:
+        return None
+    plt = pyplot()
+    colour = _colours(runs)
+    w = 0.8 / len(runs)
+    x = np.arange(len(AXES_3D))
+    fig, ax = plt.subplots(figsize=(6.5, 3.6), dpi=100)
+    for k, name in enumerate(runs):
+        xs = x + (k - (len(runs) - 1) / 2) * w
+        mae = np.asarray(overall[name].values["mae_3d"], np.float64)
+        bias = np.asarray(overall[name].values["bias_3d"], np.float64)
+        ax.bar(xs, np.nan_to_num(mae), width=w, color=colour[name], label=name)
+        ax.scatter(xs, bias, marker="_", s=200 * w, color="black", zorder=3,
+                   label="bias (prediction - truth)" if k == 0 else None)
+    ax.axhline(0.0, color="grey", lw=0.8)
+    labels = {"cx": "centre x", "cy": "centre y", "cz": "centre z\n(line of sight)", "sx": "size x",
+              "sy": "size y", "sz": "size z\n(line of sight)"}
+    ax.set_xticks(x, [labels[a] for a in AXES_3D], fontsize=8)
+    ax.set(ylabel="metres", title="3D error per box coordinate: mean |error| (bars), bias (ticks)")
+    ax.title.set_fontsize(10)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=7)
+    path = Path(out_dir) / "errors_3d.png"
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
     fig.savefig(path)

@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 from ..table_text import cell
+from .metrics import AXES_3D
 
-__all__ = ["TABLE_COLUMNS", "columns", "summary_table"]
+__all__ = ["TABLE_COLUMNS", "columns", "summary_table", "axis_table"]
 
 TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
                  ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
@@ -27,6 +28,23 @@ def summary_table(report: dict) -> str:
         for _, key, fmt in TABLE_COLUMNS:
             row.append(cell(ov.get(key), fmt))
         rows.append(row)
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
+                     for r in rows)
+
+
+def axis_table(report: dict) -> str:
+    """Where each tracker's 3D error lies: per box coordinate (AXES_3D, the camera frame, z along the
+    line of sight) the mean over sequences of the bias (prediction - truth) and of the mean |error|,
+    in metres; "" when no tracker of the report has 3D boxes."""
+    rows = [["3D error (m)"] + [f"bias {a}" for a in AXES_3D] + [f"|e| {a}" for a in AXES_3D]]
+    for name, t in report["trackers"].items():
+        ov = t["overall"]
+        if "bias_3d" not in ov:   # 2D only
+            continue
+        rows.append([name] + [cell(v, "{:+.3f}") for v in ov["bias_3d"]] + [cell(v, "{:.3f}") for v in ov["mae_3d"]])
+    if len(rows) == 1:
+        return ""
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     return "\n".join("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
                      for r in rows)
