@@ -688,18 +688,18 @@ class Track3D:
             else:
                 seen = past_border(outline, raw, self._size)
                 cloud = self._region_cloud(seen, near, region, points)
-        start = seen   # the box the 2D fusion starts from
-        if self.outline_share > 0.0 and self.silhouette == 0.0 and self.fusion and not callable(points):
-            outline, _, _ = silhouette_box(points, raw, self._M, self._size, self.z_range, SILHOUETTE)
-            if outline is not None:
-                s = self.outline_share
-                start = s * past_border(outline, raw, self._size) + (1.0 - s) * raw
         pts, bounds = self._frustum(cloud, seen)
         if seen is not raw and reaches_range(bounds, seen, self.camera, self.depth_range_m):
             # returns stopped by the sensor's range outline a cap, not the body: the range cut
             # (_reported_box) needs the image's box
             seen = raw
             pts, bounds = self._frustum(points, seen)
+        start = seen   # the box the 2D fusion starts from
+        if self.outline_share > 0.0 and self.silhouette == 0.0 and self.fusion and not callable(points):
+            outline, _, _ = silhouette_box(points, raw, self._M, self._size, self.z_range, SILHOUETTE)
+            if outline is not None:
+                s = self.outline_share
+                start = s * past_border(outline, raw, self._size) + (1.0 - s) * raw
         t2 = time.perf_counter()
         ms["frustum"] = (t2 - t1) * 1e3
         est = self._estimate(pts, bounds)
