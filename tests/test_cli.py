@@ -67,9 +67,9 @@ def test_demo_on_a_tiny_simulation(tmp_path, capsys):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["tracker"] == "kcf" and summary["frames"] >= 1
     text = capsys.readouterr().out
-    assert "AO_2d" in text and "overlay:" in text
+    assert "AO_2d" in text and "overlay:" in text and "bias cz" in text   # where the 3D error lies
     assert list((out / "results").rglob("*_overlay.gif"))
-    assert (out / "report" / "success_3d.png").is_file()
+    assert (out / "report" / "success_3d.png").is_file() and (out / "report" / "errors_3d.png").is_file()
 
 
 def test_the_demo_runs_again_in_its_folder_after_a_change(tmp_path, capsys):

@@ -96,7 +96,7 @@ def _simulate(data: Path, a) -> None:
 
 def run_demo(a) -> int:
     from track3d.evaluation import Experiment, TrackerSpec
-    from track3d.evaluation.tables import summary_table
+    from track3d.evaluation.tables import axis_table, summary_table
     from track3d.threads import set_threads
 
     if a.sequences < 1 or a.frames < 2:
@@ -130,6 +130,7 @@ def run_demo(a) -> int:
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     print()
     print(summary_table(report))
+    print(axis_table(report))
     print()
     print(f"data:        {data}")
     print(f"results:     {folders[0].parent}")
