@@ -28,9 +28,7 @@ def summary_table(report: dict) -> str:
         for _, key, fmt in TABLE_COLUMNS:
             row.append(cell(ov.get(key), fmt))
         rows.append(row)
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    return "\n".join("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
-                     for r in rows)
+    return _aligned(rows)
 
 
 def axis_table(report: dict) -> str:
@@ -43,8 +41,11 @@ def axis_table(report: dict) -> str:
         if "bias_3d" not in ov:   # 2D only
             continue
         rows.append([name] + [cell(v, "{:+.3f}") for v in ov["bias_3d"]] + [cell(v, "{:.3f}") for v in ov["mae_3d"]])
-    if len(rows) == 1:
-        return ""
+    return _aligned(rows) if len(rows) > 1 else ""
+
+
+def _aligned(rows: list[list[str]]) -> str:
+    """Text rows of cells: the first column left-aligned, the others right-aligned, two spaces apart."""
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     return "\n".join("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths)))
                      for r in rows)
