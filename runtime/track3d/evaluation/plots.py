@@ -28,6 +28,16 @@ def pyplot():
     return plt
 
 
+def _save(fig, path: str | Path) -> Path:
+    """Lay out, write and close `fig` at `path` (its folder made); returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path)
+    pyplot().close(fig)
+    return path
+
+
 def _colours(names) -> dict[str, tuple]:
     """One colour per tracker name, the same in every plot of a report (sorted names, tab10)."""
     plt = pyplot()
@@ -46,7 +56,6 @@ def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path) -> list[P
     only when some run has 3D curves."""
     plt = pyplot()
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     files = []
     colour = _colours(overall)
     def drawn(curve: str) -> bool:   # 2D-only runs have no 3D curves: no empty 3D plots
@@ -66,11 +75,7 @@ def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path) -> list[P
                xlim=(0, 1), ylim=(0, 1.02))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="lower left")
-        f = out_dir / f"success_{kind}.png"
-        fig.tight_layout()
-        fig.savefig(f)
-        plt.close(fig)
-        files.append(f)
+        files.append(_save(fig, out_dir / f"success_{kind}.png"))
     for kind, (curve, key, thr, xlabel, unit) in _PRECISION.items():
         if not drawn(curve):
             continue
@@ -82,11 +87,7 @@ def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path) -> list[P
                xlim=(thr[0], thr[-1]), ylim=(0, 1.02))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="lower right")
-        f = out_dir / f"precision_{kind}.png"
-        fig.tight_layout()
-        fig.savefig(f)
-        plt.close(fig)
-        files.append(f)
+        files.append(_save(fig, out_dir / f"precision_{kind}.png"))
     return files
 
 
@@ -116,12 +117,7 @@ def trajectory_plot(gt3d: np.ndarray, tracks: dict[str, np.ndarray], path: str |
     ax.set_zlabel("-y (m)")
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=7, loc="upper left")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def trajectory_plots(exp, names: list[str], seq_names: list[str], out_dir: str | Path) -> list[Path]:
@@ -189,12 +185,7 @@ def sequence_plot(scores: dict[str, list], out_dir: str | Path) -> Path:
     ax.set(xlim=(0, 1), xlabel=f"AO_{key[3:]} per sequence", title="Sequences, worst first")
     ax.grid(axis="x", alpha=0.3)
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.08 - 0.4 / max(rows, 4)), ncol=2)
-    path = Path(out_dir) / "sequences.png"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(fig, Path(out_dir) / "sequences.png")
 
 
 def axis_error_plot(overall: dict[str, OverallScore], out_dir: str | Path) -> Path | None:
@@ -224,9 +215,4 @@ def axis_error_plot(overall: dict[str, OverallScore], out_dir: str | Path) -> Pa
     ax.title.set_fontsize(10)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=7)
-    path = Path(out_dir) / "errors_3d.png"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(fig, Path(out_dir) / "errors_3d.png")
