@@ -15,7 +15,7 @@ from .implicit import SdfGrid, _norm, grid_size, mesh_grid, rotation, sd_ellipso
 from .shapes import Shape, scale_to_volume
 
 __all__ = ["make_bilobate", "make_elongated", "make_top_shape", "make_rubble_pile", "make_giant_craters",
-           "make_fragment", "make_superquadric", "sd_superellipsoid"]
+           "make_fragment", "make_superquadric", "sd_superellipsoid", "make_gaussian_sphere", "gaussian_log_radius"]
 
 _MARGIN = 0.3  # unit-scale room around the base primitives for noise, rims and perched boulders
 
@@ -229,3 +229,50 @@ def make_superquadric(rng: np.random.Generator, volume: float, detail: int = 6) 
     _surface_detail(g, rng, p, _u(rng, 0.015, 0.05), int(rng.integers(4, 25)), 0.2,
                     int(rng.integers(5, 60)), _u(rng, 0.03, 0.05))
     return _finish(g, rng, "superquadric", volume, detail, p)
+
+
+def gaussian_log_radius(rng: np.random.Generator, n_waves: int, slope: float):
+    """A smooth isotropic random function on the unit sphere with zero mean and unit variance:
+    a sum of `n_waves` random plane waves cos(w . u + phase) restricted to the sphere, wave
+    numbers log-uniform in 2..9 rad per unit (about the spherical-harmonic degree; a
+    wave of 1 would mostly shift the body), amplitudes falling as |w| ** -slope (the larger
+    the slope, the more the low orders dominate). Returns h(u) for unit vectors u (..., 3)."""
+    k = np.exp(rng.uniform(math.log(2.0), math.log(9.0), n_waves))
+    d = rng.standard_normal((n_waves, 3))
+    w = d / np.linalg.norm(d, axis=1, keepdims=True) * k[:, None]
+    a = k ** -slope
+    a = a / math.sqrt(0.5 * float((a * a).sum()))  # each cosine of a random phase has variance 1/2
+    phase = rng.uniform(0.0, 2 * math.pi, n_waves)
+    w32, a32, ph32 = w.astype(np.float32), a.astype(np.float32), phase.astype(np.float32)
+
+    def h(u):
+        return np.cos(u @ w32.T + ph32) @ a32
+    return h
+
+
+def make_gaussian_sphere(rng: np.random.Generator, volume: float, detail: int = 6) -> Shape:
+    """A Gaussian random sphere (the log of the radius is a random field on the sphere; the
+    generic irregular small-body model of the light-scattering literature), stretched to a
+    random axis ratio, with the common skin. It belongs to no mission family: its lumps and
+    hollows put the hidden back at distances the family generators never make."""
+    sigma = _u(rng, 0.15, 0.35)         # relative standard deviation of the log radius
+    slope = _u(rng, 0.8, 1.8)
+    h = gaussian_log_radius(rng, 32, slope)
+    axes = np.array([1.0, _u(rng, 0.45, 1.0), _u(rng, 0.3, 0.9)])
+    axes[1:] = np.sort(axes[1:])[::-1]
+    # the radius on a dense set of directions bounds the grid
+    u = rng.standard_normal((4000, 3)).astype(np.float32)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    rmax = float(np.exp(sigma * h(u) - 0.5 * sigma * sigma).max()) * 1.1
+
+    def body(q):
+        r = _norm(q)
+        dirs = q / np.maximum(r, np.float32(1e-6))[..., None]
+        return (r - np.exp(np.float32(sigma) * h(dirs) - np.float32(0.5 * sigma * sigma))).astype(np.float32)
+
+    g = _grid((-rmax,) * 3, (rmax,) * 3, detail)
+    g.union(body, (-rmax,) * 3, (rmax,) * 3)
+    p = dict(sigma=sigma, spectrum_slope=slope, axes=axes.tolist())
+    _surface_detail(g, rng, p, _u(rng, 0.015, 0.04), int(rng.integers(5, 30)), 0.25,
+                    int(rng.integers(5, 60)), _u(rng, 0.03, 0.05))
+    return _finish(g, rng, "gaussian_sphere", volume, detail, p, post=axes)

@@ -112,3 +112,6 @@ register(Generator("fragment", _bodies.make_fragment, 2, False,
 register(Generator("superquadric", _bodies.make_superquadric, 2, False,
                    "superellipsoid from boxy to pinched, axes 1 : 0.35-1 : 0.25-0.9 (cobbles, boulders, "
                    "flattened bodies; opt-in)", default=False))
+register(Generator("gaussian_sphere", _bodies.make_gaussian_sphere, 2, False,
+                   "Gaussian random sphere (random log radius) stretched to 1 : 0.45-1 : 0.3-0.9, lumps and "
+                   "hollows of every size (generic irregular bodies; opt-in)", default=False))
