@@ -24,7 +24,8 @@ from .size_coding import SIZE_CODINGS, SizeCoding, size_coding
 
 __all__ = [
     "KIND", "DEFAULT_MODEL", "NARROW_MODEL", "FULL_WIDTH_MODEL", "SENSOR_MODELS", "model_for_sensor", "SIZE_NORMS",
-    "MAX_EXTENT_M", "INPUT_POINTS", "INPUT_CATEGORY", "OUTPUTS", "one_hot", "A3BoxNetEstimator", "create",
+    "MAX_EXTENT_M", "INPUT_POINTS", "INPUT_CATEGORY", "OUTPUTS", "VIEWS", "SENSOR_VIEWS", "views_for", "MIRRORS",
+    "one_hot", "average_boxes", "A3BoxNetEstimator", "create",
 ]
 
 KIND = "a3boxnet"
@@ -50,6 +51,30 @@ SENSOR_MODELS = {"stereo": "a3boxnet_stereo.onnx"}
 def model_for_sensor(depth_sensor: str | None) -> Path:
     """The shipped A3BoxNet file for clouds of this depth sensor (None or unknown: the shared one)."""
     return shipped_model(SENSOR_MODELS.get(str(depth_sensor or "").lower(), DEFAULT_MODEL))
+
+
+# Test-time views: the box is the average of `views` passes of the network over one frustum, view
+# k with its own point sample (seed + k) and the cloud mirrored by MIRRORS[k % 4] about the
+# optical axis (the net was trained with both mirrors; the principal point is the image centre),
+# the box mirrored back; centres averaged, sizes by their geometric mean. One sample of N points
+# from a frustum of thousands is one noisy look: its sampling and the net's asymmetries average
+# out. VIEWS is the default; SENSOR_VIEWS per depth sensor (chosen by measurement, docs/models.md).
+VIEWS = 1
+SENSOR_VIEWS: dict[str, int] = {}
+MIRRORS = ((), (0,), (1,), (0, 1))   # axes negated in view k % 4: none, x, y, both
+MAX_VIEWS = 16
+
+
+def views_for(depth_sensor: str | None) -> int:
+    """The number of test-time views for clouds of this depth sensor (None or unknown: VIEWS)."""
+    return SENSOR_VIEWS.get(str(depth_sensor or "").lower(), VIEWS)
+
+
+def average_boxes(boxes: np.ndarray) -> np.ndarray:
+    """(K, 6) boxes [cx, cy, cz, sx, sy, sz] -> (6,): centres averaged, sizes by their geometric mean
+    (a size is a scale: 1 m and 4 m average to 2 m, as 0.5x and 2x of it)."""
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 6)
+    return np.concatenate([b[:, :3].mean(axis=0), np.exp(np.log(b[:, 3:]).mean(axis=0))])
 
 
 SIZE_NORMS = tuple(SIZE_CODINGS)   # the box codings a model's metadata may name (track3d.size_coding)
@@ -87,7 +112,8 @@ class A3BoxNetEstimator:
     models exported with a dynamic point axis, which ours are); seed: the sampling seed, fixed
     per call so that the same points always give the same box (deterministic); precision /
     engine: the model variant ("fp32" | "int8" | "bf16" | "auto", "onnxruntime" | "openvino" |
-    "auto", see track3d.onnxmodel; the choice is in ``.model.choice``).
+    "auto", see track3d.onnxmodel; the choice is in ``.model.choice``); views: test-time views
+    averaged per box, 1..16 (default: `views_for(depth_sensor)`; see VIEWS), run as one batch.
     """
 
     name = KIND
@@ -98,7 +124,12 @@ class A3BoxNetEstimator:
 
     def __init__(self, model: str | Path | None = None, threads: int = 1, num_points: int | None = None,
                  seed: int = 0, precision: str = "fp32", engine: str = "onnxruntime",
-                 depth_sensor: str | None = None):
+                 depth_sensor: str | None = None, views: int | None = None):
+        if views is None:
+            views = views_for(depth_sensor)
+        if isinstance(views, bool) or not isinstance(views, (int, np.integer)) or not 1 <= views <= MAX_VIEWS:
+            raise ValueError(f"views must be an integer in 1..{MAX_VIEWS}, got {views!r}")
+        self.views = int(views)
         if model is None:
             model = model_for_sensor(depth_sensor)
         # a path or a model object (onnxmodel.load_model)
@@ -126,12 +157,14 @@ class A3BoxNetEstimator:
         self._with_category = INPUT_CATEGORY in names
 
     def __repr__(self) -> str:
-        return f"A3BoxNetEstimator({self.model.path.name}, N={self.num_points}, threads={self.threads})"
+        v = f", views={self.views}" if self.views != 1 else ""
+        return f"A3BoxNetEstimator({self.model.path.name}, N={self.num_points}, threads={self.threads}{v})"
 
-    def sample(self, points: np.ndarray) -> np.ndarray:
+    def sample(self, points: np.ndarray, view: int = 0) -> np.ndarray:
+        """The N points view `view` sees (sampling seed + view; not mirrored)."""
         from .frustum import sample_points
 
-        return sample_points(np.ascontiguousarray(points, dtype=np.float32), self.num_points, self.seed)
+        return sample_points(np.ascontiguousarray(points, dtype=np.float32), self.num_points, self.seed + view)
 
     def infer(self, centred: np.ndarray, category) -> list[np.ndarray]:
         """Raw network outputs for a batch of centred points (B, N, 3) and categories (B,)."""
@@ -150,17 +183,35 @@ class A3BoxNetEstimator:
         point by point over the whole frustum."""
         category = check_category(category, self.num_categories)
         pts = check_estimator_points(points, finite=False)
-        sample = self.sample(pts)
-        lo, hi = point_bounds(sample)
+        sample = self.sample(pts) if self.views == 1 else np.stack([self.sample(pts, k) for k in range(self.views)])
+        lo, hi = point_bounds(sample.reshape(-1, 3))
         check_point_bounds(lo, hi)
         if float(np.max(hi.astype(np.float64) - lo)) > MAX_EXTENT_M:
             raise ValueError(f"A3BoxNet answers for points spanning at most {MAX_EXTENT_M:g} m, "
                              f"these span {float(np.max(hi.astype(np.float64) - lo)):.3g} m")
         if self.coding.needs_bounds:
             bounds = self._check_bounds(pts, bounds, lo, hi)
-        centred, ref, scale = self.coding.normalise(sample[None], None if bounds is None else bounds[None])
-        out = self.infer(centred, [category])
-        return self.coding.decode(ref, scale, *out)[0]
+        if self.views == 1:
+            centred, ref, scale = self.coding.normalise(sample[None], None if bounds is None else bounds[None])
+            return self.coding.decode(ref, scale, *self.infer(centred, [category]))[0]
+        return self._estimate_views(sample, category, bounds)
+
+    def _estimate_views(self, samples: np.ndarray, category: int, bounds: np.ndarray | None) -> np.ndarray:
+        """samples: (K, N, 3), view k unmirrored -> the averaged box (6,)."""
+        k_views = len(samples)
+        sign = np.ones((k_views, 3))
+        for k in range(k_views):
+            sign[k, list(MIRRORS[k % len(MIRRORS)])] = -1.0
+        mirrored = samples * sign[:, None, :].astype(np.float32)
+        b = None
+        if bounds is not None:
+            # negating an axis swaps its min and max
+            lo, hi = bounds[0] * sign, bounds[1] * sign
+            b = np.stack([np.minimum(lo, hi), np.maximum(lo, hi)], axis=1)
+        centred, ref, scale = self.coding.normalise(mirrored, b)
+        boxes = self.coding.decode(ref, scale, *self.infer(centred, [category] * k_views))
+        boxes[:, :3] *= sign
+        return average_boxes(boxes)
 
     @staticmethod
     def _check_bounds(pts: np.ndarray, bounds, sample_lo: np.ndarray, sample_hi: np.ndarray) -> np.ndarray:
