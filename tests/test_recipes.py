@@ -47,9 +47,11 @@ def test_tiny_recipe_runs_end_to_end(name, tmp_path):
     if name == "a3boxnet-narrow":   # the default: half width, distilled from the full-width model, an int8 twin
         meta = OnnxModel(tmp_path / "r" / "boxnet-narrow" / "a3boxnet_narrow.onnx", 1).meta
         assert meta["width"] == 0.5 and meta["trained"]["distilled_from"] == {"file": "a3boxnet.onnx", "weight": 1.0}
-        # stage 2: stage 1 fine-tuned with the superquadric bodies in its training world
+        # stage 3: stage 2 fine-tuned with the Gaussian random spheres in its training world as well
         assert meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet_narrow.onnx"
-        assert meta["train_data"].split("+") == ["engine-train-po", "engine-train-po2", "engine-train-sq"]
+        assert meta["train_data"].split("+") == ["engine-train-po", "engine-train-po2", "engine-train-sq",
+                                                 "engine-train-gs"]
+        assert (tmp_path / "r" / "boxnet-narrow" / "stage2" / "a3boxnet_narrow.onnx").is_file()
         assert (tmp_path / "r" / "boxnet-narrow" / "a3boxnet_narrow_int8.onnx").is_file()
     if name == "a3boxnet-engine":
         # a second run resumes: every step finds its work done or continues from its checkpoint

@@ -32,7 +32,7 @@ def test_shipped_model_is_present_and_carries_its_metadata(name):
             assert m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet.onnx"
         # the default is the full-width model cut to half width and distilled from it
         if name == "a3boxnet_narrow.onnx":
-            assert m.meta["width"] == 0.5 and m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet_narrow.onnx"  # stage 2 of its recipe
+            assert m.meta["width"] == 0.5 and m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet_narrow.onnx"  # its recipe's last stage
             assert m.meta["trained"]["distilled_from"] == {"file": "a3boxnet.onnx", "weight": 1.0}
     else:
         assert m.meta["exemplar_size"] == 127 and m.meta["total_stride"] == 8

@@ -260,23 +260,33 @@ A3BOXNET_NARROW = Recipe(
                 "width (the channels that matter most to the next layer kept) and fine-tuned on the data engine's "
                 "points-only bodies to fit both the ground truth and the full-width model's outputs "
                 "(distillation, ~45 min on one thread); then fine-tuned again, still distilled, with superquadric "
-                "bodies added to the training world (~100 min); then its int8 twin.",
-    knobs={"preset": "small", "po_train": 240, "po2_train": 360, "sq_train": 240, "frames": 25, "jitters": 3,
-           "epoch_samples": 4000, "batch": 32, "max_steps": 0, "minutes": 45, "sq_minutes": 100, "threads": 1,
-           "workers": 1, "width": 0.5, "teacher": "a3boxnet.onnx", "distill_weight": 1.0},
-    tiny={"preset": "tiny", "po_train": 2, "po2_train": 2, "sq_train": 2, "frames": 4, "jitters": 1,
-          "epoch_samples": 16, "batch": 8, "max_steps": 2, "minutes": 5, "sq_minutes": 5},
+                "bodies added to the training world (~100 min); then once more with Gaussian random spheres "
+                "added (~75 min); then its int8 twin.",
+    knobs={"preset": "small", "po_train": 240, "po2_train": 360, "sq_train": 240, "gs_train": 240, "frames": 25,
+           "jitters": 3, "epoch_samples": 4000, "batch": 32, "max_steps": 0, "minutes": 45, "sq_minutes": 100,
+           "gs_minutes": 75, "threads": 1, "workers": 1, "width": 0.5, "teacher": "a3boxnet.onnx",
+           "distill_weight": 1.0},
+    tiny={"preset": "tiny", "po_train": 2, "po2_train": 2, "sq_train": 2, "gs_train": 2, "frames": 4, "jitters": 1,
+          "epoch_samples": 16, "batch": 8, "max_steps": 2, "minutes": 5, "sq_minutes": 5, "gs_minutes": 5},
     steps=(
         _PO_DATA, _PO2_DATA,
         Step("data: superquadric bodies (boxy to pinched, any flattening), range sensors mixed", _a(
             "track3d-sim generate --preset {preset} --seed 21 --train {sq_train} --test 0 --test-unseen 1 "
             "--frames {frames} --points-only --sensors ideal,flash-lidar,tof --generators superquadric "
             "--out {data}/engine-train-sq --workers {workers} --quiet")),
+        Step("data: Gaussian random spheres (lumps and hollows of every size), range sensors mixed", _a(
+            "track3d-sim generate --preset {preset} --seed 31 --train {gs_train} --test 0 --test-unseen 1 "
+            "--frames {frames} --points-only --sensors ideal,flash-lidar,tof --generators gaussian_sphere "
+            "--out {data}/engine-train-gs --workers {workers} --quiet")),
         _PO_CACHE, _PO2_CACHE,
         Step("cache: frustums (superquadric bodies)", _a(
             "track3d-train boxnet prepare --data {data}/engine-train-sq --split train --jitters {jitters} "
             "--out {runs}/boxnet-engine/cache/engine-train-sq.npz --quiet"),
             done_when="{runs}/boxnet-engine/cache/engine-train-sq.npz"),
+        Step("cache: frustums (Gaussian random spheres)", _a(
+            "track3d-train boxnet prepare --data {data}/engine-train-gs --split train --jitters {jitters} "
+            "--out {runs}/boxnet-engine/cache/engine-train-gs.npz --quiet"),
+            done_when="{runs}/boxnet-engine/cache/engine-train-gs.npz"),
         Step("train stage 1: cut the teacher to the width, fine-tune on ground truth + the teacher's outputs", _a(
             "track3d-train boxnet train --cache {runs}/boxnet-engine/cache/engine-train-po.npz "
             "{runs}/boxnet-engine/cache/engine-train-po2.npz --num-points 512 --epochs 100 "
@@ -295,8 +305,20 @@ A3BOXNET_NARROW = Recipe(
             "--time-budget-min {sq_minutes} --stretch-aug 0.3 --size-norm extent --lr 3e-4 --width {width} "
             "--init-from {runs}/boxnet-narrow/stage1/a3boxnet_narrow.onnx "
             "--distill-from {teacher} --distill-weight {distill_weight}")),
-        Step("export with a parity check", _a(
+        Step("export stage 2 with a parity check", _a(
             "track3d-train boxnet export --checkpoint {runs}/boxnet-narrow/sq/best.pt "
+            "--out {runs}/boxnet-narrow/stage2/a3boxnet_narrow.onnx")),
+        Step("train stage 3: stage 2 fine-tuned with the Gaussian random spheres added, still distilled", _a(
+            "track3d-train boxnet train --cache {runs}/boxnet-engine/cache/engine-train-po.npz "
+            "{runs}/boxnet-engine/cache/engine-train-po2.npz {runs}/boxnet-engine/cache/engine-train-sq.npz "
+            "{runs}/boxnet-engine/cache/engine-train-gs.npz "
+            "--num-points 512 --epochs 200 --epoch-samples {epoch_samples} --batch {batch} --max-steps {max_steps} "
+            "--flip-y --scale-aug 0.15 --no-category --threads {threads} --quiet --out {runs}/boxnet-narrow/gs "
+            "--time-budget-min {gs_minutes} --stretch-aug 0.3 --size-norm extent --lr 1.5e-4 --width {width} "
+            "--init-from {runs}/boxnet-narrow/stage2/a3boxnet_narrow.onnx "
+            "--distill-from {teacher} --distill-weight {distill_weight}")),
+        Step("export with a parity check", _a(
+            "track3d-train boxnet export --checkpoint {runs}/boxnet-narrow/gs/best.pt "
             "--out {runs}/boxnet-narrow/a3boxnet_narrow.onnx")),
         Step("int8 twin, calibrated on the superquadric bodies (ships only if it passes the accuracy rule, "
              "docs/models.md)", _a(
@@ -306,7 +328,8 @@ A3BOXNET_NARROW = Recipe(
     notes=("`teacher` is the shipped full-width a3boxnet.onnx by name (or any A3BoxNet .onnx / checkpoint path, "
            "e.g. {runs}/boxnet-engine/a3boxnet.onnx after the a3boxnet-engine recipe).",
            "Stage 1 of the shipped model stopped at its 45 min budget after 40 epochs (best by validation at "
-           "epoch 38); stage 2 ran its 100 min, 86 epochs, best by validation at epoch 76.",
+           "epoch 38); stage 2 ran its 100 min, 86 epochs, best by validation at epoch 76; stage 3 ran its "
+           "75 min, 85 epochs, best by validation at epoch 83.",
            "The int8 twin calibrated on the points-only bodies (engine-train-po) failed the accuracy rule on "
            "held-out shapes (ACE_3d +0.017 m); calibrated on the superquadric bodies it passed (+0.007 m).",),
 )
