@@ -8,8 +8,9 @@ import pytest
 
 from track3d.boxes import box3d_from_points, iou_3d
 from track3d.camera import Camera
-from track3d.range_cut import (DEPTH_RATIO, MIN_COVERAGE, box_from_view, deepen_to_view, is_range_cut,
-                               lateral_coverage, reaches_range)
+from track3d.fusion import fuse
+from track3d.range_cut import (CAP_FUSION_COVERAGE, DEPTH_RATIO, MIN_COVERAGE, box_from_view, deepen_to_view,
+                               is_range_cut, lateral_coverage, reaches_range)
 from track3d.synthetic import CAM, render_sphere
 from track3d.tracker import TRACKING, Track3D
 from track3d.trackers2d import OracleTracker
@@ -91,7 +92,7 @@ def _cut_sphere(range_m: float, centre=(0.0, 0.0, 32.5), radius: float = 3.0):
 def test_the_loop_boxes_a_body_past_the_range_from_the_image():
     """A sphere of radius 3 m at 32.5 m behind a 30 m sensor range: the returns are its front
     cap. Told the range, the loop reports the box from the image (the cap's box without it);
-    the 2D fusion keeps the estimator's box (see Track3D._range_cut)."""
+    the cap covers about half of the 2D box, so the 2D box is not fused with it."""
     img, pts, b2, b3 = _cut_sphere(30.0)
     assert 0 < len(pts) and np.linalg.norm(pts, axis=1).max() <= 30.0
     gt2d = np.array([b2, b2])
@@ -114,12 +115,37 @@ def test_the_loop_boxes_a_body_past_the_range_from_the_image():
     lo = pts.min(axis=0)
     np.testing.assert_allclose(out[30.0].box3d, box_from_view(b2, CAM, float(lo[2])))
     assert iou_3d(out[30.0].box3d, b3) > 0.6 > 0.3 > iou_3d(out[None].box3d, b3)
-    np.testing.assert_allclose(out[30.0].box2d, out[None].box2d)      # fusion unchanged
+    # the cap is not the body's extent: told the range, the 2D tracker's box stands; not told,
+    # the loop fuses the cap's box and shrinks it
+    np.testing.assert_array_equal(out[30.0].box2d, b2)
+    np.testing.assert_allclose(out[None].box2d, fuse(b2, cap, CAM, t.weight_3d))
+    assert out[None].box2d[2] < b2[2] - 2
     # a body in range is the estimator's, range or not
     img, pts, b2, b3 = _cut_sphere(45.0)
     t = Track3D(CAM, OracleTracker(np.array([b2, b2])), _CapBox(), depth_range_m=45.0)
     t.init(img, b2)
     np.testing.assert_allclose(t.update(img, pts).box3d, box3d_from_points(pts))
+
+
+@pytest.mark.parametrize("z, small", [(32.5, True), (31.8, False)])
+def test_the_2d_box_is_fused_with_a_cap_only_when_the_cap_covers_enough_of_it(z, small):
+    """A cap covering less than CAP_FUSION_COVERAGE of the 2D box (a sphere of radius 3 m at
+    32.5 m behind a 30 m range, coverage ~0.55) leaves the 2D box to the tracker, frame after
+    frame (fused, it shrank the box onto the cap: the 2D tracker is corrected with the fused
+    box); a larger one (at 31.8 m, ~0.8, still cut) is fused with the estimator's box of it."""
+    img, pts, b2, _ = _cut_sphere(30.0, centre=(0.0, 0.0, z))
+    bounds = np.stack([pts.min(axis=0), pts.max(axis=0)])
+    coverage = lateral_coverage(bounds, b2, CAM)
+    assert is_range_cut(bounds, b2, CAM, 30.0) and (coverage < CAP_FUSION_COVERAGE) == small
+    t = Track3D(CAM, OracleTracker(np.array([b2] * 4)), _CapBox(), depth_range_m=30.0, silhouette=0.0)
+    t.init(img, b2)
+    for _ in range(3):
+        r = t.update(img, pts)
+        assert r.status == TRACKING
+        if small:
+            np.testing.assert_array_equal(r.box2d, b2)
+        else:
+            np.testing.assert_allclose(r.box2d, fuse(b2, box3d_from_points(pts), CAM, t.weight_3d))
 
 
 def test_a_body_reaching_the_range_with_its_outline_seen_keeps_a_deepened_box():

@@ -50,7 +50,7 @@ from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
 from .silhouette import find_body, past_border, silhouette_box
 from .fusion import WEIGHT_2D, WEIGHT_3D, fuse, fuse_section
-from .range_cut import (DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_from_view, deepen_to_view,
+from .range_cut import (CAP_FUSION_COVERAGE, DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_from_view, deepen_to_view,
                         lateral_coverage, reaches_range)
 from .trackers2d import Tracker2D, create_tracker
 
@@ -406,6 +406,7 @@ class Track3D:
         self._pad = (self.edge_pad / camera.fx, self.edge_pad / camera.fy)
         self._whole_box: np.ndarray | None = None   # the reported box of the last whole view (6,)
         self._depth_ratio = float("nan")   # size z / mean(size x, y) of the last box within the depth range
+        self._small_cap = False   # this frame's returns: a cap past the range smaller than CAP_FUSION_COVERAGE
         if depth_range_m is not None and not (np.isfinite(float(depth_range_m)) and float(depth_range_m) > 0.0):
             raise ValueError(f"depth_range_m must be a positive number of metres or None (unlimited), got {depth_range_m}")
         # the depth sensor's maximum range: a body reaching past it is boxed from the image (range_cut)
@@ -525,14 +526,17 @@ class Track3D:
         returns' cap, inside the body's outline, holds a 2D box that would otherwise grow with nothing to check it
         (measured one pass, EdgeTrack, held-out ToF sequences, AO_3d without the rule / with it
         fusing the image box / fusing `est`: seed 3 0.651 / 0.694 / 0.701, seed 5 0.674 / 0.702 /
-        0.710; seed 5 sequence 0004 0.19 / 0.08 / 0.33). Also says whether the view was whole
+        0.710; seed 5 sequence 0004 0.19 / 0.08 / 0.33), unless the cap covers less than
+        range_cut.CAP_FUSION_COVERAGE of the 2D box (`_small_cap`): then the 2D box stands. Also says whether the view was whole
         (the 2D box off every image border, the body not cut by the depth range) and whether the
         returns reached the range. When the returns reach the range but cover the outline, the
         box's back face goes at least as far as the image's box's (range_cut.deepen_to_view)
         with the depth-to-width ratio of the last box from returns within the range (1 before
         one)."""
         reach = reaches_range(bounds, box2d, self.camera, self.depth_range_m)
-        if reach and lateral_coverage(bounds, box2d, self.camera) < MIN_COVERAGE:
+        coverage = lateral_coverage(bounds, box2d, self.camera) if reach else 1.0
+        self._small_cap = coverage < CAP_FUSION_COVERAGE
+        if coverage < MIN_COVERAGE:
             b = box_from_view(box2d, self.camera, float(bounds[0][2]))
             if b is not None:
                 return b, False, True
@@ -713,7 +717,9 @@ class Track3D:
         # without fusion the reported 2D box is the 2D tracker's own (the outline only feeds the 3D box)
         box = seen if self.fusion else raw
         if self.fusion and est is not None:
-            box = fuse(start, est, self.camera, self.weight_3d)
+            # a cap of a body past the range is not its extent in the image (CAP_FUSION_COVERAGE)
+            box = np.array(start, dtype=np.float64) if self._small_cap else fuse(start, est, self.camera,
+                                                                                 self.weight_3d)
             if self._correct is not None:
                 self._correct(box)
         self.box2d = box.copy()
