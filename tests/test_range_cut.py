@@ -9,10 +9,10 @@ import pytest
 from track3d.boxes import box3d_from_points, iou_3d
 from track3d.camera import Camera
 from track3d.fusion import fuse
-from track3d.range_cut import (CAP_FUSION_COVERAGE, DEPTH_RATIO, MIN_COVERAGE, box_from_view, deepen_to_view,
-                               is_range_cut, lateral_coverage, reaches_range)
+from track3d.range_cut import (CAP_FUSION_COVERAGE, CARRY_DEPTH_EXPONENT, DEPTH_RATIO, MIN_COVERAGE, box_from_view,
+                               carry_box, deepen_to_view, is_range_cut, lateral_coverage, reaches_range)
 from track3d.synthetic import CAM, render_sphere
-from track3d.tracker import TRACKING, Track3D
+from track3d.tracker import NO_POINTS, TRACKING, Track3D
 from track3d.trackers2d import OracleTracker
 
 CAM100 = Camera.from_intrinsics(100, 100, 100.0, 100.0, 50.0, 50.0)
@@ -186,6 +186,61 @@ def test_the_deepened_box_is_as_deep_for_its_width_as_the_bodys_last_box_within_
     view = box_from_view(b2_f, CAM, float(pts_f[:, 2].min()), ratio=ratio)
     assert far[2] + far[5] / 2 == pytest.approx(view[2] + view[5] / 2)
     assert far[5] < box_from_view(b2_f, CAM, float(pts_f[:, 2].min()))[5]
+
+
+def test_carry_box_hand_cases():
+    """CAM100: fx = fy = 100, principal point (50, 50). A box on the optical axis at 20 m that
+    went with a 20 x 20 px box centred on it; the new 2D box is 10 x 10 px centred at (65, 45):
+    the rays' tangents are 0.15 and -0.05, the area ratio 4, so the depth goes to 20 * 2 **
+    exponent and the centre onto the new ray; the size stays."""
+    b3 = np.array([0.0, 0.0, 20.0, 2.0, 3.0, 4.0])
+    last, new = np.array([40.0, 40.0, 20.0, 20.0]), np.array([60.0, 40.0, 10.0, 10.0])
+    for e, z in ((0.0, 20.0), (0.5, 20.0 * np.sqrt(2.0)), (1.0, 40.0)):
+        np.testing.assert_allclose(carry_box(b3, last, new, CAM100, e), [0.15 * z, -0.05 * z, z, 2.0, 3.0, 4.0])
+    assert CARRY_DEPTH_EXPONENT == 0.5
+    # an offset from the old ray is kept: a box 1 m right of it at 20 m (tangent 0.05) stays 0.05 right
+    off = carry_box(b3 + [1.0, 0, 0, 0, 0, 0], last, new, CAM100, 1.0)
+    np.testing.assert_allclose(off[:3], [(0.15 + 0.05) * 40.0, -0.05 * 40.0, 40.0])
+    # the same 2D box: unchanged; a box that is not finite or a 2D box of no size: a copy, unchanged
+    np.testing.assert_allclose(carry_box(b3, last, last, CAM100), b3)
+    nan = np.full(6, np.nan)
+    assert np.all(np.isnan(carry_box(nan, last, new, CAM100)))
+    np.testing.assert_array_equal(carry_box(b3, last, [60.0, 40.0, 0.0, 10.0], CAM100), b3)
+
+
+def test_a_body_past_the_range_is_carried_by_the_image_box():
+    """A sphere of radius 3 m at 31 m (its returns reach the 30 m range), then at 34 m and 1.5 m
+    to the side (no return at all): the frame is "no_points" and the 3D box follows the 2D box, by
+    carry_box from the box of the last estimate; a checkpoint taken between the two frames
+    continues bit-identically. Without the range, or with the body's returns last within the
+    range, the box is held as it was."""
+    img1, pts1, b2_1, _ = _cut_sphere(30.0, centre=(0.0, 0.0, 31.0))
+    img2, pts2, b2_2, b3_2 = _cut_sphere(30.0, centre=(1.5, 0.0, 34.0))
+    assert len(pts1) > 100 and len(pts2) == 0
+    gt2d = np.array([b2_1, b2_1, b2_2])
+
+    def run(rng, first=(img1, pts1), restore=False):
+        t = Track3D(CAM, OracleTracker(gt2d), _CapBox(), depth_range_m=rng, fusion=False)
+        t.init(first[0], b2_1)
+        r1 = t.update(*first)
+        if restore:
+            state = t.get_state()
+            t = Track3D(CAM, OracleTracker(gt2d), _CapBox(), depth_range_m=rng, fusion=False)
+            t.set_state(state)
+        return r1, t.update(img2, pts2)
+
+    r1, r2 = run(30.0)
+    assert r1.status == TRACKING and r2.status == NO_POINTS
+    np.testing.assert_allclose(r2.box3d, carry_box(r1.box3d, b2_1, b2_2, CAM))
+    # nearer the body than the held box: across the line of sight and (damped) along it
+    err = lambda b: np.abs(b[:3] - b3_2[:3])
+    assert np.all(err(r2.box3d)[[0, 2]] < err(r1.box3d)[[0, 2]] - 0.5) and iou_3d(r2.box3d, b3_2) > iou_3d(r1.box3d, b3_2)
+    np.testing.assert_array_equal(run(30.0, restore=True)[1].box3d, r2.box3d)
+    held = run(None)
+    np.testing.assert_array_equal(held[1].box3d, held[0].box3d)
+    img0, pts0, _, _ = _cut_sphere(30.0, centre=(0.0, 0.0, 20.0))   # last estimate within the range
+    near = run(30.0, first=(img0, pts0))
+    np.testing.assert_array_equal(near[1].box3d, near[0].box3d)
 
 
 @pytest.mark.parametrize("bad", [0.0, -5.0, float("nan"), float("inf")])

@@ -19,7 +19,8 @@ With ``depth_range_m`` (the depth sensor's maximum range, e.g. an AMCW ToF camer
 range) a body whose returns stop at that range and cover less of it than the 2D box shows is
 boxed from the image and its front face instead of by the estimator, and one whose returns
 reach that range while covering the outline keeps the estimator's box made at least as deep as
-the image's (track3d.range_cut).
+the image's, and one whose returns had reached it and now give none (wholly past it) has its
+last box carried by the 2D box instead of held (track3d.range_cut.carry_box; still "no_points").
 Each result also carries the 2D tracker's confidence (`score`, 0..1 or None), how many frames
 the 3D box has been held (`held_frames`); after `lost_after` consecutive frames without a usable
 estimate (or with a score below `min_score`) the status is "lost", except that a frame which a
@@ -50,8 +51,8 @@ from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
 from .silhouette import find_body, past_border, silhouette_box
 from .fusion import WEIGHT_2D, WEIGHT_3D, fuse, fuse_section
-from .range_cut import (CAP_FUSION_COVERAGE, DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_from_view, deepen_to_view,
-                        lateral_coverage, reaches_range)
+from .range_cut import (CAP_FUSION_COVERAGE, DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_from_view, carry_box,
+                        deepen_to_view, lateral_coverage, reaches_range)
 from .trackers2d import Tracker2D, create_tracker
 
 __all__ = ["Track3D", "TrackResult", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES", "MIN_POINTS",
@@ -317,7 +318,8 @@ class TrackResult:
     clipped to the image as the labels are (a box wholly outside it is reported as it is);
     box2d_raw (4,) the 2D tracker's own box, unclipped; box3d (6,) float64 [cx, cy, cz, sx, sy, sz];
     status one of STATUSES: "tracking" (a new 3D estimate), "no_points" (boxes held: no usable
-    estimate, a dropped frame, or a 2D loss with the body still in the depth of the last box),
+    estimate, a dropped frame, or a 2D loss with the body still in the depth of the last box;
+    a body gone past the depth sensor's range has its 3D box carried by the 2D box),
     "lost"; num_points the frustum size; ms per-stage milliseconds (STAGES);
     score the 2D tracker's confidence in 0..1 for this frame (None when it has none);
     held_frames how many frames the 3D box has been held without a new estimate (0: estimated
@@ -407,6 +409,7 @@ class Track3D:
         self._whole_box: np.ndarray | None = None   # the reported box of the last whole view (6,)
         self._depth_ratio = float("nan")   # size z / mean(size x, y) of the last box within the depth range
         self._small_cap = False   # this frame's returns: a cap past the range smaller than CAP_FUSION_COVERAGE
+        self._carry_from = None   # the 2D box of the last 3D box when its returns reached the range
         if depth_range_m is not None and not (np.isfinite(float(depth_range_m)) and float(depth_range_m) > 0.0):
             raise ValueError(f"depth_range_m must be a positive number of metres or None (unlimited), got {depth_range_m}")
         # the depth sensor's maximum range: a body reaching past it is boxed from the image (range_cut)
@@ -540,10 +543,7 @@ class Track3D:
             b = box_from_view(box2d, self.camera, float(bounds[0][2]))
             if b is not None:
                 return b, False, True
-        x, y, w, h = (float(v) for v in box2d)
-        W, H = self._size
-        # a 2D box at the image border: the body may go on past the view on that side
-        sides = (x <= 0.5, y <= 0.5, x + w >= W - 0.5, y + h >= H - 0.5)
+        sides = self._border_sides(box2d)
         if self._fit_faces:
             est = fit_measured_faces(est, bounds, sides, self._pad)
             if self._hold_cut and any(sides) and self._whole_box is not None:
@@ -554,11 +554,19 @@ class Track3D:
             return deepen_to_view(box, box2d, self.camera, float(bounds[0][2]), ratio), False, True
         return box, not any(sides), False
 
+    def _border_sides(self, box2d: np.ndarray) -> tuple[bool, bool, bool, bool]:
+        """Whether the 2D box [x, y, w, h] touches the image's left, top, right, bottom border: the
+        body may go on past the view on that side."""
+        x, y, w, h = (float(v) for v in box2d)
+        W, H = self._size
+        return x <= 0.5, y <= 0.5, x + w >= W - 0.5, y + h >= H - 0.5
+
     def _report(self, est: np.ndarray, bounds: np.ndarray, box2d: np.ndarray) -> np.ndarray:
         """This frame's reported box (`_reported_box`) with its depth extent replaced by the
         running average (DEPTH_SMOOTHING), its front face where it was; updates the average and,
         after a whole view, the size a cut body keeps (HOLD_CUT_SIZE)."""
         box, whole, reached = self._reported_box(est, bounds, box2d)
+        self._carry_from = np.array(box2d, dtype=np.float64) if reached else None
         if not reached:   # a box from returns within the range: the body's own depth-to-width ratio
             self._depth_ratio = float(min(box[5] / max((box[3] + box[4]) / 2.0, 1e-6), MAX_DEPTH_RATIO))
         if self._smooth_depth:
@@ -592,6 +600,7 @@ class Track3D:
         self._depth_avg = float("nan")
         self._whole_box = None
         self._depth_ratio = float("nan")
+        self._carry_from = None
         self._started = True
         if points is not None and self.needs_points:
             pts, bounds = self._frustum(points, b)
@@ -710,6 +719,11 @@ class Track3D:
         status = TRACKING
         if est is None:
             status = NO_POINTS
+            if self._carry_from is not None and np.all(np.isfinite(self.box3d)) and not any(self._border_sides(seen)):
+                # a body that had reached the range and now returns nothing is past it, still in
+                # view: its box follows the image's (range_cut.carry_box)
+                self.box3d = carry_box(self.box3d, self._carry_from, seen, self.camera)
+                self._carry_from = np.array(seen, dtype=np.float64)
         else:
             self.box3d = self._report(est, bounds, seen)
         t3 = time.perf_counter()
@@ -819,6 +833,7 @@ class Track3D:
             "depth_avg": self._depth_avg if np.isfinite(self._depth_avg) else None,
             "whole_box": None if self._whole_box is None else self._whole_box.tolist(),
             "depth_ratio": self._depth_ratio if np.isfinite(self._depth_ratio) else None,
+            "carry_from": None if self._carry_from is None else self._carry_from.tolist(),
             "tracker2d": get2d(), "estimator_state": get3d() if get3d is not None else None,
         })
 
@@ -854,6 +869,8 @@ class Track3D:
             whole_box = None if whole_box is None else np.asarray(whole_box, dtype=np.float64).reshape(6).copy()
             depth_ratio = st.get("depth_ratio")   # None: no box within the range yet, or an older state
             depth_ratio = float("nan") if depth_ratio is None else float(depth_ratio)
+            carry_from = st.get("carry_from")   # None: the last box's returns were within the range, or an older state
+            carry_from = None if carry_from is None else np.asarray(carry_from, dtype=np.float64).reshape(4).copy()
             tracker2d, estimator_state = st["tracker2d"], st.get("estimator_state")
         except (KeyError, TypeError, ValueError) as e:
             raise ValueError(f"damaged Track3D state: {type(e).__name__}: {e}") from None
@@ -864,6 +881,7 @@ class Track3D:
         self.bad_frames, self.held_frames, self._depth_avg = bad, held, depth_avg
         self._whole_box = whole_box
         self._depth_ratio = depth_ratio
+        self._carry_from = carry_from
         self._started = bool(np.isfinite(box2d).all())   # the state of a started tracker
 
     def __getstate__(self):
