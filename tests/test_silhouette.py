@@ -117,15 +117,16 @@ def test_the_silhouette_option_is_checked_recorded_and_by_sensor(tmp_path):
     from track3d.tracker import SILHOUETTE, Track3D, sensor_options, silhouette_for
     from track3d.trackers2d import create_tracker
 
-    assert silhouette_for("ideal") == silhouette_for("flash-lidar") == silhouette_for(None) == SILHOUETTE == 0.5
-    assert silhouette_for("stereo") == silhouette_for("ToF") == 0.0 and sensor_options("stereo")["silhouette"] == 0.0
+    assert (silhouette_for("ideal") == silhouette_for("flash-lidar") == silhouette_for("ToF") == silhouette_for(None)
+            == SILHOUETTE == 0.5)
+    assert silhouette_for("stereo") == 0.0 and sensor_options("stereo")["silhouette"] == 0.0
     for bad in (-0.1, 5.0, float("nan")):
         with pytest.raises(ValueError, match="silhouette must be in"):
             Track3D(CAM, create_tracker("kcf"), create_estimator("baseline"), silhouette=bad)
     t = Track3D(CAM, create_tracker("kcf"), create_estimator("baseline"), silhouette=0.25)
     assert t.describe()["options"]["silhouette"] == 0.25
     from test_loop import _plain_and
-    a, b = _plain_and(tmp_path, {"name": "tof", "max_range_m": 30.0})
+    a, b = _plain_and(tmp_path, {"name": "stereo"})
     spec = TrackerSpec("oracle", "baseline")
     assert spec.build(a).silhouette == 0.5 and spec.build(b).silhouette == 0.0
     assert TrackerSpec("oracle", "baseline", silhouette=1.0).build(b).silhouette == 1.0

@@ -117,7 +117,7 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--silhouette", type=bounded(float, 0, high=4), default=None, metavar="GROW",
                    help="start from the body's outline in the depth returns: the connected returns overlapping the "
                         "2D box, searched in the box grown by GROW of its size on each side (0: off; default by the "
-                        "depth sensor, track3d.tracker.silhouette_for: 0.5, stereo and ToF 0)")
+                        "depth sensor, track3d.tracker.silhouette_for: 0.5, stereo 0)")
     t.add_argument("--outline-share", type=bounded(float, 0, high=1), default=None, metavar="S",
                    help="with the outline off (--silhouette 0), its share in the box the 2D fusion starts from and "
                         "the 2D tracker is corrected with (0: none; default by the depth sensor, "
