@@ -696,3 +696,22 @@ def test_a_huge_corrected_box_is_capped_not_a_crash():
     t.correct([0.0, 0.0, 1.0, 1e200])
     ok, box = t.update(image)
     assert np.all(np.isfinite(box)) and box[3] <= MAX_BOX_SCALE * 160
+
+
+@pytest.mark.parametrize("name", ["edgetrack", "siamfc-edge"])
+def test_a_vanishing_box_is_raised_to_the_minimum_side_not_a_crash(name):
+    """init with sides of 1.9e-182 x 1.4e-194 px underflowed the crop size (a product of the two
+    sides) to 0 and update() raised ZeroDivisionError (found by the fuzz test in the loop); a
+    learned tracker's state box is at least MIN_BOX_SIDE wide and tall, at init and in correct()."""
+    from track3d import edgetrack, siamfc
+    from track3d.frames import MIN_BOX_SIDE
+
+    t = edgetrack.create() if name == "edgetrack" else siamfc.create("edge")
+    image = np.random.default_rng(0).integers(0, 255, (120, 160, 3), dtype=np.uint8)
+    t.init(image, [0.0, 0.0, 1.8916451195518112e-182, 1.3617089941179075e-194])
+    assert np.all(t.target_sz >= MIN_BOX_SIDE)
+    ok, box = t.update(image)
+    assert np.all(np.isfinite(box)) and np.all(box[2:] > 0)
+    t.correct([5.0, 5.0, 1e-300, 1e-300])
+    ok, box = t.update(image)
+    assert np.all(np.isfinite(box)) and np.all(box[2:] > 0)

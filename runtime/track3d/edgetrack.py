@@ -34,7 +34,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .frames import MAX_BOX_SCALE, check_image
+from .frames import MAX_BOX_SCALE, MIN_BOX_SIDE, check_image
 from .onnxmodel import load_model, model_pair, shipped_model
 from .siamfc import crop_square
 
@@ -167,8 +167,9 @@ class EdgeTracker:
             raise ValueError(f"box must be [x, y, w, h], finite with positive size, got {b.tolist()}")
         self.center = b[:2] + b[2:] / 2.0
         # a (fused or corrected) state box beyond MAX_BOX_SCALE x the image is capped there, as
-        # SiamFC's: a side of 1e200 overflowed the crop size to 0 (ZeroDivisionError in update)
-        self.target_sz = np.minimum(b[2:], self._max_side)
+        # SiamFC's: a side of 1e200 overflowed the crop size to 0 (ZeroDivisionError in update);
+        # a side below MIN_BOX_SIDE is raised to it (sides of 1e-182 x 1e-194 underflowed it)
+        self.target_sz = np.clip(b[2:], MIN_BOX_SIDE, self._max_side)
         self._min_sz = max(2.0, 0.2 * float(self.target_sz.min()))
 
     def _z_sz(self) -> float:

@@ -13,10 +13,13 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["check_image", "check_estimator_points", "check_point_bounds", "point_bounds", "check_category", "check_init_box",
-           "is_integer", "MAX_COORD_M", "MAX_BOX_SCALE"]
+           "is_integer", "MAX_COORD_M", "MAX_BOX_SCALE", "MIN_BOX_SIDE"]
 
 MAX_COORD_M = 1e5     # metres: beyond, float32 points lose centimetres and the nets never saw such scenes
 MAX_BOX_SCALE = 10.0  # an initial 2D box side above 10x the image's larger side is a caller error
+# pixels: a learned tracker's state box is at least this wide and tall; a positive side of 1e-190
+# underflowed the crop size (a product of two sides) to 0 and update() divided by it
+MIN_BOX_SIDE = 0.01
 
 
 def check_image(image, size: tuple[int, int] | None = None) -> np.ndarray:

@@ -21,7 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .frames import MAX_BOX_SCALE, check_image, check_init_box
+from .frames import MAX_BOX_SCALE, MIN_BOX_SIDE, check_image, check_init_box
 from .onnxmodel import load_model, model_pair, shipped_model
 
 __all__ = ["SiamFCTracker", "create", "crop_square", "model_paths", "VARIANT_FILES", "TUNABLE"]
@@ -154,8 +154,9 @@ class SiamFCTracker:
             raise ValueError(f"box must be finite with positive size, got {b.tolist()}")
         self.center = b[:2] + b[2:] / 2.0
         # A (fused) state box larger than MAX_BOX_SCALE x the image is capped there: beyond,
-        # the crops overflow and the tracker would follow nothing.
-        self.target_sz = np.minimum(b[2:], self._max_side)
+        # the crops overflow and the tracker would follow nothing. Below MIN_BOX_SIDE the crop
+        # size (a product of the sides) underflows to 0.
+        self.target_sz = np.clip(b[2:], MIN_BOX_SIDE, self._max_side)
         ctx = self.context_amount * self.target_sz.sum()
         self.z_sz = math.sqrt(float(np.prod(self.target_sz + ctx)))
         self.x_sz = self.z_sz * self.instance_size / self.exemplar_size
