@@ -70,7 +70,10 @@ def test_stereo_recovers_depth_within_the_disparity_error(pair):
     inner = z > 0
     inner &= np.roll(inner, 6, 0) & np.roll(inner, -6, 0) & np.roll(inner, 6, 1) & np.roll(inner, -6, 1)
     ok = inner & (zs > 0)
-    assert ok.sum() > 0.9 * inner.sum()
+    # the matcher fills > 90 % of the body; the ring dropped around each of its holes
+    # (edge_erode_px) costs a few per cent more
+    assert (inner & (StereoMatcher(CAM, edge_erode_px=0).depth(left, right) > 0)).sum() > 0.9 * inner.sum()
+    assert ok.sum() > 0.85 * inner.sum()
     dd = CAM.disparity(zs[ok]) - CAM.disparity(z[ok])
     assert np.median(np.abs(dd)) < 0.25 and np.mean(np.abs(dd) < 1.0) > 0.98
     # depth error follows dz = z^2 / (fx B) * dd
@@ -294,3 +297,45 @@ def test_stereo_clouds_get_the_stereo_a3boxnet(tmp_path):
     def key(**o):
         return run_config_key({"track3d": {"estimator_options": o, "models": [{"sha256": "ab"}]}})
     assert key(depth_sensor="stereo", threads=2) == key() != key(model="x.onnx")
+
+
+def _eroded_by_hand(valid: np.ndarray, r: int) -> np.ndarray:
+    """A valid pixel stays valid iff every pixel within r (8-neighbourhood, Chebyshev distance)
+    that lies inside the image is valid: the image's border is not a hole."""
+    H, W = valid.shape
+    pad = np.pad(valid, r, constant_values=True)
+    keep = valid.copy()
+    for dy in range(2 * r + 1):
+        for dx in range(2 * r + 1):
+            keep &= pad[dy:dy + H, dx:dx + W]
+    return keep
+
+
+@pytest.mark.parametrize("scene", ["holes", "fills the frame"])
+def test_pixels_next_to_a_hole_have_no_depth(scene):
+    """edge_erode_px (default 1): a pixel whose neighbourhood holds a hole (the sky past the
+    silhouette, a textureless patch) is a hole too; the others keep their depth unchanged, and a
+    body that fills the frame keeps its depth up to the image's border."""
+    if scene == "holes":
+        left, right, z = render_pair(CAM, (0.0, 0.0, 9.0), 2.0, textureless_half=True)
+    else:
+        left, right, z = render_pair(CAM, (0.0, 0.0, 12.0), 8.0)
+        assert (z > 0).all()
+    z0 = StereoMatcher(CAM, edge_erode_px=0).depth(left, right)
+    for r in (1, 2):
+        zr = StereoMatcher(CAM, edge_erode_px=r).depth(left, right)
+        keep = _eroded_by_hand(z0 > 0, r)
+        np.testing.assert_array_equal(zr > 0, keep)
+        np.testing.assert_array_equal(zr[keep], z0[keep])
+        assert ((z0 > 0) & ~keep).sum() > 100
+    assert StereoParams().edge_erode_px == 1
+    if scene == "fills the frame":
+        z1 = StereoMatcher(CAM).depth(left, right)
+        for edge in (z1[0], z1[-1], z1[:, -1]):     # the border is not a hole: most of it keeps depth
+            assert (edge > 0).sum() > 0.1 * edge.size
+
+
+@pytest.mark.parametrize("bad", [-1, 9, 1.5, "1"])
+def test_edge_erosion_setting_is_checked(bad):
+    with pytest.raises(ValueError, match="edge_erode_px"):
+        StereoParams(edge_erode_px=bad)

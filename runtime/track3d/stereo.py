@@ -28,7 +28,11 @@ What makes a disparity valid (the rest are holes, 0):
 - d >= `min_disparity_px` (z <= fx * B / min_disparity_px) and the depth within max_depth_m,
 - u - d >= 0: a left pixel whose match would lie left of the right image is not seen by the
   right camera (the images are padded on the left before matching, so OpenCV's blind band of
-  `numDisparities` columns at the left border shrinks to these pixels).
+  `numDisparities` columns at the left border shrinks to these pixels),
+- not within `edge_erode_px` of a hole (8-neighbourhood, the image border is not a hole): the
+  matching block of a pixel next to a hole straddles the body's edge, the sky, a shadow or an
+  occlusion, and its disparity is the least reliable of the cloud (SGBM smears the body's
+  disparity past its silhouette there).
 Sub-pixel disparities: SGBM's 1/16-pixel interpolation of the matching cost.
 
 Window mode: disparity is computed on the crop [x0 - D - m, x1 + m) x [y0 - m, y1 + m) of both
@@ -65,12 +69,15 @@ class StereoParams:
     max_depth_m: float = 60.0
     mode: str = "3way"              # "3way" (default: as accurate as "sgbm" here, faster), "sgbm", "hh"
     window_margin_px: int = 16      # window mode: extra context around the box
+    edge_erode_px: int = 1          # pixels this close to a hole are holes too (0 = off)
 
     def __post_init__(self) -> None:
         if self.block_size < 1 or self.block_size % 2 == 0:
             raise ValueError(f"block_size must be odd and >= 1, got {self.block_size}")
         if not self.z_min_m > 0:
             raise ValueError(f"z_min_m must be > 0, got {self.z_min_m}")
+        if not (isinstance(self.edge_erode_px, (int, np.integer)) and 0 <= self.edge_erode_px <= 8):
+            raise ValueError(f"edge_erode_px must be an integer in 0..8, got {self.edge_erode_px!r}")
         if self.mode not in _MODES:
             raise ValueError(f"mode must be one of {', '.join(_MODES)}, got {self.mode!r}")
 
@@ -144,6 +151,11 @@ class StereoMatcher:
             var = cv2.blur(g * g, k) - m * m
             d[var < p.min_texture_dn ** 2] = 0.0
         d[d < max(p.min_disparity_px, self.fb / p.max_depth_m)] = 0.0
+        if p.edge_erode_px > 0:
+            k = 2 * p.edge_erode_px + 1
+            # erode's default border is +inf: the image's (or the window's) border is not a hole
+            inner = cv2.erode((d > 0).astype(np.uint8), np.ones((k, k), np.uint8))
+            d[inner == 0] = 0.0
         return d
 
     def disparity(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:

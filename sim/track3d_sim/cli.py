@@ -1,4 +1,4 @@
-"""`track3d-sim`: generate | stats | preview | ply | shapes. Errors print one line naming the problem, exit 2."""
+"""`track3d-sim`: generate | restereo | stats | preview | ply | shapes. Errors print one line naming the problem, exit 2."""
 from __future__ import annotations
 
 import argparse
@@ -46,7 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = ArgumentParser(prog="track3d-sim", description="3D asteroid tracking dataset simulator "
                                 "(headless CPU ray casting; writes the layout of docs/dataset.md).")
     p.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
-    sub = p.add_subparsers(dest="cmd", required=True, metavar="{generate,stats,preview,ply,shapes,demo}")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="{generate,restereo,stats,preview,ply,shapes,demo}")
     g = sub.add_parser("generate", help="render a dataset (resumable, deterministic for a seed)",
                        description="Render a dataset into --out. A killed run continues where it stopped "
                        "when started again with the same arguments; dataset.json is written last.")
@@ -100,6 +100,15 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--quiet", dest="no_progress", action="store_true", help="no progress bar")
     hidden_alias(g, "--no-progress", "no_progress", action="store_true")  # the name before --quiet
 
+    r = sub.add_parser("restereo", help="recompute a stereo dataset's depth maps from its images with this "
+                       "release's matcher (no rendering; resumable)",
+                       description="Recompute the depth maps of every stereo sequence of ROOT from its left/right "
+                       "images with this release's stereo matcher (track3d.stereo), as `generate` would now write "
+                       "them, and record the matcher's settings in each sequence's meta.json. Sequences already "
+                       "made with these settings, and sequences of other depth sensors, are left alone; a killed "
+                       "run continues where it stopped when started again.")
+    r.add_argument("root", help="dataset root (the folder holding dataset.json)")
+    r.add_argument("--quiet", dest="no_progress", action="store_true", help="no progress bar")
     s = sub.add_parser("stats", help="the paper's Fig. 4 plots (size classes, box volumes, speeds, illumination)")
     s.add_argument("root", help="dataset folder (with dataset.json)")
     s.add_argument("--out", required=True, help="output image: .png, or .pdf, .svg, ... (any format matplotlib "
@@ -169,6 +178,11 @@ def main(argv=None) -> int:
                                      shape_generators=args.shape_generators)
             generate(settings, args.out, workers=args.workers, overwrite=args.overwrite,
                      progress=not args.no_progress, ray=args.ray)
+        elif args.cmd == "restereo":
+            from .restereo import restereo
+            c = restereo(args.root, progress=not args.no_progress)
+            print(f"track3d-sim restereo: {c['recomputed']} sequences recomputed ({c['frames']} depth maps), "
+                  f"{c['current']} already current, {c['other']} of other depth sensors left alone")
         elif args.cmd == "stats":
             from .stats import plot_stats
             plot_stats(args.root, args.out, args.split)
