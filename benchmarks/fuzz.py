@@ -29,7 +29,9 @@ Contracts (the oracles, shared with tests/test_fuzz.py):
   flags for every frame;
 - CLIs: exit 0, or exit 2 with one error line on stderr (argparse prints its usage above it);
   never a traceback;
-- the simulator's mesh loader: a Shape with finite vertices, or SimError.
+- the simulator's mesh loader: a Shape with finite vertices, or SimError;
+- stereo clouds: a pair that is not uint8 RGB / grey of the camera's size is a ValueError, else
+  an (N, 3) float32 cloud, finite, z > 0, for any box; the loop on them as above.
 """
 from __future__ import annotations
 
@@ -317,6 +319,53 @@ def _t_track3d(tracker: str):
     return run
 
 
+def rand_pair(rng, w=160, h=120):
+    """A stereo pair: mostly uint8 RGB or grey with the right image a shifted left one, sometimes
+    of another dtype, channel count or size."""
+    left = rand_image(rng, w, h)
+    right = np.roll(left, -int(rng.integers(0, 30)), axis=1) if rng.random() < 0.7 else rand_image(rng, w, h)
+    kind = int(rng.integers(0, 10))
+    if kind == 0:
+        return left[..., 0], right[..., 0]
+    if kind == 1:
+        dt = rng.choice([np.float32, np.float64, np.int64, np.uint16, np.bool_])
+        return left.astype(dt) * (1.7 if dt in (np.float32, np.float64) else 1), right.astype(dt)
+    if kind == 2:
+        return left[:, : int(rng.integers(0, w))], right
+    if kind == 3:
+        return np.dstack([left, left[..., :1]]), np.dstack([right, right[..., :1]])
+    return left, right
+
+
+def t_stereo(rng, env):
+    """Stereo clouds (track3d.stereo) of any pair and box, alone and as the loop's points."""
+    from track3d.stereo import StereoCloud
+    from track3d.tracker import STATUSES, Track3D
+
+    params = {"edge_erode_px": int(rng.integers(0, 3)), "block_size": int(rng.choice([1, 3, 5, 7])),
+              "z_min_m": float(rng.choice([0.3, 1.5, 20.0]))}
+    left, right = rand_pair(rng)
+    try:
+        points = StereoCloud(env.cam, **params).bind(left, right)
+    except ValueError:
+        return "clean_error"
+    for a in (left, right):
+        expect(a.dtype == np.uint8 and a.shape[:2] == (env.cam.height, env.cam.width)
+               and (a.ndim == 2 or a.shape[2:] == (3,)), f"a stereo image {a.shape} {a.dtype} was taken")
+    box = rand_box(rng)
+    p = points(box)
+    expect(isinstance(p, np.ndarray) and p.dtype == np.float32 and p.ndim == 2 and p.shape[1] == 3,
+           f"stereo cloud {type(p).__name__} {getattr(p, 'shape', None)} {getattr(p, 'dtype', None)}")
+    expect(bool(np.all(np.isfinite(p))) and bool(np.all(p[:, 2] > 0)), "stereo cloud not finite or z <= 0")
+    t = Track3D(env.cam, _Scripted(rng), env.estimator("baseline"))
+    try:
+        t.init(rand_image(rng), box, 0, points=points)
+    except ValueError:
+        return "clean_error"
+    check_track_result(t.update(rand_image(rng), points), STATUSES, t.min_points)
+    return "ok"
+
+
 DATA_FILES = ("dataset.json", "test/a/groundtruth_2d.txt", "test/a/groundtruth_3d.txt", "test/a/absence.label",
               "test/a/cut_by_image.label", "test/a/meta.json", "test/a/left/000002.png", "test/a/depth/000001.png",
               "test/b/groundtruth_2d.txt")
@@ -457,6 +506,7 @@ TARGETS = {
     "estimate_baseline": (_t_estimator("baseline"), 14), "estimate_a3boxnet": (_t_estimator("a3boxnet"), 12),
     "loop_baseline": (_loop := _t_loop("baseline"), 12), "loop_a3boxnet": (_t_loop("a3boxnet"), 8),
     "track3d_siamfc": (_t_track3d("siamfc-edge"), 4), "track3d_edgetrack": (_t_track3d("edgetrack"), 4),
+    "stereo": (t_stereo, 3),
     **{f"tracker_{n}": (_t_tracker(n), w) for n, w in
        (("kcf", 2), ("csrt", 1), ("mosse", 2), ("medianflow", 2), ("mil", 1), ("boosting", 1))},
     "dataset": (t_dataset, 3), "cli": (t_cli, 1), "sim_cli": (t_sim_cli, 0.3), "mesh_loader": (t_mesh_loader, 1.7),

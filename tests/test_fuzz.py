@@ -161,9 +161,11 @@ def env():
         yield fuzz.Env(Path(tmp))
 
 
-@pytest.mark.parametrize("target, examples", [("dataset", 30), ("cli", 12), ("mesh_loader", 30), ("sim_cli", 4)])
+@pytest.mark.parametrize("target, examples", [("dataset", 30), ("cli", 12), ("mesh_loader", 30), ("sim_cli", 4),
+                                              ("stereo", 40)])
 def test_seeded_targets(env, target, examples):
-    """Damaged datasets, CLI argument soups, the simulator's mesh loader: hypothesis picks seeds."""
+    """Damaged datasets, CLI argument soups, the simulator's mesh loader, stereo pairs: hypothesis
+    picks seeds."""
     if target in ("mesh_loader", "sim_cli"):
         pytest.importorskip("track3d_sim")
 

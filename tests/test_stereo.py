@@ -339,3 +339,25 @@ def test_pixels_next_to_a_hole_have_no_depth(scene):
 def test_edge_erosion_setting_is_checked(bad):
     with pytest.raises(ValueError, match="edge_erode_px"):
         StereoParams(edge_erode_px=bad)
+
+
+@pytest.mark.parametrize("kind", ["int64 RGB", "float gray above 255", "float RGB", "RGBA", "bool", "empty"])
+def test_stereo_images_other_than_uint8_rgb_or_gray_are_refused(kind):
+    """An int64 pair crashed OpenCV's colour conversion (cv2.error, not a one-line error) and a
+    float grey pair was cast to uint8 with wrap-around (433 -> 177: a silent wrong disparity)."""
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 255, (120, 160, 3)).astype(np.uint8)
+    right = np.roll(left, -5, 1)
+    small = Camera.from_fov(160, 120, 60.0)
+    pair = {"int64 RGB": (left.astype(np.int64), right.astype(np.int64)),
+            "float gray above 255": (left[..., 0] * 1.7, right[..., 0] * 1.7),
+            "float RGB": (left.astype(np.float32), right.astype(np.float32)),
+            "RGBA": (np.dstack([left, left[..., :1]]), np.dstack([right, right[..., :1]])),
+            "bool": (left[..., 0] > 100, right[..., 0] > 100),
+            "empty": (left[:0], right[:0])}[kind]
+    with pytest.raises(ValueError, match="uint8"):
+        StereoCloud(small).bind(*pair)
+    with pytest.raises(ValueError, match="uint8"):
+        StereoMatcher(small).depth(*pair)
+    assert StereoCloud(small).bind(left, right)([10, 10, 50, 50]).shape[1] == 3   # uint8 RGB is taken
+    assert StereoCloud(small).bind(left[..., 0], right[..., 0])([10, 10, 50, 50]).shape[1] == 3   # and grey

@@ -87,12 +87,14 @@ _MODES = {"sgbm": cv2.STEREO_SGBM_MODE_SGBM, "hh": cv2.STEREO_SGBM_MODE_HH,
 
 
 def _gray(img: np.ndarray) -> np.ndarray:
+    # uint8 only, as every image of the loop (frames.check_image): a float or int64 image was cast
+    # with wrap-around (433 -> 177, a silent wrong disparity) or crashed OpenCV's colour conversion
     a = np.asarray(img)
+    if a.dtype != np.uint8 or not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 3)) or min(a.shape[:2]) < 1:
+        raise ValueError(f"stereo images must be (H, W, 3) or (H, W) uint8, got {a.shape} {a.dtype}")
     if a.ndim == 3:
         return cv2.cvtColor(np.ascontiguousarray(a), cv2.COLOR_RGB2GRAY)
-    if a.ndim == 2:
-        return np.ascontiguousarray(a, dtype=np.uint8)
-    raise ValueError(f"stereo images must be (H, W, 3) or (H, W) uint8, got shape {a.shape}")
+    return np.ascontiguousarray(a)
 
 
 class StereoMatcher:
