@@ -134,7 +134,10 @@ def rand_cloud(rng, max_n=2000, near=True) -> np.ndarray:
 
 
 def rand_box(rng, w=160, h=120) -> list:
-    kind = int(rng.integers(0, 6))
+    kind = int(rng.integers(0, 7))
+    if kind == 6:  # vanishing: positive sides whose product underflows
+        return [float(rng.uniform(-2, w)), float(rng.uniform(-2, h)), float(10 ** -rng.uniform(3, 300)),
+                float(10 ** -rng.uniform(3, 300))]
     if kind == 0:
         return [float(v) for v in rng.uniform([-20, -20, 0.5, 0.5], [w + 20, h + 20, w, h])]
     if kind == 1:  # tiny
