@@ -25,7 +25,7 @@ from .camera import Camera
 
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "DATASET_JSON", "LEFT_DIR", "RIGHT_DIR", "DEPTH_DIR", "GT2D", "GT3D",
-    "ABSENCE", "CUT", "META", "frame_name", "write_depth_png", "read_depth_png", "read_rgb", "write_rgb",
+    "ABSENCE", "CUT", "META", "frame_name", "write_meta", "write_depth_png", "read_depth_png", "read_rgb", "write_rgb",
     "write_labels", "write_dataset_json", "COARSE_CATEGORIES",
     "DatasetError", "Dataset", "Sequence", "Frame",
 ]
@@ -108,17 +108,27 @@ def write_labels(seq_dir: str | Path, gt2d: np.ndarray, gt3d: np.ndarray, absent
     np.savetxt(d / GT3D, g3, fmt=f"%.{int(decimals_3d)}f", delimiter=",")
     np.savetxt(d / ABSENCE, a, fmt="%d")
     np.savetxt(d / CUT, c, fmt="%d")
-    (d / META).write_text(json.dumps(meta, indent=1, sort_keys=True))
+    write_meta(d, meta)
+
+
+def write_meta(seq_dir: str | Path, meta: dict) -> None:
+    """Write a sequence's meta.json (sorted keys: deterministic bytes), atomically: a temporary
+    file renamed, so a killed writer leaves the old file or the new one, never half of one."""
+    _write_json(Path(seq_dir) / META, meta)
 
 
 def write_dataset_json(root: str | Path, info: dict) -> None:
     """Write <root>/dataset.json atomically (a temporary file renamed): its presence means the
     dataset is complete, so it is written last and never half."""
+    _write_json(Path(root) / DATASET_JSON, info)
+
+
+def _write_json(path: Path, obj: dict) -> None:
+    """JSON with sorted keys (deterministic bytes) through a temporary file renamed over `path`."""
     import os
 
-    path = Path(root) / DATASET_JSON
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(info, indent=1, sort_keys=True))
+    tmp.write_text(json.dumps(obj, indent=1, sort_keys=True))
     os.replace(tmp, path)
 
 

@@ -8,25 +8,16 @@ whose meta.json already records the current settings is skipped, and meta.json i
 only after all of the sequence's depth maps."""
 from __future__ import annotations
 
-import json
-import os
 import sys
 from pathlib import Path
 
-from track3d.dataset import DEPTH_DIR, META, Dataset, frame_name, write_depth_png
+from track3d.dataset import DEPTH_DIR, Dataset, frame_name, write_depth_png, write_meta
 from track3d.stereo import StereoMatcher
 
 from .errors import SimError
 from .sensors import sensor_info
 
 __all__ = ["restereo"]
-
-
-def _write_meta(path: Path, meta: dict) -> None:
-    # the same bytes as dataset.write_labels' meta.json, replaced atomically
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(meta, indent=1, sort_keys=True))
-    os.replace(tmp, path)
 
 
 def restereo(root: str | Path, progress: bool = True) -> dict[str, int]:
@@ -56,7 +47,7 @@ def restereo(root: str | Path, progress: bool = True) -> dict[str, int]:
                 counts["frames"] += 1
                 if bar is not None:
                     bar.update(1)
-            _write_meta(s.path / META, {**s.meta, "depth_sensor": info})
+            write_meta(s.path, {**s.meta, "depth_sensor": info})
             counts["recomputed"] += 1
     finally:
         if bar is not None:
