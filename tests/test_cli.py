@@ -122,3 +122,14 @@ def test_track_passes_a_loop_option_to_the_loop_and_records_it(synth, tmp_path, 
     with pytest.raises(SystemExit) as e:
         main(["track", "--data", str(synth), flag, bad])
     assert e.value.code == 2
+
+
+@pytest.mark.parametrize("flag,recorded", [("--outline-contain", '"outline_contain": true'),
+                                           ("--no-outline-contain", '"outline_contain": false')])
+def test_track_passes_outline_contain_to_the_loop_and_records_it(synth, tmp_path, flag, recorded):
+    from track3d.evaluation.results import read_run_record
+
+    res = tmp_path / "res"
+    assert main(["track", "--data", str(synth), "--tracker", "mosse", "--estimator", "baseline", "--sequence", "a",
+                 flag, "--results", str(res), "--video", "none", "--quiet"]) == 0
+    assert json.dumps(read_run_record(res, "test", "mosse+baseline")).count(recorded) == 1

@@ -181,6 +181,81 @@ def test_the_outline_share_option_is_checked_recorded_and_by_sensor(tmp_path):
     assert TrackerSpec("oracle", "baseline", outline_share=0.5).build(b).outline_share == 0.5
 
 
+def test_contain_hand_cases():
+    """The box moved the least, its size kept, to hold the outline (by hand, per axis)."""
+    from track3d.silhouette import contain
+
+    out = [30.0, 40.0, 80.0, 30.0]                        # x 30..110, y 40..70
+    # a box of the outline's size 10 px right and 15 px low of it: moved onto it
+    np.testing.assert_array_equal(contain([40, 55, 80, 30], out), out)
+    # a larger box (the dark side) holding the outline: left as it is
+    np.testing.assert_array_equal(contain([20, 30, 120, 60], out), [20, 30, 120, 60])
+    # a larger box beside it: shifted by what the outline passes it, its size kept
+    # x: 40..160 -> 30..150; y: 20..65 -> 25..70
+    np.testing.assert_array_equal(contain([40, 20, 120, 45], out), [30, 25, 120, 45])
+    # a smaller box: moved to the low side, then grown to the high side
+    # x: 50..70 -> 30..110; y: 60..65 -> 40..70
+    np.testing.assert_array_equal(contain([50, 60, 20, 5], out), out)
+    # slack 2: the outline shrunk to x 32..108, y 42..68 before it is held
+    # x: 40..120 -> 32..112; y: 55..85 -> 42..72
+    np.testing.assert_array_equal(contain([40, 55, 80, 30], out, 2.0), [32, 42, 80, 30])
+    np.testing.assert_array_equal(contain([31, 39, 80, 30], out, 2.0), [31, 39, 80, 30])
+    # an outline thinner than twice the slack holds nothing on that axis
+    np.testing.assert_array_equal(contain([40, 55, 80, 30], [30, 40, 3, 30], 2.0), [40, 42, 80, 30])
+    assert contain(np.array([40.0, 55, 80, 30]), out).dtype == np.float64
+
+
+def test_outline_contain_moves_a_drifted_box_and_its_frustum():
+    """Stereo's outline is the lit part, a lower bound of the body: a 2D box beside it has drifted
+    (a README stereo test sequence: EdgeTrack 9-18 px below a fully lit body's top). With
+    outline_contain the frustum, the 3D box and the fusion start from the box moved onto it."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import CONTAIN_SLACK_PX, Track3D
+
+    Low = _answering([30.0, 55.0, 80.0, 30.0])    # the body's size, 15 px low
+    mask = np.zeros((120, 160), bool)
+    mask[40:70, 30:110] = True                    # the outline: [30, 40, 80, 30]
+    pts = _cloud(mask)
+    image = np.zeros((120, 160, 3), np.uint8)
+    res = {}
+    for on in (False, True):
+        t = Track3D(CAM, Low(), create_estimator("baseline"), silhouette=0.0, outline_share=0.0,
+                    outline_contain=on, weight_3d=0.0)
+        t.init(image, [30, 40, 80, 30], points=pts)
+        res[on] = t.update(image, pts)
+    np.testing.assert_allclose(res[False].box2d, [30.0, 55.0, 80.0, 30.0], atol=1e-9)
+    np.testing.assert_allclose(res[True].box2d, [30.0, 40.0 + CONTAIN_SLACK_PX, 80.0, 30.0], atol=1e-3)
+    np.testing.assert_array_equal(res[True].box2d_raw, res[False].box2d_raw)   # the tracker's own box reported
+    # the frustum of the moved box holds more of the body: more points, the 3D box higher up
+    assert res[True].num_points > res[False].num_points
+    assert res[True].box3d[1] < res[False].box3d[1]
+    # with the outline on, containment has nothing to add
+    a, b = (Track3D(CAM, Low(), create_estimator("baseline"), silhouette=0.5, outline_contain=c, weight_3d=0.0)
+            for c in (False, True))
+    for t in (a, b):
+        t.init(image, [30, 40, 80, 30], points=pts)
+    np.testing.assert_array_equal(a.update(image, pts).box2d, b.update(image, pts).box2d)
+
+
+def test_the_outline_contain_option_is_checked_recorded_and_by_sensor(tmp_path):
+    from track3d.estimators import create_estimator
+    from track3d.evaluation import TrackerSpec
+    from track3d.tracker import Track3D, outline_contain_for, sensor_options
+    from track3d.trackers2d import create_tracker
+
+    assert outline_contain_for("stereo") is True and sensor_options("stereo")["outline_contain"] is True
+    assert not (outline_contain_for("ideal") or outline_contain_for("ToF") or outline_contain_for(None))
+    for bad in (1, "yes", None):
+        with pytest.raises(ValueError, match="outline_contain must be True or False"):
+            Track3D(CAM, create_tracker("kcf"), create_estimator("baseline"), outline_contain=bad)
+    t = Track3D(CAM, create_tracker("kcf"), create_estimator("baseline"), outline_contain=True)
+    assert t.describe()["options"]["outline_contain"] is True
+    from test_loop import _plain_and
+    a, b = _plain_and(tmp_path, {"name": "tof", "max_range_m": 30.0})
+    assert TrackerSpec("oracle", "baseline").build(b).outline_contain is False
+    assert TrackerSpec("oracle", "baseline", outline_contain=True).build(b).outline_contain is True
+
+
 def test_find_body_hand_cases():
     from track3d.silhouette import find_body
 

@@ -122,6 +122,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="with the outline off (--silhouette 0), its share in the box the 2D fusion starts from and "
                         "the 2D tracker is corrected with (0: none; default by the depth sensor, "
                         "track3d.tracker.outline_share_for: stereo 0.3, others 0)")
+    t.add_argument("--outline-contain", action=argparse.BooleanOptionalAction, default=None,
+                   help="with the outline off (--silhouette 0), move the 2D tracker's box (its size kept) to hold "
+                        "the outline before the frustum and the fusion (default by the depth sensor, "
+                        "track3d.tracker.outline_contain_for: on for stereo, off for the others)")
     t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
                    help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
                         "itself; default: by the depth sensor, 0.3, 0 for stereo; track3d.tracker.frustum_margin_for)")
@@ -244,6 +248,8 @@ def _cmd_track(a) -> int:
         a.silhouette = stereo.get("silhouette")
     if a.depth == "stereo" and a.outline_share is None:
         a.outline_share = stereo.get("outline_share")
+    if a.depth == "stereo" and a.outline_contain is None:
+        a.outline_contain = stereo.get("outline_contain")
     if a.depth == "stereo" and a.estimator == "a3boxnet" and "model" not in eopts:
         eopts.setdefault("depth_sensor", "stereo")   # the stereo model (track3d.boxnet.SENSOR_MODELS)
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
@@ -251,6 +257,7 @@ def _cmd_track(a) -> int:
                        evidence_points=a.evidence_points, reacquire_threshold=a.reacquire_threshold,
                        hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad, silhouette=a.silhouette,
                        outline_share=a.outline_share,
+                       outline_contain=a.outline_contain,
                        frustum_margin=margin,
                        # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's
                        depth_range=not a.no_depth_range and a.depth != "stereo",

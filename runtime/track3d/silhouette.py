@@ -19,7 +19,7 @@ import numpy as np
 
 from .frustum import extract_frustum
 
-__all__ = ["CELL_MIN_PX", "GRID_CELLS", "MIN_SHARE", "RASTER_POINTS", "silhouette_box", "find_body"]
+__all__ = ["CELL_MIN_PX", "GRID_CELLS", "MIN_SHARE", "RASTER_POINTS", "silhouette_box", "find_body", "contain"]
 
 CELL_MIN_PX = 2.5     # pixels: a cell spans at least this (gaps of a coarse sensor grid close)
 GRID_CELLS = 96       # cells on the longer side of the search region at most (cost bound)
@@ -170,3 +170,28 @@ def find_body(points: np.ndarray, near: np.ndarray, M: np.ndarray, image_size: t
     keep = np.zeros(r.n, bool)
     keep[big] = True
     return r.box(keep, image_size)
+
+
+def contain(box2d: np.ndarray, outline: np.ndarray, slack: float = 0.0) -> np.ndarray:
+    """The box (4,) float64 [x, y, w, h] moved the least to hold `outline` [x, y, w, h] shrunk by
+    `slack` pixels on each side: per axis, a side the outline passes is moved out to it and the
+    opposite side follows by the same amount (the box's size kept), the box then grown where the
+    outline is still wider. An axis where the shrunk outline is empty is left as it is.
+
+    For an outline that is a lower bound of the body (returns only where the body is, but not
+    everywhere it is: stereo depth of the lit part): the body holds the outline, so a box beside
+    it has drifted, while a box larger than the outline may be right (the body's dark side)."""
+    b = np.array(box2d, dtype=np.float64).reshape(4)
+    o = np.asarray(outline, dtype=np.float64).reshape(4)
+    out = b.copy()
+    for a in (0, 1):
+        t0, t1 = b[a], b[a] + b[a + 2]
+        o0, o1 = o[a] + slack, o[a] + o[a + 2] - slack
+        if not o1 > o0:
+            continue
+        if o0 < t0:               # past the low side: shift down, then grow up to the high side
+            t0, t1 = o0, max(t1 - (t0 - o0), o1)
+        elif o1 > t1:             # past the high side
+            t0, t1 = min(t0 + (o1 - t1), o0), o1
+        out[a], out[a + 2] = t0, t1 - t0
+    return out
