@@ -266,9 +266,12 @@ class _Scripted:
 
 def _t_loop(name):
     def run(rng, env):
-        from track3d.tracker import STATUSES, Track3D
+        from track3d.tracker import DEPTH_SENSORS, STATUSES, Track3D, sensor_options
 
-        t = Track3D(env.cam, _Scripted(rng), env.estimator(name), z_range=(1.0, float(rng.choice([45.0, 1e6]))))
+        # every sensor's loop options (stereo: the outline off, its share and containment on)
+        sensor = [None, *DEPTH_SENSORS][int(rng.integers(0, len(DEPTH_SENSORS) + 1))]
+        t = Track3D(env.cam, _Scripted(rng), env.estimator(name), z_range=(1.0, float(rng.choice([45.0, 1e6]))),
+                    **sensor_options(sensor))
         img = rand_image(rng)
         try:
             t.init(img, rand_box(rng), rand_category(rng), points=rand_cloud(rng) if rng.random() < 0.5 else None)

@@ -22,7 +22,7 @@ from track3d.estimators import create_estimator
 from track3d.frustum import (extract_frustum_bounds, extract_frustum_bounds_numpy, sample_points,
                              sample_points_numpy)
 from track3d.synthetic import CAM
-from track3d.tracker import STATUSES, Track3D
+from track3d.tracker import DEPTH_SENSORS, STATUSES, Track3D, sensor_options
 from track3d.trackers2d import create_tracker
 
 
@@ -96,10 +96,14 @@ class _Scripted:
 @FAST
 @given(init_box=boxes, category=categories, tracked=st.lists(st.tuples(st.booleans(), boxes), min_size=1, max_size=3),
        cloud=st.one_of(clouds, near_clouds), name=st.sampled_from(["baseline", "a3boxnet"]),
-       depth_range=st.one_of(st.none(), st.floats(0.5, 60.0)), weight_2d=st.sampled_from([0.0, 0.75, 1.0]))
-def test_loop_never_raises_on_sensor_data(estimators, init_box, category, tracked, cloud, name, depth_range, weight_2d):
+       depth_range=st.one_of(st.none(), st.floats(0.5, 60.0)), weight_2d=st.sampled_from([0.0, 0.75, 1.0]),
+       sensor=st.sampled_from([None, *DEPTH_SENSORS]))
+def test_loop_never_raises_on_sensor_data(estimators, init_box, category, tracked, cloud, name, depth_range, weight_2d,
+                                          sensor):
+    # every sensor's loop options (stereo: the outline off, its share and containment on)
+    opts = {**sensor_options(sensor), "weight_2d": weight_2d}
     t = Track3D(CAM, _Scripted([(ok, np.asarray(b)) for ok, b in tracked]), estimators[name],
-                depth_range_m=depth_range, weight_2d=weight_2d)
+                depth_range_m=depth_range, **opts)
     img = np.zeros((CAM.height, CAM.width, 3), np.uint8)
     try:
         t.init(img, init_box, category, points=cloud)
