@@ -346,7 +346,7 @@ def rand_pair(rng, w=160, h=120):
 def t_stereo(rng, env):
     """Stereo clouds (track3d.stereo) of any pair and box, alone and as the loop's points."""
     from track3d.stereo import StereoCloud
-    from track3d.tracker import STATUSES, Track3D
+    from track3d.tracker import STATUSES, Track3D, sensor_options
 
     params = {"edge_erode_px": int(rng.integers(0, 3)), "block_size": int(rng.choice([1, 3, 5, 7])),
               "z_min_m": float(rng.choice([0.3, 1.5, 20.0]))}
@@ -363,7 +363,9 @@ def t_stereo(rng, env):
     expect(isinstance(p, np.ndarray) and p.dtype == np.float32 and p.ndim == 2 and p.shape[1] == 3,
            f"stereo cloud {type(p).__name__} {getattr(p, 'shape', None)} {getattr(p, 'dtype', None)}")
     expect(bool(np.all(np.isfinite(p))) and bool(np.all(p[:, 2] > 0)), "stereo cloud not finite or z <= 0")
-    t = Track3D(env.cam, _Scripted(rng), env.estimator("baseline"))
+    # the default loop, or stereo's options (the outline read from the callable's cloud)
+    t = Track3D(env.cam, _Scripted(rng), env.estimator("baseline"),
+                **(sensor_options("stereo") if rng.random() < 0.5 else {}))
     try:
         t.init(rand_image(rng), box, 0, points=points)
     except ValueError:

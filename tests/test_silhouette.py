@@ -237,6 +237,41 @@ def test_outline_contain_moves_a_drifted_box_and_its_frustum():
     np.testing.assert_array_equal(a.update(image, pts).box2d, b.update(image, pts).box2d)
 
 
+def test_outline_contain_reads_a_callable_cloud_once():
+    """Stereo from the pair (`StereoCloud.bind`) computes depth around the box it is given: the
+    loop asks once, for the tracker's box, reads the outline in that cloud and moves the box as
+    with a depth map (it used to ask only for the frustum, with no outline to read)."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import Track3D
+
+    Low = _answering([30.0, 55.0, 80.0, 30.0])    # the body's size, 15 px low
+    mask = np.zeros((120, 160), bool)
+    mask[40:70, 30:110] = True                    # the outline: [30, 40, 80, 30]
+    pts = _cloud(mask)
+    asked = []
+
+    def window(box):                              # the cloud of the box and 16 px around it
+        asked.append(np.array(box, dtype=np.float64))
+        x, y, w, h = box
+        u = pts[:, 0] / pts[:, 2] * CAM.fx + CAM.cx
+        v = pts[:, 1] / pts[:, 2] * CAM.fy + CAM.cy
+        keep = (u > x - 16) & (u < x + w + 16) & (v > y - 16) & (v < y + h + 16)
+        return pts[keep]
+    image = np.zeros((120, 160, 3), np.uint8)
+    out = {}
+    for on in (False, True):
+        t = Track3D(CAM, Low(), create_estimator("baseline"), silhouette=0.0, outline_share=0.0,
+                    outline_contain=on, weight_3d=0.0, frustum_margin=0.0)
+        t.init(image, [30, 40, 80, 30], points=pts)
+        asked.clear()
+        out[on] = t.update(image, window)
+        assert len(asked) == 1
+        np.testing.assert_array_equal(asked[0], [30.0, 55.0, 80.0, 30.0])
+    np.testing.assert_allclose(out[False].box2d, [30.0, 55.0, 80.0, 30.0], atol=1e-9)
+    np.testing.assert_allclose(out[True].box2d, [30.0, 42.0, 80.0, 30.0], atol=1e-3)   # y 55 -> 40 + 2 px slack
+    assert out[True].num_points > out[False].num_points
+
+
 def test_the_outline_contain_option_is_checked_recorded_and_by_sensor(tmp_path):
     from track3d.estimators import create_estimator
     from track3d.evaluation import TrackerSpec

@@ -520,14 +520,19 @@ class Track3D:
         return cls.create(camera, DEFAULT_TRACKER, "a3boxnet", arith, {**arith, **sensor}, **options)
 
     # --- the loop --------------------------------------------------------------------------------
+    def _cut_box(self, box2d: np.ndarray) -> np.ndarray:
+        """The box a frustum is cut with: `box2d` widened by ``frustum_margin`` of its size."""
+        if self.frustum_margin > 0.0:
+            grow = box2d[2:] * self.frustum_margin
+            return np.concatenate([box2d[:2] - grow / 2.0, box2d[2:] + grow])
+        return box2d
+
     def _frustum(self, points, box2d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(frustum points, their (2, 3) [min; max]) from one C++ pass; the points are finite.
         The cut uses the 2D box widened by ``frustum_margin`` (see FRUSTUM_MARGIN).
         points: a cloud (N, 3) or a callable box2d -> cloud (e.g. track3d.stereo.StereoCloud.bind,
         which computes depth only around the box)."""
-        if self.frustum_margin > 0.0:
-            grow = box2d[2:] * self.frustum_margin
-            box2d = np.concatenate([box2d[:2] - grow / 2.0, box2d[2:] + grow])
+        box2d = self._cut_box(box2d)
         if callable(points):
             points = points(box2d.copy())
         return extract_frustum_bounds(points, box2d, self._M, *self.z_range)
@@ -718,10 +723,14 @@ class Track3D:
             r = TrackResult(self._shown(raw), raw.copy(), self.box3d.copy(), TRACKING, 0, ms,
                             _tracker_score(self.tracker2d))
             return self._judge(r, estimated=False)
-        seen, cloud = raw, points
         lit = None   # the outline where it is off (stereo: the lit part), for containment and the share
-        if (self.silhouette == 0.0 and not callable(points)
-                and (self.outline_contain or (self.outline_share > 0.0 and self.fusion))):
+        wants_lit = self.silhouette == 0.0 and (self.outline_contain or (self.outline_share > 0.0 and self.fusion))
+        if wants_lit and callable(points):
+            # a cloud computed around the box (stereo from the pair: the box and the matcher's
+            # margin): the one call the frustum would make, made first so the outline can be read
+            points = points(self._cut_box(raw).copy())
+        seen, cloud = raw, points
+        if wants_lit and not callable(points):
             lit, _, _ = silhouette_box(points, raw, self._M, self._size, self.z_range, SILHOUETTE)
             if lit is not None:
                 lit = past_border(lit, raw, self._size)
