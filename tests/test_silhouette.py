@@ -272,6 +272,37 @@ def test_outline_contain_reads_a_callable_cloud_once():
     assert out[True].num_points > out[False].num_points
 
 
+def test_outline_contain_finds_a_body_the_tracker_left():
+    """With containment on and no returns near the tracker's box (EdgeTrack left on the sky after
+    the body went out of view and came back), the loop goes on from the body the whole view's
+    depth shows; a blob of fewer than FIND_MIN_RETURNS returns is noise, not a body."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import FIND_MIN_RETURNS, Track3D
+
+    OnSky = _answering([120.0, 5.0, 30.0, 20.0])   # far from any return
+    mask = np.zeros((120, 160), bool)
+    mask[60:90, 10:60] = True                      # the body: [10, 60, 50, 30]
+    image = np.zeros((120, 160, 3), np.uint8)
+    speck = np.zeros((120, 160), bool)
+    speck[60:66, 10:16] = True                     # 36 returns: noise
+    assert speck.sum() < FIND_MIN_RETURNS <= mask.sum()
+    for cloud, want in ((_cloud(mask), [10.0, 60.0, 50.0, 30.0]), (_cloud(speck), [120.0, 5.0, 30.0, 20.0])):
+        out = {}
+        for on in (False, True):
+            t = Track3D(CAM, OnSky(), create_estimator("baseline"), silhouette=0.0, outline_share=0.3,
+                        outline_contain=on, weight_3d=0.0)
+            t.init(image, [120, 5, 30, 20], points=_cloud(mask))
+            out[on] = t.update(image, cloud)
+        np.testing.assert_allclose(out[False].box2d, [120.0, 5.0, 30.0, 20.0], atol=1e-9)
+        np.testing.assert_allclose(out[True].box2d, want, atol=1e-3)
+    assert out[False].status == out[True].status == "no_points"   # the speck: held, as without it
+    # from the pair (a cloud of the box's window) there is no whole view to search: nothing moves
+    t = Track3D(CAM, OnSky(), create_estimator("baseline"), silhouette=0.0, outline_contain=True, weight_3d=0.0)
+    t.init(image, [120, 5, 30, 20], points=_cloud(mask))
+    full = _cloud(mask)
+    np.testing.assert_allclose(t.update(image, lambda box: full).box2d, [120.0, 5.0, 30.0, 20.0], atol=1e-9)
+
+
 def test_the_outline_contain_option_is_checked_recorded_and_by_sensor(tmp_path):
     from track3d.estimators import create_estimator
     from track3d.evaluation import TrackerSpec
