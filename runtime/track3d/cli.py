@@ -124,7 +124,8 @@ def _parser() -> argparse.ArgumentParser:
                         "track3d.tracker.outline_share_for: stereo 0.3, others 0)")
     t.add_argument("--outline-contain", action=argparse.BooleanOptionalAction, default=None,
                    help="with the outline off (--silhouette 0), move the 2D tracker's box (its size kept) to hold "
-                        "the outline before the frustum and the fusion (default by the depth sensor, "
+                        "the outline before the frustum and the fusion, and with no returns near it go to the body "
+                        "the whole view's depth shows (default by the depth sensor, "
                         "track3d.tracker.outline_contain_for: on for stereo, off for the others)")
     t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
                    help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
