@@ -738,6 +738,7 @@ class Track3D:
             # margin): the one call the frustum would make, made first so the outline can be read
             points = points(self._cut_box(raw).copy())
         seen, cloud = raw, points
+        cut = None   # (frustum points, bounds) of `seen`, when already cut
         if wants_lit and not callable(points):
             lit, _, _ = silhouette_box(points, raw, self._M, self._size, self.z_range, SILHOUETTE)
             if lit is not None:
@@ -749,8 +750,10 @@ class Track3D:
                 # left on the sky by a body that went out of view and came back); the whole
                 # view's depth finds it, if it holds enough returns to be a body, not noise
                 body = find_body(points, raw, self._M, self._size, self.z_range)
-                if body is not None and len(self._frustum(points, body)[0]) >= FIND_MIN_RETURNS:
+                found = None if body is None else self._frustum(points, body)
+                if found is not None and len(found[0]) >= FIND_MIN_RETURNS:
                     seen = lit = body
+                    cut = found   # the frustum of the box the loop goes on from, cut once
         if self.silhouette > 0.0 and not callable(points):
             outline, near, region = silhouette_box(points, raw, self._M, self._size, self.z_range, self.silhouette)
             if outline is None:
@@ -762,7 +765,7 @@ class Track3D:
             else:
                 seen = past_border(outline, raw, self._size)
                 cloud = self._region_cloud(seen, near, region, points)
-        pts, bounds = self._frustum(cloud, seen)
+        pts, bounds = cut if cut is not None else self._frustum(cloud, seen)
         if seen is not raw and reaches_range(bounds, seen, self.camera, self.depth_range_m):
             # returns stopped by the sensor's range outline a cap, not the body: the range cut
             # (_reported_box) needs the image's box
