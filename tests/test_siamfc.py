@@ -246,6 +246,15 @@ def test_cli_prepare_train_export_eval_on_tiny_data(tiny_dataset, tmp_path, caps
     assert main(["siamfc", "export", "--checkpoint", str(run / "ckpt.pt"), "--out", str(prefix)]) == 0
     meta = OnnxModel(str(prefix) + "_search.onnx", 1, "siamfc-search").meta
     assert meta["training"]["steps"] == 5 and meta["width"] == 0.125
+    # the last checkpoint (written after the loop) still names the data it was trained on
+    index = json.loads((cache / "index.json").read_text())
+    assert meta["train_data_hash"] == index["data_hash"] and meta["train_data_hash"]
+    # a kill after logging a step but before its checkpoint: the resumed run logs that step once
+    with open(run / "log.jsonl", "a") as f:
+        f.write(json.dumps({"step": 6, "loss": 1.0, "lr": 0.01, "elapsed_s": 0.0}) + "\n")
+    assert main(args + ["--steps", "6"]) == 0
+    steps = [json.loads(l)["step"] for l in (run / "log.jsonl").read_text().splitlines()]
+    assert steps == sorted(set(steps)) and steps[-1] == 6, steps
     capsys.readouterr()
     assert main(["siamfc", "eval", "--model", str(prefix), "--data", str(tiny_dataset), "--split", "test",
                  "--max-sequences", "1"]) == 0

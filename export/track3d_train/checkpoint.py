@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["load_checkpoint_dict", "network_of", "SIGNATURES"]
+__all__ = ["load_checkpoint_dict", "save_checkpoint", "network_of", "SIGNATURES"]
 
 
 def _config_with(key: str, config: str = "config") -> Callable[[dict], bool]:
@@ -23,6 +23,19 @@ SIGNATURES: dict[str, tuple[Callable[[dict], bool], str]] = {
     "SiamFC": (_config_with("variant"), "track3d-train siamfc export"),
     "EdgeTrack": (_config_with("widths"), "track3d-train edgetrack export"),
 }
+
+
+def save_checkpoint(path: str | Path, ck: dict) -> None:
+    """torch.save `ck` to `path` through a temporary file beside it, so that a run killed while
+    saving leaves the previous checkpoint whole."""
+    import os
+
+    import torch
+
+    p = Path(path)
+    tmp = p.with_name(p.name + ".tmp")
+    torch.save(ck, str(tmp))
+    os.replace(tmp, p)
 
 
 def network_of(ck) -> str | None:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -17,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..checkpoint import save_checkpoint
+from ..training_log import read_log, trim_log
 from .data import MAKER, CropCache, PairSampler, load_background
 from .model import EdgeTrack, EdgeTrackConfig, cell_centres, edgetrack_loss
 
@@ -31,12 +32,6 @@ def load_checkpoint(path) -> tuple[EdgeTrack, dict]:
     net = EdgeTrack(EdgeTrackConfig.from_dict(ck["config"]))
     net.load_state_dict(ck["model"])
     return net, ck
-
-
-def _save(path: Path, obj: dict) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(obj, str(tmp))
-    os.replace(tmp, path)
 
 
 def fit_platt(logits: np.ndarray, labels: np.ndarray, iters: int = 100) -> tuple[float, float]:
@@ -114,7 +109,7 @@ def validate(net: EdgeTrack, batches) -> dict:
 
 
 def plot_curves(log_path, json_path, png_path, title="EdgeTrack training") -> None:
-    rows = [json.loads(l) for l in Path(log_path).read_text().splitlines() if l.strip()]
+    rows = read_log(log_path)
     tr = [r for r in rows if r.get("kind") == "train"]
     va = [r for r in rows if r.get("kind") == "val"]
     Path(json_path).write_text(json.dumps({"train": tr, "val": va}))
@@ -187,11 +182,7 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
         opt.load_state_dict(ck["optim"])
         step, elapsed0 = int(ck["step"]), float(ck.get("elapsed_s", 0.0))
         sampler.rng = np.random.default_rng([seed, step])
-        if log_path.exists():   # drop rows logged after the checkpoint (a kill between checkpoints)
-            rows = [l for l in log_path.read_text().splitlines() if l.strip() and json.loads(l)["step"] <= step]
-            tmp = log_path.with_name(log_path.name + ".tmp")
-            tmp.write_text("".join(r + "\n" for r in rows))
-            os.replace(tmp, log_path)
+        trim_log(log_path, step)   # rows logged after the checkpoint (a kill between checkpoints)
         torch.manual_seed(seed + step)
         print(f"resumed from {ck_path} at step {step} ({elapsed0 / 60:.1f} min trained)")
     else:
@@ -208,7 +199,7 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
     data_info = cache_data_info(Path(cache_dir) / "target", MAKER)   # the training data's identity, for the export
 
     def checkpoint(elapsed):
-        _save(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
+        save_checkpoint(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
                         "config": net.cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
                         "batch": batch, "seed": seed, "border_cut": border_cut, "calib": [net.cfg.calib_a, net.cfg.calib_b],
                         "pad": sampler.pad, **data_info})

@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 import json
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from ..checkpoint import save_checkpoint
+from ..training_log import read_log, trim_log
 from .data import CropCache, PairSampler
 from .model import SiamFC, SiamFCConfig, balanced_bce
 
@@ -24,18 +25,12 @@ def load_checkpoint(path) -> tuple[SiamFC, dict]:
     return net, ck
 
 
-def _save(path: Path, obj: dict):
-    tmp = path.with_suffix(".tmp")
-    torch.save(obj, str(tmp))
-    os.replace(tmp, path)
-
-
 def plot_log(log_path, png_path, title="SiamFC training") -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = [json.loads(l) for l in Path(log_path).read_text().splitlines() if l.strip()]
+    rows = read_log(log_path)
     if not rows:
         return
     st = np.array([r["step"] for r in rows])
@@ -75,13 +70,20 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
                           max_gap=max_gap, seed=seed)
     from .data import cache_data_info
 
-    data_info = cache_data_info(cache_dir)
+    data_info = cache_data_info(cache_dir)   # the training data's identity, for the export
+
+    def checkpoint(elapsed):
+        save_checkpoint(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
+                                  "config": cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
+                                  "batch": batch, "seed": seed, **data_info})
+
     if resume and ck_path.is_file():
         ck = torch.load(str(ck_path), map_location="cpu", weights_only=False)
         net.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optim"])
         step, elapsed0 = int(ck["step"]), float(ck.get("elapsed_s", 0.0))
         sampler.rng = np.random.default_rng([seed, step])
+        trim_log(log_path, step)   # rows logged after the checkpoint (a kill between checkpoints)
         torch.manual_seed(seed + step)
         print(f"resumed from {ck_path} at step {step}")
     elif init_from:
@@ -130,18 +132,14 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
                 acc, nacc = 0.0, 0
             budget_hit = time_budget_s is not None and elapsed >= time_budget_s
             if now - last_ck >= ckpt_every_s or step == steps or budget_hit:
-                _save(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
-                                "config": cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
-                                "batch": batch, "seed": seed, **data_info})
+                checkpoint(elapsed)
                 last_ck = now
             if budget_hit:
                 stopped = "time budget"
                 break
     if bar:
         bar.close()
-    _save(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step, "config": cfg.to_dict(),
-                    "elapsed_s": elapsed0 + time.perf_counter() - t_start, "steps_planned": steps,
-                    "batch": batch, "seed": seed})
+    checkpoint(elapsed0 + time.perf_counter() - t_start)
     try:
         plot_log(log_path, out / "loss.png", f"SiamFC {cfg.variant}")
     except Exception as e:  # plotting is a convenience
