@@ -245,3 +245,30 @@ def test_bench_accumulation_carries_a_view_onto_the_body_in_a_later_frame(tiny_d
     rec = json.loads((tmp_path / "accumulation.json").read_text())
     assert set(rec["mean_iou_3d"]) == set(bench.VARIANTS)
     assert all(0.0 <= v <= 1.0 for v in rec["mean_iou_3d"].values())
+    assert bench.main(["--data", str(tiny_dataset), "--split", "test", "--limit", "1", "--every", "2",
+                       "--out", str(tmp_path)]) == 0
+
+
+def test_carved_back_bounds_the_true_back_face_and_tightens_with_views(tiny_dataset):
+    """Space carving with the true pose (ideal depth): the farthest point the past views leave is
+    never nearer than the body's true back face (less one sample along the ray), there is no bound
+    without a past view, and more views never loosen it."""
+    import bench_accumulation as bench
+    from track3d.dataset import Dataset
+
+    for seq in Dataset(tiny_dataset).sequences("test")[:2]:
+        fd = seq.meta["frame_data"]
+        R, T = np.asarray(fd["R"]).reshape(-1, 3, 3), np.asarray(fd["T"])
+        frames = [k for k in range(len(seq)) if not seq.absent[k] and (seq.depth(k) > 0).sum() > 20]
+        j = frames[-1]
+        d = seq.depth(j)
+        assert bench.carved_back(seq.camera, d, R[j], T[j], []) == float("inf")
+        back = seq.gt3d[j][2] + seq.gt3d[j][5] / 2.0
+        bounds = []
+        for n in range(1, len(frames)):
+            past = [(seq.depth(k), R[k], T[k]) for k in frames[:n]]
+            bounds.append(bench.carved_back(seq.camera, d, R[j], T[j], past))
+        width = float(np.ptp(seq.points(j)[:, 0])) + float(np.ptp(seq.points(j)[:, 1]))
+        step = bench.RAY_REACH * width / (bench.RAY_SAMPLES - 1)
+        assert all(b >= back - step - bench.CARVE_TOL_M for b in bounds), (bounds, back)
+        assert all(b2 <= b1 + 1e-9 for b1, b2 in zip(bounds, bounds[1:])), bounds
