@@ -48,6 +48,11 @@ RAY_STRIDE = 3              # carving: one ray per RAY_STRIDE x RAY_STRIDE pixel
 RAY_SAMPLES = 96            # carving: samples along a ray, front face to front + RAY_REACH x the width
 RAY_REACH = 3.0
 CARVE_TOL_M = 0.05          # carving: a point this much nearer than a view's surface still counts
+ICP_POINTS = 3000           # --pose icp: returns of a frame registered onto the previous frame's
+ICP_ITERS = 30
+ICP_MAX_DIST_M = 1.0        # --pose icp: pairs farther apart than this are left out
+ICP_GOOD_M = 0.03           # --pose icp: a point this close to the other view's surface fits
+ICP_MIN_FIT = 0.6           # --pose icp: a registration fitting fewer of the points starts the views over
 
 
 def to_body(points: np.ndarray, R: np.ndarray, T: np.ndarray) -> np.ndarray:
@@ -95,20 +100,137 @@ def carved_back(cam, depth_i: np.ndarray, R_i, T_i, past: list) -> float:
     return float(pts[alive, 2].max())
 
 
-def sequence_ious(seq, estimator, seen_angle_deg: float = 90.0, seed: int = 0, every: int = 1) -> dict[str, list[float]]:
+def _grid_points_normals(cam, depth: np.ndarray, box2d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The returns inside box2d [x, y, w, h] as points (n, 3) with unit normals (n, 3) from the
+    depth grid's central differences (pixels whose four neighbours all have a return)."""
+    H, W = depth.shape
+    x, y, w, h = (float(v) for v in box2d)
+    x0, y0 = max(int(x) - 1, 1), max(int(y) - 1, 1)
+    x1, y1 = min(int(np.ceil(x + w)) + 1, W - 1), min(int(np.ceil(y + h)) + 1, H - 1)
+    d = depth.astype(np.float64)
+    u = np.arange(W) + 0.5
+    v = np.arange(H) + 0.5
+    P = np.stack([(u[None, :] - cam.cx) / cam.fx * d, (v[:, None] - cam.cy) / cam.fy * d, d], axis=-1)
+    ok = d > 0
+    c = (slice(y0, y1), slice(x0, x1))
+    du = P[y0:y1, x0 + 1:x1 + 1] - P[y0:y1, x0 - 1:x1 - 1]
+    dv = P[y0 + 1:y1 + 1, x0:x1] - P[y0 - 1:y1 - 1, x0:x1]
+    good = ok[c] & ok[y0:y1, x0 + 1:x1 + 1] & ok[y0:y1, x0 - 1:x1 - 1] & ok[y0 + 1:y1 + 1, x0:x1] & ok[y0 - 1:y1 - 1, x0:x1]
+    n = np.cross(du, dv)
+    norm = np.linalg.norm(n, axis=-1)
+    good &= norm > 0
+    return P[c][good], n[good] / norm[good][:, None]
+
+
+def icp(src: np.ndarray, dst: np.ndarray, dst_normals: np.ndarray, init: np.ndarray,
+        iters: int = ICP_ITERS, max_dist: float = ICP_MAX_DIST_M) -> np.ndarray:
+    """Point-to-plane ICP: the rigid transform (4, 4) that puts the points src (n, 3) onto the
+    surface dst (m, 3) with normals (m, 3), started from `init` (4, 4)."""
+    return icp_fit(src, dst, dst_normals, init, iters, max_dist)[0]
+
+
+def icp_fit(src: np.ndarray, dst: np.ndarray, dst_normals: np.ndarray, init: np.ndarray,
+            iters: int = ICP_ITERS, max_dist: float = ICP_MAX_DIST_M) -> tuple[np.ndarray, float]:
+    """`icp`'s transform and the share of src (0..1) that lands within ICP_GOOD_M of the surface
+    dst along its normal with it (how well the two views fit: near 1 on clean depth when right)."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(dst)
+    M = np.array(init, dtype=np.float64)
+    for _ in range(iters):
+        s = src @ M[:3, :3].T + M[:3, 3]
+        dist, idx = tree.query(s, distance_upper_bound=max_dist)
+        keep = np.isfinite(dist)
+        if keep.sum() < 6:
+            break
+        s, q, n = s[keep], dst[idx[keep]], dst_normals[idx[keep]]
+        A = np.concatenate([np.cross(s, n), n], axis=1)          # d(n . (R s + t - q)) / d(w, t)
+        r = np.einsum("ij,ij->i", n, q - s)
+        x, *_ = np.linalg.lstsq(A, r, rcond=None)
+        w, t = x[:3], x[3:]
+        theta = float(np.linalg.norm(w))
+        K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+        dR = np.eye(3) + (np.sin(theta) / theta * K + (1 - np.cos(theta)) / theta ** 2 * K @ K if theta > 1e-12 else K)
+        step = np.eye(4)
+        step[:3, :3], step[:3, 3] = dR, t
+        M = step @ M
+        if theta < 1e-6 and np.linalg.norm(t) < 1e-5:
+            break
+    s = src @ M[:3, :3].T + M[:3, 3]
+    dist, idx = tree.query(s, distance_upper_bound=max_dist)
+    keep = np.isfinite(dist)
+    resid = np.abs(np.einsum("ij,ij->i", dst_normals[idx[keep]], s[keep] - dst[idx[keep]]))
+    return M, float((resid < ICP_GOOD_M).sum() / max(len(src), 1))
+
+
+def icp_poses(seq, max_points: int = ICP_POINTS, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-frame pose (R (T, 3, 3), T (T, 3), the convention of `to_body`) from the depth alone:
+    each present frame's returns in its label box registered onto the previous present frame's
+    by point-to-plane ICP (started from the last frame's motion), the motions chained; the body
+    frame is the first present frame's camera frame moved to its returns' centroid (so that the
+    direction from the body to the camera means what it does with the true pose). Frames without
+    returns keep the last pose. A registration that fits fewer than ICP_MIN_FIT of the points
+    (the body left the view, spun too far between frames) starts a new body frame: the third
+    array (T,) int numbers these segments, and views of different segments must not be joined."""
+    rng = np.random.default_rng(seed)
+    n = len(seq)
+    R, T = np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3))
+    segment, seg = np.zeros(n, np.int64), 0
+    G = np.eye(4)            # camera frame of this frame -> body frame
+    motion = np.eye(4)       # the last frame-to-frame motion (this frame -> the previous one)
+    prev = None
+    for i in range(n):
+        if not seq.absent[i] and np.all(np.isfinite(seq.gt2d[i])):
+            pts, nrm = _grid_points_normals(seq.camera, seq.depth(i), seq.gt2d[i])
+            if len(pts) >= 20:
+                fit = 0.0
+                if prev is not None:
+                    src = pts if len(pts) <= max_points else pts[rng.choice(len(pts), max_points, replace=False)]
+                    step, fit = icp_fit(src, prev[0], prev[1], motion)
+                if fit >= ICP_MIN_FIT:
+                    motion = step
+                    G = G @ motion
+                else:           # the first view, or a registration gone wrong: a new body frame
+                    if prev is not None:
+                        seg += 1
+                    G, motion = np.eye(4), np.eye(4)
+                    G[:3, 3] = -pts.mean(axis=0)
+                prev = (pts, nrm)
+        R[i] = G[:3, :3].T          # to_body(p) = R^T (p - T) = G p
+        T[i] = -G[:3, :3].T @ G[:3, 3]
+        segment[i] = seg
+    return R, T, segment
+
+
+def _net_on(estimator, views: np.ndarray, bounds: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """A3BoxNet on the accumulated views, the seen faces measured; `fallback` where the views
+    leave the network's domain (a pose gone wrong spreads them past its extent)."""
+    try:
+        return fit_measured_faces(estimator.estimate(views.astype(np.float32), -1), bounds)
+    except ValueError:
+        return fallback
+
+
+def sequence_ious(seq, estimator, seen_angle_deg: float = 90.0, seed: int = 0, every: int = 1,
+                  pose: str = "true") -> dict[str, list[float]]:
     """Per present frame (every `every`-th: the views are those frames too), IoU_3d of each
-    variant (VARIANTS) against the label."""
-    fd = seq.meta.get("frame_data")
-    if not isinstance(fd, dict) or "R" not in fd or "T" not in fd:
-        raise ValueError(f"{seq.path}: meta.json has no per-frame pose (frame_data R, T): "
-                         "a dataset of an older simulator")
-    R = np.asarray(fd["R"], np.float64).reshape(-1, 3, 3)     # body -> camera
-    T = np.asarray(fd["T"], np.float64).reshape(-1, 3)
+    variant (VARIANTS) against the label. pose "true": the simulator's; "icp": `icp_poses`."""
+    segment = np.zeros(len(seq), np.int64)
+    if pose == "icp":
+        R, T, segment = icp_poses(seq, seed=seed)
+    else:
+        fd = seq.meta.get("frame_data")
+        if not isinstance(fd, dict) or "R" not in fd or "T" not in fd:
+            raise ValueError(f"{seq.path}: meta.json has no per-frame pose (frame_data R, T): "
+                             "a dataset of an older simulator")
+        R = np.asarray(fd["R"], np.float64).reshape(-1, 3, 3)     # body -> camera
+        T = np.asarray(fd["T"], np.float64).reshape(-1, 3)
     rng = np.random.default_rng(seed)
     body = np.zeros((0, 3))
     looks = np.zeros((0, 3))      # the unit directions from the body to the camera, body frame
     out: dict[str, list[float]] = {k: [] for k in VARIANTS}
     past: list = []
+    current = 0
     for i in range(0, len(seq), every):
         if seq.absent[i]:
             continue
@@ -116,6 +238,8 @@ def sequence_ious(seq, estimator, seen_angle_deg: float = 90.0, seed: int = 0, e
         if len(pts) < 10:
             continue
         g = seq.gt3d[i]
+        if segment[i] != current:   # a new body frame (the pose was lost): the views start over
+            body, looks, past, current = np.zeros((0, 3)), np.zeros((0, 3)), [], segment[i]
         net = fit_measured_faces(estimator.estimate(pts, -1, bounds=bounds), bounds)
         view = to_body(pts, R[i], T[i])
         if len(view) > MAX_VIEW_POINTS:
@@ -143,7 +267,7 @@ def sequence_ious(seq, estimator, seen_angle_deg: float = 90.0, seed: int = 0, e
         net_back = net[2] + net[5] / 2.0
         boxes = {"net": net, "views_box": np.concatenate([(lo + hi) / 2.0, hi - lo]),
                  "max_back": with_back(max(net[2] + net[5] / 2.0, hi[2])),
-                 "net_on_views": fit_measured_faces(estimator.estimate(views.astype(np.float32), -1), bounds),
+                 "net_on_views": _net_on(estimator, views, bounds, net),
                  "seen_back": with_back(hi[2]) if seen >= seen_angle_deg else net,
                  "hull_back": with_back(min(net_back, hull)),
                  "hull_clip": with_back(min(max(net_back, hi[2]), max(hull, hi[2]))),
@@ -160,6 +284,9 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--limit", type=bounded(int, 0), default=0, help="first N sequences only (0: all)")
     ap.add_argument("--seen-angle", type=bounded(float, 0, high=180), default=90.0,
                     help="degrees between a past view and this one for `seen_back` to trust the views (default 90)")
+    ap.add_argument("--pose", choices=("true", "icp"), default="true",
+                    help="the body's pose: the simulator's (true, the ceiling) or from the depth alone "
+                         "(icp: point-to-plane ICP of each frame onto the last, chained; default true)")
     ap.add_argument("--every", type=bounded(int, 1), default=1,
                     help="every N-th frame only, as the frame measured and as a view (long sequences: "
                          "the carving's cost grows with the views; default 1)")
@@ -172,10 +299,10 @@ def main(argv=None) -> int:
     seqs = Dataset(a.data).sequences(a.split)[: a.limit or None]
     estimator = create_estimator("a3boxnet")
     rec = start_record("accumulation", data=a.data.as_posix(), split=a.split, variants=list(VARIANTS),
-                       seen_angle_deg=a.seen_angle, every=a.every)
+                       seen_angle_deg=a.seen_angle, every=a.every, pose=a.pose)
     per = {}
     for seq in progress(seqs, desc="sequences"):
-        ious = sequence_ious(seq, estimator, a.seen_angle, every=a.every)
+        ious = sequence_ious(seq, estimator, a.seen_angle, every=a.every, pose=a.pose)
         per[seq.name] = {"generator": seq.meta.get("generator"),
                          "spin_deg_s": seq.meta.get("motion", {}).get("spin_deg_s"),
                          **{k: float(np.mean(v)) if v else None for k, v in ious.items()}}
