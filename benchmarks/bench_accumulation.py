@@ -100,9 +100,10 @@ def carved_back(cam, depth_i: np.ndarray, R_i, T_i, past: list) -> float:
     return float(pts[alive, 2].max())
 
 
-def _grid_points_normals(cam, depth: np.ndarray, box2d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _grid_points_normals(cam, depth: np.ndarray, box2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
     """The returns inside box2d [x, y, w, h] as points (n, 3) with unit normals (n, 3) from the
-    depth grid's central differences (pixels whose four neighbours all have a return)."""
+    depth grid's central differences (pixels whose four neighbours all have a return), and the
+    grid itself for projective matching: (points (h, w, 3), normals (h, w, 3), valid (h, w), x0, y0)."""
     H, W = depth.shape
     x, y, w, h = (float(v) for v in box2d)
     x0, y0 = max(int(x) - 1, 1), max(int(y) - 1, 1)
@@ -119,7 +120,8 @@ def _grid_points_normals(cam, depth: np.ndarray, box2d: np.ndarray) -> tuple[np.
     n = np.cross(du, dv)
     norm = np.linalg.norm(n, axis=-1)
     good &= norm > 0
-    return P[c][good], n[good] / norm[good][:, None]
+    n = n / np.where(norm > 0, norm, 1.0)[..., None]
+    return P[c][good], n[good], (P[c], n, good, x0, y0)
 
 
 def icp(src: np.ndarray, dst: np.ndarray, dst_normals: np.ndarray, init: np.ndarray,
@@ -136,14 +138,46 @@ def icp_fit(src: np.ndarray, dst: np.ndarray, dst_normals: np.ndarray, init: np.
     from scipy.spatial import cKDTree
 
     tree = cKDTree(dst)
+
+    def match(s):
+        dist, idx = tree.query(s, distance_upper_bound=max_dist)
+        keep = np.isfinite(dist)
+        return keep, dst[idx[keep]], dst_normals[idx[keep]]
+
+    return _point_to_plane(src, match, init, iters)
+
+
+def projective_icp_fit(src: np.ndarray, grid: tuple, cam, init: np.ndarray, iters: int = ICP_ITERS,
+                       max_dist: float = ICP_MAX_DIST_M) -> tuple[np.ndarray, float]:
+    """`icp_fit` with each point matched to the return of the other view's depth grid it projects
+    onto (`_grid_points_normals`' grid), not to its nearest point: no search, linear in the points."""
+    P, N, good, x0, y0 = grid
+    h, w = good.shape
+
+    def match(s):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            col = np.floor(cam.fx * s[:, 0] / s[:, 2] + cam.cx).astype(np.int64) - x0
+            row = np.floor(cam.fy * s[:, 1] / s[:, 2] + cam.cy).astype(np.int64) - y0
+        keep = (s[:, 2] > 0) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        keep[keep] = good[row[keep], col[keep]]
+        q, n = P[row[keep], col[keep]], N[row[keep], col[keep]]
+        near = np.linalg.norm(q - s[keep], axis=1) < max_dist
+        keep[np.flatnonzero(keep)[~near]] = False
+        return keep, q[near], n[near]
+
+    return _point_to_plane(src, match, init, iters)
+
+
+def _point_to_plane(src: np.ndarray, match, init: np.ndarray, iters: int) -> tuple[np.ndarray, float]:
+    """Gauss-Newton point-to-plane steps from `init`; match(points) -> (kept mask, their surface
+    points, their normals). Returns the transform (4, 4) and the share of src that fits."""
     M = np.array(init, dtype=np.float64)
     for _ in range(iters):
         s = src @ M[:3, :3].T + M[:3, 3]
-        dist, idx = tree.query(s, distance_upper_bound=max_dist)
-        keep = np.isfinite(dist)
+        keep, q, n = match(s)
         if keep.sum() < 6:
             break
-        s, q, n = s[keep], dst[idx[keep]], dst_normals[idx[keep]]
+        s = s[keep]
         A = np.concatenate([np.cross(s, n), n], axis=1)          # d(n . (R s + t - q)) / d(w, t)
         r = np.einsum("ij,ij->i", n, q - s)
         x, *_ = np.linalg.lstsq(A, r, rcond=None)
@@ -157,13 +191,13 @@ def icp_fit(src: np.ndarray, dst: np.ndarray, dst_normals: np.ndarray, init: np.
         if theta < 1e-6 and np.linalg.norm(t) < 1e-5:
             break
     s = src @ M[:3, :3].T + M[:3, 3]
-    dist, idx = tree.query(s, distance_upper_bound=max_dist)
-    keep = np.isfinite(dist)
-    resid = np.abs(np.einsum("ij,ij->i", dst_normals[idx[keep]], s[keep] - dst[idx[keep]]))
+    keep, q, n = match(s)
+    resid = np.abs(np.einsum("ij,ij->i", n, s[keep] - q))
     return M, float((resid < ICP_GOOD_M).sum() / max(len(src), 1))
 
 
-def icp_poses(seq, max_points: int = ICP_POINTS, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def icp_poses(seq, max_points: int = ICP_POINTS, seed: int = 0, projective: bool = False,
+              timings: list | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-frame pose (R (T, 3, 3), T (T, 3), the convention of `to_body`) from the depth alone:
     each present frame's returns in its label box registered onto the previous present frame's
     by point-to-plane ICP (started from the last frame's motion), the motions chained; the body
@@ -171,7 +205,10 @@ def icp_poses(seq, max_points: int = ICP_POINTS, seed: int = 0) -> tuple[np.ndar
     direction from the body to the camera means what it does with the true pose). Frames without
     returns keep the last pose. A registration that fits fewer than ICP_MIN_FIT of the points
     (the body left the view, spun too far between frames) starts a new body frame: the third
-    array (T,) int numbers these segments, and views of different segments must not be joined."""
+    array (T,) int numbers these segments, and views of different segments must not be joined.
+    projective: `projective_icp_fit` instead of the KD-tree's; `timings` gets each registration's ms."""
+    import time
+
     rng = np.random.default_rng(seed)
     n = len(seq)
     R, T = np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3))
@@ -181,12 +218,16 @@ def icp_poses(seq, max_points: int = ICP_POINTS, seed: int = 0) -> tuple[np.ndar
     prev = None
     for i in range(n):
         if not seq.absent[i] and np.all(np.isfinite(seq.gt2d[i])):
-            pts, nrm = _grid_points_normals(seq.camera, seq.depth(i), seq.gt2d[i])
+            pts, nrm, grid = _grid_points_normals(seq.camera, seq.depth(i), seq.gt2d[i])
             if len(pts) >= 20:
                 fit = 0.0
                 if prev is not None:
                     src = pts if len(pts) <= max_points else pts[rng.choice(len(pts), max_points, replace=False)]
-                    step, fit = icp_fit(src, prev[0], prev[1], motion)
+                    t0 = time.perf_counter()
+                    step, fit = (projective_icp_fit(src, prev[2], seq.camera, motion) if projective
+                                 else icp_fit(src, prev[0], prev[1], motion))
+                    if timings is not None:
+                        timings.append((time.perf_counter() - t0) * 1e3)
                 if fit >= ICP_MIN_FIT:
                     motion = step
                     G = G @ motion
@@ -195,7 +236,7 @@ def icp_poses(seq, max_points: int = ICP_POINTS, seed: int = 0) -> tuple[np.ndar
                         seg += 1
                     G, motion = np.eye(4), np.eye(4)
                     G[:3, 3] = -pts.mean(axis=0)
-                prev = (pts, nrm)
+                prev = (pts, nrm, grid)
         R[i] = G[:3, :3].T          # to_body(p) = R^T (p - T) = G p
         T[i] = -G[:3, :3].T @ G[:3, 3]
         segment[i] = seg
@@ -212,12 +253,13 @@ def _net_on(estimator, views: np.ndarray, bounds: np.ndarray, fallback: np.ndarr
 
 
 def sequence_ious(seq, estimator, seen_angle_deg: float = 90.0, seed: int = 0, every: int = 1,
-                  pose: str = "true") -> dict[str, list[float]]:
+                  pose: str = "true", timings: list | None = None) -> dict[str, list[float]]:
     """Per present frame (every `every`-th: the views are those frames too), IoU_3d of each
-    variant (VARIANTS) against the label. pose "true": the simulator's; "icp": `icp_poses`."""
+    variant (VARIANTS) against the label. pose "true": the simulator's; "icp" / "icp-projective":
+    `icp_poses` (its registrations' ms appended to `timings`)."""
     segment = np.zeros(len(seq), np.int64)
-    if pose == "icp":
-        R, T, segment = icp_poses(seq, seed=seed)
+    if pose in ("icp", "icp-projective"):
+        R, T, segment = icp_poses(seq, seed=seed, projective=pose == "icp-projective", timings=timings)
     else:
         fd = seq.meta.get("frame_data")
         if not isinstance(fd, dict) or "R" not in fd or "T" not in fd:
@@ -284,9 +326,11 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--limit", type=bounded(int, 0), default=0, help="first N sequences only (0: all)")
     ap.add_argument("--seen-angle", type=bounded(float, 0, high=180), default=90.0,
                     help="degrees between a past view and this one for `seen_back` to trust the views (default 90)")
-    ap.add_argument("--pose", choices=("true", "icp"), default="true",
+    ap.add_argument("--pose", choices=("true", "icp", "icp-projective"), default="true",
                     help="the body's pose: the simulator's (true, the ceiling) or from the depth alone "
-                         "(icp: point-to-plane ICP of each frame onto the last, chained; default true)")
+                         "(icp: point-to-plane ICP of each frame onto the last, chained, nearest-point "
+                         "matching; icp-projective: matching by projection onto the last depth grid; "
+                         "default true)")
     ap.add_argument("--every", type=bounded(int, 1), default=1,
                     help="every N-th frame only, as the frame measured and as a view (long sequences: "
                          "the carving's cost grows with the views; default 1)")
@@ -300,14 +344,17 @@ def main(argv=None) -> int:
     estimator = create_estimator("a3boxnet")
     rec = start_record("accumulation", data=a.data.as_posix(), split=a.split, variants=list(VARIANTS),
                        seen_angle_deg=a.seen_angle, every=a.every, pose=a.pose)
-    per = {}
+    per, timings = {}, []
     for seq in progress(seqs, desc="sequences"):
-        ious = sequence_ious(seq, estimator, a.seen_angle, every=a.every, pose=a.pose)
+        ious = sequence_ious(seq, estimator, a.seen_angle, every=a.every, pose=a.pose, timings=timings)
         per[seq.name] = {"generator": seq.meta.get("generator"),
                          "spin_deg_s": seq.meta.get("motion", {}).get("spin_deg_s"),
                          **{k: float(np.mean(v)) if v else None for k, v in ious.items()}}
     rec["sequences"] = per
     rec["mean_iou_3d"] = {k: float(np.mean([p[k] for p in per.values() if p[k] is not None])) for k in VARIANTS}
+    if timings:   # one registration of a frame onto the last, this process's CPU as it ran
+        rec["registration_ms"] = {"median": float(np.median(timings)), "p99": float(np.percentile(timings, 99)),
+                                  "count": len(timings), "points": ICP_POINTS}
     a.out.mkdir(parents=True, exist_ok=True)
     write_json(a.out / "accumulation.json", finish_record(rec))
     print(" ".join(f"{k} {v:.4f}" for k, v in rec["mean_iou_3d"].items()))
