@@ -76,7 +76,7 @@ def carved_back(cam, depth_i: np.ndarray, R_i, T_i, past: list) -> float:
     vv, uu = np.nonzero(depth_i[::RAY_STRIDE, ::RAY_STRIDE] > 0)
     vv, uu = vv * RAY_STRIDE, uu * RAY_STRIDE
     front = depth_i[vv, uu].astype(np.float64)
-    rays = np.stack([(uu + 0.5 - cam.cx) / cam.fx, (vv + 0.5 - cam.cy) / cam.fy, np.ones(len(uu))], axis=1)
+    rays = cam.pixel_rays()[vv, uu]
     width = float(np.ptp(rays[:, 0] * front)) + float(np.ptp(rays[:, 1] * front))
     t = np.linspace(0.0, RAY_REACH * max(width, 0.1), RAY_SAMPLES)
     z = front[:, None] + t[None, :]                                   # (rays, samples)
@@ -86,9 +86,7 @@ def carved_back(cam, depth_i: np.ndarray, R_i, T_i, past: list) -> float:
     H, W = depth_i.shape
     for d_k, R_k, T_k in past:
         q = to_camera(body[alive], R_k, T_k)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = np.floor(cam.fx * q[:, 0] / q[:, 2] + cam.cx).astype(np.int64)
-            v = np.floor(cam.fy * q[:, 1] / q[:, 2] + cam.cy).astype(np.int64)
+        u, v = _pixels(cam, q)
         inside = (q[:, 2] > 0) & (u >= 0) & (u < W) & (v >= 0) & (v < H)
         keep = ~inside
         dk = d_k[v[inside], u[inside]]
@@ -100,6 +98,14 @@ def carved_back(cam, depth_i: np.ndarray, R_i, T_i, past: list) -> float:
     return float(pts[alive, 2].max())
 
 
+def _pixels(cam, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pixel (column, row) int64 each point (n, 3) projects into (`Camera.project`, floored);
+    points at z <= 0 get a large negative index, off every image."""
+    with np.errstate(invalid="ignore"):
+        uv = np.nan_to_num(np.floor(cam.project(points)), nan=-1, posinf=-1, neginf=-1)
+    return uv[:, 0].astype(np.int64), uv[:, 1].astype(np.int64)
+
+
 def _grid_points_normals(cam, depth: np.ndarray, box2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
     """The returns inside box2d [x, y, w, h] as points (n, 3) with unit normals (n, 3) from the
     depth grid's central differences (pixels whose four neighbours all have a return), and the
@@ -108,15 +114,15 @@ def _grid_points_normals(cam, depth: np.ndarray, box2d: np.ndarray) -> tuple[np.
     x, y, w, h = (float(v) for v in box2d)
     x0, y0 = max(int(x) - 1, 1), max(int(y) - 1, 1)
     x1, y1 = min(int(np.ceil(x + w)) + 1, W - 1), min(int(np.ceil(y + h)) + 1, H - 1)
-    d = depth.astype(np.float64)
-    u = np.arange(W) + 0.5
-    v = np.arange(H) + 0.5
-    P = np.stack([(u[None, :] - cam.cx) / cam.fx * d, (v[:, None] - cam.cy) / cam.fy * d, d], axis=-1)
+    # the box and a pixel around it, so that every pixel of the box has its four neighbours
+    ring = (slice(y0 - 1, y1 + 1), slice(x0 - 1, x1 + 1))
+    d = depth[ring].astype(np.float64)
+    P = cam.pixel_rays()[ring] * d[..., None]
     ok = d > 0
-    c = (slice(y0, y1), slice(x0, x1))
-    du = P[y0:y1, x0 + 1:x1 + 1] - P[y0:y1, x0 - 1:x1 - 1]
-    dv = P[y0 + 1:y1 + 1, x0:x1] - P[y0 - 1:y1 - 1, x0:x1]
-    good = ok[c] & ok[y0:y1, x0 + 1:x1 + 1] & ok[y0:y1, x0 - 1:x1 - 1] & ok[y0 + 1:y1 + 1, x0:x1] & ok[y0 - 1:y1 - 1, x0:x1]
+    c = (slice(1, -1), slice(1, -1))
+    du = P[1:-1, 2:] - P[1:-1, :-2]
+    dv = P[2:, 1:-1] - P[:-2, 1:-1]
+    good = ok[c] & ok[1:-1, 2:] & ok[1:-1, :-2] & ok[2:, 1:-1] & ok[:-2, 1:-1]
     n = np.cross(du, dv)
     norm = np.linalg.norm(n, axis=-1)
     good &= norm > 0
@@ -155,9 +161,8 @@ def projective_icp_fit(src: np.ndarray, grid: tuple, cam, init: np.ndarray, iter
     h, w = good.shape
 
     def match(s):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            col = np.floor(cam.fx * s[:, 0] / s[:, 2] + cam.cx).astype(np.int64) - x0
-            row = np.floor(cam.fy * s[:, 1] / s[:, 2] + cam.cy).astype(np.int64) - y0
+        col, row = _pixels(cam, s)
+        col, row = col - x0, row - y0
         keep = (s[:, 2] > 0) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
         keep[keep] = good[row[keep], col[keep]]
         q, n = P[row[keep], col[keep]], N[row[keep], col[keep]]
@@ -308,7 +313,7 @@ def sequence_ious(seq, estimator, seen_angle_deg: float = 90.0, seed: int = 0, e
         past.append((depth_i, R[i], T[i]))
         net_back = net[2] + net[5] / 2.0
         boxes = {"net": net, "views_box": np.concatenate([(lo + hi) / 2.0, hi - lo]),
-                 "max_back": with_back(max(net[2] + net[5] / 2.0, hi[2])),
+                 "max_back": with_back(max(net_back, hi[2])),
                  "net_on_views": _net_on(estimator, views, bounds, net),
                  "seen_back": with_back(hi[2]) if seen >= seen_angle_deg else net,
                  "hull_back": with_back(min(net_back, hull)),
