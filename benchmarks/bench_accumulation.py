@@ -34,6 +34,7 @@ from benchlib.output import add_out_argument
 from benchlib.record import finish_record, start_record
 
 from track3d.argparsing import ArgumentParser, bounded, run_main
+from track3d.body_views import point_to_plane
 from track3d.boxes import fit_measured_faces, iou_3d
 from track3d.dataset import Dataset
 from track3d.estimators import create_estimator
@@ -150,7 +151,7 @@ def icp_fit(src: np.ndarray, dst: np.ndarray, dst_normals: np.ndarray, init: np.
         keep = np.isfinite(dist)
         return keep, dst[idx[keep]], dst_normals[idx[keep]]
 
-    return _point_to_plane(src, match, init, iters)
+    return point_to_plane(src, match, init, iters, ICP_GOOD_M)
 
 
 def projective_icp_fit(src: np.ndarray, grid: tuple, cam, init: np.ndarray, iters: int = ICP_ITERS,
@@ -170,35 +171,7 @@ def projective_icp_fit(src: np.ndarray, grid: tuple, cam, init: np.ndarray, iter
         keep[np.flatnonzero(keep)[~near]] = False
         return keep, q[near], n[near]
 
-    return _point_to_plane(src, match, init, iters)
-
-
-def _point_to_plane(src: np.ndarray, match, init: np.ndarray, iters: int) -> tuple[np.ndarray, float]:
-    """Gauss-Newton point-to-plane steps from `init`; match(points) -> (kept mask, their surface
-    points, their normals). Returns the transform (4, 4) and the share of src that fits."""
-    M = np.array(init, dtype=np.float64)
-    for _ in range(iters):
-        s = src @ M[:3, :3].T + M[:3, 3]
-        keep, q, n = match(s)
-        if keep.sum() < 6:
-            break
-        s = s[keep]
-        A = np.concatenate([np.cross(s, n), n], axis=1)          # d(n . (R s + t - q)) / d(w, t)
-        r = np.einsum("ij,ij->i", n, q - s)
-        x, *_ = np.linalg.lstsq(A, r, rcond=None)
-        w, t = x[:3], x[3:]
-        theta = float(np.linalg.norm(w))
-        K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
-        dR = np.eye(3) + (np.sin(theta) / theta * K + (1 - np.cos(theta)) / theta ** 2 * K @ K if theta > 1e-12 else K)
-        step = np.eye(4)
-        step[:3, :3], step[:3, 3] = dR, t
-        M = step @ M
-        if theta < 1e-6 and np.linalg.norm(t) < 1e-5:
-            break
-    s = src @ M[:3, :3].T + M[:3, 3]
-    keep, q, n = match(s)
-    resid = np.abs(np.einsum("ij,ij->i", n, s[keep] - q))
-    return M, float((resid < ICP_GOOD_M).sum() / max(len(src), 1))
+    return point_to_plane(src, match, init, iters, ICP_GOOD_M)
 
 
 def icp_poses(seq, max_points: int = ICP_POINTS, seed: int = 0, projective: bool = False,

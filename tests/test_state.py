@@ -35,10 +35,11 @@ def _same(a, b):
     assert (a.status, a.num_points, a.score, a.held_frames) == (b.status, b.num_points, b.score, b.held_frames)
 
 
-@pytest.mark.parametrize("tracker,estimator", [("siamfc-edge", "a3boxnet"), ("edgetrack", "a3boxnet"),
-                                               ("kcf", "baseline")])
-def test_state_restores_bit_identically(tracker, estimator):
-    t = _make(tracker, estimator)
+@pytest.mark.parametrize("tracker,estimator,kw", [("siamfc-edge", "a3boxnet", {}), ("edgetrack", "a3boxnet", {}),
+                                                  ("kcf", "baseline", {}),
+                                                  ("edgetrack", "a3boxnet", {"body_views": True})])
+def test_state_restores_bit_identically(tracker, estimator, kw):
+    t = _make(tracker, estimator, **kw)
     img, pts, box = _frame(0)
     t.init(img, box, 0, points=pts)
     for k in range(1, 5):
@@ -46,7 +47,7 @@ def test_state_restores_bit_identically(tracker, estimator):
     state = t.get_state()
     plain = json.loads(json.dumps(state))              # JSON-able and picklable, no ORT objects
     pickle.loads(pickle.dumps(state))
-    a, b = _make(tracker, estimator), _make(tracker, estimator)
+    a, b = _make(tracker, estimator, **kw), _make(tracker, estimator, **kw)
     a.set_state(plain)
     b.set_state(state)
     if tracker != "kcf":

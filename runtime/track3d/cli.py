@@ -127,6 +127,10 @@ def _parser() -> argparse.ArgumentParser:
                         "the outline before the frustum and the fusion, and with no returns near it go to the body "
                         "the whole view's depth shows (default by the depth sensor, "
                         "track3d.tracker.outline_contain_for: on for stereo, off for the others)")
+    t.add_argument("--body-views", action=argparse.BooleanOptionalAction, default=None,
+                   help="keep the body's past views in a body-fixed frame (registered from the depth alone) and "
+                        "hold the 3D box's back face at least at the farthest point they saw (default by the depth "
+                        "sensor, track3d.tracker.body_views_for)")
     t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
                    help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
                         "itself; default: by the depth sensor, 0.3, 0 for stereo; track3d.tracker.frustum_margin_for)")
@@ -258,7 +262,7 @@ def _cmd_track(a) -> int:
                        evidence_points=a.evidence_points, reacquire_threshold=a.reacquire_threshold,
                        hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad, silhouette=a.silhouette,
                        outline_share=a.outline_share,
-                       outline_contain=a.outline_contain,
+                       outline_contain=a.outline_contain, body_views=a.body_views,
                        frustum_margin=margin,
                        # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's
                        depth_range=not a.no_depth_range and a.depth != "stereo",

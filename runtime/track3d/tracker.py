@@ -39,11 +39,13 @@ finite, has no positive size, does not overlap the image or is more than 10x the
 from __future__ import annotations
 
 import time
+from dataclasses import asdict
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
+from .body_views import BodyViews, BodyViewsParams
 from .camera import Camera
 from .estimators import BoxEstimator, create_estimator
 from .frames import MAX_COORD_M, check_category, check_image, check_init_box
@@ -316,14 +318,27 @@ def outline_contain_for(depth_sensor: str | None) -> bool:
     return SENSOR_OUTLINE_CONTAIN.get(_sensor_key(depth_sensor), False)
 
 
+# The body's past views in a body-fixed frame (track3d.body_views): the back face held at least
+# as far as the farthest point a past view saw. Registered from the depth alone every
+# BodyViewsParams.every-th frame.
+BODY_VIEWS = False
+SENSOR_BODY_VIEWS: dict[str, bool] = {}
+
+
+def body_views_for(depth_sensor: str | None) -> bool:
+    """Whether the loop keeps the body's past views (track3d.body_views), for this sensor."""
+    return SENSOR_BODY_VIEWS.get(_sensor_key(depth_sensor), BODY_VIEWS)
+
+
 def sensor_options(depth_sensor: str | None) -> dict:
     """Track3D's options chosen by the depth sensor (None: unknown): frustum_margin, weight_3d,
-    weight_2d, measured_faces, edge_pad, silhouette, outline_share, outline_contain (the eight
-    tables above)."""
+    weight_2d, measured_faces, edge_pad, silhouette, outline_share, outline_contain, body_views
+    (the nine tables above)."""
     return {"frustum_margin": frustum_margin_for(depth_sensor), "weight_3d": fusion_weight_for(depth_sensor),
             "weight_2d": section_weight_for(depth_sensor), "measured_faces": measured_faces_for(depth_sensor),
             "edge_pad": edge_pad_for(depth_sensor), "silhouette": silhouette_for(depth_sensor),
-            "outline_share": outline_share_for(depth_sensor), "outline_contain": outline_contain_for(depth_sensor)}
+            "outline_share": outline_share_for(depth_sensor), "outline_contain": outline_contain_for(depth_sensor),
+            "body_views": body_views_for(depth_sensor)}
 STATE_VERSION = 1
 
 
@@ -391,7 +406,8 @@ class Track3D:
                  depth_smoothing: float = DEPTH_SMOOTHING, evidence_points: int = EVIDENCE_POINTS,
                  reacquire_threshold: float | None = REACQUIRE_THRESHOLD, hold_cut_size: float = HOLD_CUT_SIZE,
                  edge_pad: float = EDGE_PAD, silhouette: float = SILHOUETTE,
-                 outline_share: float = OUTLINE_SHARE, outline_contain: bool = False):
+                 outline_share: float = OUTLINE_SHARE, outline_contain: bool = False,
+                 body_views: bool | BodyViewsParams = BODY_VIEWS):
         if not isinstance(camera, Camera):
             raise TypeError(f"camera must be a track3d.Camera, got {type(camera).__name__}")
         if not 0.0 <= float(weight_3d) <= 1.0:
@@ -441,6 +457,12 @@ class Track3D:
         if not isinstance(outline_contain, (bool, np.bool_)):
             raise ValueError(f"outline_contain must be True or False, got {outline_contain!r}")
         self.outline_contain = bool(outline_contain)
+        if not isinstance(body_views, (bool, np.bool_, BodyViewsParams)):
+            raise ValueError(f"body_views must be True, False or a BodyViewsParams, got {body_views!r}")
+        self.body_views = bool(body_views is not False)
+        # the past views only push an amodal estimator's guessed back face
+        self._views = (BodyViews(camera, body_views if isinstance(body_views, BodyViewsParams) else None)
+                       if self.body_views and amodal else None)
         self._pad = (self.edge_pad / camera.fx, self.edge_pad / camera.fy)
         self._whole_box: np.ndarray | None = None   # the reported box of the last whole view (6,)
         self._depth_ratio = float("nan")   # size z / mean(size x, y) of the last box within the depth range
@@ -602,11 +624,19 @@ class Track3D:
         W, H = self._size
         return x <= 0.5, y <= 0.5, x + w >= W - 0.5, y + h >= H - 0.5
 
-    def _report(self, est: np.ndarray, bounds: np.ndarray, box2d: np.ndarray) -> np.ndarray:
-        """This frame's reported box (`_reported_box`) with its depth extent replaced by the
+    def _report(self, est: np.ndarray, bounds: np.ndarray, box2d: np.ndarray,
+                far: float | None = None) -> np.ndarray:
+        """This frame's reported box (`_reported_box`), its back face at least at `far` (the past
+        views' farthest depth, track3d.body_views) when the returns are within the depth range,
+        with its depth extent replaced by the
         running average (DEPTH_SMOOTHING), its front face where it was; updates the average and,
         after a whole view, the size a cut body keeps (HOLD_CUT_SIZE)."""
         box, whole, reached = self._reported_box(est, bounds, box2d)
+        if far is not None and not reached and far > box[2] + box[5] / 2.0:
+            front = box[2] - box[5] / 2.0
+            box = np.array(box, dtype=np.float64)
+            box[5] = far - front
+            box[2] = front + box[5] / 2.0
         self._carry_from = np.array(box2d, dtype=np.float64) if reached else None
         if not reached:   # a box from returns within the range: the body's own depth-to-width ratio
             self._depth_ratio = float(min(box[5] / max((box[3] + box[4]) / 2.0, 1e-6), MAX_DEPTH_RATIO))
@@ -642,6 +672,8 @@ class Track3D:
         self._whole_box = None
         self._depth_ratio = float("nan")
         self._carry_from = None
+        if self._views is not None:
+            self._views.reset()
         self._started = True
         if points is not None and self.needs_points:
             pts, bounds = self._frustum(points, b)
@@ -661,6 +693,8 @@ class Track3D:
         r.held_frames = self.held_frames
         if self.bad_frames >= self.lost_after:
             r.status = LOST
+        if r.status == LOST and self._views is not None:   # the body found again may be turned any way
+            self._views.reset()
         return r
 
     def _check_started(self, call: str) -> None:
@@ -786,7 +820,8 @@ class Track3D:
                 self.box3d = carry_box(self.box3d, self._carry_from, seen, self.camera)
                 self._carry_from = np.array(seen, dtype=np.float64)
         else:
-            self.box3d = self._report(est, bounds, seen)
+            far = None if self._views is None else self._views.update(pts, self._cut_box(seen))
+            self.box3d = self._report(est, bounds, seen, far)
         t3 = time.perf_counter()
         ms["box3d"] = (t3 - t2) * 1e3
         # without fusion the reported 2D box is the 2D tracker's own (the outline only feeds the 3D box)
@@ -896,6 +931,7 @@ class Track3D:
             "depth_ratio": self._depth_ratio if np.isfinite(self._depth_ratio) else None,
             "carry_from": None if self._carry_from is None else self._carry_from.tolist(),
             "tracker2d": get2d(), "estimator_state": get3d() if get3d is not None else None,
+            "body_views": None if self._views is None else self._views.get_state(),
         })
 
     def set_state(self, state: dict) -> None:
@@ -933,6 +969,10 @@ class Track3D:
             carry_from = st.get("carry_from")   # None: the last box's returns were within the range, or an older state
             carry_from = None if carry_from is None else np.asarray(carry_from, dtype=np.float64).reshape(4).copy()
             tracker2d, estimator_state = st["tracker2d"], st.get("estimator_state")
+            views = None
+            if self._views is not None and st.get("body_views") is not None:
+                views = BodyViews(self.camera, self._views.params)
+                views.set_state(st["body_views"])
         except (KeyError, TypeError, ValueError) as e:
             raise ValueError(f"damaged Track3D state: {type(e).__name__}: {e}") from None
         set2d(tracker2d)
@@ -943,6 +983,11 @@ class Track3D:
         self._whole_box = whole_box
         self._depth_ratio = depth_ratio
         self._carry_from = carry_from
+        if self._views is not None:   # a state without views (an older one, or views off): they start over
+            if views is None:
+                self._views.reset()
+            else:
+                self._views = views
         self._started = bool(np.isfinite(box2d).all())   # the state of a started tracker
 
     def __getstate__(self):
@@ -971,7 +1016,9 @@ class Track3D:
                         "reacquire_threshold": self.reacquire_threshold,
                         "hold_cut_size": self.hold_cut_size, "edge_pad": self.edge_pad,
                         "silhouette": self.silhouette, "outline_share": self.outline_share,
-                        "outline_contain": self.outline_contain},
+                        "outline_contain": self.outline_contain,
+                        # only when on: the records of runs without the views stay as they were
+                        **({"body_views": asdict(self._views.params)} if self._views is not None else {})},
             "models": models,
         }
 

@@ -70,6 +70,7 @@ class TrackerSpec:
     silhouette: float | None = None          # None: by the sequence's depth sensor (silhouette_for)
     outline_share: float | None = None       # None: by the sequence's depth sensor (outline_share_for)
     outline_contain: bool | None = None      # None: by the sequence's depth sensor (outline_contain_for)
+    body_views: bool | None = None           # None: by the sequence's depth sensor (body_views_for)
     threads: int = 1
     tracker_options: dict = field(default_factory=dict)
     estimator_options: dict = field(default_factory=dict)

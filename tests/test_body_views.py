@@ -1,0 +1,174 @@
+"""The body's past views (track3d.body_views): grid, registration, the back face they show."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from track3d import Camera
+from track3d.body_views import BodyViews, BodyViewsParams, projective_fit, surface_grid
+
+CAM = Camera.from_fov(160, 120, 40.0)
+AXES = np.array([1.5, 1.0, 0.7])       # the ellipsoid's semi-axes (m)
+CENTRE = np.array([0.2, -0.1, 12.0])
+
+
+def _rot_y(deg: float) -> np.ndarray:
+    a = np.radians(deg)
+    return np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+
+
+def _ellipsoid_view(R: np.ndarray, centre: np.ndarray = CENTRE) -> tuple[np.ndarray, np.ndarray]:
+    """The returns (n, 3) of an ellipsoid at attitude R (body -> camera) and `centre`, one per
+    pixel whose ray hits it (the nearer root), and their 2D box [x, y, w, h]."""
+    rays = CAM.pixel_rays().reshape(-1, 3)
+    # body coordinates q = R^T (t d - c); sum (q / axes)^2 = 1 is a quadratic in t
+    d = (rays @ R) / AXES
+    c = (centre @ R) / AXES
+    A, B, C = (d * d).sum(1), -2.0 * (d @ c), c @ c - 1.0
+    disc = B * B - 4 * A * C
+    hit = disc > 0
+    t = (-B[hit] - np.sqrt(disc[hit])) / (2 * A[hit])
+    pts = rays[hit] * t[:, None]
+    v, u = np.divmod(np.flatnonzero(hit), CAM.width)
+    box = np.array([u.min(), v.min(), u.max() - u.min() + 1, v.max() - v.min() + 1], dtype=np.float64)
+    return pts.astype(np.float32), box
+
+
+def _true_back(R: np.ndarray, centre: np.ndarray = CENTRE) -> float:
+    """The ellipsoid's largest depth: its centre's plus the half-extent of the rotated axes along z."""
+    return float(centre[2] + np.sqrt(((R[2] * AXES) ** 2).sum()))
+
+
+def test_surface_grid_of_a_plane_holds_its_points_and_normal():
+    """Hand case: a plane z = 10 seen square-on; every cell's mean lies on it, the normals are
+    along the line of sight, the cells are at most `cells` a side."""
+    pts, box = _plane_points(10.0)
+    g = surface_grid(CAM, pts, box, cells=8)
+    assert g.valid.shape[0] <= 8 and g.valid.shape[1] <= 8 and g.valid.all()
+    assert np.allclose(g.points[..., 2], 10.0)
+    assert g.normal_ok[1:-1, 1:-1].all() and not g.normal_ok[0].any()   # the border lacks neighbours
+    assert np.allclose(np.abs(g.normals[g.normal_ok][:, 2]), 1.0)
+    # each cell's mean projects inside that cell
+    r, c, inside = g.cells_of(CAM, g.points[g.valid])
+    rows, cols = np.nonzero(g.valid)
+    assert inside.all() and (r == rows).all() and (c == cols).all()
+
+
+def _plane_points(z: float) -> tuple[np.ndarray, np.ndarray]:
+    box = np.array([40.0, 30.0, 64.0, 48.0])
+    rays = CAM.pixel_rays()[30:78, 40:104].reshape(-1, 3)
+    return rays * z, box
+
+
+def test_projective_fit_undoes_a_small_motion_of_the_ellipsoid():
+    """The ellipsoid turned by 4 degrees and moved 6 cm: the registration of the new view onto
+    the old one's grid gives that motion back (within 0.5 degree and 2 cm)."""
+    R0, R1 = np.eye(3), _rot_y(4.0)
+    p0, b0 = _ellipsoid_view(R0)
+    shift = np.array([0.04, 0.0, -0.045])
+    p1, _ = _ellipsoid_view(R1, CENTRE + shift)
+    grid = surface_grid(CAM, p0, b0, cells=48)
+    M, fit = projective_fit(p1[::4].astype(np.float64), grid, CAM, np.eye(4), iters=20)
+    assert fit > 0.8   # the outermost cells have no normal: their points match nothing
+    # the truth: new camera point -> old camera point, p0 = R0 R1^T (p1 - c1) + c0
+    Rt = R0 @ R1.T
+    angle = np.degrees(np.arccos(np.clip((np.trace(M[:3, :3] @ Rt.T) - 1) / 2, -1, 1)))
+    assert angle < 0.5
+    test = np.array([[0.3, 0.2, 11.5]])
+    want = (test - (CENTRE + shift)) @ Rt.T + CENTRE
+    assert np.abs(test @ M[:3, :3].T + M[:3, 3] - want).max() < 0.02
+
+
+def test_the_views_show_the_back_face_a_single_view_cannot():
+    """An ellipsoid turning 180 degrees about the vertical: its long axis starts across the line of
+    sight and ends across it again, after pointing along it. Past the half turn the farthest
+    point of the views comes within 6 cm of the true back face; it never lies 6 cm beyond it; the
+    first view alone gives nothing."""
+    bv = BodyViews(CAM, BodyViewsParams(every=1))
+    fars = []
+    for k in range(61):
+        R = _rot_y(3.0 * k)
+        pts, box = _ellipsoid_view(R)
+        far = bv.update(pts, box)
+        if k == 0:
+            assert far is None
+            continue
+        fars.append((far, _true_back(R), float(pts[:, 2].max())))
+    assert bv.restarts == 0
+    far, back, seen = np.array(fars).T
+    assert (far <= back + 0.06).all()
+    assert np.abs(far[-20:] - back[-20:]).max() < 0.06
+    # and the views add depth the last view does not hold (the check above can fail)
+    assert (far[-20:] - seen[-20:]).min() > 0.3
+
+
+def test_a_registration_that_fails_starts_the_views_over():
+    """A jump no registration explains (the body elsewhere, turned 90 degrees): one restart, and
+    the views hold only the new view (no far side) until the next key frame."""
+    bv = BodyViews(CAM, BodyViewsParams(every=1))
+    for k in range(5):
+        assert (bv.update(*_ellipsoid_view(_rot_y(3.0 * k))) is None) == (k == 0)
+    jumped = CENTRE + np.array([2.0, 0.5, 3.0])
+    assert bv.update(*_ellipsoid_view(_rot_y(100.0), jumped)) is None
+    assert bv.restarts == 1 and bv.views == 1
+    assert bv.update(*_ellipsoid_view(_rot_y(103.0), jumped)) is not None
+    assert bv.restarts == 1
+
+
+def test_between_key_frames_the_far_side_follows_the_front():
+    """every=3: frames between key frames keep the last key frame's depth behind the returns'
+    nearest point (the body moving 10 cm nearer moves the far side with it)."""
+    bv = BodyViews(CAM, BodyViewsParams(every=3))
+    for k in range(7):   # key frames 0, 3, 6
+        far = bv.update(*_ellipsoid_view(_rot_y(3.0 * k)))
+    assert far is not None
+    pts, box = _ellipsoid_view(_rot_y(21.0), CENTRE - np.array([0.0, 0.0, 0.1]))
+    front6 = float(_ellipsoid_view(_rot_y(18.0))[0][:, 2].min())
+    assert bv.update(pts, box) == pytest.approx(far - front6 + float(pts[:, 2].min()))
+
+
+@pytest.mark.parametrize("value", [0, -1, 1.5, True])
+def test_params_are_checked(value):
+    with pytest.raises(ValueError, match="every"):
+        BodyViewsParams(every=value)
+
+
+def test_state_continues_bit_identically():
+    a, b = BodyViews(CAM, BodyViewsParams(every=2)), BodyViews(CAM, BodyViewsParams(every=2))
+    for k in range(5):
+        a.update(*_ellipsoid_view(_rot_y(3.0 * k)))
+    from track3d.state import from_plain, to_plain
+    import json
+
+    b.set_state(from_plain(json.loads(json.dumps(to_plain(a.get_state())))))
+    for k in range(5, 9):
+        view = _ellipsoid_view(_rot_y(3.0 * k))
+        assert a.update(*view) == b.update(*view)
+
+
+def test_the_loop_holds_the_back_face_at_the_views():
+    """Track3D with the views on, oracle 2D boxes, the turning ellipsoid. While its long axis
+    points along the line of sight (frames 22-38, the back 2-3 m behind the front) A3BoxNet's
+    guess falls short of the back face by 0.1-0.35 m; the views put it within 0.1 m on average.
+    The views only push the back face out, so elsewhere the box stays within 0.2 m of the truth
+    (the running average of the depth extent lags by a frame or two)."""
+    from track3d.tracker import Track3D
+
+    frames = [_ellipsoid_view(_rot_y(3.0 * k)) for k in range(61)]
+    gt = np.array([b for _, b in frames])
+    image = np.zeros((CAM.height, CAM.width, 3), np.uint8)
+    err = {}
+    true = np.array([_true_back(_rot_y(3.0 * k)) for k in range(1, 61)])
+    for views in (False, BodyViewsParams(every=1)):
+        try:
+            t = Track3D.create(CAM, "oracle", "a3boxnet", tracker_options={"gt": gt, "absent": np.zeros(len(gt), bool)},
+                               body_views=views)
+        except Exception as e:   # a build without the shipped models
+            pytest.skip(str(e))
+        t.init(image, gt[0], points=frames[0][0])
+        out = [t.update(image, pts).box3d for pts, _ in frames[1:]]
+        err[bool(views)] = np.array([b[2] + b[5] / 2.0 for b in out]) - true
+    along = slice(21, 38)    # frames 22-38
+    assert np.abs(err[False][along]).mean() > 0.15   # the net's shortfall: the check below can fail
+    assert np.abs(err[True][along]).mean() < 0.1
+    assert np.abs(err[True]).max() < 0.2
