@@ -119,6 +119,28 @@ def engine_table(root: Path) -> str:
     return table + "\n\n" + models_line(now.values(), '"now"')
 
 
+def long_table(root: Path) -> str:
+    """The long watches (300 frames, ideal depth; long_watch/engine_baseline.json): the loop with
+    the body's past views (the default) and without them (runs named ...-noviews), AO_3d / ACE_3d (m)."""
+    now = {(r["sensor"], r["split"], r["protocol"], r["tracker"]): r
+           for r in _load(root, "long_watch/engine_baseline.json")["rows"]}
+
+    def pair(key):
+        r = now.get(key)
+        return "-" if r is None else f"{r['ao_3d']:.3f} / {r['ace_3d']:.3f}"
+
+    rows = []
+    for s, sp in sorted({(k[0], k[1]) for k in now}, key=lambda x: (ENGINE_SPLITS.index(x), x)):
+        rows.append([s, sp, pair((s, sp, "restart", "oracle+a3boxnet-noviews")),
+                     f"**{pair((s, sp, 'restart', 'oracle+a3boxnet'))}**",
+                     pair((s, sp, "onepass", "edgetrack+a3boxnet-noviews")),
+                     f"**{pair((s, sp, 'onepass', 'edgetrack+a3boxnet'))}**",
+                     pair((s, sp, "onepass", "siamfc-edge+a3boxnet")), pair((s, sp, "onepass", "nano+a3boxnet"))])
+    return markdown_table(["depth", "split", "A3BoxNet, oracle 2D: one view", "past views",
+                           "Track3D default (EdgeTrack), one pass: one view", "past views",
+                           "SiamFC-edge + A3BoxNet, one pass", "NanoTrack v2 + A3BoxNet, one pass"], rows)
+
+
 def models_line(rows, what: str) -> str:
     """One line naming the model files (sha256 prefixes, from the runs' records) behind `rows`."""
     seen: dict[str, set] = {}
@@ -173,7 +195,7 @@ def table2_engine_table(root: Path) -> str:
     return _table2(root, TABLE2_ENGINE_ROWS)
 
 
-TABLES = {"speed": speed_table, "engine": engine_table, "table2": table2_table, "table2_engine": table2_engine_table}
+TABLES = {"speed": speed_table, "engine": engine_table, "long": long_table, "table2": table2_table, "table2_engine": table2_engine_table}
 
 
 def render(readme: str, root: Path) -> str:

@@ -172,3 +172,25 @@ def test_the_loop_holds_the_back_face_at_the_views():
     assert np.abs(err[False][along]).mean() > 0.15   # the net's shortfall: the check below can fail
     assert np.abs(err[True][along]).mean() < 0.1
     assert np.abs(err[True]).max() < 0.2
+
+
+def test_the_views_follow_the_depth_sensor_and_the_spec():
+    """On for ideal depth and an unknown sensor, off for stereo and ToF (measured: they cost there,
+    docs/runtime.md); a TrackerSpec's explicit value wins over the sensor's."""
+    from track3d.evaluation import TrackerSpec
+    from track3d.tracker import Track3D
+
+    try:
+        on = {s: Track3D.from_default(CAM, depth_sensor=s)._views is not None
+              for s in (None, "ideal", "flash-lidar", "tof", "stereo")}
+    except Exception as e:   # a build without the shipped models
+        pytest.skip(str(e))
+    assert on == {None: True, "ideal": True, "flash-lidar": False, "tof": False, "stereo": False}
+
+    class Seq:   # what TrackerSpec.build reads of a sequence
+        camera, gt2d, absent, depth_sensor, depth_range_m = CAM, np.zeros((2, 4)), np.zeros(2, bool), "ideal", None
+
+    assert TrackerSpec("kcf", "a3boxnet").build(Seq())._views is not None
+    assert TrackerSpec("kcf", "a3boxnet", body_views=False).build(Seq())._views is None
+    Seq.depth_sensor = "stereo"
+    assert TrackerSpec("kcf", "a3boxnet", body_views=True).build(Seq())._views is not None

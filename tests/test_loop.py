@@ -641,7 +641,8 @@ def test_the_hidden_depth_is_averaged_over_frames_front_face_kept(frames):
     img, pts = frames[1][0], frames[1][1]
 
     def run(est, **kw):
-        t = Track3D(CAM, OracleTracker(np.tile(gt2d[1], (9, 1))), est, measured_faces=False, **kw)
+        # the past views off: the returns reach past the scripted back faces and would push them
+        t = Track3D(CAM, OracleTracker(np.tile(gt2d[1], (9, 1))), est, measured_faces=False, body_views=False, **kw)
         t.init(img, gt2d[1])
         return t, [t.update(img, pts).box3d.copy() for _ in range(len(est.depths))]
 

@@ -29,6 +29,9 @@ import numpy as np
 
 from .camera import Camera
 
+# a registration stops at a step below 0.006 degrees and 0.1 mm: far below what the back face
+# needs (cm), and it halves the steps of a key frame
+DONE_RAD, DONE_M = 1e-4, 1e-4
 GRID_POINTS_PER_CELL = 4    # surface_grid bins at most this many points per cell on average
 
 __all__ = ["BodyViewsParams", "BodyViews", "SurfaceGrid", "surface_grid", "point_to_plane", "projective_fit"]
@@ -39,7 +42,7 @@ class BodyViewsParams:
     """How `BodyViews` samples, registers and keeps views."""
     every: int = 3              # a key frame every N frames with returns (registration and a new view)
     cells: int = 48             # the surface grid: at most cells x cells over the 2D box
-    iters: int = 12             # ICP steps per registration
+    iters: int = 6              # ICP steps per registration (from the start below, 4 did as well as 12)
     icp_points: int = 500       # grid points registered (a stride of them)
     max_dist_m: float = 1.0     # ICP: pairs farther apart than this are left out
     good_m: float = 0.03        # a point this close to the other surface (along its normal) fits
@@ -96,10 +99,11 @@ def surface_grid(camera: Camera, points: np.ndarray, box2d: np.ndarray, cells: i
     cols, rows = max(int(np.ceil(w / step)), 1), max(int(np.ceil(h / step)), 1)
     grid = SurfaceGrid(np.zeros((rows, cols, 3)), np.zeros((rows, cols, 3)), np.zeros((rows, cols), bool),
                        np.zeros((rows, cols), bool), x, y, step)
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    p = np.asarray(points).reshape(-1, 3)
     most = GRID_POINTS_PER_CELL * cells * cells
     if len(p) > most:   # a near body's 100,000 returns: a stride of them fills the cells as well
         p = p[:: int(np.ceil(len(p) / most))]
+    p = p.astype(np.float64)
     r, c, inside = grid.cells_of(camera, p)
     lin = (r * cols + c)[inside]
     p = p[inside]
@@ -120,10 +124,11 @@ def surface_grid(camera: Camera, points: np.ndarray, box2d: np.ndarray, cells: i
     return grid
 
 
-def point_to_plane(src: np.ndarray, match, init: np.ndarray, iters: int,
-                   good_m: float) -> tuple[np.ndarray, float]:
+def point_to_plane(src: np.ndarray, match, init: np.ndarray, iters: int, good_m: float,
+                   done_rad: float = 1e-6, done_m: float = 1e-5) -> tuple[np.ndarray, float]:
     """Gauss-Newton point-to-plane ICP from the rigid transform `init` (4, 4); match(points (n, 3))
-    -> (kept mask (n,), their surface points (k, 3), their unit normals (k, 3)). Returns the
+    -> (kept mask (n,), their surface points (k, 3), their unit normals (k, 3)). Stops after
+    `iters` steps or a step below done_rad and done_m. Returns the
     transform (4, 4) that puts src (n, 3) onto the surface and the share of src (0..1) within
     good_m of it along the normal with it."""
     M = np.array(init, dtype=np.float64)
@@ -133,9 +138,16 @@ def point_to_plane(src: np.ndarray, match, init: np.ndarray, iters: int,
         if keep.sum() < 6:
             break
         s = s[keep]
-        A = np.concatenate([np.cross(s, n), n], axis=1)          # d(n . (R s + t - q)) / d(w, t)
+        A = np.empty((len(s), 6))                                 # d(n . (R s + t - q)) / d(w, t)
+        A[:, 0] = s[:, 1] * n[:, 2] - s[:, 2] * n[:, 1]           # s x n
+        A[:, 1] = s[:, 2] * n[:, 0] - s[:, 0] * n[:, 2]
+        A[:, 2] = s[:, 0] * n[:, 1] - s[:, 1] * n[:, 0]
+        A[:, 3:] = n
         r = np.einsum("ij,ij->i", n, q - s)
-        x, *_ = np.linalg.lstsq(A, r, rcond=None)
+        # the normal equations, damped a little: a surface that leaves a motion free (a plane
+        # sliding in itself) gets the smallest step there, not an arbitrary one
+        H = A.T @ A
+        x = np.linalg.solve(H + np.eye(6) * (1e-9 * np.trace(H) + 1e-12), A.T @ r)
         w, t = x[:3], x[3:]
         theta = float(np.linalg.norm(w))
         K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
@@ -143,7 +155,7 @@ def point_to_plane(src: np.ndarray, match, init: np.ndarray, iters: int,
         step = np.eye(4)
         step[:3, :3], step[:3, 3] = dR, t
         M = step @ M
-        if theta < 1e-6 and np.linalg.norm(t) < 1e-5:
+        if theta < done_rad and np.linalg.norm(t) < done_m:
             break
     s = src @ M[:3, :3].T + M[:3, 3]
     keep, q, n = match(s)
@@ -151,18 +163,26 @@ def point_to_plane(src: np.ndarray, match, init: np.ndarray, iters: int,
     return M, float((resid < good_m).sum() / max(len(src), 1))
 
 
-def projective_fit(src: np.ndarray, grid: SurfaceGrid, camera: Camera, init: np.ndarray, iters: int = 12,
+def projective_fit(src: np.ndarray, grid: SurfaceGrid, camera: Camera, init: np.ndarray, iters: int = 6,
                    max_dist_m: float = 1.0, good_m: float = 0.03) -> tuple[np.ndarray, float]:
     """`point_to_plane` with each point matched to the grid cell (with a normal) it projects into."""
+    cols = grid.valid.shape[1]
+    points, normals, ok = grid.points.reshape(-1, 3), grid.normals.reshape(-1, 3), grid.normal_ok.reshape(-1)
+    max_d2 = max_dist_m * max_dist_m
+
     def match(s):
         r, c, keep = grid.cells_of(camera, s)
-        keep &= grid.normal_ok[r, c]
-        q, n = grid.points[r[keep], c[keep]], grid.normals[r[keep], c[keep]]
-        near = np.linalg.norm(q - s[keep], axis=1) < max_dist_m
-        keep[np.flatnonzero(keep)[~near]] = False
-        return keep, q[near], n[near]
+        lin = r * cols + c
+        keep &= ok[lin]
+        idx = np.flatnonzero(keep)
+        q = points[lin[idx]]
+        d = q - s[idx]
+        near = np.einsum("ij,ij->i", d, d) < max_d2
+        keep[idx[~near]] = False
+        idx = lin[idx[near]]
+        return keep, points[idx], normals[idx]
 
-    return point_to_plane(src, match, init, iters, good_m)
+    return point_to_plane(src, match, init, iters, good_m, DONE_RAD, DONE_M)
 
 
 class BodyViews:
@@ -187,15 +207,15 @@ class BodyViews:
         self.restarts = 0                # registrations that started the views over
         self.views = 0                   # views in the body frame
 
-    def update(self, points: np.ndarray, box2d: np.ndarray) -> float | None:
+    def update(self, points: np.ndarray, box2d: np.ndarray, front: float | None = None) -> float | None:
         """This frame's returns (n, 3) (the frustum: camera frame) and 2D box [x, y, w, h] -> the
         farthest depth (m, this frame's z) a past view saw of the body, or None (no view but this
         one). Between key frames, the last key frame's far side held at the same distance behind
-        the returns' nearest point."""
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        the returns' nearest point (`front`, their least z, when the caller has it)."""
+        pts = np.asarray(points).reshape(-1, 3)
         if len(pts) == 0:
             return None
-        front = float(pts[:, 2].min())
+        front = float(pts[:, 2].min()) if front is None else float(front)
         key = self._frames % self.params.every == 0
         self._frames += 1
         if not key:
@@ -230,7 +250,7 @@ class BodyViews:
             self._G, self._body, self.views = np.eye(4), np.zeros((0, 3)), 0
             self._G[:3, 3] = -view.mean(axis=0)
         self._grid, self._centroid = grid, view.mean(axis=0)
-        keep = pts[:: max(1, int(np.ceil(len(pts) / p.view_points)))]
+        keep = pts[:: max(1, int(np.ceil(len(pts) / p.view_points)))].astype(np.float64)
         self._body = np.concatenate([self._body, keep @ self._G[:3, :3].T + self._G[:3, 3]])
         if len(self._body) > p.max_points:   # thinned over every view: the oldest saw the side hidden now
             self._body = self._body[::2]

@@ -255,6 +255,8 @@ def _cmd_track(a) -> int:
         a.outline_share = stereo.get("outline_share")
     if a.depth == "stereo" and a.outline_contain is None:
         a.outline_contain = stereo.get("outline_contain")
+    if a.depth == "stereo" and a.body_views is None:
+        a.body_views = stereo.get("body_views")
     if a.depth == "stereo" and a.estimator == "a3boxnet" and "model" not in eopts:
         eopts.setdefault("depth_sensor", "stereo")   # the stereo model (track3d.boxnet.SENSOR_MODELS)
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
