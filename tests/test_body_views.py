@@ -81,50 +81,55 @@ def test_projective_fit_undoes_a_small_motion_of_the_ellipsoid():
 
 def test_the_views_show_the_back_face_a_single_view_cannot():
     """An ellipsoid turning 180 degrees about the vertical: its long axis starts across the line of
-    sight and ends across it again, after pointing along it. Past the half turn the farthest
-    point of the views comes within 6 cm of the true back face; it never lies 6 cm beyond it; the
-    first view alone gives nothing."""
+    sight and ends across it again, after pointing along it, at 3 degrees a frame. Over the last
+    20 frames the farthest point of the views is within 11 cm of the true back face, and it is
+    never more than 12 cm beyond it (the chained pose drifts by ~6 cm, and a key frame is
+    registered in the next call: the far side lags by a frame while the back recedes 3 cm a
+    frame); the first two calls give nothing (no view registered, then one)."""
     bv = BodyViews(CAM, BodyViewsParams(every=1))
     fars = []
     for k in range(61):
         R = _rot_y(3.0 * k)
         pts, box = _ellipsoid_view(R)
         far = bv.update(pts, box)
-        if k == 0:
+        if k < 2:
             assert far is None
             continue
         fars.append((far, _true_back(R), float(pts[:, 2].max())))
     assert bv.restarts == 0
     far, back, seen = np.array(fars).T
-    assert (far <= back + 0.06).all()
-    assert np.abs(far[-20:] - back[-20:]).max() < 0.06
+    assert (far <= back + 0.12).all()
+    assert np.abs(far[-20:] - back[-20:]).max() < 0.11
     # and the views add depth the last view does not hold (the check above can fail)
     assert (far[-20:] - seen[-20:]).min() > 0.3
 
 
 def test_a_registration_that_fails_starts_the_views_over():
-    """A jump no registration explains (the body elsewhere, turned 90 degrees): one restart, and
-    the views hold only the new view (no far side) until the next key frame."""
+    """A jump no registration explains (the body elsewhere, turned 90 degrees): registered in the
+    next call, one restart, and the views hold only the new view (no far side) until the next
+    key frame is registered."""
     bv = BodyViews(CAM, BodyViewsParams(every=1))
     for k in range(5):
-        assert (bv.update(*_ellipsoid_view(_rot_y(3.0 * k))) is None) == (k == 0)
+        assert (bv.update(*_ellipsoid_view(_rot_y(3.0 * k))) is None) == (k < 2)
     jumped = CENTRE + np.array([2.0, 0.5, 3.0])
-    assert bv.update(*_ellipsoid_view(_rot_y(100.0), jumped)) is None
+    assert bv.update(*_ellipsoid_view(_rot_y(100.0), jumped)) is not None   # not registered yet
+    assert bv.restarts == 0
+    assert bv.update(*_ellipsoid_view(_rot_y(103.0), jumped)) is None
     assert bv.restarts == 1 and bv.views == 1
-    assert bv.update(*_ellipsoid_view(_rot_y(103.0), jumped)) is not None
+    assert bv.update(*_ellipsoid_view(_rot_y(106.0), jumped)) is not None
     assert bv.restarts == 1
 
 
 def test_between_key_frames_the_far_side_follows_the_front():
-    """every=3: frames between key frames keep the last key frame's depth behind the returns'
-    nearest point (the body moving 10 cm nearer moves the far side with it)."""
+    """every=3: frames between key frames keep the last registered key frame's depth behind the
+    returns' nearest point (the body moving 10 cm nearer moves the far side with it)."""
     bv = BodyViews(CAM, BodyViewsParams(every=3))
-    for k in range(7):   # key frames 0, 3, 6
-        far = bv.update(*_ellipsoid_view(_rot_y(3.0 * k)))
-    assert far is not None
-    pts, box = _ellipsoid_view(_rot_y(21.0), CENTRE - np.array([0.0, 0.0, 0.1]))
-    front6 = float(_ellipsoid_view(_rot_y(18.0))[0][:, 2].min())
-    assert bv.update(pts, box) == pytest.approx(far - front6 + float(pts[:, 2].min()))
+    for k in range(8):   # key frames 0, 3, 6; the last registered in call 7
+        far7 = bv.update(*_ellipsoid_view(_rot_y(3.0 * k)))
+    assert far7 is not None
+    front7 = float(_ellipsoid_view(_rot_y(21.0))[0][:, 2].min())
+    pts, box = _ellipsoid_view(_rot_y(24.0), CENTRE - np.array([0.0, 0.0, 0.1]))
+    assert bv.update(pts, box) == pytest.approx(far7 - front7 + float(pts[:, 2].min()))
 
 
 @pytest.mark.parametrize("value", [0, -1, 1.5, True])
@@ -150,8 +155,8 @@ def test_the_loop_holds_the_back_face_at_the_views():
     """Track3D with the views on, oracle 2D boxes, the turning ellipsoid. While its long axis
     points along the line of sight (frames 22-38, the back 2-3 m behind the front) A3BoxNet's
     guess falls short of the back face by 0.1-0.35 m; the views put it within 0.1 m on average.
-    The views only push the back face out, so elsewhere the box stays within 0.2 m of the truth
-    (the running average of the depth extent lags by a frame or two)."""
+    The views only push the back face out, so elsewhere the box stays within 0.25 m of the truth
+    (the running average of the depth extent and the key frame registered a frame late lag)."""
     from track3d.tracker import Track3D
 
     frames = [_ellipsoid_view(_rot_y(3.0 * k)) for k in range(61)]
@@ -171,7 +176,7 @@ def test_the_loop_holds_the_back_face_at_the_views():
     along = slice(21, 38)    # frames 22-38
     assert np.abs(err[False][along]).mean() > 0.15   # the net's shortfall: the check below can fail
     assert np.abs(err[True][along]).mean() < 0.1
-    assert np.abs(err[True]).max() < 0.2
+    assert np.abs(err[True]).max() < 0.25
 
 
 def test_the_views_follow_the_depth_sensor_and_the_spec():

@@ -324,12 +324,13 @@ def outline_contain_for(depth_sensor: str | None) -> bool:
 # mean IoU_3d over present frames): single-frame net 0.843 -> 0.859 / 0.865 / 0.863 registering
 # every 1st / 3rd / 5th frame (every frame drifts more: more registrations chained); checked in
 # the loop on a fresh 300-frame set (seed 13, EdgeTrack one pass, AO_3d / ACE_3d): test 0.911 /
-# 0.209 -> 0.918 / 0.189, held-out shapes 0.859 / 0.316 -> 0.873 / 0.278 m, 11 of 24 sequences up
+# 0.209 -> 0.918 / 0.190, held-out shapes 0.859 / 0.316 -> 0.873 / 0.278 m, 12 of 24 sequences up
 # by more than 0.005, none down. 60-frame calibration sets: ideal held-out shapes 0.876 -> 0.880,
 # flash-LiDAR 0.887 / 0.828 -> 0.886 / 0.828, ToF unchanged (its noise fails the registrations);
 # stereo 0.7395 -> 0.7322 (four sets; the matcher's smeared surfaces register into wrong poses
-# that pass the fit test): off for stereo, and for ToF, where it only costs time. Cost: +0.5 ms
-# a frame on average on one core (a registration every third frame, ~1.5 ms).
+# that pass the fit test): off for stereo, and for ToF, where it only costs time. Cost: +0.45 ms
+# a frame on average on one core (a key frame's grid ~0.5 ms, its registration ~0.8 ms in the
+# next frame).
 BODY_VIEWS = True
 SENSOR_BODY_VIEWS = {"stereo": False, "tof": False, "flash-lidar": False}
 
