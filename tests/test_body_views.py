@@ -199,3 +199,12 @@ def test_the_views_follow_the_depth_sensor_and_the_spec():
     assert TrackerSpec("kcf", "a3boxnet", body_views=False).build(Seq())._views is None
     Seq.depth_sensor = "stereo"
     assert TrackerSpec("kcf", "a3boxnet", body_views=True).build(Seq())._views is not None
+
+
+@pytest.mark.parametrize("off", [False, np.bool_(False)])
+def test_views_off_means_off_and_a_wrong_value_is_one_error(off):
+    from track3d.tracker import Track3D
+
+    assert Track3D.create(CAM, "kcf", "a3boxnet", body_views=off)._views is None
+    with pytest.raises(ValueError, match="body_views"):
+        Track3D.create(CAM, "kcf", "a3boxnet", body_views="yes")

@@ -39,8 +39,7 @@ finite, has no positive size, does not overlap the image or is more than 10x the
 from __future__ import annotations
 
 import time
-from dataclasses import asdict
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -469,7 +468,7 @@ class Track3D:
         self.outline_contain = bool(outline_contain)
         if not isinstance(body_views, (bool, np.bool_, BodyViewsParams)):
             raise ValueError(f"body_views must be True, False or a BodyViewsParams, got {body_views!r}")
-        self.body_views = bool(body_views is not False)
+        self.body_views = isinstance(body_views, BodyViewsParams) or bool(body_views)
         # the past views only push an amodal estimator's guessed back face
         self._views = (BodyViews(camera, body_views if isinstance(body_views, BodyViewsParams) else None)
                        if self.body_views and amodal else None)
@@ -530,7 +529,8 @@ class Track3D:
                **options) -> "Track3D":
         """Build from registry names; `options` go to Track3D (fusion, weight_3d, z_range,
         min_points, lost_after, min_score, frustum_margin, depth_range_m, weight_2d, measured_faces,
-        depth_smoothing, evidence_points, reacquire_threshold)."""
+        depth_smoothing, evidence_points, reacquire_threshold, hold_cut_size, edge_pad, silhouette,
+        outline_share, outline_contain, body_views)."""
         t = cls(camera, create_tracker(tracker, **(tracker_options or {})),
                 create_estimator(estimator, **(estimator_options or {})), **options)
         t.tracker_name, t.estimator_name = str(tracker).lower(), str(estimator).lower()
