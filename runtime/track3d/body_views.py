@@ -10,16 +10,18 @@ before. `BodyViews` keeps the past views in a frame fixed to the body:
   and any density gives the same small surface);
 - the grid's points are registered onto the last key frame's grid by point-to-plane ICP with
   projective matching (each point paired with the cell it projects into: no search, linear in
-  the points), started from the last motion; the motions chained give the body frame;
+  the points), started from the last turn and the shift that puts the two grids' centroids
+  together; the motions chained give the body frame;
 - a registration that leaves fewer than `min_fit` of the points within `good_m` of the other
   surface (the body left the view, spun too far, a noisy sensor) starts the views over, so one
   wrong pose is never carried on;
 - `far` is the farthest point of the views in this frame's camera frame: the back face is at
   least there.
 
-Measured with the simulator's pose and with this pose from the depth (benchmarks/
-bench_accumulation.py, docs/models.md "Temporal ceiling"): over 300 frames the views' farthest
-point lifts the single-frame box on held-out shapes; over 60 frames it does not matter.
+Its ceiling was measured with the simulator's pose (benchmarks/bench_accumulation.py,
+docs/models.md); in the loop (docs/runtime.md, README "Long watches") over 300 frames the views'
+farthest point lifts the single-frame box most on held-out shapes; over 60 frames it hardly
+matters.
 """
 from __future__ import annotations
 
@@ -30,7 +32,7 @@ import numpy as np
 from .camera import Camera
 
 # a registration stops at a step below 0.006 degrees and 0.1 mm: far below what the back face
-# needs (cm), and it halves the steps of a key frame
+# needs (cm)
 DONE_RAD, DONE_M = 1e-4, 1e-4
 GRID_POINTS_PER_CELL = 4    # surface_grid bins at most this many points per cell on average
 
