@@ -180,7 +180,7 @@ def test_the_loop_holds_the_back_face_at_the_views():
 
 
 def test_the_views_follow_the_depth_sensor_and_the_spec():
-    """On for ideal and flash-LiDAR depth and an unknown sensor, off for stereo and ToF (measured: they cost there,
+    """On for the range sensors and an unknown sensor, off for stereo (measured: it costs there,
     docs/runtime.md); a TrackerSpec's explicit value wins over the sensor's."""
     from track3d.evaluation import TrackerSpec
     from track3d.tracker import Track3D
@@ -190,7 +190,7 @@ def test_the_views_follow_the_depth_sensor_and_the_spec():
               for s in (None, "ideal", "flash-lidar", "tof", "stereo")}
     except Exception as e:   # a build without the shipped models
         pytest.skip(str(e))
-    assert on == {None: True, "ideal": True, "flash-lidar": True, "tof": False, "stereo": False}
+    assert on == {None: True, "ideal": True, "flash-lidar": True, "tof": True, "stereo": False}
 
     class Seq:   # what TrackerSpec.build reads of a sequence
         camera, gt2d, absent, depth_sensor, depth_range_m = CAM, np.zeros((2, 4)), np.zeros(2, bool), "ideal", None
