@@ -34,7 +34,7 @@ from benchlib.output import add_out_argument
 from benchlib.record import finish_record, start_record
 
 from track3d.argparsing import ArgumentParser, bounded, run_main
-from track3d.body_views import point_to_plane
+from track3d.body_views import SurfaceGrid, point_to_plane, projective_fit
 from track3d.boxes import fit_measured_faces, iou_3d
 from track3d.dataset import Dataset
 from track3d.estimators import create_estimator
@@ -157,21 +157,11 @@ def icp_fit(src: np.ndarray, dst: np.ndarray, dst_normals: np.ndarray, init: np.
 def projective_icp_fit(src: np.ndarray, grid: tuple, cam, init: np.ndarray, iters: int = ICP_ITERS,
                        max_dist: float = ICP_MAX_DIST_M) -> tuple[np.ndarray, float]:
     """`icp_fit` with each point matched to the return of the other view's depth grid it projects
-    onto (`_grid_points_normals`' grid), not to its nearest point: no search, linear in the points."""
+    onto (`_grid_points_normals`' grid), not to its nearest point: the loop's
+    `track3d.body_views.projective_fit` on a grid of one-pixel cells, stopping as `icp_fit` does."""
     P, N, good, x0, y0 = grid
-    h, w = good.shape
-
-    def match(s):
-        col, row = _pixels(cam, s)
-        col, row = col - x0, row - y0
-        keep = (s[:, 2] > 0) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
-        keep[keep] = good[row[keep], col[keep]]
-        q, n = P[row[keep], col[keep]], N[row[keep], col[keep]]
-        near = np.linalg.norm(q - s[keep], axis=1) < max_dist
-        keep[np.flatnonzero(keep)[~near]] = False
-        return keep, q[near], n[near]
-
-    return point_to_plane(src, match, init, iters, ICP_GOOD_M)
+    cells = SurfaceGrid(P, N, good, good, float(x0), float(y0), 1.0)
+    return projective_fit(src, cells, cam, init, iters, max_dist, ICP_GOOD_M, done_rad=1e-6, done_m=1e-5)
 
 
 def icp_poses(seq, max_points: int = ICP_POINTS, seed: int = 0, projective: bool = False,

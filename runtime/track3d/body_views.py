@@ -166,7 +166,8 @@ def point_to_plane(src: np.ndarray, match, init: np.ndarray, iters: int, good_m:
 
 
 def projective_fit(src: np.ndarray, grid: SurfaceGrid, camera: Camera, init: np.ndarray, iters: int = 6,
-                   max_dist_m: float = 1.0, good_m: float = 0.03) -> tuple[np.ndarray, float]:
+                   max_dist_m: float = 1.0, good_m: float = 0.03, done_rad: float = DONE_RAD,
+                   done_m: float = DONE_M) -> tuple[np.ndarray, float]:
     """`point_to_plane` with each point matched to the grid cell (with a normal) it projects into."""
     cols = grid.valid.shape[1]
     points, normals, ok = grid.points.reshape(-1, 3), grid.normals.reshape(-1, 3), grid.normal_ok.reshape(-1)
@@ -184,14 +185,14 @@ def projective_fit(src: np.ndarray, grid: SurfaceGrid, camera: Camera, init: np.
         idx = lin[idx[near]]
         return keep, points[idx], normals[idx]
 
-    return point_to_plane(src, match, init, iters, good_m, DONE_RAD, DONE_M)
+    return point_to_plane(src, match, init, iters, good_m, done_rad, done_m)
 
 
 class BodyViews:
     """Past views of one body in a body-fixed frame, registered from the depth alone (module doc).
 
-    update(points, box2d) each frame with an estimate; reset() when the target is lost or the
-    tracker restarts."""
+    update(points, box2d) each frame with an estimate; reset() when the tracker starts on a new
+    target (a lost target keeps its views: the fit test decides when it is found again)."""
 
     def __init__(self, camera: Camera, params: BodyViewsParams | None = None):
         self.camera = camera
