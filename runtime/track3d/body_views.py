@@ -16,7 +16,12 @@ before. `BodyViews` keeps the past views in a frame fixed to the body:
   surface (the body left the view, spun too far, a noisy sensor) starts the views over, so one
   wrong pose is never carried on;
 - `far` is the farthest point of the views in this frame's camera frame: the back face is at
-  least there.
+  least there;
+- `limit` is the farthest a body point can be along this frame's lines of sight through its
+  outline (space carving): every past view from another direction saw empty sky outside its
+  outline and empty space in front of its surface, so a point of the body is inside each view's
+  outline and not in front of what it saw. A few views from directions at least `carve_angle_deg`
+  apart are kept for it (`carve_views`); the back face is at most there (never nearer than `far`).
 
 Its ceiling was measured with the simulator's pose (benchmarks/bench_accumulation.py,
 docs/models.md); in the loop (docs/runtime.md, README "Long watches") over 300 frames the views'
@@ -36,7 +41,8 @@ from .camera import Camera
 DONE_RAD, DONE_M = 1e-4, 1e-4
 GRID_POINTS_PER_CELL = 4    # surface_grid bins at most this many points per cell on average
 
-__all__ = ["BodyViewsParams", "BodyViews", "SurfaceGrid", "surface_grid", "point_to_plane", "projective_fit"]
+__all__ = ["BodyViewsParams", "BodyViews", "SurfaceGrid", "surface_grid", "point_to_plane", "projective_fit",
+           "carved_back"]
 
 
 @dataclass(frozen=True)
@@ -51,18 +57,28 @@ class BodyViewsParams:
     min_fit: float = 0.6        # a registration fitting fewer of the points starts the views over
     view_points: int = 400      # points of each view kept in the body frame
     max_points: int = 8000      # view points kept (every other one dropped past it)
+    carve_views: int = 12       # views kept for the carved limit of the back face (0: no limit)
+    carve_angle_deg: float = 10.0   # a view is kept when this far from every kept one
+    carve_rays: int = 64        # lines of sight through this view's outline carved
+    carve_samples: int = 24     # samples along each, front to carve_reach x the body's width behind
+    carve_reach: float = 2.0
+    carve_tol_m: float = 0.05   # a sample this much in front of a view's surface is still kept
 
     def __post_init__(self) -> None:
-        for name in ("every", "cells", "iters", "icp_points", "view_points", "max_points"):
+        for name in ("every", "cells", "iters", "icp_points", "view_points", "max_points", "carve_views",
+                     "carve_rays", "carve_samples"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f"BodyViewsParams.{name} must be an integer >= 1, got {v!r}")
-        for name in ("max_dist_m", "good_m"):
+            low = 0 if name == "carve_views" else 1
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
+                raise ValueError(f"BodyViewsParams.{name} must be an integer >= {low}, got {v!r}")
+        for name in ("max_dist_m", "good_m", "carve_reach", "carve_tol_m"):
             v = getattr(self, name)
             if not (np.isfinite(float(v)) and float(v) > 0.0):
                 raise ValueError(f"BodyViewsParams.{name} must be a positive number of metres, got {v!r}")
         if not 0.0 < float(self.min_fit) <= 1.0:
             raise ValueError(f"BodyViewsParams.min_fit must be in (0, 1], got {self.min_fit!r}")
+        if not 0.0 <= float(self.carve_angle_deg) < 180.0:
+            raise ValueError(f"BodyViewsParams.carve_angle_deg must be in [0, 180), got {self.carve_angle_deg!r}")
 
 
 @dataclass
@@ -71,7 +87,9 @@ class SurfaceGrid:
     points projecting into pixels [x0 + col * step, x0 + (col + 1) * step) x [y0 + row * step, ...).
 
     points (rows, cols, 3) float64, normals (rows, cols, 3) float64 unit (where `normal_ok`),
-    valid (rows, cols) bool: the cell holds points; normal_ok: it and its four neighbours do."""
+    valid (rows, cols) bool: the cell holds points; normal_ok: it and its four neighbours do;
+    near (rows, cols) float64: the least z of the cell's points (inf where none; None: the
+    points' z, a grid made elsewhere)."""
     points: np.ndarray
     normals: np.ndarray
     valid: np.ndarray
@@ -79,6 +97,13 @@ class SurfaceGrid:
     x0: float
     y0: float
     step: float
+    near: np.ndarray | None = None
+
+    def near_z(self) -> np.ndarray:
+        """(rows, cols) the least z seen in each cell, inf where empty."""
+        if self.near is not None:
+            return self.near
+        return np.where(self.valid, self.points[..., 2], np.inf)
 
     def cells_of(self, camera: Camera, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(row, col) int64 of the cell each point (n, 3) projects into, and whether it is in the grid."""
@@ -114,6 +139,9 @@ def surface_grid(camera: Camera, points: np.ndarray, box2d: np.ndarray, cells: i
         grid.points[..., k] = (np.bincount(lin, weights=p[:, k], minlength=rows * cols)
                                / np.maximum(n, 1.0)).reshape(rows, cols)
     grid.valid[:] = (n > 0).reshape(rows, cols)
+    near = np.full(rows * cols, np.inf)
+    np.minimum.at(near, lin, p[:, 2])
+    grid.near = near.reshape(rows, cols)
     P, ok = grid.points, grid.valid
     if rows >= 3 and cols >= 3:
         du = P[1:-1, 2:] - P[1:-1, :-2]
@@ -188,6 +216,57 @@ def projective_fit(src: np.ndarray, grid: SurfaceGrid, camera: Camera, init: np.
     return point_to_plane(src, match, init, iters, good_m, done_rad, done_m)
 
 
+def carved_back(camera: Camera, grid: SurfaceGrid, G: np.ndarray, past: list[tuple[SurfaceGrid, np.ndarray]],
+                rays: int = 64, samples: int = 24, reach: float = 2.0, tol_m: float = 0.05) -> float:
+    """The farthest depth (z of `grid`'s camera, metres) a point of the body can have along the
+    lines of sight through `grid`'s outline, given past views `past` [(grid, body -> that camera
+    (4, 4))] and this view's camera -> body `G` (4, 4): space carving on at most `rays` lines of
+    sight (cell centres), `samples` points each from the nearest return to `reach` x the
+    returns' width behind the farthest. A point survives a past view when it projects outside that view's
+    image (unseen there) or into a cell of its grid with returns and no nearer than their least
+    z - tol_m (a grid spans the body's outline and a margin: off it is sky); a point in front of
+    this view's own surface is empty. inf without a past view or where a point at the last
+    sample survives; never nearer than the farthest return of the rays."""
+    if not past:
+        return float("inf")
+    rows, cols = grid.valid.shape
+    idx = np.flatnonzero(grid.valid)
+    idx = idx[:: max(1, int(np.ceil(len(idx) / rays)))]
+    near = grid.near_z().reshape(-1)[idx]
+    u = grid.x0 + (idx % cols + 0.5) * grid.step
+    v = grid.y0 + (idx // cols + 0.5) * grid.step
+    d = np.stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones(len(idx))], axis=1)
+    seen = grid.points[grid.valid]
+    width = max(float(np.ptp(seen[:, 0])), float(np.ptp(seen[:, 1])), 0.05)
+    front = float(near.min())
+    z = np.linspace(front, float(near.max()) + reach * width, samples)
+    ray, k = np.nonzero(z[None, :] >= near[:, None])     # behind this view's own surface
+    zs = z[k]
+    pts = d[ray] * zs[:, None]
+    body = pts @ G[:3, :3].T + G[:3, 3]
+    fx, fy, cx, cy, W, Hh = camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height
+    for g, H in past:
+        if len(zs) == 0:
+            break
+        q = body @ H[:3, :3].T + H[:3, 3]
+        qz = q[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = fx * q[:, 0] / qz + cx
+            v = fy * q[:, 1] / qz + cy
+        in_view = (qz > 0) & (u >= 0) & (u < W) & (v >= 0) & (v < Hh)
+        gr, gc = g.valid.shape
+        c = np.floor((u - g.x0) / g.step)
+        r = np.floor((v - g.y0) / g.step)
+        on = in_view & (c >= 0) & (c < gc) & (r >= 0) & (r < gr)
+        lin = np.where(on, r * gc + c, 0).astype(np.int64)
+        # in that view but off its grid: sky (the grid spans the body's outline and a margin)
+        keep = ~in_view | (on & (qz >= g.near_z().reshape(-1)[lin] - tol_m))
+        body, zs = body[keep], zs[keep]
+    if len(zs) and zs.max() >= z[-1]:   # alive at the last sample: the views do not bound it
+        return float("inf")
+    return float(max(near.max(), zs.max() if len(zs) else -np.inf))
+
+
 class BodyViews:
     """Past views of one body in a body-fixed frame, registered from the depth alone (module doc).
 
@@ -208,6 +287,10 @@ class BodyViews:
         self._body = np.zeros((0, 3))    # the views, body frame
         self._offset = float("nan")      # far minus the returns' nearest depth at the last key frame
         self._pending: tuple | None = None   # a key frame's (grid, returns kept, front), registered next call
+        self._carve_job: tuple | None = None  # a registered key frame's (grid, G, front), carved next call
+        self._carved: list[tuple[SurfaceGrid, np.ndarray]] = []   # views kept for carving: (grid, camera -> body)
+        self._limit = float("inf")       # the carved limit minus the returns' nearest depth at its key frame
+        self.limit: float | None = None  # this frame's carved limit of the back face (z, m), or None
         self.restarts = 0                # registrations that started the views over
         self.views = 0                   # views in the body frame
 
@@ -220,9 +303,13 @@ class BodyViews:
         A key frame's grid is made in its own call and registered in the next one: the two
         halves of the work land in different frames (the loop's worst frame ~0.6 ms shorter)."""
         pts = np.asarray(points).reshape(-1, 3)
+        self.limit = None
         if len(pts) == 0:
             return None
         front = float(pts[:, 2].min()) if front is None else float(front)
+        if self._carve_job is not None:
+            self._carve(*self._carve_job)
+            self._carve_job = None
         if self._pending is not None:
             self._register(*self._pending)
             self._pending = None
@@ -234,7 +321,34 @@ class BodyViews:
             if grid.valid.sum() >= 6:
                 keep = pts[:: max(1, int(np.ceil(len(pts) / p.view_points)))].astype(np.float64)
                 self._pending = (grid, keep, front)
+        if np.isfinite(self._limit):
+            self.limit = front + self._limit
         return front + self._offset if np.isfinite(self._offset) else None
+
+    def _carve(self, grid: SurfaceGrid, G: np.ndarray, front: float) -> None:
+        """The carved limit of a registered key frame (`carved_back` against the kept views from
+        other directions); the frame joins the kept views when none is within carve_angle_deg of
+        it (the oldest dropped past carve_views)."""
+        p = self.params
+        centre = self._body.mean(axis=0) if len(self._body) else np.zeros(3)
+
+        def look(Gk: np.ndarray) -> np.ndarray:   # the unit direction from the body to that camera
+            v = Gk[:3, 3] - centre
+            return v / max(float(np.linalg.norm(v)), 1e-12)
+
+        here = look(G)
+        cos = np.cos(np.radians(p.carve_angle_deg))
+        looks = [look(Gk) for _, Gk in self._carved]
+        far_first = np.argsort([float(here @ lk) for lk in looks])     # the most different first
+        past = [(self._carved[i][0], np.linalg.inv(self._carved[i][1])) for i in far_first
+                if float(here @ looks[i]) < cos]
+        bound = carved_back(self.camera, grid, G, past, p.carve_rays, p.carve_samples, p.carve_reach,
+                            p.carve_tol_m)
+        self._limit = bound - front
+        if len(past) == len(looks):   # a new direction: kept (the oldest dropped past carve_views)
+            self._carved.append((grid, G.copy()))
+            if len(self._carved) > p.carve_views:
+                del self._carved[0]
 
     def _register(self, grid: SurfaceGrid, keep: np.ndarray, front: float) -> None:
         """Register a key frame's grid onto the last one's, add its returns `keep` to the views,
@@ -259,11 +373,14 @@ class BodyViews:
             # the last good motion stays the next start: a fast spin goes on turning as it did
             self._G, self._body, self.views = np.eye(4), np.zeros((0, 3)), 0
             self._G[:3, 3] = -view.mean(axis=0)
+            self._carved, self._limit = [], float("inf")
         self._grid, self._centroid = grid, view.mean(axis=0)
         self._body = np.concatenate([self._body, keep @ self._G[:3, :3].T + self._G[:3, 3]])
         if len(self._body) > p.max_points:   # thinned over every view: the oldest saw the side hidden now
             self._body = self._body[::2]
         self.views += 1
+        if self.params.carve_views > 0:
+            self._carve_job = (grid, self._G.copy(), front)
         if self.views < 2:
             self._offset = float("nan")
             return
@@ -272,22 +389,27 @@ class BodyViews:
 
     def get_state(self) -> dict:
         def grid_state(g):
-            return None if g is None else {"points": g.points, "normals": g.normals, "valid": g.valid,
-                                           "normal_ok": g.normal_ok, "x0": g.x0, "y0": g.y0, "step": g.step}
+            return None if g is None else {"points": g.points.copy(), "normals": g.normals.copy(),
+                                           "valid": g.valid.copy(), "normal_ok": g.normal_ok.copy(), "x0": g.x0,
+                                           "y0": g.y0, "step": g.step, "near": g.near_z().copy()}
 
-        pend = self._pending
+        pend, job = self._pending, self._carve_job
         return {"frames": self._frames, "G": self._G.copy(), "motion": self._motion.copy(),
                 "body": self._body.copy(), "offset": self._offset, "centroid": self._centroid.copy(),
                 "restarts": self.restarts, "views": self.views, "grid": grid_state(self._grid),
                 "pending": None if pend is None else {"grid": grid_state(pend[0]), "keep": pend[1].copy(),
-                                                      "front": pend[2]}}
+                                                      "front": pend[2]},
+                "limit": self._limit,
+                "carve_job": None if job is None else {"grid": grid_state(job[0]), "G": job[1].copy(),
+                                                       "front": job[2]},
+                "carved": [{"grid": grid_state(g), "G": Gk.copy()} for g, Gk in self._carved]}
 
     def set_state(self, st: dict) -> None:
         def grid_of(g):
             return None if g is None else SurfaceGrid(
                 np.asarray(g["points"], np.float64), np.asarray(g["normals"], np.float64),
                 np.asarray(g["valid"], bool), np.asarray(g["normal_ok"], bool), float(g["x0"]), float(g["y0"]),
-                float(g["step"]))
+                float(g["step"]), None if g.get("near") is None else np.asarray(g["near"], np.float64))
 
         grid = grid_of(st["grid"])
         pend = st.get("pending")
@@ -300,3 +422,11 @@ class BodyViews:
         self._frames, self._G, self._motion, self._body = int(st["frames"]), G, motion, body
         self._offset, self.restarts, self.views = float(st["offset"]), int(st["restarts"]), int(st["views"])
         self._grid, self._centroid, self._pending = grid, centroid, pending
+        # a state from before the carving has none: the limit starts with the next key frame
+        job = st.get("carve_job")
+        self._limit = float(st.get("limit", float("inf")))
+        self._carve_job = None if job is None else (grid_of(job["grid"]), np.asarray(job["G"], np.float64).reshape(4, 4),
+                                                    float(job["front"]))
+        self._carved = [(grid_of(c["grid"]), np.asarray(c["G"], np.float64).reshape(4, 4))
+                        for c in st.get("carved", [])]
+        self.limit = None
