@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from track3d import Camera
-from track3d.body_views import BodyViews, BodyViewsParams, carved_back, projective_fit, surface_grid
+from track3d.body_views import (BodyViews, BodyViewsParams, carved_back, hold_back_face, projective_fit,
+                                surface_grid)
 
 CAM = Camera.from_fov(160, 120, 40.0)
 AXES = np.array([1.5, 1.0, 0.7])       # the ellipsoid's semi-axes (m)
@@ -180,6 +181,25 @@ def test_the_views_carve_the_back_face_of_the_turning_body():
             assert np.isinf(err).all()
         else:
             assert np.abs(err).max() < 0.2 and len(bv._carved) == 12
+
+
+@pytest.mark.parametrize("far, limit, back", [
+    (None, None, 11.0),       # no bound
+    (11.5, None, 11.5),       # the views saw farther: pushed out
+    (10.5, None, 11.0),       # a nearer farthest point says nothing
+    (None, 10.5, 10.5),       # carved: pulled in
+    (None, 12.0, 11.0),       # a farther limit says nothing
+    (11.5, 10.5, 11.5),       # crossed: the views' farthest point wins
+    (10.2, 10.5, 10.5),       # between the two
+    (None, 8.5, 11.0),        # a limit in front of the front face (9 m) is no box: left as it is
+])
+def test_the_back_face_is_held_between_the_views(far, limit, back):
+    """Hand cases: a box 2 m deep centred at 10 m (front 9, back 11)."""
+    box = np.array([0.5, -0.2, 10.0, 3.0, 2.5, 2.0])
+    out = hold_back_face(box, far, limit)
+    assert out[2] - out[5] / 2.0 == pytest.approx(9.0)          # the front face stays
+    assert out[2] + out[5] / 2.0 == pytest.approx(back)
+    assert np.array_equal(out[[0, 1, 3, 4]], box[[0, 1, 3, 4]])
 
 
 @pytest.mark.parametrize("value", [0, -1, 1.5, True])

@@ -42,7 +42,7 @@ DONE_RAD, DONE_M = 1e-4, 1e-4
 GRID_POINTS_PER_CELL = 4    # surface_grid bins at most this many points per cell on average
 
 __all__ = ["BodyViewsParams", "BodyViews", "SurfaceGrid", "surface_grid", "point_to_plane", "projective_fit",
-           "carved_back"]
+           "carved_back", "hold_back_face"]
 
 
 @dataclass(frozen=True)
@@ -214,6 +214,22 @@ def projective_fit(src: np.ndarray, grid: SurfaceGrid, camera: Camera, init: np.
         return keep, points[idx], normals[idx]
 
     return point_to_plane(src, match, init, iters, good_m, done_rad, done_m)
+
+
+def hold_back_face(box: np.ndarray, far: float | None, limit: float | None) -> np.ndarray:
+    """box [cx, cy, cz, w, h, d] (camera frame, z the depth) with its back face at least at `far`
+    and at most at `limit` (either None: no bound), front face kept; where the two cross, `far`
+    wins (the views saw that far). A bound at or in front of the front face leaves the box as it is."""
+    front, back = box[2] - box[5] / 2.0, box[2] + box[5] / 2.0
+    lo = -np.inf if far is None else float(far)
+    hi = np.inf if limit is None else max(float(limit), lo)
+    new = min(max(back, lo), hi)
+    if new == back or not new > front:
+        return box
+    out = np.array(box, dtype=np.float64)
+    out[5] = new - front
+    out[2] = front + out[5] / 2.0
+    return out
 
 
 def carved_back(camera: Camera, grid: SurfaceGrid, G: np.ndarray, past: list[tuple[SurfaceGrid, np.ndarray]],

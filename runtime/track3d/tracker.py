@@ -44,7 +44,7 @@ from typing import Callable
 
 import numpy as np
 
-from .body_views import BodyViews, BodyViewsParams
+from .body_views import BodyViews, BodyViewsParams, hold_back_face
 from .camera import Camera
 from .estimators import BoxEstimator, create_estimator
 from .frames import MAX_COORD_M, check_category, check_image, check_init_box
@@ -651,15 +651,8 @@ class Track3D:
         running average (DEPTH_SMOOTHING), its front face where it was; updates the average and,
         after a whole view, the size a cut body keeps (HOLD_CUT_SIZE)."""
         box, whole, reached = self._reported_box(est, bounds, box2d)
-        if not reached and (far is not None or limit is not None):
-            front, back = box[2] - box[5] / 2.0, box[2] + box[5] / 2.0
-            lo = -np.inf if far is None else far
-            hi = np.inf if limit is None else max(limit, lo)
-            new = min(max(back, lo), hi)
-            if new != back and new > front:
-                box = np.array(box, dtype=np.float64)
-                box[5] = new - front
-                box[2] = front + box[5] / 2.0
+        if not reached:
+            box = hold_back_face(box, far, limit)
         self._carry_from = np.array(box2d, dtype=np.float64) if reached else None
         if not reached:   # a box from returns within the range: the body's own depth-to-width ratio
             self._depth_ratio = float(min(box[5] / max((box[3] + box[4]) / 2.0, 1e-6), MAX_DEPTH_RATIO))
