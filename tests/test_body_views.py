@@ -183,6 +183,30 @@ def test_the_views_carve_the_back_face_of_the_turning_body():
             assert np.abs(err).max() < 0.2 and len(bv._carved) == 12
 
 
+def test_a_view_cut_by_the_sensor_range_does_not_carve():
+    """The turning ellipsoid seen by a sensor whose returns stop at 11.9 m for its first 30 frames
+    (a cap: the cells past the range are empty, not sky). Those views, passed with carve=False,
+    are registered but never carve: the limit in the later frames stays behind the true back
+    face. Carving with them (as before the flag) cut the body by up to 0.375 m."""
+    def run(flag: bool) -> np.ndarray:
+        bv = BodyViews(CAM, BodyViewsParams(every=1))
+        err = []
+        for k in range(61):
+            R = _rot_y(3.0 * k)
+            pts, box = _ellipsoid_view(R)
+            cut = k < 30
+            if cut:
+                pts = pts[pts[:, 2] < 11.9]
+                assert bv.limit is None or k == 0 or not flag
+            bv.update(pts, box, carve=not (cut and flag))
+            if k >= 30 and bv.limit is not None:
+                err.append(bv.limit - _true_back(R))
+        return np.array(err)
+
+    assert run(True).min() > -0.02
+    assert run(False).min() < -0.2    # the check above can fail
+
+
 @pytest.mark.parametrize("far, limit, back", [
     (None, None, 11.0),       # no bound
     (11.5, None, 11.5),       # the views saw farther: pushed out

@@ -310,11 +310,15 @@ class BodyViews:
         self.restarts = 0                # registrations that started the views over
         self.views = 0                   # views in the body frame
 
-    def update(self, points: np.ndarray, box2d: np.ndarray, front: float | None = None) -> float | None:
+    def update(self, points: np.ndarray, box2d: np.ndarray, front: float | None = None,
+               carve: bool = True) -> float | None:
         """This frame's returns (n, 3) (the frustum: camera frame) and 2D box [x, y, w, h] -> the
         farthest depth (m, this frame's z) a past view saw of the body, or None (no registered
         view but one): the last registered key frame's far side, held at the same distance behind
-        the returns' nearest point (`front`, their least z, when the caller has it).
+        the returns' nearest point (`front`, their least z, when the caller has it). carve=False:
+        this view's outline is not the body's (its returns stop at the sensor's range), so it is
+        registered and kept but neither carves nor is bounded by carving (`limit` None until the
+        next key frame that carves).
 
         A key frame's grid is made in its own call and registered in the next one: the two
         halves of the work land in different frames (the loop's worst frame ~0.6 ms shorter)."""
@@ -336,7 +340,7 @@ class BodyViews:
             grid = surface_grid(self.camera, pts, box2d, p.cells)
             if grid.valid.sum() >= 6:
                 keep = pts[:: max(1, int(np.ceil(len(pts) / p.view_points)))].astype(np.float64)
-                self._pending = (grid, keep, front)
+                self._pending = (grid, keep, front, bool(carve))
         if np.isfinite(self._limit):
             self.limit = front + self._limit
         return front + self._offset if np.isfinite(self._offset) else None
@@ -366,7 +370,7 @@ class BodyViews:
             if len(self._carved) > p.carve_views:
                 del self._carved[0]
 
-    def _register(self, grid: SurfaceGrid, keep: np.ndarray, front: float) -> None:
+    def _register(self, grid: SurfaceGrid, keep: np.ndarray, front: float, carve: bool = True) -> None:
         """Register a key frame's grid onto the last one's, add its returns `keep` to the views,
         and set the far side's distance behind its nearest return `front`."""
         p = self.params
@@ -395,8 +399,10 @@ class BodyViews:
         if len(self._body) > p.max_points:   # thinned over every view: the oldest saw the side hidden now
             self._body = self._body[::2]
         self.views += 1
-        if self.params.carve_views > 0:
+        if self.params.carve_views > 0 and carve:
             self._carve_job = (grid, self._G.copy(), front)
+        elif not carve:   # a view that is no outline (the sensor's range cut it) neither carves nor bounds
+            self._limit = float("inf")
         if self.views < 2:
             self._offset = float("nan")
             return
@@ -414,7 +420,7 @@ class BodyViews:
                 "body": self._body.copy(), "offset": self._offset, "centroid": self._centroid.copy(),
                 "restarts": self.restarts, "views": self.views, "grid": grid_state(self._grid),
                 "pending": None if pend is None else {"grid": grid_state(pend[0]), "keep": pend[1].copy(),
-                                                      "front": pend[2]},
+                                                      "front": pend[2], "carve": pend[3]},
                 "limit": self._limit,
                 "carve_job": None if job is None else {"grid": grid_state(job[0]), "G": job[1].copy(),
                                                        "front": job[2]},
@@ -430,7 +436,7 @@ class BodyViews:
         grid = grid_of(st["grid"])
         pend = st.get("pending")
         pending = None if pend is None else (grid_of(pend["grid"]), np.asarray(pend["keep"], np.float64).reshape(-1, 3),
-                                             float(pend["front"]))
+                                             float(pend["front"]), bool(pend.get("carve", True)))
         G = np.asarray(st["G"], np.float64).reshape(4, 4)
         motion = np.asarray(st["motion"], np.float64).reshape(4, 4)
         body = np.asarray(st["body"], np.float64).reshape(-1, 3)

@@ -837,7 +837,9 @@ class Track3D:
         else:
             far = limit = None
             if self._views is not None:
-                far = self._views.update(pts, self._cut_box(seen), float(bounds[0][2]))
+                # returns that stop at the sensor's range outline a cap, not the body: no carving
+                cut_by_range = reaches_range(bounds, seen, self.camera, self.depth_range_m)
+                far = self._views.update(pts, self._cut_box(seen), float(bounds[0][2]), carve=not cut_by_range)
                 limit = self._views.limit
             self.box3d = self._report(est, bounds, seen, far, limit)
         t3 = time.perf_counter()
