@@ -238,11 +238,11 @@ def carved_back(camera: Camera, grid: SurfaceGrid, G: np.ndarray, past: list[tup
     lines of sight through `grid`'s outline, given past views `past` [(grid, body -> that camera
     (4, 4))] and this view's camera -> body `G` (4, 4): space carving on at most `rays` lines of
     sight (cell centres), `samples` points each from the nearest return to `reach` x the
-    returns' width behind the farthest. A point survives a past view when it projects outside that view's
-    image (unseen there) or into a cell of its grid with returns and no nearer than their least
-    z - tol_m (a grid spans the body's outline and a margin: off it is sky); a point in front of
-    this view's own surface is empty. inf without a past view or where a point at the last
-    sample survives; never nearer than the farthest return of the rays."""
+    returns' width behind the farthest. A point survives a past view when it projects outside
+    that view's image (unseen there) or into a cell of its grid with returns and no nearer than
+    their least z - tol_m (a grid spans the body's outline and a margin: off it is sky); a point
+    in front of this view's own surface is empty. inf without a past view or where a point at
+    the last sample survives; never nearer than the farthest return of the rays."""
     if not past:
         return float("inf")
     rows, cols = grid.valid.shape
@@ -302,7 +302,7 @@ class BodyViews:
         self._centroid = np.zeros(3)     # the last key frame's grid points' mean
         self._body = np.zeros((0, 3))    # the views, body frame
         self._offset = float("nan")      # far minus the returns' nearest depth at the last key frame
-        self._pending: tuple | None = None   # a key frame's (grid, returns kept, front), registered next call
+        self._pending: tuple | None = None   # a key frame's (grid, returns kept, front, carve), registered next call
         self._carve_job: tuple | None = None  # a registered key frame's (grid, G, front), carved next call
         self._carved: list[tuple[SurfaceGrid, np.ndarray]] = []   # views kept for carving: (grid, camera -> body)
         self._limit = float("inf")       # the carved limit minus the returns' nearest depth at its key frame
