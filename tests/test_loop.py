@@ -460,6 +460,32 @@ def test_hold_cut_extent_hand_cases():
     np.testing.assert_array_equal(hold_cut_extent(b, bounds, (True, False, False, False), [np.nan] * 6, 0.8), b)
 
 
+def test_hold_cut_extent_with_the_views_extent_hand_cases():
+    """extent: the body's extent now (the past views'): the extent held; the part test takes the
+    larger of it and the whole view's."""
+    from track3d.boxes import hold_cut_extent
+
+    b = np.array([1.1, 2.2, 10.5, 1.2, 1.4, 3.0])           # x 0.5..1.7, y 1.5..2.9, z 9..12
+    bounds = np.array([[0.5, 1.5, 9.0], [1.7, 2.9, 10.0]])
+    whole = np.array([0.0, 2.0, 10.0, 3.0, 2.0, 5.0])        # seen whole before: 3 m in x
+    # the body has turned: 2 m in x now; cut at x max, the returns a part (1.2 < 0.8 x 3): the
+    # seen face stays (0.5), the open one 2 m away (2.5); y keeps its 2 m about the whole middle
+    np.testing.assert_allclose(hold_cut_extent(b, bounds, (False, False, True, False), whole, 0.8,
+                                               [2.0, 2.0, 5.0]), [1.5, 2.0, 10.0, 2.0, 2.0, 5.0])
+    # the views saw only 1.4 m of it (a side never in view): 1.2 >= 0.8 x 1.4, but 1.2 < 0.8 x 3,
+    # so still a part, held at what the views saw (the estimate's guess of a sliver's open side
+    # is dropped); alone, the views' extent would have let the estimate's 1.2 stand
+    np.testing.assert_allclose(hold_cut_extent(b, bounds, (False, False, True, False), whole, 0.8,
+                                               [1.4, 2.0, 5.0]), [1.2, 2.0, 10.0, 1.4, 2.0, 5.0])
+    # the body has turned wider than the whole view saw: 4 m held
+    np.testing.assert_allclose(hold_cut_extent(b, bounds, (False, False, True, False), whole, 0.8,
+                                               [4.0, 2.0, 5.0]), [2.5, 2.0, 10.0, 4.0, 2.0, 5.0])
+    # an extent that is not finite is the whole view's
+    np.testing.assert_allclose(hold_cut_extent(b, bounds, (False, False, True, False), whole, 0.8,
+                                               [np.nan, 2.0, 5.0]),
+                               hold_cut_extent(b, bounds, (False, False, True, False), whole, 0.8))
+
+
 def test_fit_measured_faces_pad_hand_cases():
     """pad (x, y) per metre of depth: half on each measured face at the box's middle depth; an
     open side is not padded (its face is not the outline)."""

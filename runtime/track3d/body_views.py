@@ -21,7 +21,10 @@ before. `BodyViews` keeps the past views in a frame fixed to the body:
   outline (space carving): every past view from another direction saw empty sky outside its
   outline and empty space in front of its surface, so a point of the body is inside each view's
   outline and not in front of what it saw. A few views from directions at least `carve_angle_deg`
-  apart are kept for it (`carve_views`); the back face is at most there (never nearer than `far`).
+  apart are kept for it (`carve_views`); the back face is at most there (never nearer than `far`);
+- `extent` is the views' extent in the last key frame's camera frame, once a key frame that saw
+  the body whole is among them: a body cut by the image border keeps it across the view (the
+  body turns, so the last whole view's extent goes stale).
 
 Its ceiling was measured with the simulator's pose (benchmarks/bench_accumulation.py,
 docs/models.md); in the loop (docs/runtime.md, README "Long watches") over 300 frames the views'
@@ -63,12 +66,14 @@ class BodyViewsParams:
     carve_samples: int = 24     # samples along each, front to carve_reach x the body's width behind
     carve_reach: float = 2.0
     carve_tol_m: float = 0.05   # a sample this much in front of a view's surface is still kept
+    cut_extent: int = 2         # a body cut by the image border takes its extent on the first N axes
+                                # (x, y, z) from the views that saw it whole (0: the last whole box's)
 
     def __post_init__(self) -> None:
         for name in ("every", "cells", "iters", "icp_points", "view_points", "max_points", "carve_views",
-                     "carve_rays", "carve_samples"):
+                     "carve_rays", "carve_samples", "cut_extent"):
             v = getattr(self, name)
-            low = 0 if name == "carve_views" else 1
+            low = 0 if name in ("carve_views", "cut_extent") else 1
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
                 raise ValueError(f"BodyViewsParams.{name} must be an integer >= {low}, got {v!r}")
         for name in ("max_dist_m", "good_m", "carve_reach", "carve_tol_m"):
@@ -79,6 +84,8 @@ class BodyViewsParams:
             raise ValueError(f"BodyViewsParams.min_fit must be in (0, 1], got {self.min_fit!r}")
         if not 0.0 <= float(self.carve_angle_deg) < 180.0:
             raise ValueError(f"BodyViewsParams.carve_angle_deg must be in [0, 180), got {self.carve_angle_deg!r}")
+        if self.cut_extent > 3:
+            raise ValueError(f"BodyViewsParams.cut_extent must be 0-3 axes, got {self.cut_extent!r}")
 
 
 @dataclass
@@ -307,23 +314,28 @@ class BodyViews:
         self._carved: list[tuple[SurfaceGrid, np.ndarray]] = []   # views kept for carving: (grid, camera -> body)
         self._limit = float("inf")       # the carved limit minus the returns' nearest depth at its key frame
         self.limit: float | None = None  # this frame's carved limit of the back face (z, m), or None
+        self._whole = False              # a registered key frame of these views saw the body whole
+        self._extent = np.full(3, np.nan)   # the views' extent in the last key frame's camera frame
+        self.extent: np.ndarray | None = None   # (3,) this frame's, when the views hold a whole view
         self.restarts = 0                # registrations that started the views over
         self.views = 0                   # views in the body frame
 
     def update(self, points: np.ndarray, box2d: np.ndarray, front: float | None = None,
-               carve: bool = True) -> float | None:
+               carve: bool = True, whole: bool = False) -> float | None:
         """This frame's returns (n, 3) (the frustum: camera frame) and 2D box [x, y, w, h] -> the
         farthest depth (m, this frame's z) a past view saw of the body, or None (no registered
         view but one): the last registered key frame's far side, held at the same distance behind
         the returns' nearest point (`front`, their least z, when the caller has it). carve=False:
         this view's outline is not the body's (its returns stop at the sensor's range), so it is
         registered and kept but neither carves nor is bounded by carving (`limit` None until the
-        next key frame that carves).
+        next key frame that carves). whole: this view saw the body whole (off the image border,
+        within the sensor's range); once one such key frame is registered, `extent` is the views'
+        extent (x, y, z; m) in the last key frame's camera frame, else None.
 
         A key frame's grid is made in its own call and registered in the next one: the two
         halves of the work land in different frames (the loop's worst frame ~0.6 ms shorter)."""
         pts = np.asarray(points).reshape(-1, 3)
-        self.limit = None
+        self.limit = self.extent = None
         if len(pts) == 0:
             return None
         front = float(pts[:, 2].min()) if front is None else float(front)
@@ -340,9 +352,11 @@ class BodyViews:
             grid = surface_grid(self.camera, pts, box2d, p.cells)
             if grid.valid.sum() >= 6:
                 keep = pts[:: max(1, int(np.ceil(len(pts) / p.view_points)))].astype(np.float64)
-                self._pending = (grid, keep, front, bool(carve))
+                self._pending = (grid, keep, front, bool(carve), bool(whole))
         if np.isfinite(self._limit):
             self.limit = front + self._limit
+        if np.all(np.isfinite(self._extent)):
+            self.extent = self._extent.copy()
         return front + self._offset if np.isfinite(self._offset) else None
 
     def _carve(self, grid: SurfaceGrid, G: np.ndarray, front: float) -> None:
@@ -370,9 +384,11 @@ class BodyViews:
             if len(self._carved) > p.carve_views:
                 del self._carved[0]
 
-    def _register(self, grid: SurfaceGrid, keep: np.ndarray, front: float, carve: bool = True) -> None:
+    def _register(self, grid: SurfaceGrid, keep: np.ndarray, front: float, carve: bool = True,
+                  whole: bool = False) -> None:
         """Register a key frame's grid onto the last one's, add its returns `keep` to the views,
-        and set the far side's distance behind its nearest return `front`."""
+        and set the far side's distance behind its nearest return `front` and, once a whole view
+        is among them, the views' extent."""
         p = self.params
         view = grid.points[grid.valid]
         fit = 0.0
@@ -394,6 +410,8 @@ class BodyViews:
             self._G, self._body, self.views = np.eye(4), np.zeros((0, 3)), 0
             self._G[:3, 3] = -view.mean(axis=0)
             self._carved, self._limit = [], float("inf")
+            self._whole, self._extent = False, np.full(3, np.nan)
+        self._whole = self._whole or bool(whole)
         self._grid, self._centroid = grid, view.mean(axis=0)
         self._body = np.concatenate([self._body, keep @ self._G[:3, :3].T + self._G[:3, 3]])
         if len(self._body) > p.max_points:   # thinned over every view: the oldest saw the side hidden now
@@ -407,7 +425,12 @@ class BodyViews:
             self._offset = float("nan")
             return
         inv = np.linalg.inv(self._G)
-        self._offset = float((self._body @ inv[2, :3] + inv[2, 3]).max()) - front
+        # one axis at a time: a (n, 3) product and its column reductions cost ten times as much
+        z = self._body @ inv[2, :3] + inv[2, 3]
+        self._offset = float(z.max()) - front
+        if self._whole:
+            x, y = (self._body @ inv[k, :3] + inv[k, 3] for k in (0, 1))
+            self._extent = np.array([x.max() - x.min(), y.max() - y.min(), z.max() - z.min()])
 
     def get_state(self) -> dict:
         def grid_state(g):
@@ -420,8 +443,9 @@ class BodyViews:
                 "body": self._body.copy(), "offset": self._offset, "centroid": self._centroid.copy(),
                 "restarts": self.restarts, "views": self.views, "grid": grid_state(self._grid),
                 "pending": None if pend is None else {"grid": grid_state(pend[0]), "keep": pend[1].copy(),
-                                                      "front": pend[2], "carve": pend[3]},
-                "limit": self._limit,
+                                                      "front": pend[2], "carve": pend[3], "whole": pend[4]},
+                "limit": self._limit, "whole": self._whole,
+                "extent": None if not np.all(np.isfinite(self._extent)) else self._extent.copy(),
                 "carve_job": None if job is None else {"grid": grid_state(job[0]), "G": job[1].copy(),
                                                        "front": job[2]},
                 "carved": [{"grid": grid_state(g), "G": Gk.copy()} for g, Gk in self._carved]}
@@ -436,7 +460,8 @@ class BodyViews:
         grid = grid_of(st["grid"])
         pend = st.get("pending")
         pending = None if pend is None else (grid_of(pend["grid"]), np.asarray(pend["keep"], np.float64).reshape(-1, 3),
-                                             float(pend["front"]), bool(pend.get("carve", True)))
+                                             float(pend["front"]), bool(pend.get("carve", True)),
+                                             bool(pend.get("whole", False)))
         G = np.asarray(st["G"], np.float64).reshape(4, 4)
         motion = np.asarray(st["motion"], np.float64).reshape(4, 4)
         body = np.asarray(st["body"], np.float64).reshape(-1, 3)
@@ -451,4 +476,8 @@ class BodyViews:
                                                     float(job["front"]))
         self._carved = [(grid_of(c["grid"]), np.asarray(c["G"], np.float64).reshape(4, 4))
                         for c in st.get("carved", [])]
-        self.limit = None
+        self.limit = self.extent = None
+        # a state from before the views' extent has none: it starts with the next whole key frame
+        self._whole = bool(st.get("whole", False))
+        ext = st.get("extent")
+        self._extent = np.full(3, np.nan) if ext is None else np.asarray(ext, np.float64).reshape(3).copy()

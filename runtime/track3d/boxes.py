@@ -182,7 +182,7 @@ def fit_measured_faces(box3d: np.ndarray, bounds: np.ndarray,
 
 
 def hold_cut_extent(box3d: np.ndarray, bounds: np.ndarray, open_sides: tuple[bool, bool, bool, bool],
-                    whole_box: np.ndarray, below: float) -> np.ndarray:
+                    whole_box: np.ndarray, below: float, extent: np.ndarray | None = None) -> np.ndarray:
     """The box (6,) float64 of a body cut by the image border, sized from the last view that saw
     it whole: the returns of a cut body span only its visible part, and an estimator shown that
     part sizes the part.
@@ -201,16 +201,24 @@ def hold_cut_extent(box3d: np.ndarray, bounds: np.ndarray, open_sides: tuple[boo
     at least the whole depth from it. An axis open on both sides (a body larger than the view)
     whose returns span less than `below` x its whole extent is such a part too: the whole extent
     about the whole view's middle moved the least to hold the returns. Bounds that are not finite
-    change nothing."""
+    change nothing.
+
+    extent: (3,) the body's extent now, when known better than the whole view's (the past views
+    carried into this frame: the body has turned since): the extent held; an axis is a part when
+    its returns span less than `below` x the larger of the two (the views show at least the
+    extent they saw, a side never seen is missing from it)."""
     b = np.array(box3d, dtype=np.float64).reshape(6)
     lo, hi = (np.asarray(v, dtype=np.float64).reshape(3) for v in bounds)
     whole = np.asarray(whole_box, dtype=np.float64).reshape(6)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(np.isfinite(whole))):
         return b
-    size = whole[3:]
+    size = whole[3:] if extent is None else np.asarray(extent, dtype=np.float64).reshape(3)
+    if not np.all(np.isfinite(size)):
+        size = whole[3:]
+    test = np.maximum(whole[3:], size)
     opens = [(bool(open_sides[k]), bool(open_sides[2 + k])) for k in (0, 1)]
     # an open axis whose returns are a part of the body's whole extent
-    cut = [(o0 or o1) and hi[k] - lo[k] < below * size[k] for k, (o0, o1) in enumerate(opens)]
+    cut = [(o0 or o1) and hi[k] - lo[k] < below * test[k] for k, (o0, o1) in enumerate(opens)]
     part = any(cut)
     for k, (o0, o1) in enumerate(opens):
         if cut[k] and o0 and o1:

@@ -222,7 +222,9 @@ DEPTH_SMOOTHING = 0.5
 # instead: 0.8918, 0.8864, 0.8176, 0.7501); the whole view's middle on the other axis then
 # +0.0002 to +0.0012 on all nine calibration sets (docs/runtime.md has every number). An axis at
 # both borders (a body larger than the view) is held too: it shrank to the view (a 7.6 m body at
-# 7 m, accuracy set held-out shapes 0023: AO_3d 0.509 -> 0.586). 0: off.
+# 7 m, accuracy set held-out shapes 0023: AO_3d 0.509 -> 0.586). With the body's past views
+# (BODY_VIEWS) the extent held across the view is theirs now, carried into the frame as the body
+# turned (`_views_extent`). 0: off.
 HOLD_CUT_SIZE = 0.8
 # The returns' lateral extent is that of their pixels' centres: the body's outline lies on average
 # half a pixel beyond them on each side, so the measured x and y faces move out by half a pixel
@@ -338,7 +340,14 @@ def outline_contain_for(depth_sensor: str | None) -> bool:
 # shapes 0.873 -> 0.878; flash-LiDAR (seed 19, oracle) 0.894 -> 0.896, 0.870 -> 0.871; ToF (seed
 # 23, oracle) 0.801 -> 0.802, 0.820 -> 0.820; 60-frame sets (seeds 3 / 9, oracle) unchanged; no
 # sequence down by more than 0.005. Cost: in the third frame of each key frame's cycle, 0.4-0.8 ms
-# (median), +0.1-0.2 ms a frame on average.
+# (median), +0.1-0.2 ms a frame on average. A body cut by the image border keeps its extent
+# across the view from the views (BodyViewsParams.cut_extent, HOLD_CUT_SIZE): the last whole
+# view's extent, held before, goes stale as the body turns (a seed-11 body 8.7 m across when
+# last seen whole and 5 m across 60 frames later was held 3.4 m too wide). Against the views
+# without it (AO_3d): seed 11 oracle train-like 0.889 -> 0.913, held-out shapes 0.890 -> 0.891;
+# seed 13 EdgeTrack test 0.924 -> 0.926, held-out shapes 0.878 -> 0.883; flash-LiDAR seed 19
+# 0.896 -> 0.901, 0.871 -> 0.871; ToF seed 23 0.802 -> 0.804, 0.820 -> 0.822; 60-frame seeds 3 /
+# 9 0.917 -> 0.917, 0.881 -> 0.881; 13 sequences up by more than 0.005, none down.
 BODY_VIEWS = True
 SENSOR_BODY_VIEWS = {"stereo": False}
 
@@ -629,12 +638,25 @@ class Track3D:
         if self._fit_faces:
             est = fit_measured_faces(est, bounds, sides, self._pad)
             if self._hold_cut and any(sides) and self._whole_box is not None:
-                est = hold_cut_extent(est, bounds, sides, self._whole_box, self.hold_cut_size)
+                est = hold_cut_extent(est, bounds, sides, self._whole_box, self.hold_cut_size,
+                                      self._views_extent())
         box = fuse_section(est, box2d, self.camera, self.weight_2d) if self.weight_2d > 0.0 else est
         if reach:   # the outline is seen, the depth stops at the range: the body goes on past it
             ratio = self._depth_ratio if np.isfinite(self._depth_ratio) else DEPTH_RATIO
             return deepen_to_view(box, box2d, self.camera, float(bounds[0][2]), ratio), False, True
         return box, not any(sides), False
+
+    def _views_extent(self) -> np.ndarray | None:
+        """The extent (3,) a cut body keeps: the last whole view's, on the first
+        BodyViewsParams.cut_extent axes the past views' now (the body has turned since it was
+        last seen whole); None without views that saw it whole."""
+        ext = None if self._views is None else self._views.extent
+        k = 0 if self._views is None else self._views.params.cut_extent
+        if ext is None or k == 0 or self._whole_box is None:
+            return None
+        size = self._whole_box[3:].copy()
+        size[:k] = ext[:k]
+        return size
 
     def _border_sides(self, box2d: np.ndarray) -> tuple[bool, bool, bool, bool]:
         """Whether the 2D box [x, y, w, h] touches the image's left, top, right, bottom border: the
@@ -839,7 +861,9 @@ class Track3D:
             if self._views is not None:
                 # returns that stop at the sensor's range outline a cap, not the body: no carving
                 cut_by_range = reaches_range(bounds, seen, self.camera, self.depth_range_m)
-                far = self._views.update(pts, self._cut_box(seen), float(bounds[0][2]), carve=not cut_by_range)
+                whole = not cut_by_range and not any(self._border_sides(seen))
+                far = self._views.update(pts, self._cut_box(seen), float(bounds[0][2]), carve=not cut_by_range,
+                                         whole=whole)
                 limit = self._views.limit
             self.box3d = self._report(est, bounds, seen, far, limit)
         t3 = time.perf_counter()
