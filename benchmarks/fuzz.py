@@ -24,6 +24,9 @@ Contracts (the oracles, shared with tests/test_fuzz.py):
   (L = the points' largest extent, at least 1 m);
 - the loop (Track3D.update): never raises on sensor data; status in STATUSES; box2d finite;
   "tracking" implies a finite box3d of positive size and num_points >= min_points;
+- the loop with the body's past views over a turning, moving ellipsoid (often cut by the image
+  border, its returns sometimes damaged or replaced): as above every frame, and a tracker
+  restored from a state taken mid-run gives the same results bit for bit;
 - 2D trackers: update returns (bool, finite (4,) float64 box when ok);
 - dataset reader: a dataset that reads has as many label rows as images, finite labels and 0/1
   flags for every frame;
@@ -283,6 +286,91 @@ def _t_loop(name):
     return run
 
 
+def _damaged(rng, pts: np.ndarray) -> np.ndarray:
+    """A body's returns as a sensor may send them: mostly as they are, sometimes empty, with
+    non-finite or huge rows, collapsed to one point, noisy, cut short, or any random cloud."""
+    r = rng.random()
+    if r < 0.05:
+        return np.zeros((0, 3), np.float32)
+    if r < 0.10 and len(pts):
+        p = pts.copy()
+        p[rng.integers(0, len(p), max(1, len(p) // 10))] = rng.choice(SPECIALS)
+        return p
+    if r < 0.13 and len(pts):
+        return np.repeat(pts[:1], len(pts), axis=0)
+    if r < 0.16:
+        return (pts + rng.normal(0, 2, pts.shape)).astype(np.float32)
+    if r < 0.18:
+        return pts[: int(rng.integers(0, 20))]
+    if r < 0.21:
+        return rand_cloud(rng)
+    return pts
+
+
+def t_loop_views(rng, env):
+    """The loop with the body's past views (registration, carving, a cut body's extent) over a
+    turning, moving ellipsoid, oracle 2D boxes; a state taken mid-run continues bit-identically."""
+    from track3d.body_views import BodyViewsParams
+    from track3d.synthetic import ellipsoid_returns
+    from track3d.trackers2d import create_tracker
+    from track3d.tracker import DEPTH_SENSORS, STATUSES, Track3D, sensor_options
+
+    n = int(rng.integers(8, 60))
+    axes = rng.uniform(0.2, 4.0, 3)
+    z0 = float(rng.uniform(3.0, 60.0))
+    c0 = np.array([rng.uniform(-0.4, 0.4) * z0, rng.uniform(-0.3, 0.3) * z0, z0])
+    vel = rng.normal(0.0, 0.3, 3)
+    axis = rng.normal(size=3)
+    axis /= max(float(np.linalg.norm(axis)), 1e-9)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    rate = np.radians(rng.uniform(0.0, 30.0))
+
+    def attitude(k):   # Rodrigues' rotation by rate * k about axis
+        a = rate * k
+        return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * K @ K
+
+    frames = [ellipsoid_returns(env.cam, attitude(k), c0 + vel * k, axes) for k in range(n)]
+    gt = np.array([b for _, b in frames])
+    absent = (gt[:, 2] <= 0) | (rng.random(n) < 0.03)
+    gt[gt[:, 2] <= 0] = [10.0, 10.0, 5.0, 5.0]
+    if rng.random() < 0.3:
+        gt[:, :2] += rng.normal(0.0, 4.0, (n, 2))
+    sensor = [None, *DEPTH_SENSORS][int(rng.integers(0, len(DEPTH_SENSORS) + 1))]
+    params = BodyViewsParams(every=int(rng.integers(1, 4)), carve_views=int(rng.integers(0, 13)),
+                             carve_angle_deg=float(rng.uniform(0.0, 30.0)), cut_extent=int(rng.integers(0, 4)))
+
+    def build():
+        return Track3D(env.cam, create_tracker("oracle", gt=gt, absent=absent), env.estimator("a3boxnet"),
+                       **{**sensor_options(sensor), "body_views": params},
+                       depth_range_m=30.0 if sensor == "tof" else None)
+
+    t = build()
+    image = np.zeros((env.cam.height, env.cam.width, 3), np.uint8)
+    try:
+        t.init(image, gt[0], points=frames[0][0])
+    except ValueError:
+        return "clean_error"
+    at = int(rng.integers(1, n))
+    state, inputs, outs = None, [], []
+    for k in range(1, n):
+        if k == at:
+            state = t.get_state()
+        pts = _damaged(rng, frames[k][0])
+        res = t.update(image, pts)
+        check_track_result(res, STATUSES, t.min_points)
+        if state is not None:
+            inputs.append(pts)
+            outs.append(res)
+    t2 = build()
+    t2.set_state(state)
+    for pts, a in zip(inputs, outs):
+        b = t2.update(image, pts)
+        expect(a.status == b.status and np.array_equal(a.box2d, b.box2d, equal_nan=True)
+               and np.array_equal(a.box3d, b.box3d, equal_nan=True),
+               f"restored state diverged: {a.status} {a.box3d} vs {b.status} {b.box3d}")
+    return "ok"
+
+
 def _t_tracker(name):
     def run(rng, env):
         from track3d.trackers2d import create_tracker
@@ -513,6 +601,7 @@ TARGETS = {
     "frustum": (t_frustum, 22), "sampling": (t_sampling, 12),
     "estimate_baseline": (_t_estimator("baseline"), 14), "estimate_a3boxnet": (_t_estimator("a3boxnet"), 12),
     "loop_baseline": (_loop := _t_loop("baseline"), 12), "loop_a3boxnet": (_t_loop("a3boxnet"), 8),
+    "loop_views": (t_loop_views, 2),
     "track3d_siamfc": (_t_track3d("siamfc-edge"), 4), "track3d_edgetrack": (_t_track3d("edgetrack"), 4),
     "stereo": (t_stereo, 3),
     **{f"tracker_{n}": (_t_tracker(n), w) for n, w in

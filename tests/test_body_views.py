@@ -7,6 +7,7 @@ import pytest
 from track3d import Camera
 from track3d.body_views import (BodyViews, BodyViewsParams, carved_back, hold_back_face, projective_fit,
                                 surface_grid)
+from track3d.synthetic import ellipsoid_returns, rotation_y
 
 CAM = Camera.from_fov(160, 120, 40.0)
 AXES = np.array([1.5, 1.0, 0.7])       # the ellipsoid's semi-axes (m)
@@ -14,25 +15,12 @@ CENTRE = np.array([0.2, -0.1, 12.0])
 
 
 def _rot_y(deg: float) -> np.ndarray:
-    a = np.radians(deg)
-    return np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+    return rotation_y(deg)
 
 
 def _ellipsoid_view(R: np.ndarray, centre: np.ndarray = CENTRE) -> tuple[np.ndarray, np.ndarray]:
-    """The returns (n, 3) of an ellipsoid at attitude R (body -> camera) and `centre`, one per
-    pixel whose ray hits it (the nearer root), and their 2D box [x, y, w, h]."""
-    rays = CAM.pixel_rays().reshape(-1, 3)
-    # body coordinates q = R^T (t d - c); sum (q / axes)^2 = 1 is a quadratic in t
-    d = (rays @ R) / AXES
-    c = (centre @ R) / AXES
-    A, B, C = (d * d).sum(1), -2.0 * (d @ c), c @ c - 1.0
-    disc = B * B - 4 * A * C
-    hit = disc > 0
-    t = (-B[hit] - np.sqrt(disc[hit])) / (2 * A[hit])
-    pts = rays[hit] * t[:, None]
-    v, u = np.divmod(np.flatnonzero(hit), CAM.width)
-    box = np.array([u.min(), v.min(), u.max() - u.min() + 1, v.max() - v.min() + 1], dtype=np.float64)
-    return pts.astype(np.float32), box
+    """The returns (n, 3) of the ellipsoid at attitude R (body -> camera) and `centre`, and their 2D box."""
+    return ellipsoid_returns(CAM, R, centre, AXES)
 
 
 def _true_back(R: np.ndarray, centre: np.ndarray = CENTRE) -> float:

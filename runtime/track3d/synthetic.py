@@ -18,7 +18,8 @@ import numpy as np
 from .camera import Camera
 from .dataset import FORMAT, FORMAT_VERSION, frame_name, write_depth_png, write_labels, write_rgb
 
-__all__ = ["CAM", "sphere_hits", "render_sphere", "sphere_path", "make_synthetic_dataset"]
+__all__ = ["CAM", "sphere_hits", "render_sphere", "sphere_path", "ellipsoid_returns", "rotation_y",
+           "make_synthetic_dataset"]
 
 CAM = Camera.from_fov(160, 120, 60.0)   # small, so that tests and fuzzing stay fast
 
@@ -51,6 +52,36 @@ def render_sphere(cam: Camera, centre, radius: float):
         if len(uu) else np.zeros(4)
     box3d = np.concatenate([c, [2 * radius] * 3])
     return img, depth, box2d, box3d
+
+
+def ellipsoid_returns(cam: Camera, R: np.ndarray, centre, axes) -> tuple[np.ndarray, np.ndarray]:
+    """An ideal depth sensor's returns of an ellipsoid with semi-axes `axes` (3,) m at attitude R
+    (3, 3) (body -> camera) and `centre` (3,): (n, 3) float32, one per pixel whose ray meets it
+    in front of the camera (the nearer root), and their 2D box [x, y, w, h] float64 (zeros when
+    none): a turning body with a known back face, for the body's past views."""
+    axes = np.asarray(axes, np.float64).reshape(3)
+    centre = np.asarray(centre, np.float64).reshape(3)
+    rays = cam.pixel_rays().reshape(-1, 3)
+    # body coordinates q = R^T (t d - c); sum (q / axes)^2 = 1 is a quadratic in t
+    d = (rays @ R) / axes
+    c = (centre @ R) / axes
+    a, b, k = (d * d).sum(1), -2.0 * (d @ c), c @ c - 1.0
+    disc = b * b - 4 * a * k
+    hit = disc > 0
+    t = np.zeros(len(rays))
+    t[hit] = (-b[hit] - np.sqrt(disc[hit])) / (2 * a[hit])
+    hit &= t > 0
+    if not hit.any():
+        return np.zeros((0, 3), np.float32), np.zeros(4)
+    v, u = np.divmod(np.flatnonzero(hit), cam.width)
+    box = np.array([u.min(), v.min(), u.max() - u.min() + 1, v.max() - v.min() + 1], dtype=np.float64)
+    return (rays[hit] * t[hit, None]).astype(np.float32), box
+
+
+def rotation_y(deg: float) -> np.ndarray:
+    """The rotation (3, 3) by `deg` degrees about the camera's vertical (y) axis."""
+    a = np.radians(deg)
+    return np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
 
 
 def sphere_path(n: int, start=(-1.0, 0.2, 12.0), step=(0.12, -0.02, 0.15)):
