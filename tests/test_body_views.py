@@ -14,8 +14,7 @@ AXES = np.array([1.5, 1.0, 0.7])       # the ellipsoid's semi-axes (m)
 CENTRE = np.array([0.2, -0.1, 12.0])
 
 
-def _rot_y(deg: float) -> np.ndarray:
-    return rotation_y(deg)
+_rot_y = rotation_y
 
 
 def _ellipsoid_view(R: np.ndarray, centre: np.ndarray = CENTRE) -> tuple[np.ndarray, np.ndarray]:
