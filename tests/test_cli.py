@@ -40,6 +40,10 @@ def test_track_then_eval(synth, tmp_path, capsys):
     (["track", "--data", "{synth}", "--estimator", "nope"], "unknown 3D box estimator"),
     (["track", "--data", "{synth}", "--split", "train"], "split 'train'"),
     (["track", "--data", "{synth}", "--tracker-option", "oops"], "key=value"),
+    (["track", "--data", "{synth}", "--body-views-option", "nope=1"], "unknown --body-views-option nope"),
+    (["track", "--data", "{synth}", "--body-views-option", "every=0"], "BodyViewsParams.every"),
+    (["track", "--data", "{synth}", "--body-views-option", "cut_extent=1.5"], "BodyViewsParams.cut_extent"),
+    (["track", "--data", "{synth}", "--no-body-views", "--body-views-option", "every=5"], "drop --no-body-views"),
     (["eval", "--data", "{synth}", "--results", "{missing}"], "no results"),
 ])
 def test_clear_errors(synth, tmp_path, capsys, argv, message):
@@ -122,6 +126,22 @@ def test_track_passes_a_loop_option_to_the_loop_and_records_it(synth, tmp_path, 
     with pytest.raises(SystemExit) as e:
         main(["track", "--data", str(synth), flag, bad])
     assert e.value.code == 2
+
+
+def test_track_passes_body_views_settings_and_names_the_results_by_them(synth, tmp_path):
+    """--body-views-option sets BodyViewsParams (the run record keeps them) and, without --name,
+    the results go beside the default views' results, not over them."""
+    from track3d.evaluation.results import read_run_record
+
+    res = tmp_path / "res"
+    assert main(["track", "--data", str(synth), "--tracker", "oracle", "--sequence", "a", "--body-views-option",
+                 "cut_extent=0", "--body-views-option", "carve_views=0", "--results", str(res), "--video", "none",
+                 "--quiet"]) == 0
+    name = "oracle+a3boxnet-views-carve_views=0-cut_extent=0"
+    assert (res / "test" / name / "a" / "a_3d_001.txt").is_file()
+    views = read_run_record(res, "test", name)
+    text = json.dumps(views)
+    assert '"cut_extent": 0' in text and '"carve_views": 0' in text and '"every": 3' in text, text
 
 
 @pytest.mark.parametrize("flag,recorded", [("--outline-contain", '"outline_contain": true'),

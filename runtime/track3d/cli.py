@@ -131,6 +131,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="keep the body's past views in a body-fixed frame (registered from the depth alone) and "
                         "hold the 3D box's back face at least at the farthest point they saw (default by the depth "
                         "sensor, track3d.tracker.body_views_for)")
+    t.add_argument("--body-views-option", action="append", metavar="KEY=VALUE",
+                   help="a setting of the body's past views (track3d.body_views.BodyViewsParams, e.g. every=5, "
+                        "carve_views=0: no carving, cut_extent=0: a cut body keeps its last whole view's extent); "
+                        "turns the views on; the results are named <tracker>+<estimator>-views-KEY=VALUE unless "
+                        "--name is given")
     t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
                    help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
                         "itself; default: by the depth sensor, 0.3, 0 for stereo; track3d.tracker.frustum_margin_for)")
@@ -257,6 +262,19 @@ def _cmd_track(a) -> int:
         a.outline_contain = stereo.get("outline_contain")
     if a.depth == "stereo" and a.body_views is None:
         a.body_views = stereo.get("body_views")
+    views_opts = _options(a.body_views_option)
+    if views_opts:
+        from dataclasses import fields
+
+        from .body_views import BodyViewsParams
+
+        if a.body_views is False:
+            raise ValueError("--body-views-option needs the body's views: drop --no-body-views")
+        known = {f.name for f in fields(BodyViewsParams)}
+        unknown = sorted(set(views_opts) - known)
+        if unknown:
+            raise ValueError(f"unknown --body-views-option {', '.join(unknown)}: one of {', '.join(sorted(known))}")
+        a.body_views = BodyViewsParams(**views_opts)
     if a.depth == "stereo" and a.estimator == "a3boxnet" and "model" not in eopts:
         eopts.setdefault("depth_sensor", "stereo")   # the stereo model (track3d.boxnet.SENSOR_MODELS)
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
@@ -269,6 +287,8 @@ def _cmd_track(a) -> int:
                        # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's
                        depth_range=not a.no_depth_range and a.depth != "stereo",
                        tracker_options=topts, estimator_options=eopts, name=a.name)
+    if views_opts and not a.name:   # keep the default views' results of the same pair
+        spec.name = spec.label + "-views-" + "-".join(f"{k}={v}" for k, v in sorted(views_opts.items()))
     if a.depth == "stereo" and not a.name:
         spec.name = spec.label + "-stereo"   # keep the depth-map results of the same pair
     exp = Experiment(a.data, a.split, a.results, sequences=_unique(a.sequences), max_frames=a.frames,

@@ -29,6 +29,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..body_views import BodyViewsParams
 from ..boxes import iou_3d
 from ..jsonable import write_json
 from ..dataset import Dataset, DatasetError, Sequence
@@ -70,7 +71,7 @@ class TrackerSpec:
     silhouette: float | None = None          # None: by the sequence's depth sensor (silhouette_for)
     outline_share: float | None = None       # None: by the sequence's depth sensor (outline_share_for)
     outline_contain: bool | None = None      # None: by the sequence's depth sensor (outline_contain_for)
-    body_views: bool | None = None           # None: by the sequence's depth sensor (body_views_for)
+    body_views: bool | BodyViewsParams | None = None   # None: by the sequence's depth sensor (body_views_for)
     threads: int = 1
     tracker_options: dict = field(default_factory=dict)
     estimator_options: dict = field(default_factory=dict)
