@@ -355,3 +355,39 @@ def test_views_off_means_off_and_a_wrong_value_is_one_error(off):
     assert Track3D.create(CAM, "kcf", "a3boxnet", body_views=off)._views is None
     with pytest.raises(ValueError, match="body_views"):
         Track3D.create(CAM, "kcf", "a3boxnet", body_views="yes")
+
+
+def test_the_views_far_side_holds_when_the_returns_reach_the_range():
+    """A body whose returns reach the depth sensor's range while they cover its outline: the
+    loop deepens the box from the image's box (range_cut.deepen_to_view), and the past views'
+    farthest point still bounds its back face from below (those points were seen), while the
+    carving's upper bound does not apply (the returns say nothing of where the body ends).
+    Hand case: 40 px box at the image centre, returns from 28 to 29.9 m against a 30 m range."""
+    from track3d.camera import Camera
+    from track3d.estimators import create_estimator
+    from track3d.range_cut import deepen_to_view
+    from track3d.tracker import Track3D
+
+    cam = Camera.from_fov(160, 120, 45.0)
+    class Still:
+        def init(self, image, box):
+            pass
+
+        def update(self, image):
+            return True, np.zeros(4)
+    t = Track3D(cam, Still(), create_estimator("none"), depth_range_m=30.0)
+    box2d = np.array([60.0, 40.0, 40.0, 40.0])
+    half = 20.0 / cam.fx * 28.0          # the box's half width at the front face
+    bounds = np.array([[-half, -half, 28.0], [half, half, 29.9]])
+    est = np.array([0.0, 0.0, 29.0, 2 * half, 2 * half, 2.0])
+    view_back = deepen_to_view(est, box2d, cam, 28.0)
+    back = view_back[2] + view_back[5] / 2.0
+    assert back < 40.0
+    for far, limit, want in ((back + 1.5, None, back + 1.5),   # the views saw farther
+                             (back + 1.5, back + 1.6, back + 1.5),
+                             (back - 1.0, back - 0.5, back),   # a limit nearer than the image's box: no effect
+                             (None, None, back)):
+        box = t._report(est, bounds, box2d, far, limit)
+        assert box[2] - box[5] / 2.0 == pytest.approx(28.0)
+        assert box[2] + box[5] / 2.0 == pytest.approx(want)
+
