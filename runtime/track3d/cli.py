@@ -114,6 +114,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="pixels added to the returns' extent across the line of sight (half on each side: the "
                         "outline lies beyond the outermost pixel centres; 0: off; default "
                         "by the depth sensor, track3d.tracker.edge_pad_for: 1, ToF 3; with measured faces)")
+    t.add_argument("--front-quantile", type=bounded(float, 0, high=0.1), default=None, metavar="Q",
+                   help="the quantile of the returns' depth taken as the body's front face (0: the nearest return; "
+                        "a noisy sensor's nearest return lies in front of the surface; default by the depth "
+                        "sensor, track3d.tracker.front_quantile_for: 0, ToF 0.005)")
     t.add_argument("--silhouette", type=bounded(float, 0, high=4), default=None, metavar="GROW",
                    help="start from the body's outline in the depth returns: the connected returns overlapping the "
                         "2D box, searched in the box grown by GROW of its size on each side (0: off; default by the "
@@ -280,7 +284,8 @@ def _cmd_track(a) -> int:
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
                        weight_2d=weight_2d, measured_faces=faces, depth_smoothing=a.depth_smoothing,
                        evidence_points=a.evidence_points, reacquire_threshold=a.reacquire_threshold,
-                       hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad, silhouette=a.silhouette,
+                       hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad,
+                       front_quantile=a.front_quantile, silhouette=a.silhouette,
                        outline_share=a.outline_share,
                        outline_contain=a.outline_contain, body_views=a.body_views,
                        frustum_margin=margin,

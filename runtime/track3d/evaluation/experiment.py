@@ -68,6 +68,7 @@ class TrackerSpec:
     reacquire_threshold: float | None = None   # None: track3d.tracker.REACQUIRE_THRESHOLD; 0: the tracker's own
     hold_cut_size: float | None = None       # None: track3d.tracker.HOLD_CUT_SIZE
     edge_pad: float | None = None            # None: by the sequence's depth sensor (edge_pad_for)
+    front_quantile: float | None = None      # None: by the sequence's depth sensor (front_quantile_for)
     silhouette: float | None = None          # None: by the sequence's depth sensor (silhouette_for)
     outline_share: float | None = None       # None: by the sequence's depth sensor (outline_share_for)
     outline_contain: bool | None = None      # None: by the sequence's depth sensor (outline_contain_for)
