@@ -267,6 +267,16 @@ class _Scripted:
         return (bool(r > 0.1), np.asarray(rand_box(self.rng), dtype=np.float64) if r > 0.05 else np.zeros(3))
 
 
+def _rand_sun(rng):
+    """A sun direction a user may set: none, any direction, or straight along the line of sight."""
+    r = rng.random()
+    if r < 0.2:
+        return None
+    if r < 0.3:
+        return [0.0, 0.0, float(rng.choice([-1.0, 1.0]))]
+    return rng.normal(size=3) * float(rng.choice([1e-6, 1.0, 1e6]))
+
+
 def _t_loop(name):
     def run(rng, env):
         from track3d.tracker import DEPTH_SENSORS, STATUSES, Track3D, sensor_options
@@ -275,6 +285,7 @@ def _t_loop(name):
         sensor = [None, *DEPTH_SENSORS][int(rng.integers(0, len(DEPTH_SENSORS) + 1))]
         t = Track3D(env.cam, _Scripted(rng), env.estimator(name), z_range=(1.0, float(rng.choice([45.0, 1e6]))),
                     **sensor_options(sensor))
+        t.set_sun(_rand_sun(rng))
         img = rand_image(rng)
         try:
             t.init(img, rand_box(rng), rand_category(rng), points=rand_cloud(rng) if rng.random() < 0.5 else None)
@@ -454,6 +465,7 @@ def t_stereo(rng, env):
     # the default loop, or stereo's options (the outline read from the callable's cloud)
     t = Track3D(env.cam, _Scripted(rng), env.estimator("baseline"),
                 **(sensor_options("stereo") if rng.random() < 0.5 else {}))
+    t.set_sun(_rand_sun(rng))
     try:
         t.init(rand_image(rng), box, 0, points=points)
     except ValueError:

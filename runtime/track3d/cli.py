@@ -131,6 +131,12 @@ def _parser() -> argparse.ArgumentParser:
                         "the outline before the frustum and the fusion, and with no returns near it go to the body "
                         "the whole view's depth shows (default by the depth sensor, "
                         "track3d.tracker.outline_contain_for: on for stereo, off for the others)")
+    t.add_argument("--dark-side", type=bounded(float, 0, high=2), default=None, metavar="K",
+                   help="with the outline off (--silhouette 0) and the sun's direction known (meta.json sun), the 2D "
+                        "box reaches past the lit outline on the side away from the sun by K x a sphere's dark part "
+                        "(0: off; default by the depth sensor, track3d.tracker.dark_side_for: stereo 0.1, others 0)")
+    t.add_argument("--no-sun", action="store_true",
+                   help="ignore the sun's direction recorded with each sequence (meta.json sun.direction)")
     t.add_argument("--body-views", action=argparse.BooleanOptionalAction, default=None,
                    help="keep the body's past views in a body-fixed frame (registered from the depth alone) and "
                         "hold the 3D box's back face at least at the farthest point they saw (default by the depth "
@@ -287,7 +293,8 @@ def _cmd_track(a) -> int:
                        hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad,
                        front_quantile=a.front_quantile, silhouette=a.silhouette,
                        outline_share=a.outline_share,
-                       outline_contain=a.outline_contain, body_views=a.body_views,
+                       outline_contain=a.outline_contain, dark_side=a.dark_side, sun=not a.no_sun,
+                       body_views=a.body_views,
                        frustum_margin=margin,
                        # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's
                        depth_range=not a.no_depth_range and a.depth != "stereo",

@@ -256,6 +256,19 @@ class Sequence:
             return None
         return r if np.isfinite(r) and r > 0 else None
 
+    @property
+    def sun_direction(self) -> np.ndarray | None:
+        """Unit (3,) float64 vector toward the sun in the left camera's frame (meta.json
+        sun.direction), None when not recorded or not three finite numbers of non-zero length."""
+        sun = self.meta.get("sun")
+        d = sun.get("direction") if isinstance(sun, dict) else None
+        try:
+            v = np.asarray(d, dtype=np.float64).reshape(3)
+        except (TypeError, ValueError):
+            return None
+        n = float(np.linalg.norm(v))
+        return v / n if np.all(np.isfinite(v)) and n > 1e-12 else None
+
     def image_path(self, i: int, side: str = LEFT_DIR) -> Path:
         return self.path / side / frame_name(i)
 

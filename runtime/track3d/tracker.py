@@ -45,6 +45,7 @@ from typing import Callable
 import numpy as np
 
 from .body_views import BodyViews, BodyViewsParams, hold_back_face
+from .dark_side import check_sun, dark_side_box, reach_dark_side
 from .camera import Camera
 from .estimators import BoxEstimator, create_estimator
 from .frames import MAX_COORD_M, check_category, check_image, check_init_box
@@ -273,6 +274,33 @@ FRONT_QUANTILE = 0.0
 SENSOR_FRONT_QUANTILES = {"tof": 0.005}
 
 
+# The body's dark side (track3d.dark_side): with the sun's direction known (`Track3D.set_sun`) and
+# the loop reading a lit outline (stereo: depth only where the images have texture), the 2D box
+# reaches past the outline's side away from the sun by DARK_SIDE x the sphere's dark part. Chosen
+# below (SENSOR_DARK_SIDES); 0 for the range sensors, whose outline holds the dark side.
+# Chosen on stereo calibration sets (seeds 3 and 9, 12 train-like + 12 held-out-shape sequences x 60
+# frames each, EdgeTrack one pass; `track3d-sim generate --preset small --seed S --train 0 --test 12
+# --test-unseen 12 --frames 60 --sensors stereo`), AO_3d seed 3 test / held-out shapes, seed 9 test /
+# held-out shapes at 0 / 0.1 / 0.15 / 0.25 / 0.4 / 0.6: 0.6829 0.7140 0.7305 0.7375 (mean 0.7162) /
+# 0.6911 0.7122 0.7360 0.7408 (0.7201) / 0.6935 0.6997 0.7376 0.7402 (0.7177) / 0.6955 0.7036 0.7374
+# 0.7406 (0.7193) / 0.6697 0.6930 0.7345 0.7373 (0.7086) / 0.6364 0.6767 0.7269 0.7255 (0.6914);
+# at 0.1 ACE_3d 0.718 / 0.657 / 0.521 / 0.452 -> 0.700 / 0.636 / 0.509 / 0.444 m and AO_2d 0.862 /
+# 0.912 / 0.902 / 0.908 -> 0.870 / 0.912 / 0.906 / 0.908. A lower cap on the share (0.12-0.25: past
+# ~90 degrees the boxes fall short by ~12% of the lit extent, not by the sphere's ratio) was no
+# better (mean 0.7103-0.7188). Where the boxes missed the body (seed 3, EdgeTrack, frames off the
+# image border, along the sun's image direction): at 0-30 / 30-60 / 60-90 / 90+ degrees of phase
+# the box's middle lay 0.00 / 0.04 / 0.07 / 0.06 of the body's extent toward the sun and the box
+# was 0.00 / 0.05 / 0.10 / 0.11 of it short; with ideal depth (its outline holds the dark side)
+# 0.00 at every phase.
+DARK_SIDE = 0.0
+SENSOR_DARK_SIDES = {"stereo": 0.1}
+
+
+def dark_side_for(depth_sensor: str | None) -> float:
+    """The dark-side share (track3d.dark_side) for this sensor (None: unknown, DARK_SIDE)."""
+    return SENSOR_DARK_SIDES.get(_sensor_key(depth_sensor), DARK_SIDE)
+
+
 def front_quantile_for(depth_sensor: str | None) -> float:
     """The quantile of the returns' depth taken as the body's front face, for this sensor (None:
     unknown, FRONT_QUANTILE: the nearest return)."""
@@ -384,13 +412,13 @@ def body_views_for(depth_sensor: str | None) -> bool:
 def sensor_options(depth_sensor: str | None) -> dict:
     """Track3D's options chosen by the depth sensor (None: unknown): frustum_margin, weight_3d,
     weight_2d, measured_faces, edge_pad, front_quantile, silhouette, outline_share, outline_contain,
-    body_views (the ten tables above)."""
+    dark_side, body_views (the eleven tables above)."""
     return {"frustum_margin": frustum_margin_for(depth_sensor), "weight_3d": fusion_weight_for(depth_sensor),
             "weight_2d": section_weight_for(depth_sensor), "measured_faces": measured_faces_for(depth_sensor),
             "edge_pad": edge_pad_for(depth_sensor), "front_quantile": front_quantile_for(depth_sensor),
             "silhouette": silhouette_for(depth_sensor),
             "outline_share": outline_share_for(depth_sensor), "outline_contain": outline_contain_for(depth_sensor),
-            "body_views": body_views_for(depth_sensor)}
+            "dark_side": dark_side_for(depth_sensor), "body_views": body_views_for(depth_sensor)}
 STATE_VERSION = 1
 
 
@@ -459,6 +487,7 @@ class Track3D:
                  reacquire_threshold: float | None = REACQUIRE_THRESHOLD, hold_cut_size: float = HOLD_CUT_SIZE,
                  edge_pad: float = EDGE_PAD, front_quantile: float = FRONT_QUANTILE,
                  silhouette: float = SILHOUETTE, outline_share: float = OUTLINE_SHARE, outline_contain: bool = False,
+                 dark_side: float = DARK_SIDE,
                  body_views: bool | BodyViewsParams = BODY_VIEWS):
         if not isinstance(camera, Camera):
             raise TypeError(f"camera must be a track3d.Camera, got {type(camera).__name__}")
@@ -512,6 +541,10 @@ class Track3D:
         if not isinstance(outline_contain, (bool, np.bool_)):
             raise ValueError(f"outline_contain must be True or False, got {outline_contain!r}")
         self.outline_contain = bool(outline_contain)
+        if not (np.isfinite(float(dark_side)) and 0.0 <= float(dark_side) <= 2.0):
+            raise ValueError(f"dark_side must be in [0, 2] (0: off), got {dark_side}")
+        self.dark_side = float(dark_side)
+        self.sun: np.ndarray | None = None   # unit (3,) toward the sun, camera frame (set_sun)
         if not isinstance(body_views, (bool, np.bool_, BodyViewsParams)):
             raise ValueError(f"body_views must be True, False or a BodyViewsParams, got {body_views!r}")
         self.body_views = isinstance(body_views, BodyViewsParams) or bool(body_views)
@@ -576,7 +609,7 @@ class Track3D:
         """Build from registry names; `options` go to Track3D (fusion, weight_3d, z_range,
         min_points, lost_after, min_score, frustum_margin, depth_range_m, weight_2d, measured_faces,
         depth_smoothing, evidence_points, reacquire_threshold, hold_cut_size, edge_pad, front_quantile, silhouette,
-        outline_share, outline_contain, body_views)."""
+        outline_share, outline_contain, dark_side, body_views)."""
         t = cls(camera, create_tracker(tracker, **(tracker_options or {})),
                 create_estimator(estimator, **(estimator_options or {})), **options)
         t.tracker_name, t.estimator_name = str(tracker).lower(), str(estimator).lower()
@@ -732,6 +765,13 @@ class Track3D:
             self._whole_box = np.array(box, dtype=np.float64)
         return box
 
+    def set_sun(self, direction) -> None:
+        """The sun's direction: 3 numbers toward the sun in the camera frame (x right, y down, z
+        forward; any length > 0), or None (unknown). With `dark_side` > 0 and a lit outline read
+        (stereo), the 2D box reaches past the outline's side away from the sun (track3d.dark_side).
+        Kept across init() (a property of the scene, not of the target); part of get_state()."""
+        self.sun = check_sun(direction)
+
     def init(self, image: np.ndarray, box2d: np.ndarray, category: int = -1,
              points: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         """Start on `image` with the target in `box2d` [x, y, w, h]; category: coarse category.
@@ -844,6 +884,7 @@ class Track3D:
                             _tracker_score(self.tracker2d))
             return self._judge(r, estimated=False)
         lit = None   # the outline where it is off (stereo: the lit part), for containment and the share
+        dark = None  # that outline reaching into the body's dark side (track3d.dark_side), with the sun known
         wants_lit = self.silhouette == 0.0 and (self.outline_contain or (self.outline_share > 0.0 and self.fusion))
         windowed = callable(points)   # a cloud of the box's window only: no whole view to search
         if wants_lit and callable(points):
@@ -858,6 +899,9 @@ class Track3D:
                 lit = past_border(lit, raw, self._size)
                 if self.outline_contain:
                     seen = contain(raw, lit, CONTAIN_SLACK_PX)
+                if self.dark_side > 0.0 and self.sun is not None:
+                    dark = dark_side_box(lit, self.sun, self.camera, self.dark_side)
+                    seen = reach_dark_side(seen, dark, self.sun, self.camera)
             elif self.outline_contain and not windowed:
                 # no returns near the tracker's box: the body, if in view, is elsewhere (a tracker
                 # left on the sky by a body that went out of view and came back); the whole
@@ -919,6 +963,11 @@ class Track3D:
                                                                                  self.weight_3d)
             if self._correct is not None:
                 self._correct(box)
+            if dark is not None:
+                # the lit outline's share of `start` and the fusion pulled the dark side back in;
+                # pushed out again after the tracker's correction (before it, the calibration
+                # sets' mean AO_3d below was 0.7191 instead of 0.7201)
+                box = reach_dark_side(box, dark, self.sun, self.camera)
         self.box2d = box.copy()
         t4 = time.perf_counter()
         ms["fusion"] = (t4 - t3) * 1e3
@@ -1019,6 +1068,7 @@ class Track3D:
             "carry_from": None if self._carry_from is None else self._carry_from.tolist(),
             "tracker2d": get2d(), "estimator_state": get3d() if get3d is not None else None,
             "body_views": None if self._views is None else self._views.get_state(),
+            "sun": None if self.sun is None else self.sun.tolist(),
         })
 
     def set_state(self, state: dict) -> None:
@@ -1056,6 +1106,7 @@ class Track3D:
             carry_from = st.get("carry_from")   # None: the last box's returns were within the range, or an older state
             carry_from = None if carry_from is None else np.asarray(carry_from, dtype=np.float64).reshape(4).copy()
             tracker2d, estimator_state = st["tracker2d"], st.get("estimator_state")
+            sun = check_sun(st.get("sun"))   # None: unknown, or a state from before the sun
             views = None
             if self._views is not None and st.get("body_views") is not None:
                 views = BodyViews(self.camera, self._views.params)
@@ -1070,6 +1121,7 @@ class Track3D:
         self._whole_box = whole_box
         self._depth_ratio = depth_ratio
         self._carry_from = carry_from
+        self.sun = sun
         if self._views is not None:   # a state without views (an older one, or views off): they start over
             if views is None:
                 self._views.reset()
@@ -1106,6 +1158,8 @@ class Track3D:
                         **({"front_quantile": self.front_quantile} if self.front_quantile > 0.0 else {}),
                         "silhouette": self.silhouette, "outline_share": self.outline_share,
                         "outline_contain": self.outline_contain,
+                        # only when on: the records of runs without it stay as they were
+                        **({"dark_side": self.dark_side} if self.dark_side > 0.0 else {}),
                         # only when on: the records of runs without the views stay as they were
                         **({"body_views": asdict(self._views.params)} if self._views is not None else {})},
             "models": models,

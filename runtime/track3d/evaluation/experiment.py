@@ -72,6 +72,8 @@ class TrackerSpec:
     silhouette: float | None = None          # None: by the sequence's depth sensor (silhouette_for)
     outline_share: float | None = None       # None: by the sequence's depth sensor (outline_share_for)
     outline_contain: bool | None = None      # None: by the sequence's depth sensor (outline_contain_for)
+    dark_side: float | None = None           # None: by the sequence's depth sensor (dark_side_for)
+    sun: bool = True                         # the sequence's sun direction (Sequence.sun_direction) to Track3D
     body_views: bool | BodyViewsParams | None = None   # None: by the sequence's depth sensor (body_views_for)
     threads: int = 1
     tracker_options: dict = field(default_factory=dict)
@@ -102,16 +104,19 @@ class TrackerSpec:
         eopts = self._options(self.estimator, self.estimator_options)
         if self.estimator == "a3boxnet" and "model" not in eopts:
             eopts.setdefault("depth_sensor", seq.depth_sensor)   # the sensor's own model (boxnet.SENSOR_MODELS)
-        return Track3D.create(seq.camera, self.tracker, self.estimator, tracker_options=topts,
-                              estimator_options=eopts,
-                              fusion=self.fusion,
-                              depth_range_m=seq.depth_range_m if self.depth_range else None,
-                              **({} if self.depth_smoothing is None else {"depth_smoothing": self.depth_smoothing}),
-                              **({} if self.evidence_points is None else {"evidence_points": self.evidence_points}),
-                              **({} if self.reacquire_threshold is None else
-                                 {"reacquire_threshold": self.reacquire_threshold or None}),
-                              **({} if self.hold_cut_size is None else {"hold_cut_size": self.hold_cut_size}),
-                              **self.sensor_options(seq.depth_sensor))
+        t = Track3D.create(seq.camera, self.tracker, self.estimator, tracker_options=topts,
+                           estimator_options=eopts,
+                           fusion=self.fusion,
+                           depth_range_m=seq.depth_range_m if self.depth_range else None,
+                           **({} if self.depth_smoothing is None else {"depth_smoothing": self.depth_smoothing}),
+                           **({} if self.evidence_points is None else {"evidence_points": self.evidence_points}),
+                           **({} if self.reacquire_threshold is None else
+                              {"reacquire_threshold": self.reacquire_threshold or None}),
+                           **({} if self.hold_cut_size is None else {"hold_cut_size": self.hold_cut_size}),
+                           **self.sensor_options(seq.depth_sensor))
+        if self.sun:
+            t.set_sun(seq.sun_direction)
+        return t
 
     def sensor_options(self, depth_sensor: str | None) -> dict:
         """The sensor's defaults (track3d.tracker.sensor_options) with this spec's explicit values."""
