@@ -132,7 +132,8 @@ def test_the_loop_reaches_into_the_dark_side_with_the_sun_known():
 
 def test_the_sequence_s_sun_reaches_the_loop(tmp_path):
     """Sequence.sun_direction reads meta.json's sun (unit vector, None when absent or bad);
-    TrackerSpec hands it to Track3D unless told not to; dark_side follows the depth sensor."""
+    TrackerSpec hands it to Track3D unless told not to; dark_side is off for every sensor unless
+    asked for."""
     from track3d.dataset import Dataset
     from track3d.evaluation import TrackerSpec
     from track3d.synthetic import make_synthetic_dataset
@@ -150,7 +151,7 @@ def test_the_sequence_s_sun_reaches_the_loop(tmp_path):
     assert b.sun_direction is None
     t = TrackerSpec("oracle", "baseline").build(a)
     np.testing.assert_allclose(t.sun, [0, 1, 0])
-    assert t.dark_side == dark_side_for("stereo") == sensor_options("stereo")["dark_side"] > 0
+    assert t.dark_side == dark_side_for("stereo") == sensor_options("stereo")["dark_side"] == 0.0   # off
     assert TrackerSpec("oracle", "baseline", sun=False).build(a).sun is None
-    assert TrackerSpec("oracle", "baseline", dark_side=0.0).build(a).dark_side == 0.0
+    assert TrackerSpec("oracle", "baseline", dark_side=0.1).build(a).dark_side == 0.1
     assert dark_side_for("ideal") == dark_side_for("tof") == dark_side_for(None) == 0.0

@@ -134,7 +134,7 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--dark-side", type=bounded(float, 0, high=2), default=None, metavar="K",
                    help="with the outline off (--silhouette 0) and the sun's direction known (meta.json sun), the 2D "
                         "box reaches past the lit outline on the side away from the sun by K x a sphere's dark part "
-                        "(0: off; default by the depth sensor, track3d.tracker.dark_side_for: stereo 0.1, others 0)")
+                        "(0: off, the default for every sensor, track3d.tracker.dark_side_for; 0.1 was measured for stereo, docs/runtime.md)")
     t.add_argument("--no-sun", action="store_true",
                    help="ignore the sun's direction recorded with each sequence (meta.json sun.direction)")
     t.add_argument("--body-views", action=argparse.BooleanOptionalAction, default=None,
