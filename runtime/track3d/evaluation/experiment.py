@@ -115,7 +115,7 @@ class TrackerSpec:
                            **({} if self.hold_cut_size is None else {"hold_cut_size": self.hold_cut_size}),
                            **self.sensor_options(seq.depth_sensor))
         if self.sun:
-            t.set_sun(seq.sun_direction)
+            t.set_sun(getattr(seq, "sun_direction", None))   # a sequence-like object may not record one
         return t
 
     def sensor_options(self, depth_sensor: str | None) -> dict:
