@@ -512,10 +512,7 @@ def test_the_edge_pad_puts_the_measured_outline_on_the_body():
     pts = CAM.backproject_depth(depth)
     err = {}
     for pad in (0.0, 1.0):
-        t = Track3D(CAM, OracleTracker(np.array([b2, b2])), _Enclosing(), depth_smoothing=0.0, fusion=False,
-                    edge_pad=pad)
-        t.init(img, b2, points=pts)
-        box = t.update(img, pts).box3d
+        t, box = _enclosed_twice(img, b2, pts, edge_pad=pad)
         err[pad] = abs(box[3] - 2 * r) + abs(box[4] - 2 * r)
         assert t.describe()["options"]["edge_pad"] == pad
     assert err[1.0] < 0.5 * err[0.0], err
@@ -532,6 +529,15 @@ class _Enclosing:
 
     def estimate(self, points, category):
         return box3d_from_points(points)
+
+
+def _enclosed_twice(img, box2d, pts, **options):
+    """Track3D with the enclosing-box estimator, no smoothing or fusion, started and updated once
+    on the same frame: (the tracker, the update's 3D box)."""
+    t = Track3D(CAM, OracleTracker(np.array([box2d, box2d])), _Enclosing(), depth_smoothing=0.0, fusion=False,
+                **options)
+    t.init(img, box2d, points=pts)
+    return t, t.update(img, pts).box3d
 
 
 def test_a_body_cut_by_the_border_keeps_the_size_of_its_last_whole_view():
@@ -743,10 +749,7 @@ def test_a_noisy_sensor_s_front_face_is_a_quantile_of_its_returns():
     assert len(pts) > 7000
     err = {}
     for q in (0.0, 0.005):
-        t = Track3D(CAM, OracleTracker(np.array([b2, b2])), _Enclosing(), depth_smoothing=0.0, fusion=False,
-                    front_quantile=q)
-        t.init(img, b2, points=pts)
-        box = t.update(img, pts).box3d
+        t, box = _enclosed_twice(img, b2, pts, front_quantile=q)
         err[q] = box[2] - box[5] / 2.0 - 4.0
         assert t.describe()["options"].get("front_quantile", 0.0) == q
     assert -0.12 < err[0.0] < -0.08 and abs(err[0.005]) < 0.045, err
