@@ -969,7 +969,7 @@ class Track3D:
             if dark is not None:
                 # the lit outline's share of `start` and the fusion pulled the dark side back in;
                 # pushed out again after the tracker's correction (before it, the calibration
-                # sets' mean AO_3d below was 0.7191 instead of 0.7201)
+                # sets' mean AO_3d at 0.1 was 0.7191 instead of 0.7201: DARK_SIDE's notes)
                 box = reach_dark_side(box, dark, self.sun, self.camera)
         self.box2d = box.copy()
         t4 = time.perf_counter()
