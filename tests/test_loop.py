@@ -2,6 +2,8 @@
 simulator needed)."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -771,3 +773,66 @@ def test_a_noisy_sensor_s_front_face_is_a_quantile_of_its_returns():
     for bad in (-0.1, float("nan"), 0.2):
         with pytest.raises(ValueError, match="front_quantile"):
             Track3D(CAM, OracleTracker(np.array([b2])), _Enclosing(), front_quantile=bad)
+
+
+class _Fronts:
+    """An amodal estimator whose boxes' front face follows a script (depth extent 2 m)."""
+
+    amodal = True
+
+    def __init__(self, fronts):
+        self.fronts = list(fronts)
+
+    def estimate(self, points, category):
+        f = self.fronts.pop(0)
+        return np.array([0.0, 0.0, f + 1.0, 1.0, 1.0, 2.0])
+
+
+def test_the_front_filter_follows_the_front_face_by_hand(frames, tmp_path):
+    """The alpha-beta filter (FRONT_FILTER, stereo's (0.8, 0.2)) on a scripted front face
+    10, 12, 12, 12 m: alpha 0.5, beta 0: 10, 11, 11.5, 11.75; alpha 0.5, beta 0.5 (guess x + v,
+    miss = front - guess, x = guess + a miss, v += b miss): 10, 11, 12, 12.5. The depth extent is
+    kept, a checkpoint continues the filter, init() starts it over, and the option is checked,
+    recorded and chosen by the sensor."""
+    from track3d.evaluation import TrackerSpec
+    from track3d.tracker import front_filter_for, sensor_options
+
+    gt2d = np.array([f[2] for f in frames])
+    img, pts = frames[1][0], frames[1][1]
+
+    def run(fronts, ff, state_at=None):
+        t = Track3D(CAM, OracleTracker(np.tile(gt2d[1], (9, 1))), _Fronts(fronts), measured_faces=False,
+                    body_views=False, depth_smoothing=0.0, front_filter=ff)
+        t.init(img, gt2d[1], points=pts)
+        out = [t.box3d.copy()]
+        for k in range(len(t.estimator.fronts)):
+            if k == state_at:
+                rest = t.estimator.fronts
+                st = json.loads(json.dumps(t.get_state()))
+                t = Track3D(CAM, OracleTracker(np.tile(gt2d[1], (9, 1))), _Fronts(rest), measured_faces=False,
+                            body_views=False, depth_smoothing=0.0, front_filter=ff)
+                t.set_state(st)
+            out.append(t.update(img, pts).box3d.copy())
+        return t, np.array(out)
+
+    _, b = run([10.0, 12.0, 12.0, 12.0], (0.5, 0.0))
+    np.testing.assert_allclose(b[:, 2] - b[:, 5] / 2, [10, 11, 11.5, 11.75])
+    np.testing.assert_allclose(b[:, 5], 2.0)
+    t, b = run([10.0, 12.0, 12.0, 12.0], (0.5, 0.5))
+    np.testing.assert_allclose(b[:, 2] - b[:, 5] / 2, [10, 11, 12, 12.5])
+    assert t.describe()["options"]["front_filter"] == [0.5, 0.5]
+    _, c = run([10.0, 12.0, 12.0, 12.0], (0.5, 0.5), state_at=1)
+    np.testing.assert_array_equal(c, b)
+    t.estimator.fronts = [20.0]
+    t.init(img, gt2d[1], points=pts)
+    assert t.box3d[2] - t.box3d[5] / 2 == 20.0
+    _, off = run([10.0, 12.0], None)
+    np.testing.assert_allclose(off[:, 2] - off[:, 5] / 2, [10, 12])
+    for bad in ((0.0, 0.1), (1.5, 0.1), (0.5, -1.0), (0.5,), "x"):
+        with pytest.raises(ValueError, match="front_filter"):
+            Track3D(CAM, OracleTracker(gt2d), _Fronts([]), front_filter=bad)
+    assert front_filter_for("stereo") == sensor_options("stereo")["front_filter"] == (0.8, 0.2)
+    assert front_filter_for("ideal") is front_filter_for("tof") is front_filter_for(None) is None
+    seqs = _plain_and_stereo(tmp_path)
+    assert TrackerSpec("oracle", "baseline").build(seqs[1]).front_filter == (0.8, 0.2)
+    assert TrackerSpec("oracle", "baseline", front_filter=False).build(seqs[1]).front_filter is None

@@ -37,6 +37,19 @@ def _options(pairs: list[str] | None) -> dict:
     return out
 
 
+def _front_filter(text: str) -> tuple[float, float] | bool:
+    """argparse type of --front-filter: "ALPHA,BETA" -> (alpha, beta); "off" -> False (none)."""
+    if text.strip().lower() == "off":
+        return False
+    try:
+        a, b = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected ALPHA,BETA (e.g. 0.8,0.2) or off, got {text!r}") from None
+    if not (0.0 < a <= 1.0 and 0.0 <= b <= 1.0):
+        raise argparse.ArgumentTypeError(f"expected 0 < ALPHA <= 1 and 0 <= BETA <= 1, got {text!r}")
+    return a, b
+
+
 def _result_name(text: str) -> str:
     """argparse type: a result name is one folder under <results>/<split>/; "a/b" or "../x"
     would write beside or outside the results, where `track3d eval` never looks."""
@@ -131,6 +144,10 @@ def _parser() -> argparse.ArgumentParser:
                         "the outline before the frustum and the fusion, and with no returns near it go to the body "
                         "the whole view's depth shows (default by the depth sensor, "
                         "track3d.tracker.outline_contain_for: on for stereo, off for the others)")
+    t.add_argument("--front-filter", type=_front_filter, default=None, metavar="ALPHA,BETA|off",
+                   help="follow the 3D box's front face over frames with an alpha-beta filter, e.g. 0.8,0.2 "
+                        "(0 < ALPHA <= 1, 0 <= BETA <= 1; off: none; default by the depth sensor, "
+                        "track3d.tracker.front_filter_for: stereo 0.8,0.2, others off)")
     t.add_argument("--dark-side", type=bounded(float, 0, high=2), default=None, metavar="K",
                    help="with the outline off (--silhouette 0) and the sun's direction known (meta.json sun), the 2D "
                         "box reaches past the lit outline on the side away from the sun by K x a sphere's dark part "
@@ -291,7 +308,7 @@ def _cmd_track(a) -> int:
                        weight_2d=weight_2d, measured_faces=faces, depth_smoothing=a.depth_smoothing,
                        evidence_points=a.evidence_points, reacquire_threshold=a.reacquire_threshold,
                        hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad,
-                       front_quantile=a.front_quantile, silhouette=a.silhouette,
+                       front_quantile=a.front_quantile, front_filter=a.front_filter, silhouette=a.silhouette,
                        outline_share=a.outline_share,
                        outline_contain=a.outline_contain, dark_side=a.dark_side, sun=not a.no_sun,
                        body_views=a.body_views,

@@ -69,6 +69,7 @@ class TrackerSpec:
     hold_cut_size: float | None = None       # None: track3d.tracker.HOLD_CUT_SIZE
     edge_pad: float | None = None            # None: by the sequence's depth sensor (edge_pad_for)
     front_quantile: float | None = None      # None: by the sequence's depth sensor (front_quantile_for)
+    front_filter: tuple[float, float] | bool | None = None   # None: by the sensor (front_filter_for); False: off
     silhouette: float | None = None          # None: by the sequence's depth sensor (silhouette_for)
     outline_share: float | None = None       # None: by the sequence's depth sensor (outline_share_for)
     outline_contain: bool | None = None      # None: by the sequence's depth sensor (outline_contain_for)
@@ -122,6 +123,8 @@ class TrackerSpec:
         """The sensor's defaults (track3d.tracker.sensor_options) with this spec's explicit values."""
         opts = sensor_options(depth_sensor)
         opts.update({k: getattr(self, k) for k in opts if getattr(self, k) is not None})
+        if opts.get("front_filter") is False:   # asked off (None means the sensor's)
+            opts["front_filter"] = None
         return opts
 
     def unavailable(self, seq: Sequence) -> str | None:
