@@ -41,22 +41,30 @@ def check_sun(direction) -> np.ndarray | None:
     return d / n
 
 
-def dark_share(box2d: np.ndarray, sun: np.ndarray, camera: Camera, k: float,
-               cap: float = DARK_SHARE_CAP) -> tuple[float, np.ndarray] | None:
-    """(share, u): the dark part's extent as a share of the lit extent toward the sun, ``min(cap,
-    k (1 - cos a) / (1 + cos a))`` with a the phase angle at the box's centre ray, and u (2,) the
-    unit image direction toward the sun there; None when the sun lies along that ray (no side)."""
+def _sun_at(box2d: np.ndarray, sun: np.ndarray, camera: Camera) -> tuple[float, np.ndarray] | None:
+    """(cos a, u) at the box's centre ray: a the phase angle, u (2,) the unit image direction
+    toward the sun; None when the sun lies along that ray (no side)."""
     x, y, w, h = (float(v) for v in box2d)
     ray = np.array([(x + w / 2.0 - camera.cx) / camera.fx, (y + h / 2.0 - camera.cy) / camera.fy, 1.0])
     ray /= np.linalg.norm(ray)
-    cos_a = float(-sun @ ray)                  # the observer lies back along the ray
     across = sun - float(sun @ ray) * ray      # the sun's direction across the line of sight
     u = np.array([across[0] * camera.fx, across[1] * camera.fy])
     n = float(np.linalg.norm(u))
     if n < 1e-9:
         return None
-    share = k * (1.0 - cos_a) / max(1.0 + cos_a, 1e-9)
-    return min(float(cap), share), u / n
+    return float(-sun @ ray), u / n            # the observer lies back along the ray
+
+
+def dark_share(box2d: np.ndarray, sun: np.ndarray, camera: Camera, k: float,
+               cap: float = DARK_SHARE_CAP) -> tuple[float, np.ndarray] | None:
+    """(share, u): the dark part's extent as a share of the lit extent toward the sun, ``min(cap,
+    k (1 - cos a) / (1 + cos a))`` with a the phase angle at the box's centre ray, and u (2,) the
+    unit image direction toward the sun there; None when the sun lies along that ray (no side)."""
+    got = _sun_at(box2d, sun, camera)
+    if got is None:
+        return None
+    cos_a, u = got
+    return min(float(cap), k * (1.0 - cos_a) / max(1.0 + cos_a, 1e-9)), u
 
 
 def dark_side_box(lit: np.ndarray, sun: np.ndarray, camera: Camera, k: float,
@@ -82,7 +90,7 @@ def reach_dark_side(box2d: np.ndarray, dark: np.ndarray, sun: np.ndarray, camera
     (the extended outline of `dark_side_box`), the other sides kept; a new float64 array."""
     b = np.array(box2d, dtype=np.float64).reshape(4)
     d = np.asarray(dark, dtype=np.float64).reshape(4)
-    got = dark_share(b, sun, camera, 1.0) if np.all(np.isfinite(b)) and np.all(np.isfinite(d)) else None
+    got = _sun_at(b, sun, camera) if np.all(np.isfinite(b)) and np.all(np.isfinite(d)) else None
     if got is None:
         return b
     _, u = got
