@@ -37,7 +37,7 @@ def test_registry():
         make_body("no_such_body", np.random.default_rng(0), VOLUME, 4)
 
 
-@pytest.mark.parametrize("name", NEW + ["gaussian_sphere"])
+@pytest.mark.parametrize("name", NEW + ["gaussian_sphere", "aggregate"])
 def test_deterministic_for_a_seed(name, bodies):
     again = make_body(name, np.random.default_rng(7), VOLUME, 4)
     assert again.vertices.tobytes() == bodies[name].vertices.tobytes()
@@ -195,3 +195,19 @@ def test_gaussian_log_radius_hand_cases():
     assert abs(vals.mean()) < 0.1 and abs(vals.var() - 1.0) < 0.15
     again = gaussian_log_radius(np.random.default_rng(3), 32, 1.3)(u)
     np.testing.assert_array_equal(again, gaussian_log_radius(np.random.default_rng(3), 32, 1.3)(u))
+
+
+def test_aggregate_lumps_rest_on_each_other():
+    """Each lump after the first rests on one placed before it: the balls inscribed in the two
+    (0.89 x the smallest semi-axis, exponents <= 1.2) overlap, so the body is one piece by
+    construction; 3-7 lumps, none larger than the first."""
+    from track3d_sim.bodies import _INSCRIBED
+    assert 3 ** -0.6 * math.sqrt(3) > _INSCRIBED        # the superellipsoid's nearest surface point at e = 1.2
+    for seed in range(12):
+        p = make_body("aggregate", np.random.default_rng(seed), VOLUME, 3).params
+        c, r = np.array(p["lump_centres"]), [np.array(x) for x in p["lump_radii"]]
+        assert 3 <= p["lumps"] == len(c) == len(r) <= 7
+        assert max(max(e) for e in p["lump_exponents"]) <= 1.2
+        for i in range(1, len(c)):
+            assert r[i].max() <= r[0].max()
+            assert any(np.linalg.norm(c[i] - c[j]) < _INSCRIBED * (r[i].min() + r[j].min()) for j in range(i))

@@ -289,6 +289,7 @@ def test_opt_in_generators_only_in_runs_that_name_them(tmp_path):
     train and test from the named ones only (test_unseen keeps the held-out rule)."""
     assert "superquadric" in G.GENERATORS and "superquadric" not in G.default_generators()
     assert "gaussian_sphere" in G.GENERATORS and "gaussian_sphere" not in G.default_generators()
+    assert "aggregate" in G.GENERATORS and "aggregate" not in G.default_generators()
     unseen, _ = resolve_unseen(None, 4)
     gens, _ = _check_splits(plan(60, 30, 4, unseen))
     assert "superquadric" not in gens["train"] | gens["test"]

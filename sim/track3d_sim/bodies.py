@@ -15,7 +15,8 @@ from .implicit import SdfGrid, _norm, grid_size, mesh_grid, rotation, sd_ellipso
 from .shapes import Shape, scale_to_volume
 
 __all__ = ["make_bilobate", "make_elongated", "make_top_shape", "make_rubble_pile", "make_giant_craters",
-           "make_fragment", "make_superquadric", "sd_superellipsoid", "make_gaussian_sphere", "gaussian_log_radius"]
+           "make_fragment", "make_superquadric", "sd_superellipsoid", "make_gaussian_sphere", "gaussian_log_radius",
+           "make_aggregate"]
 
 _MARGIN = 0.3  # unit-scale room around the base primitives for noise, rims and perched boulders
 
@@ -276,3 +277,47 @@ def make_gaussian_sphere(rng: np.random.Generator, volume: float, detail: int = 
     _surface_detail(g, rng, p, _u(rng, 0.015, 0.04), int(rng.integers(5, 30)), 0.25,
                     int(rng.integers(5, 60)), _u(rng, 0.03, 0.05))
     return _finish(g, rng, "gaussian_sphere", volume, detail, p, post=axes)
+
+
+# The ball of radius 0.89 x the smallest semi-axis lies inside a superellipsoid of exponents
+# <= 1.2 (at 1.2 the surface comes nearest the centre on the diagonal, at 3 ** -0.6 x sqrt(3)).
+_INSCRIBED = 0.89
+
+
+def make_aggregate(rng: np.random.Generator, volume: float, detail: int = 6) -> Shape:
+    """An aggregate of 3-7 lumps (rotated superellipsoids from rounded to blocky, 0.3-0.75 the
+    size of the first), each set against a lump already placed, blended from sharp contacts to
+    smooth saddles, with the common skin. Gravitational aggregates and multi-lobed bodies
+    (Kleopatra, Arrokoth); what matters for training is that the outline a camera sees says
+    little about how far the body reaches behind it: a lump may sit behind another."""
+    n = int(rng.integers(3, 8))
+    blend = float(np.exp(rng.uniform(math.log(0.02), math.log(0.2))))
+    centres, radii, rots, exps = [], [], [], []
+    for i in range(n):
+        r = np.sort(rng.uniform(0.55, 1.0, 3))[::-1] * (0.6 if i == 0 else 0.6 * _u(rng, 0.3, 0.75))
+        if i == 0:
+            c = np.zeros(3)
+        else:
+            j = int(rng.integers(0, i))              # the lump it rests against
+            d = rng.standard_normal(3)
+            d /= np.linalg.norm(d)
+            # the balls inscribed in the two lumps overlap, so the aggregate is one piece
+            c = centres[j] + d * _INSCRIBED * (radii[j].min() + r.min()) * _u(rng, 0.6, 0.95)
+        centres.append(c)
+        radii.append(r)
+        rots.append(rotation(rng))
+        exps.append((float(np.exp(rng.uniform(math.log(0.4), math.log(1.2)))),
+                     float(np.exp(rng.uniform(math.log(0.4), math.log(1.2))))))
+    reach = [float(r.max()) * 1.5 for r in radii]    # exponents down to 0.4 reach 1.4x the radius on a diagonal
+    lo = np.min([c - e for c, e in zip(centres, reach)], axis=0)
+    hi = np.max([c + e for c, e in zip(centres, reach)], axis=0)
+    g = _grid(lo, hi, detail)
+    for c, r, R, (e1, e2), e in zip(centres, radii, rots, exps, reach):
+        def lump(q, c=c, r=r, R=R, e1=e1, e2=e2):
+            return sd_superellipsoid((q - np.asarray(c, q.dtype)) @ np.asarray(R, q.dtype), r, e1, e2)
+        g.union(lump, c - e, c + e, k=blend)
+    p = dict(lumps=n, blend=blend, lump_radii=[r.tolist() for r in radii], lump_centres=[c.tolist() for c in centres],
+             lump_exponents=[list(e) for e in exps])
+    _surface_detail(g, rng, p, _u(rng, 0.015, 0.04), int(rng.integers(5, 30)), 0.2,
+                    int(rng.integers(10, 70)), _u(rng, 0.03, 0.05))
+    return _finish(g, rng, "aggregate", volume, detail, p)

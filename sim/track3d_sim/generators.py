@@ -115,3 +115,6 @@ register(Generator("superquadric", _bodies.make_superquadric, 2, False,
 register(Generator("gaussian_sphere", _bodies.make_gaussian_sphere, 2, False,
                    "Gaussian random sphere (random log radius) stretched to 1 : 0.45-1 : 0.3-0.9, lumps and "
                    "hollows of every size (generic irregular bodies; opt-in)", default=False))
+register(Generator("aggregate", _bodies.make_aggregate, 0, False,
+                   "3-7 rotated superellipsoid lumps, rounded to blocky, each resting on another, sharp to "
+                   "smooth contacts (aggregates, multi-lobed bodies; opt-in)", default=False))
