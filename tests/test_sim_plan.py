@@ -317,3 +317,26 @@ def test_generators_flag_errors_are_one_line(capsys, tmp_path):
                    "--out", str(tmp_path / "d"), *args])
         err = capsys.readouterr().err
         assert rc != 0 and msg in err and "Traceback" not in err
+
+
+def test_an_opt_in_generator_held_out_alone_is_in_the_category_list(tmp_path, capsys):
+    """--unseen-generators may name an opt-in generator that --generators does not: its bodies
+    are the test_unseen split's, so it is among the run's body sources (the fine-category list);
+    it used to crash on the first unseen sequence (ValueError: not in list)."""
+    out = tmp_path / "d"
+    rc = main(["generate", "--preset", "tiny", "--train", "1", "--test", "0", "--test-unseen", "1", "--frames", "1",
+               "--points-only", "--generators", "bilobate", "--unseen-generators", "superquadric",
+               "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 0 and "Traceback" not in err, err
+    info = json.loads((out / DATASET_JSON).read_text())
+    fine = info["categories"]["fine"]
+    assert "superquadric" in info["categories"]["generators"]
+    seq = Dataset(out).sequences("test_unseen")[0]
+    meta = json.loads((out / "test_unseen" / seq.name / "meta.json").read_text())
+    assert meta["generator"] == "superquadric"
+    assert fine[meta["fine_index"]] == meta["fine_category"] and meta["fine_category"].startswith("superquadric/")
+    # a run whose held-out generators are default ones keeps its identity (resumable as before)
+    s = make_settings("tiny", 0, train=2, test=1, test_unseen=1, frames=1, shape_generators="superquadric,bilobate")
+    assert dataset_info(s, plan_of(s))["categories"]["generators"] == \
+        [g for g, v in G.GENERATORS.items() if v.default or g == "superquadric"]

@@ -160,7 +160,8 @@ def _identity(settings: dict) -> dict:
     # the registry is part of the plan: a run resumed after a generator was added is refused
     # (an opt-in generator is part of it only in the runs that name it)
     pool = settings.get("shape_generators")
-    return {"generator_version": __version__, "generators": body_sources(False, pool),
+    return {"generator_version": __version__,
+            "generators": body_sources(False, pool, settings.get("unseen_generators") or ()),
             "meshes": _public_meshes(settings), **{k: settings[k] for k in keys},
             **({"shape_generators": list(pool)} if pool is not None else {})}
 
@@ -184,6 +185,7 @@ def dataset_info(settings: dict, specs) -> dict:
     user = bool(settings["meshes"])
     pool = settings.get("shape_generators")
     cats = split_categories(tuple(settings["unseen_generators"]), user, pool)
+    sources = body_sources(user, pool, settings["unseen_generators"])
     splits = {split: [s.name for s in specs if s.split == split] for split in SPLITS}
     sensors = {split: dict(sorted(Counter(s.sensor for s in specs if s.split == split).items())) for split in SPLITS}
     return {
@@ -193,12 +195,12 @@ def dataset_info(settings: dict, specs) -> dict:
         "size_classes": boxes.SIZE_TEMPLATES.tolist(),
         "categories": {
             "shape_families": list(FAMILIES),
-            "generators": body_sources(user, pool),
+            "generators": sources,
             "generator_family": {g: (FAMILIES[GENERATORS[g].coarse] if g in GENERATORS else USER)
-                                 for g in body_sources(user, pool)},
+                                 for g in sources},
             **({"shape_generators": list(pool)} if pool is not None else {}),
             "textures": list(TEXTURES),
-            "fine": [fine_name(g, t) for g in body_sources(user, pool) for t in range(len(TEXTURES))],
+            "fine": [fine_name(g, t) for g in sources for t in range(len(TEXTURES))],
             **{f"{split}_fine": [fine_name(g, t) for g, t in cats[split]] for split in SPLITS},
             "unseen_generators": list(settings["unseen_generators"]),
             "unseen_note": settings["unseen_note"],

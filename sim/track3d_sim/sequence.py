@@ -137,10 +137,11 @@ def split_categories(unseen=(), user_meshes: bool = False, pool=None) -> dict[st
     return {"train": train, "test": test, "test_unseen": test_unseen}
 
 
-def body_sources(user_meshes: bool = False, pool=None) -> list[str]:
+def body_sources(user_meshes: bool = False, pool=None, unseen=()) -> list[str]:
     """Every body source of a run, in the order of the fine-category list: the default
-    generators and the opt-in ones of `pool` (registry order)."""
-    return [USER] if user_meshes else [g for g, v in GENERATORS.items() if v.default or g in (pool or ())]
+    generators and the opt-in ones of `pool` or held out in `unseen` (registry order)."""
+    named = set(pool or ()) | set(unseen or ())
+    return [USER] if user_meshes else [g for g, v in GENERATORS.items() if v.default or g in named]
 
 
 def fine_name(generator: str, texture: int) -> str:
@@ -349,6 +350,7 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
             progress(1)
     coarse = -1 if spec.generator == USER else coarse_index(spec.generator)
     family = USER if spec.generator == USER else FAMILIES[coarse]
+    sources = body_sources(bool(meshes), settings.get("shape_generators"), settings.get("unseen_generators") or ())
     meta = {
         "name": spec.name, "split": spec.split, "index": spec.index,
         # family / family_index: the paper's coarse category (what Sequence.category reads), "user" / -1
@@ -356,7 +358,7 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
         "generator": spec.generator, "family": family, "family_index": coarse,
         "texture": TEXTURES[spec.texture], "texture_index": spec.texture,
         "fine_category": spec.fine_category,
-        "fine_index": body_sources(bool(meshes), settings.get("shape_generators")).index(spec.generator) * len(TEXTURES) + spec.texture,
+        "fine_index": sources.index(spec.generator) * len(TEXTURES) + spec.texture,
         "sensor": spec.sensor, "points_only": points_only,
         "scene": SCENES[spec.scene], "scene_index": spec.scene,
         "shape": {"family": shape.family, "radius_m": shape.radius, "extent_m": shape.extent.tolist(),
