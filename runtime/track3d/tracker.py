@@ -75,6 +75,11 @@ LOST_AFTER = 10          # consecutive frames without a usable estimate (or belo
 # 32 false matches), the false "lost" flags 55 or more on 14 of 21 (Track3D's lost precision
 # 0.86 -> 0.93 pooled over nine sets, recall unchanged). 0: off.
 EVIDENCE_POINTS = 48
+# A body carried past the depth range (range_cut.carry_box) is carried from the last estimate
+# whose returns reached the range; a 2D box at the image border with less than this share of the
+# area of the last such box clear of the border is a sliver of the body, not its size in the
+# image, and is not carried from (the clear one is kept).
+CARRY_SLIVER = 0.5
 # Inside the loop a lost 2D tracker that judges its own loss takes a candidate only at this
 # score or above (its `reacquire_threshold`, raised to this, never lowered; None: the tracker's
 # own). Right after an exit its wide search is mostly pad and empty sky, whose edge scored
@@ -594,7 +599,11 @@ class Track3D:
         self._whole_box: np.ndarray | None = None   # the reported box of the last whole view (6,)
         self._depth_ratio = float("nan")   # size z / mean(size x, y) of the last box within the depth range
         self._small_cap = False   # this frame's returns: a cap past the range smaller than CAP_FUSION_COVERAGE
-        self._carry_from = None   # the 2D box of the last 3D box when its returns reached the range
+        # the last 2D box clear of the image border whose returns reached the range, and its 3D box
+        # (6,): what a body gone wholly past the range is carried from (range_cut.carry_box)
+        self._carry_from: np.ndarray | None = None
+        self._carry_box: np.ndarray | None = None
+        self._carry_area = float("nan")   # area (px^2) of the last such 2D box clear of the image border
         if depth_range_m is not None and not (np.isfinite(float(depth_range_m)) and float(depth_range_m) > 0.0):
             raise ValueError(f"depth_range_m must be a positive number of metres or None (unlimited), got {depth_range_m}")
         # the depth sensor's maximum range: a body reaching past it is boxed from the image (range_cut)
@@ -791,7 +800,6 @@ class Track3D:
         # held-out: seed 23 300 frames 0.8037 -> 0.8121 / 0.8224 -> 0.8226, seed 3 60 frames
         # 0.7603 -> 0.7653 / 0.7787 -> 0.7787)
         box = hold_back_face(box, far, None if reached else limit)
-        self._carry_from = np.array(box2d, dtype=np.float64) if reached else None
         if not reached:   # a box from returns within the range: the body's own depth-to-width ratio
             self._depth_ratio = float(min(box[5] / max((box[3] + box[4]) / 2.0, 1e-6), MAX_DEPTH_RATIO))
         if self._smooth_depth:
@@ -805,6 +813,21 @@ class Track3D:
             self._whole_box = np.array(box, dtype=np.float64)
         if self.front_filter is not None:
             box = self._filter_front(box)
+        if not reached:
+            self._carry_from = self._carry_box = None
+            self._carry_area = float("nan")
+        else:
+            # a 2D box at the image border may be a sliver of the body: a body that left the view
+            # beyond the range and came back wholly past it was carried from a sliver's box, 8 m
+            # too near (README ToF long-watch held-out 0008). A border box with less than
+            # CARRY_SLIVER of the last clear box's area leaves the pair as it was; a tracker whose
+            # box keeps its size at the border (SiamFC) still carries from its latest box
+            clear = not any(self._border_sides(box2d))
+            area = float(box2d[2] * box2d[3])
+            if clear:
+                self._carry_area = area
+            if clear or not area < CARRY_SLIVER * self._carry_area:   # (nan: no clear box yet)
+                self._carry_from, self._carry_box = np.array(box2d, dtype=np.float64), np.array(box, dtype=np.float64)
         return box
 
     def _filter_front(self, box: np.ndarray) -> np.ndarray:
@@ -853,7 +876,8 @@ class Track3D:
         self._depth_avg = float("nan")
         self._whole_box = None
         self._depth_ratio = float("nan")
-        self._carry_from = None
+        self._carry_from = self._carry_box = None
+        self._carry_area = float("nan")
         self._front = (float("nan"), 0.0)
         if self._views is not None:
             self._views.reset()
@@ -999,11 +1023,13 @@ class Track3D:
         status = TRACKING
         if est is None:
             status = NO_POINTS
-            if self._carry_from is not None and np.all(np.isfinite(self.box3d)) and not any(self._border_sides(seen)):
+            if (self._carry_from is not None and self._carry_box is not None and np.all(np.isfinite(self._carry_box))
+                    and not any(self._border_sides(seen))):
                 # a body that had reached the range and now returns nothing is past it, still in
                 # view: its box follows the image's (range_cut.carry_box)
-                self.box3d = carry_box(self.box3d, self._carry_from, seen, self.camera)
-                self._carry_from = np.array(seen, dtype=np.float64)
+                self.box3d = carry_box(self._carry_box, self._carry_from, seen, self.camera)
+                self._carry_from, self._carry_box = np.array(seen, dtype=np.float64), self.box3d.copy()
+                self._carry_area = float(seen[2] * seen[3])
         else:
             bounds = self._measured(pts, bounds)
             far = limit = None
@@ -1128,6 +1154,8 @@ class Track3D:
             "whole_box": None if self._whole_box is None else self._whole_box.tolist(),
             "depth_ratio": self._depth_ratio if np.isfinite(self._depth_ratio) else None,
             "carry_from": None if self._carry_from is None else self._carry_from.tolist(),
+            "carry_box": None if self._carry_box is None else self._carry_box.tolist(),
+            "carry_area": self._carry_area if np.isfinite(self._carry_area) else None,
             "tracker2d": get2d(), "estimator_state": get3d() if get3d is not None else None,
             "body_views": None if self._views is None else self._views.get_state(),
             "sun": None if self.sun is None else self.sun.tolist(),
@@ -1168,6 +1196,11 @@ class Track3D:
             depth_ratio = float("nan") if depth_ratio is None else float(depth_ratio)
             carry_from = st.get("carry_from")   # None: the last box's returns were within the range, or an older state
             carry_from = None if carry_from is None else np.asarray(carry_from, dtype=np.float64).reshape(4).copy()
+            carry_box = st.get("carry_box", st["box3d"])   # an older state carried its last box
+            carry_area = st.get("carry_area")   # None: no clear box reached the range yet, or an older state
+            carry_area = float("nan") if carry_area is None else float(carry_area)
+            carry_box = (None if carry_from is None or carry_box is None
+                         else np.asarray(carry_box, dtype=np.float64).reshape(6).copy())
             tracker2d, estimator_state = st["tracker2d"], st.get("estimator_state")
             sun = check_sun(st.get("sun"))   # None: unknown, or a state from before the sun
             front = st.get("front")   # None: no filtered front face yet, or an older state
@@ -1185,7 +1218,7 @@ class Track3D:
         self.bad_frames, self.held_frames, self._depth_avg = bad, held, depth_avg
         self._whole_box = whole_box
         self._depth_ratio = depth_ratio
-        self._carry_from = carry_from
+        self._carry_from, self._carry_box, self._carry_area = carry_from, carry_box, carry_area
         self.sun = sun
         self._front = front
         if self._views is not None:   # a state without views (an older one, or views off): they start over
