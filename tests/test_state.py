@@ -141,14 +141,17 @@ def test_a_lost_2d_tracker_with_depth_returns_in_its_last_box_is_held_not_lost()
     the last box says the body is there (held-out sets: 0 returns after an exit, 55 or more on
     14 of 21 false flags). With >= evidence_points returns the frame is held ("no_points",
     num_points the returns, boxes unchanged) and counts towards lost_after; fewer returns, 0
-    (off), or a tracker that does not judge its own loss: "lost" as before."""
+    (off), or a tracker that does not judge its own loss: "lost" as before. When the body's
+    outline there gives a measured 3D box (the outline on, `silhouette`), the body is in view and
+    measured: the frame is not a bad one, however long it lasts (300-frame calibration sets:
+    a body held at the border for 30 frames had turned "lost" while its 3D box followed it)."""
     from track3d.estimators import create_estimator
 
     img, pts, box = _frame(0)
     assert len(pts) > 200
     empty = np.zeros((0, 3), np.float32)
     judge = _SelfJudging()
-    t = Track3D(CAM, judge, create_estimator("baseline"), lost_after=3)
+    t = Track3D(CAM, judge, create_estimator("baseline"), lost_after=3, silhouette=0.0)
     t.init(img, box, 0, points=pts)
     first = t.update(img, pts)
     judge.lost = True
@@ -157,6 +160,15 @@ def test_a_lost_2d_tracker_with_depth_returns_in_its_last_box_is_held_not_lost()
     assert np.array_equal(held.box3d, first.box3d) and np.array_equal(held.box2d, first.box2d)
     assert [t.update(img, pts).status for _ in range(2)] == [NO_POINTS, LOST]    # 3 bad frames
     assert t.update(img, empty).status == LOST
+    judge = _SelfJudging()
+    t = Track3D(CAM, judge, create_estimator("baseline"), lost_after=3)          # the outline on
+    t.init(img, box, 0, points=pts)
+    first = t.update(img, pts)
+    judge.lost = True
+    measured = [t.update(img, pts) for _ in range(6)]
+    assert [r.status for r in measured] == [NO_POINTS] * 6 and measured[-1].held_frames == 6
+    np.testing.assert_allclose(measured[-1].box3d, first.box3d, atol=0.05)      # the body's box, measured
+    assert [t.update(img, empty).status for _ in range(1)] == [LOST]             # no returns: its word
     few = pts[:47]
     t = Track3D(CAM, _SelfJudging(), create_estimator("baseline"), lost_after=3)
     t.init(img, box, 0, points=pts)
