@@ -109,14 +109,16 @@ class _SelfJudging:
 def test_a_tracker_that_judges_its_loss_is_not_lost_for_want_of_points():
     """A body past a ToF camera's range gives an empty frustum while the 2D tracker follows it:
     the loop said "lost" after lost_after such frames (43 of 82 "lost" reports on held-out ToF
-    sequences). With a tracker that reports its own loss the frames stay "no_points" (3D held);
-    its own loss and dropped frames still make it lost; a tracker without the flag is unchanged."""
+    sequences). With a tracker that reports its own loss the frames stay "no_points" (3D held)
+    when the sensor's range can explain the empty frustum (the last box reaches 0.8 of it); its
+    own loss and dropped frames still make it lost; a tracker without the flag is unchanged."""
     from track3d.estimators import create_estimator
 
     img, pts, box = _frame(0)
     empty = np.zeros((0, 3), np.float32)
     judge = _SelfJudging()
-    t = Track3D(CAM, judge, create_estimator("baseline"), lost_after=3)
+    far = float(np.linalg.norm(pts, axis=1).max())
+    t = Track3D(CAM, judge, create_estimator("baseline"), lost_after=3, depth_range_m=far * 1.1)
     t.init(img, box, 0, points=pts)
     outs = [t.update(img, empty) for _ in range(8)]
     assert [o.status for o in outs] == [NO_POINTS] * 8 and outs[-1].held_frames == 8
@@ -134,6 +136,43 @@ def test_a_tracker_that_judges_its_loss_is_not_lost_for_want_of_points():
     t = Track3D(CAM, Plain(), create_estimator("baseline"), lost_after=3)
     t.init(img, box, 0, points=pts)
     assert [t.update(img, empty).status for _ in range(4)] == [NO_POINTS, NO_POINTS, LOST, LOST]
+
+
+def test_a_tracker_on_empty_space_is_lost_when_the_depth_range_cannot_explain_it():
+    """A 2D tracker that judges its own loss held a box on the sky for 9-12 frames after a body's
+    exit, and an empty frustum never made it lost. Without a depth range, or with the last box
+    well inside the range (its far side short of EMPTY_RANGE_SHARE of it), EMPTY_LOST_AFTER such
+    frames in a row are "lost"; with no 3D box yet and a range (a body past a ToF camera's range
+    from the start) they are not; a return in the frustum, or a new estimate, starts the count
+    over; the count survives a checkpoint."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import EMPTY_LOST_AFTER, EMPTY_RANGE_SHARE
+
+    class Judging(_SelfJudging):   # checkpointable
+        def get_state(self):
+            return {"box": self.box.tolist(), "lost": self.lost}
+
+        def set_state(self, st):
+            self.box, self.lost = np.asarray(st["box"], float), bool(st["lost"])
+
+    img, pts, box = _frame(0)
+    empty = np.zeros((0, 3), np.float32)
+    far = float(np.linalg.norm(pts, axis=1).max())
+    n = EMPTY_LOST_AFTER
+    for rng in (None, far / (0.9 * EMPTY_RANGE_SHARE)):        # no range; the box at 0.9 x 0.8 of it
+        t = Track3D(CAM, Judging(), create_estimator("baseline"), lost_after=10, depth_range_m=rng)
+        t.init(img, box, 0, points=pts)
+        assert t.update(img, pts).status == TRACKING
+        outs = [t.update(img, empty).status for _ in range(n + 1)]
+        assert outs == [NO_POINTS] * (n - 1) + [LOST, LOST]
+        assert t.update(img, pts).status == TRACKING                           # the count starts over
+        assert [t.update(img, empty).status for _ in range(n - 1)] == [NO_POINTS] * (n - 1)
+        t2 = Track3D(CAM, Judging(), create_estimator("baseline"), lost_after=10, depth_range_m=rng)
+        t2.set_state(json.loads(json.dumps(t.get_state())))
+        assert t2.update(img, empty).status == LOST
+    t = Track3D(CAM, Judging(), create_estimator("baseline"), lost_after=10, depth_range_m=far)
+    t.init(img, box, 0)                                                         # no 3D box yet
+    assert [t.update(img, empty).status for _ in range(n + 2)] == [NO_POINTS] * (n + 2)
 
 
 def test_a_lost_2d_tracker_with_depth_returns_in_its_last_box_is_held_not_lost():
