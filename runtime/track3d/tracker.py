@@ -628,8 +628,9 @@ class Track3D:
         self._whole_box: np.ndarray | None = None   # the reported box of the last whole view (6,)
         self._depth_ratio = float("nan")   # size z / mean(size x, y) of the last box within the depth range
         self._small_cap = False   # this frame's returns: a cap past the range smaller than CAP_FUSION_COVERAGE
-        # the last 2D box clear of the image border whose returns reached the range, and its 3D box
-        # (6,): what a body gone wholly past the range is carried from (range_cut.carry_box)
+        # the 2D box of the last estimate whose returns reached the range (not a sliver of the body at
+        # the image border: CARRY_SLIVER) and its 3D box (6,): what a body gone wholly past the range
+        # is carried from (range_cut.carry_box)
         self._carry_from: np.ndarray | None = None
         self._carry_box: np.ndarray | None = None
         self._carry_area = float("nan")   # area (px^2) of the last such 2D box clear of the image border
