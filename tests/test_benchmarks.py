@@ -159,6 +159,33 @@ def test_latency_record_names_the_tracker_that_ran(tmp_path):
     assert (rec["tracker"], rec["estimator"]) == (want["tracker"], want["estimator"])
 
 
+
+def test_memory_bench_plays_one_watch_back_and_forth_and_records_each_window(tmp_path, capsys):
+    """bench_memory: the frame order is a ping-pong (hand case), the run is one watch without a
+    restart, each window gives one reading, the statuses add up to the measured updates; an
+    unknown sequence is a one-line error."""
+    import itertools
+
+    import bench_memory
+
+    from track3d.synthetic import make_synthetic_dataset
+
+    assert list(itertools.islice(bench_memory.ping_pong(3), 8)) == [0, 1, 2, 1, 0, 1, 2, 1]
+    g = bench_memory.growth(np.array([0.0, 1e4, 2e4]), np.array([5.0, 6.0, 7.0]))
+    assert g["slope_per_10k_updates"] == pytest.approx(1.0) and g["last_minus_first"] == 2.0
+    data = make_synthetic_dataset(tmp_path / "d", {"a": 8})
+    out = tmp_path / "mem.json"
+    assert bench_memory.main(["--data", str(data), "--updates", "40", "--warmup", "5", "--every", "10",
+                              "--out", str(out)]) == 0
+    rec = json.loads(out.read_text())
+    assert rec["readings"]["updates"] == [0, 10, 20, 30, 40] and len(rec["readings"]["window_median_ms"]) == 4
+    assert sum(rec["statuses"].values()) == 40 and rec["config"]["frames"] == 8
+    assert rec["rss_mb"]["max"] >= rec["rss_mb"]["min"] > 0 and rec["state_kb"]["min"] > 0
+    capsys.readouterr()
+    assert bench_memory.main(["--data", str(data), "--sequence", "nope"]) == 2
+    assert "no sequence 'nope'" in capsys.readouterr().err
+
+
 def test_precision_verdicts_pass_only_on_every_split(tmp_path):
     """A variant measured on two splits is allowed only if its "<network> only" row passed on
     both; the verdict lands on every file of that network."""

@@ -391,3 +391,22 @@ def test_the_views_far_side_holds_when_the_returns_reach_the_range():
         assert box[2] - box[5] / 2.0 == pytest.approx(28.0)
         assert box[2] + box[5] / 2.0 == pytest.approx(want)
 
+
+
+def test_the_views_stay_bounded_over_a_long_watch():
+    """A spacecraft never restarts the loop: the ellipsoid turning for 720 frames (six turns),
+    every frame a key frame, adds 400 view points a frame (288,000 in all). The views keep at
+    most `max_points` of them and `carve_views` carving views, and the state the loop checkpoints
+    is no larger in the last 240 frames than in the 240 after the first turn."""
+    p = BodyViewsParams(every=1, max_points=2000, carve_views=6)
+    bv = BodyViews(CAM, p)
+    sizes = []
+    for k in range(720):
+        bv.update(*_ellipsoid_view(_rot_y(3.0 * k)))
+        assert len(bv._body) <= p.max_points and len(bv._carved) <= p.carve_views
+        if k >= 120:
+            st = bv.get_state()
+            sizes.append(sum(np.asarray(v).nbytes for g in [st["grid"], *[c["grid"] for c in st["carved"]]]
+                             if g is not None for v in g.values()) + st["body"].nbytes)
+    assert bv.restarts == 0 and bv.views > p.max_points // p.view_points   # the cap was reached, not avoided
+    assert max(sizes[-240:]) <= max(sizes[:240])

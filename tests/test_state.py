@@ -378,3 +378,36 @@ def test_the_loop_raises_a_self_judging_trackers_reacquisition_threshold():
     for bad in (0.0, 1.5, -1):
         with pytest.raises(ValueError, match="reacquire_threshold"):
             Track3D(CAM, Judging(0.6), est, reacquire_threshold=bad)
+
+
+
+
+def test_the_loop_state_stays_bounded_over_a_long_watch():
+    """The sphere moved back and forth for 600 updates without a restart (EdgeTrack, A3BoxNet and
+    the body's views): what the loop keeps is bounded by its parameters, not by the frames it has
+    seen. The checkpoint (`get_state`) outside the views keeps its size; the views hold at most
+    `max_points` body points, `carve_views` carving views and surface grids of at most `cells`
+    x `cells` cells. The loop tracked on every frame."""
+    from track3d.body_views import BodyViewsParams
+
+    p = BodyViewsParams()
+    t = _make("edgetrack", "a3boxnet", body_views=True)
+    frames = [_frame(k) for k in range(len(PATH))]
+    t.init(frames[0][0], frames[0][2], 0, points=frames[0][1])
+    order = list(range(1, len(PATH))) + list(range(len(PATH) - 2, -1, -1))
+    rest, statuses, most = set(), set(), 0
+    for k in range(600):
+        img, pts, _ = frames[order[k % len(order)]]
+        statuses.add(t.update(img, pts).status)
+        st = t.get_state()
+        bv = st.pop("body_views")
+        rest.add(len(json.dumps(st)))
+        body = t._views._body
+        grids = [g for g in [t._views._grid, *(g for g, _ in t._views._carved)] if g is not None]
+        assert len(body) <= p.max_points and bv["carved"] is not None and len(bv["carved"]) <= p.carve_views
+        assert all(g.valid.size <= p.cells * p.cells for g in grids)
+        most = max(most, len(body))
+    assert statuses == {TRACKING}
+    # the 2D tracker's and the loop's own state: a fixed layout (numbers printed to various lengths)
+    assert max(rest) - min(rest) < 100
+    assert most > p.view_points      # the views did fill (the bounds above were put to the test)
