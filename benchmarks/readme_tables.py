@@ -120,8 +120,10 @@ def engine_table(root: Path) -> str:
 
 
 def long_table(root: Path) -> str:
-    """The long watches (300 frames, ideal depth; long_watch/engine_baseline.json): the loop with
-    the body's past views (the default) and without them (runs named ...-noviews), AO_3d / ACE_3d (m)."""
+    """The long watches (300 frames; long_watch/engine_baseline.json): the loop with the body's
+    past views and without them, AO_3d / ACE_3d (m), the default in bold: the views for the range
+    sensors (their runs without are named ...-noviews), one view for stereo depth (its runs with
+    the views are named ...-views)."""
     now = {(r["sensor"], r["split"], r["protocol"], r["tracker"]): r
            for r in _load(root, "long_watch/engine_baseline.json")["rows"]}
 
@@ -131,10 +133,18 @@ def long_table(root: Path) -> str:
 
     rows = []
     for s, sp in sorted({(k[0], k[1]) for k in now}, key=lambda x: (ENGINE_SPLITS.index(x), x)):
-        rows.append([s, sp, pair((s, sp, "restart", "oracle+a3boxnet-noviews")),
+        if (s, sp, "onepass", "edgetrack+a3boxnet-views") in now:
+            # a sensor whose default is one view (stereo): its plain runs are the default, bold
+            cells = [f"**{pair((s, sp, 'restart', 'oracle+a3boxnet'))}**",
+                     pair((s, sp, "restart", "oracle+a3boxnet-views")),
+                     f"**{pair((s, sp, 'onepass', 'edgetrack+a3boxnet'))}**",
+                     pair((s, sp, "onepass", "edgetrack+a3boxnet-views"))]
+        else:
+            cells = [pair((s, sp, "restart", "oracle+a3boxnet-noviews")),
                      f"**{pair((s, sp, 'restart', 'oracle+a3boxnet'))}**",
                      pair((s, sp, "onepass", "edgetrack+a3boxnet-noviews")),
-                     f"**{pair((s, sp, 'onepass', 'edgetrack+a3boxnet'))}**",
+                     f"**{pair((s, sp, 'onepass', 'edgetrack+a3boxnet'))}**"]
+        rows.append([s, sp, *cells,
                      pair((s, sp, "onepass", "siamfc-edge+a3boxnet")), pair((s, sp, "onepass", "nano+a3boxnet"))])
     return markdown_table(["depth", "split", "A3BoxNet, oracle 2D: one view", "past views",
                            "Track3D default (EdgeTrack), one pass: one view", "past views",

@@ -126,6 +126,30 @@ def test_an_empty_readme_section_is_filled_and_the_next_one_kept():
     assert out.index(readme_tables.speed_table(readme_tables.REPO)) < out.index("kept prose")
 
 
+
+def test_the_long_table_bolds_each_sensors_default(tmp_path):
+    """The long-watch table: the range sensors' default keeps the views (their runs without are
+    ...-noviews), stereo's is one view (its runs with them are ...-views); each row bolds its
+    default and puts the views' runs under "past views"."""
+    import readme_tables
+
+    rows = []
+    for sensor, runs in (("ideal", {"": 0.9, "-noviews": 0.8}), ("stereo", {"": 0.7, "-views": 0.6})):
+        for tracker, proto in (("oracle+a3boxnet", "restart"), ("edgetrack+a3boxnet", "onepass")):
+            for suffix, ao in runs.items():
+                rows.append({"sensor": sensor, "split": "test", "protocol": proto, "tracker": tracker + suffix,
+                             "ao_3d": ao + (0.01 if proto == "onepass" else 0.0), "ace_3d": 0.5})
+    f = tmp_path / readme_tables.RESULTS / "long_watch" / "engine_baseline.json"
+    f.parent.mkdir(parents=True)
+    f.write_text(json.dumps({"rows": rows}))
+    lines = readme_tables.long_table(tmp_path).splitlines()
+    ideal = next(x for x in lines if x.startswith("| ideal"))
+    stereo = next(x for x in lines if x.startswith("| stereo"))
+    assert ideal.split(" | ")[2:6] == ["0.800 / 0.500", "**0.900 / 0.500**", "0.810 / 0.500", "**0.910 / 0.500**"]
+    assert stereo.split(" | ")[2:6] == ["**0.700 / 0.500**", "0.600 / 0.500", "**0.710 / 0.500**", "0.610 / 0.500"]
+    assert lines.index(ideal) < lines.index(stereo)
+
+
 @pytest.mark.skipif(not hasattr(__import__("os"), "sched_setaffinity"), reason="no CPU affinity here")
 def test_pin_threads_pins_every_thread_and_widens_again():
     import cv2

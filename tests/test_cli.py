@@ -115,6 +115,7 @@ def test_runtime_never_imports_the_simulator_or_torch():
     ("--edge-pad", "0.5", '"edge_pad": 0.5', "-1"),
     ("--front-quantile", "0.01", '"front_quantile": 0.01', "0.5"),
     ("--dark-side", "0.3", '"dark_side": 0.3', "-1"),
+    ("--fusion-cover", "0.2", '"fusion_cover": 0.2', "1.5"),
     ("--front-filter", "0.5,0.1", '"front_filter": [0.5, 0.1]', "0,0.1"),
     ("--silhouette", "0.25", '"silhouette": 0.25', "-1"),
 ])

@@ -484,3 +484,57 @@ def test_a_lost_tracker_with_returns_at_its_last_box_is_not_moved():
         t.init(image, [10, 10, 20, 20], points=pts)
         r = t.update(image, pts)
         assert r.status == LOST and t.tracker2d.corrected is None
+
+
+def test_a_sparse_cloud_moves_no_2d_box(tmp_path):
+    """A body mostly in shadow gives stereo depth only on a lit sliver (a README stereo long watch:
+    1,160 returns in a 557 x 383 px box). Its outline and its 3D box are a sliver's: shared into
+    the 2D box and fused, they shrank the box to the sliver, the 2D tracker was corrected onto it
+    and lost the body. With fewer returns than `fusion_cover` of the box's pixels the tracker's
+    box stands and is what the tracker is corrected with; a cloud over the whole body is fused as
+    before. The option is checked, recorded, and by sensor."""
+    from track3d.estimators import create_estimator
+    from track3d.evaluation import TrackerSpec
+    from track3d.tracker import Track3D, fusion_cover_for, sensor_options
+
+    box = [20.0, 20.0, 120.0, 80.0]                # the body's box: 9,600 px
+    sliver = np.zeros((120, 160), bool)
+    sliver[90:100, 100:140] = True                 # 400 px lit (4%), in the box's low right corner
+    whole = np.zeros((120, 160), bool)
+    whole[20:100, 20:140] = True
+    image = np.zeros((120, 160, 3), np.uint8)
+
+    def run(mask, cover):
+        Tracker = _losing(box)
+        Tracker.update = lambda self, image: (True, np.array(box))   # tracking, never lost
+        tr = Tracker()
+        t = Track3D(CAM, tr, create_estimator("baseline"), silhouette=0.0, outline_share=0.3,
+                    outline_contain=True, weight_3d=0.15, fusion_cover=cover)
+        pts = _cloud(mask)
+        t.init(image, box, points=pts)
+        r = t.update(image, pts)
+        return r, tr.corrected
+
+    shrunk, onto = run(sliver, 0.0)
+    kept, onto_kept = run(sliver, 0.05)
+    assert iou_2d(shrunk.box2d, box) < 0.8 and np.allclose(onto, shrunk.box2d)   # the failure
+    np.testing.assert_allclose(kept.box2d, box, atol=1e-9)
+    np.testing.assert_allclose(onto_kept, box, atol=1e-9)
+    np.testing.assert_array_equal(kept.box3d, shrunk.box3d)          # the 3D box is the cloud's either way
+    # a whole body's cloud (100% of the box) is fused alike with the rule on and off
+    a, _ = run(whole, 0.0)
+    b, _ = run(whole, 0.05)
+    np.testing.assert_array_equal(a.box2d, b.box2d)
+
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="fusion_cover must be in"):
+            Track3D(CAM, _answering(box)(), create_estimator("baseline"), fusion_cover=bad)
+    t = Track3D(CAM, _answering(box)(), create_estimator("baseline"), fusion_cover=0.05)
+    assert t.describe()["options"]["fusion_cover"] == 0.05
+    assert "fusion_cover" not in Track3D(CAM, _answering(box)(), create_estimator("baseline")).describe()["options"]
+    assert fusion_cover_for("ideal") == fusion_cover_for(None) == 0.0
+    assert sensor_options("stereo")["fusion_cover"] == fusion_cover_for("stereo")
+    from test_loop import _plain_and
+    _, tof = _plain_and(tmp_path, {"name": "tof", "max_range_m": 30.0})
+    assert TrackerSpec("oracle", "baseline").build(tof).fusion_cover == 0.0
+    assert TrackerSpec("oracle", "baseline", fusion_cover=0.2).build(tof).fusion_cover == 0.2

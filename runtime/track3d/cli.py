@@ -152,6 +152,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="with the outline off (--silhouette 0) and the sun's direction known (meta.json sun), the 2D "
                         "box reaches past the lit outline on the side away from the sun by K x a sphere's dark part "
                         "(0: off, the default for every sensor, track3d.tracker.dark_side_for; 0.1 was measured for stereo, docs/runtime.md)")
+    t.add_argument("--fusion-cover", type=bounded(float, 0, high=1), default=None, metavar="SHARE",
+                   help="when fewer than SHARE of the 2D box's pixels hold a return (stereo: a body mostly in "
+                        "shadow), neither the depth's outline nor the 3D box moves the 2D box (0: off; default by "
+                        "the depth sensor, track3d.tracker.fusion_cover_for)")
     t.add_argument("--no-sun", action="store_true",
                    help="ignore the sun's direction recorded with each sequence (meta.json sun.direction)")
     t.add_argument("--body-views", action=argparse.BooleanOptionalAction, default=None,
@@ -287,6 +291,8 @@ def _cmd_track(a) -> int:
         a.outline_share = stereo.get("outline_share")
     if a.depth == "stereo" and a.outline_contain is None:
         a.outline_contain = stereo.get("outline_contain")
+    if a.depth == "stereo" and a.fusion_cover is None:
+        a.fusion_cover = stereo.get("fusion_cover")
     if a.depth == "stereo" and a.body_views is None:
         a.body_views = stereo.get("body_views")
     views_opts = _options(a.body_views_option)
@@ -310,7 +316,7 @@ def _cmd_track(a) -> int:
                        hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad,
                        front_quantile=a.front_quantile, front_filter=a.front_filter, silhouette=a.silhouette,
                        outline_share=a.outline_share,
-                       outline_contain=a.outline_contain, dark_side=a.dark_side, sun=not a.no_sun,
+                       outline_contain=a.outline_contain, dark_side=a.dark_side, fusion_cover=a.fusion_cover, sun=not a.no_sun,
                        body_views=a.body_views,
                        frustum_margin=margin,
                        # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's
