@@ -538,3 +538,43 @@ def test_a_sparse_cloud_moves_no_2d_box(tmp_path):
     _, tof = _plain_and(tmp_path, {"name": "tof", "max_range_m": 30.0})
     assert TrackerSpec("oracle", "baseline").build(tof).fusion_cover == 0.0
     assert TrackerSpec("oracle", "baseline", fusion_cover=0.2).build(tof).fusion_cover == 0.2
+
+
+def test_a_lost_tracker_on_a_lit_body_is_held_and_measured_not_lost():
+    """Stereo (the outline is the lit part, `outline_contain`): EdgeTrack drifted off a half-lit
+    body and called it lost while 17,000 returns showed the body in its last box (a README stereo
+    long watch: 65 frames "lost"). Held frames whose 3D box is measured from the frustum of the
+    last box moved onto the lit outline are not bad frames: the status stays "no_points" past
+    `lost_after`, the 3D box follows the returns, the 2D box and the tracker stay where they
+    were; with no returns there the frames count again. Without containment (the old rule for a
+    cloud whose outline is not read) the same frames turn "lost" after `lost_after`."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import LOST, NO_POINTS, Track3D
+
+    box = [30.0, 30.0, 80.0, 60.0]
+    image = np.zeros((120, 160, 3), np.uint8)
+
+    def lit(dx):   # the lit half of the body: pixels x 30+dx..69+dx, y 30..89
+        m = np.zeros((120, 160), bool)
+        m[30:90, 30 + dx:70 + dx] = True
+        return _cloud(m)
+
+    def run(contain):
+        tr = _losing(box)()
+        tr.update = lambda image: (True, np.array(box))
+        t = Track3D(CAM, tr, create_estimator("baseline"), silhouette=0.0, outline_share=0.3,
+                    outline_contain=contain, weight_3d=0.15, lost_after=3)
+        t.init(image, box, points=lit(0))
+        t.update(image, lit(0))
+        tr.corrected = None
+        tr.update = lambda image: (tr.__setattr__("lost", True), (False, np.array(box)))[1]
+        return t, tr, [t.update(image, lit(k)) for k in range(1, 7)]
+
+    t, tr, held = run(True)
+    assert [r.status for r in held] == [NO_POINTS] * 6 and held[-1].held_frames == 6
+    assert held[-1].box3d[0] > held[0].box3d[0] + 0.04          # measured: it follows the lit part right
+    assert all(np.array_equal(r.box2d, held[0].box2d) for r in held) and tr.corrected is None
+    empty = np.zeros((0, 3), np.float32)
+    assert [t.update(image, empty).status for _ in range(3)][-1] == LOST
+    _, _, old = run(False)
+    assert [r.status for r in old] == [NO_POINTS, NO_POINTS, LOST, LOST, LOST, LOST]
