@@ -1226,14 +1226,7 @@ class Track3D:
                                                self.silhouette)
         if outline is None:
             return False
-        pts, bounds = self._frustum(self._region_cloud(outline, near, region, points), outline)
-        if reaches_range(bounds, outline, self.camera, self.depth_range_m):
-            return False
-        est = self._estimate(pts, bounds)
-        if est is None:
-            return False
-        self.box3d = self._report(est, self._measured(pts, bounds), outline)
-        return True
+        return self._measure_held(self._region_cloud(outline, near, region, points), outline)
 
     def _held_lit(self, points: np.ndarray) -> bool:
         """`_held_outline` where the outline is the lit part (stereo, `outline_contain`): the 3D
@@ -1242,14 +1235,19 @@ class Track3D:
         lit, _, _ = silhouette_box(points, self.box2d, self._M, self._size, self.z_range, SILHOUETTE)
         if lit is None:
             return False
-        seen = contain(self.box2d, past_border(lit, self.box2d, self._size), CONTAIN_SLACK_PX)
-        pts, bounds = self._frustum(points, seen)
-        if reaches_range(bounds, seen, self.camera, self.depth_range_m):
+        return self._measure_held(points, contain(self.box2d, past_border(lit, self.box2d, self._size),
+                                                  CONTAIN_SLACK_PX))
+
+    def _measure_held(self, cloud: np.ndarray, box: np.ndarray) -> bool:
+        """A held frame's 3D box from the frustum of `box` in `cloud`; False (the box held as it
+        was) when the returns reach the depth range or give no estimate."""
+        pts, bounds = self._frustum(cloud, box)
+        if reaches_range(bounds, box, self.camera, self.depth_range_m):
             return False
         est = self._estimate(pts, bounds)
         if est is None:
             return False
-        self.box3d = self._report(est, self._measured(pts, bounds), seen)
+        self.box3d = self._report(est, self._measured(pts, bounds), box)
         return True
 
     # --- checkpoints and self-description ------------------------------------------------------
