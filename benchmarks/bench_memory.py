@@ -13,7 +13,9 @@ records
   process; it includes the preloaded frames, which stay constant after loading);
 - the size of the loop's state (the bytes of `Track3D.get_state()` as JSON: everything the next
   update depends on, the body's past views included);
-- the window's median and p99 update time.
+- the window's median and p99 update time;
+- with --trim, the resident memory again after a garbage collection and glibc's malloc_trim:
+  memory the process still holds but no longer uses drops out of it.
 
 It reports the growth of each after warm-up (the last reading minus the first, and a least-squares
 slope per 10,000 updates), the windows' latency drift (last window's median over the first's), and
@@ -22,6 +24,7 @@ Writes JSON only with --out (nothing is written into the repository by default).
 """
 from __future__ import annotations
 
+import gc
 import json
 import os
 import resource
@@ -47,6 +50,23 @@ def resident_mb() -> float:
     except (OSError, ValueError, IndexError):
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         return peak / 2 ** 20 if sys.platform == "darwin" else peak / 2 ** 10
+
+
+def trim_heap() -> bool:
+    """Run a full garbage collection and hand the C heap's free pages back to the operating system
+    (glibc's malloc_trim); False where there is no glibc (only the collection ran)."""
+    import ctypes
+    import ctypes.util
+
+    gc.collect()
+    name = ctypes.util.find_library("c")
+    if name is None:
+        return False
+    try:
+        ctypes.CDLL(name).malloc_trim(0)
+    except (OSError, AttributeError):   # a C library without malloc_trim (not glibc)
+        return False
+    return True
 
 
 def ping_pong(n: int):
@@ -77,6 +97,10 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--warmup", type=bounded(int, 0), default=1000,
                     help="updates before the first reading (default 1000: the views fill up)")
     ap.add_argument("--every", type=bounded(int, 10), default=1000, help="updates between readings (default 1000)")
+    ap.add_argument("--trim", action="store_true",
+                    help="at each reading also collect garbage and return the C heap's free pages (glibc "
+                         "malloc_trim), then read the resident memory again: what the process holds but "
+                         "no longer uses")
     ap.add_argument("--cpu", type=int, default=None, help="pin every thread to this CPU (default: the lowest allowed)")
     ap.add_argument("--out", type=Path, help="write the JSON report here (default: print only)")
     return ap
@@ -112,7 +136,7 @@ def main(argv=None) -> int:
     order = ping_pong(len(frames))
     next(order)
     statuses = dict.fromkeys(STATUSES, 0)
-    at, rss, state_kb, win_med, win_p99 = [], [], [], [], []
+    at, rss, rss_trimmed, state_kb, win_med, win_p99 = [], [], [], [], [], []
     window: list[float] = []
     total = a.warmup + a.updates
     rss_loaded = resident_mb()
@@ -132,6 +156,9 @@ def main(argv=None) -> int:
             at.append(done - a.warmup)
             rss.append(resident_mb())
             state_kb.append(len(json.dumps(t3d.get_state())) / 1024)
+            if a.trim:
+                trim_heap()
+                rss_trimmed.append(resident_mb())
             print(f"\r{done - a.warmup}/{a.updates} updates: RSS {rss[-1]:.1f} MB, state {state_kb[-1]:.0f} kB",
                   end="", file=sys.stderr, flush=True)
     print(file=sys.stderr)
@@ -142,15 +169,16 @@ def main(argv=None) -> int:
         "config": {"tracker": t3d.describe()["tracker"], "estimator": t3d.describe()["estimator"],
                    "depth_sensor": sensor, "threads": 1, "data": Path(a.data).name, "split": a.split,
                    "sequence": seq.name, "frames": len(frames), "updates": a.updates, "warmup": a.warmup,
-                   "every": a.every},
+                   "every": a.every, "trim": a.trim},
         "rss_mb_after_loading": rss_loaded,
         "rss_mb": growth(x, np.asarray(rss)),
+        "rss_mb_after_trim": growth(x, np.asarray(rss_trimmed)) if rss_trimmed else None,
         "state_kb": growth(x, np.asarray(state_kb)),
         "window_median_ms": growth(x[1:], np.asarray(win_med)) if win_med else None,
         "window_p99_ms": growth(x[1:], np.asarray(win_p99)) if win_p99 else None,
         "latency_drift": win_med[-1] / win_med[0] if len(win_med) >= 2 else None,
         "statuses": statuses,
-        "readings": {"updates": at, "rss_mb": rss, "state_kb": state_kb, "window_median_ms": win_med,
+        "readings": {"updates": at, "rss_mb": rss, "rss_mb_after_trim": rss_trimmed, "state_kb": state_kb, "window_median_ms": win_med,
                      "window_p99_ms": win_p99},
     }
     r, s = report["rss_mb"], report["state_kb"]

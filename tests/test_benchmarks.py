@@ -200,8 +200,9 @@ def test_memory_bench_plays_one_watch_back_and_forth_and_records_each_window(tmp
     data = make_synthetic_dataset(tmp_path / "d", {"a": 8})
     out = tmp_path / "mem.json"
     assert bench_memory.main(["--data", str(data), "--updates", "40", "--warmup", "5", "--every", "10",
-                              "--out", str(out)]) == 0
+                              "--trim", "--out", str(out)]) == 0
     rec = json.loads(out.read_text())
+    assert len(rec["readings"]["rss_mb_after_trim"]) == 5 and rec["config"]["trim"] is True
     assert rec["readings"]["updates"] == [0, 10, 20, 30, 40] and len(rec["readings"]["window_median_ms"]) == 4
     assert sum(rec["statuses"].values()) == 40 and rec["config"]["frames"] == 8
     assert rec["rss_mb"]["max"] >= rec["rss_mb"]["min"] > 0 and rec["state_kb"]["min"] > 0
