@@ -157,3 +157,15 @@ def test_track_passes_outline_contain_to_the_loop_and_records_it(synth, tmp_path
     assert main(["track", "--data", str(synth), "--tracker", "mosse", "--estimator", "baseline", "--sequence", "a",
                  flag, "--results", str(res), "--video", "none", "--quiet"]) == 0
     assert json.dumps(read_run_record(res, "test", "mosse+baseline")).count(recorded) == 1
+
+
+@pytest.mark.parametrize("flags,recorded", [(["--outline-contain", "--texture-trim"], 1),
+                                            (["--outline-contain", "--no-texture-trim"], 0),
+                                            (["--outline-contain"], 0)])   # the synthetic set's sensor: off
+def test_track_passes_texture_trim_to_the_loop_and_records_it_when_on(synth, tmp_path, flags, recorded):
+    from track3d.evaluation.results import read_run_record
+
+    res = tmp_path / "res"
+    assert main(["track", "--data", str(synth), "--tracker", "mosse", "--estimator", "baseline", "--sequence", "a",
+                 *flags, "--results", str(res), "--video", "none", "--quiet"]) == 0
+    assert json.dumps(read_run_record(res, "test", "mosse+baseline")).count('"texture_trim": true') == recorded

@@ -144,6 +144,10 @@ def _parser() -> argparse.ArgumentParser:
                         "the outline before the frustum and the fusion, and with no returns near it go to the body "
                         "the whole view's depth shows (default by the depth sensor, "
                         "track3d.tracker.outline_contain_for: on for stereo, off for the others)")
+    t.add_argument("--texture-trim", action=argparse.BooleanOptionalAction, default=None,
+                   help="with the box moved to hold the outline (--outline-contain), pull its sides in off image "
+                        "texture the depth did not match (stereo: a moon or a star field behind the body; default by "
+                        "the depth sensor, track3d.tracker.texture_trim_for: on for stereo, off for the others)")
     t.add_argument("--front-filter", type=_front_filter, default=None, metavar="ALPHA,BETA|off",
                    help="follow the 3D box's front face over frames with an alpha-beta filter, e.g. 0.8,0.2 "
                         "(0 < ALPHA <= 1, 0 <= BETA <= 1; off: none; default by the depth sensor, "
@@ -291,6 +295,8 @@ def _cmd_track(a) -> int:
         a.outline_share = stereo.get("outline_share")
     if a.depth == "stereo" and a.outline_contain is None:
         a.outline_contain = stereo.get("outline_contain")
+    if a.depth == "stereo" and a.texture_trim is None:
+        a.texture_trim = stereo.get("texture_trim")
     if a.depth == "stereo" and a.fusion_cover is None:
         a.fusion_cover = stereo.get("fusion_cover")
     if a.depth == "stereo" and a.body_views is None:
@@ -316,7 +322,7 @@ def _cmd_track(a) -> int:
                        hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad,
                        front_quantile=a.front_quantile, front_filter=a.front_filter, silhouette=a.silhouette,
                        outline_share=a.outline_share,
-                       outline_contain=a.outline_contain, dark_side=a.dark_side, fusion_cover=a.fusion_cover, sun=not a.no_sun,
+                       outline_contain=a.outline_contain, texture_trim=a.texture_trim, dark_side=a.dark_side, fusion_cover=a.fusion_cover, sun=not a.no_sun,
                        body_views=a.body_views,
                        frustum_margin=margin,
                        # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's

@@ -58,6 +58,7 @@ from .fusion import WEIGHT_2D, WEIGHT_3D, fuse, fuse_section
 from .range_cut import (CAP_FUSION_COVERAGE, DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_from_view, carry_box,
                         deepen_to_view, lateral_coverage, reaches_range)
 from .trackers2d import Tracker2D, create_tracker
+from .unmatched_texture import trim_unmatched
 
 __all__ = ["Track3D", "TrackResult", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES", "MIN_POINTS",
            "FRUSTUM_MARGIN", "frustum_margin_for", "fusion_weight_for", "section_weight_for", "measured_faces_for",
@@ -475,6 +476,26 @@ def outline_contain_for(depth_sensor: str | None) -> bool:
     return SENSOR_OUTLINE_CONTAIN.get(_sensor_key(depth_sensor), False)
 
 
+# With containment on, the contained box's sides that reach past the lit outline onto texture the
+# depth did not match are pulled in to it (`track3d.unmatched_texture`): stereo matches any near
+# textured surface, so that texture is farther (a moon or a planet's limb behind the body, a dense
+# star field), not the body. EdgeTrack spread its box over a textured moon half behind a held-out
+# body (stereo seed 43, 300 frames: IoU_2d 0.93 -> 0.75 over frames 200-300). Stereo calibration
+# sets with images (60-frame seeds 3, 9 and 21 and the 300-frame seed 43; 12 + 12 sequences each),
+# EdgeTrack one pass, AO_3d pooled over the 96 sequences 0.7072 -> 0.7092; up by more than 0.005
+# on 9 (distant moons +0.005 to +0.047, galaxy bands +0.019 and +0.051), none down by more than
+# 0.002. Measured by brightness instead of texture, a body in sun glare lost its dark side and a
+# fast body leaving the view was lost (-0.35); without the guard for dark bodies (MATCH_COVER)
+# their own unmatched texture pulled their boxes in; without the right camera's blind band a near
+# body at the left border lost 40 px (-0.009, two sequences).
+SENSOR_TEXTURE_TRIM = {"stereo": True}
+
+
+def texture_trim_for(depth_sensor: str | None) -> bool:
+    """Whether a contained box is pulled in off texture the depth did not match, for this sensor."""
+    return SENSOR_TEXTURE_TRIM.get(_sensor_key(depth_sensor), False)
+
+
 # The body's past views in a body-fixed frame (track3d.body_views): the back face held at least
 # as far as the farthest point a past view saw, the pose registered from the depth alone every
 # third frame. Chosen on a 300-frame set (seed 11, held-out shapes, oracle 2D boxes, ideal depth;
@@ -516,14 +537,14 @@ def body_views_for(depth_sensor: str | None) -> bool:
 def sensor_options(depth_sensor: str | None) -> dict:
     """Track3D's options chosen by the depth sensor (None: unknown): frustum_margin, weight_3d,
     weight_2d, measured_faces, edge_pad, front_quantile, front_filter, silhouette, outline_share,
-    outline_contain, dark_side, fusion_cover, body_views (the thirteen tables above)."""
+    outline_contain, texture_trim, dark_side, fusion_cover, body_views (the fourteen tables above)."""
     return {"frustum_margin": frustum_margin_for(depth_sensor), "weight_3d": fusion_weight_for(depth_sensor),
             "weight_2d": section_weight_for(depth_sensor), "measured_faces": measured_faces_for(depth_sensor),
             "edge_pad": edge_pad_for(depth_sensor), "front_quantile": front_quantile_for(depth_sensor),
             "front_filter": front_filter_for(depth_sensor),
             "silhouette": silhouette_for(depth_sensor),
             "outline_share": outline_share_for(depth_sensor), "outline_contain": outline_contain_for(depth_sensor),
-            "dark_side": dark_side_for(depth_sensor), "fusion_cover": fusion_cover_for(depth_sensor),
+            "texture_trim": texture_trim_for(depth_sensor), "dark_side": dark_side_for(depth_sensor), "fusion_cover": fusion_cover_for(depth_sensor),
             "body_views": body_views_for(depth_sensor)}
 STATE_VERSION = 1
 
@@ -594,7 +615,7 @@ class Track3D:
                  edge_pad: float = EDGE_PAD, front_quantile: float = FRONT_QUANTILE,
                  front_filter: tuple[float, float] | None = FRONT_FILTER,
                  silhouette: float = SILHOUETTE, outline_share: float = OUTLINE_SHARE, outline_contain: bool = False,
-                 dark_side: float = DARK_SIDE, fusion_cover: float = FUSION_COVER,
+                 dark_side: float = DARK_SIDE, fusion_cover: float = FUSION_COVER, texture_trim: bool = False,
                  body_views: bool | BodyViewsParams = BODY_VIEWS):
         if not isinstance(camera, Camera):
             raise TypeError(f"camera must be a track3d.Camera, got {type(camera).__name__}")
@@ -659,6 +680,9 @@ class Track3D:
         if not isinstance(outline_contain, (bool, np.bool_)):
             raise ValueError(f"outline_contain must be True or False, got {outline_contain!r}")
         self.outline_contain = bool(outline_contain)
+        if not isinstance(texture_trim, (bool, np.bool_)):
+            raise ValueError(f"texture_trim must be True or False, got {texture_trim!r}")
+        self.texture_trim = bool(texture_trim)
         if not (np.isfinite(float(dark_side)) and 0.0 <= float(dark_side) <= 2.0):
             raise ValueError(f"dark_side must be in [0, 2] (0: off), got {dark_side}")
         self.dark_side = float(dark_side)
@@ -737,7 +761,7 @@ class Track3D:
         min_points, lost_after, min_score, frustum_margin, depth_range_m, weight_2d, measured_faces,
         depth_smoothing, evidence_points, reacquire_threshold, hold_cut_size, edge_pad, front_quantile,
         front_filter, silhouette,
-        outline_share, outline_contain, dark_side, fusion_cover, body_views)."""
+        outline_share, outline_contain, texture_trim, dark_side, fusion_cover, body_views)."""
         t = cls(camera, create_tracker(tracker, **(tracker_options or {})),
                 create_estimator(estimator, **(estimator_options or {})), **options)
         t.tracker_name, t.estimator_name = str(tracker).lower(), str(estimator).lower()
@@ -1053,7 +1077,7 @@ class Track3D:
                 if status == NO_POINTS and self.silhouette > 0.0 and not callable(points):
                     measured = self._held_outline(points)
                 elif status == NO_POINTS and self.outline_contain and not callable(points):
-                    measured = self._held_lit(points)
+                    measured = self._held_lit(points, image)
                 ms["frustum"] = (time.perf_counter() - t0) * 1e3 - ms["track2d"]
             body = self._whole_body(points, n if asked else None) if status == LOST else None
             if body is None:
@@ -1082,11 +1106,11 @@ class Track3D:
         seen, cloud = raw, points
         cut = None   # (frustum points, bounds) of `seen`, when already cut
         if wants_lit and not callable(points):
-            lit, _, _ = silhouette_box(points, raw, self._M, self._size, self.z_range, SILHOUETTE)
+            lit, near, _ = silhouette_box(points, raw, self._M, self._size, self.z_range, SILHOUETTE)
             if lit is not None:
                 lit = past_border(lit, raw, self._size)
                 if self.outline_contain:
-                    seen = contain(raw, lit, CONTAIN_SLACK_PX)
+                    seen = self._contain(raw, lit, near, image)
                 if self.dark_side > 0.0 and self.sun is not None:
                     dark = dark_side_box(lit, self.sun, self.camera, self.dark_side)
                     seen = reach_dark_side(seen, dark, self.sun, self.camera)
@@ -1228,15 +1252,27 @@ class Track3D:
             return False
         return self._measure_held(self._region_cloud(outline, near, region, points), outline)
 
-    def _held_lit(self, points: np.ndarray) -> bool:
+    def _held_lit(self, points: np.ndarray, image: np.ndarray) -> bool:
         """`_held_outline` where the outline is the lit part (stereo, `outline_contain`): the 3D
         box from the frustum of the last box moved to hold the lit outline there; True when it was
         measured. The 2D box and the tracker stay as they were."""
-        lit, _, _ = silhouette_box(points, self.box2d, self._M, self._size, self.z_range, SILHOUETTE)
+        lit, near, _ = silhouette_box(points, self.box2d, self._M, self._size, self.z_range, SILHOUETTE)
         if lit is None:
             return False
-        return self._measure_held(points, contain(self.box2d, past_border(lit, self.box2d, self._size),
-                                                  CONTAIN_SLACK_PX))
+        return self._measure_held(points, self._contain(self.box2d, past_border(lit, self.box2d, self._size),
+                                                        near, image))
+
+    def _contain(self, box: np.ndarray, lit: np.ndarray, near: np.ndarray, image: np.ndarray) -> np.ndarray:
+        """`box` moved to hold the lit outline `lit` (`silhouette.contain`), then, with
+        `texture_trim`, pulled in off texture the returns `near` (the outline's) did not match
+        (`unmatched_texture.trim_unmatched`; the right camera's blind band at the left border
+        from the nearest return's disparity)."""
+        box = contain(box, lit, CONTAIN_SLACK_PX)
+        if not self.texture_trim or not len(near):
+            return box
+        z = float(near[:, 2].min())
+        blind = self.camera.fx * self.camera.baseline_m / z if z > 0.0 else float(self._size[0])
+        return trim_unmatched(box, lit, image, len(near), blind)
 
     def _measure_held(self, cloud: np.ndarray, box: np.ndarray) -> bool:
         """A held frame's 3D box from the frustum of `box` in `cloud`; False (the box held as it
@@ -1383,6 +1419,7 @@ class Track3D:
                         **({"front_filter": list(self.front_filter)} if self.front_filter is not None else {}),
                         "silhouette": self.silhouette, "outline_share": self.outline_share,
                         "outline_contain": self.outline_contain,
+                        **({"texture_trim": True} if self.texture_trim else {}),
                         # only when on: the records of runs without it stay as they were
                         **({"dark_side": self.dark_side} if self.dark_side > 0.0 else {}),
                         **({"fusion_cover": self.fusion_cover} if self.fusion_cover > 0.0 else {}),
