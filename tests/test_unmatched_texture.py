@@ -116,3 +116,43 @@ def test_the_loop_pulls_a_stereo_box_off_a_moon_and_records_the_option(tmp_path)
     _, tof = _plain_and(tmp_path, {"name": "tof", "max_range_m": 30.0})
     assert TrackerSpec("oracle", "baseline").build(tof).texture_trim is False
     assert TrackerSpec("oracle", "baseline", texture_trim=True).build(tof).texture_trim is True
+
+
+def test_a_trimmed_box_stays_within_the_box_and_holds_the_outline():
+    """Any image, box and outline (seeded draws, boxes often past the image border): the answer
+    is finite, inside the box, and still holds the outline shrunk by the slack."""
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        img = rng.integers(0, 256, size=(int(rng.integers(8, 90)), int(rng.integers(8, 90)), 3)).astype(np.uint8)
+        if rng.random() < 0.5:
+            img[:, : img.shape[1] // 2] = 0          # half dark
+        H, W = img.shape[:2]
+        lit = np.array([rng.uniform(-20, W), rng.uniform(-20, H), rng.uniform(1, W), rng.uniform(1, H)])
+        grow = rng.uniform(0, 30, size=4)
+        box = lit + [-grow[0], -grow[1], grow[0] + grow[2], grow[1] + grow[3]]
+        out = trim_unmatched(box, lit, img, returns=int(rng.integers(0, 5000)), blind_px=float(rng.uniform(0, 20)))
+        assert out.shape == (4,) and np.all(np.isfinite(out))
+        assert out[0] >= box[0] and out[1] >= box[1]
+        assert out[0] + out[2] <= box[0] + box[2] + 1e-9 and out[1] + out[3] <= box[1] + box[3] + 1e-9
+        assert out[0] <= lit[0] - 2.0 + 1e-9 or out[0] == box[0]
+        assert out[1] <= lit[1] - 2.0 + 1e-9 or out[1] == box[1]
+        right, bottom = out[0] + out[2], out[1] + out[3]
+        assert right >= lit[0] + lit[2] + 2.0 - 1e-9 or right == box[0] + box[2]
+        assert bottom >= lit[1] + lit[3] + 2.0 - 1e-9 or bottom == box[1] + box[3]
+
+
+def test_an_axis_left_as_it_was_keeps_its_numbers():
+    """x + w - x is not always w in floats: a box the rule leaves alone on an axis comes back
+    with that axis's very numbers ((9.75311907905558 + 54.69118559223883) - 9.75311907905558 is
+    not 54.69118559223883)."""
+    x, w = 9.75311907905558, 54.69118559223883
+    assert (x + w) - x != w
+    rng = np.random.default_rng(1)
+    img = np.zeros((100, 100, 3), np.uint8)
+    img[20:50, 20:50] = _texture(rng, (30, 30, 1))
+    lit = np.array([20.0, 20.0, 30.0, 30.0])
+    box = np.array([x, x, w, w])                   # past the outline on every side, over dark sky
+    np.testing.assert_array_equal(trim_unmatched(box, lit, img, returns=900), box)
+    img[10:60, 55:70] = _texture(rng, (50, 15, 1))  # a moon right of the body: only x moves
+    out = trim_unmatched(box, lit, img, returns=900)
+    assert out[0] == x and out[0] + out[2] == 53.0 and out[1] == x and out[3] == w

@@ -106,4 +106,9 @@ def trim_unmatched(box: np.ndarray, lit: np.ndarray, image: np.ndarray, returns:
         k0 = _first(rows[s:e], TEXTURE_SHARE) if e > s else None
         if k0 is not None:
             y1 = float(ry0 + s + k0)
-    return np.array([x0, y0, x1 - x0, y1 - y0])
+    out = b.copy()   # an axis left as it was keeps its numbers (x + w - x need not give w back)
+    if (x0, x1) != (b[0], b[0] + b[2]):
+        out[0], out[2] = x0, x1 - x0
+    if (y0, y1) != (b[1], b[1] + b[3]):
+        out[1], out[3] = y0, y1 - y0
+    return out
