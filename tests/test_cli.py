@@ -169,3 +169,13 @@ def test_track_passes_texture_trim_to_the_loop_and_records_it_when_on(synth, tmp
     assert main(["track", "--data", str(synth), "--tracker", "mosse", "--estimator", "baseline", "--sequence", "a",
                  *flags, "--results", str(res), "--video", "none", "--quiet"]) == 0
     assert json.dumps(read_run_record(res, "test", "mosse+baseline")).count('"texture_trim": true') == recorded
+
+
+@pytest.mark.parametrize("flag,recorded", [("--resume-outline", 1), ("--no-resume-outline", 0)])
+def test_track_passes_resume_outline_to_the_loop_and_records_it_when_on(synth, tmp_path, flag, recorded):
+    from track3d.evaluation.results import read_run_record
+
+    res = tmp_path / "res"
+    assert main(["track", "--data", str(synth), "--tracker", "mosse", "--estimator", "baseline", "--sequence", "a",
+                 flag, "--results", str(res), "--video", "none", "--quiet"]) == 0
+    assert json.dumps(read_run_record(res, "test", "mosse+baseline")).count('"resume_outline": true') == recorded

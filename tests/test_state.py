@@ -411,3 +411,52 @@ def test_the_loop_state_stays_bounded_over_a_long_watch():
     # the 2D tracker's and the loop's own state: a fixed layout (numbers printed to various lengths)
     assert max(rest) - min(rest) < 100
     assert most > p.view_points      # the views did fill (the bounds above were put to the test)
+
+
+def test_a_lost_tracker_goes_on_from_the_outline_of_a_body_in_view():
+    """EdgeTrack called a large body lost for 55 frames while the flash LiDAR's outline followed it
+    (a 300-frame calibration sequence: the held 2D box fell to IoU_2d 0.44). With
+    `resume_outline` the loop goes on from the outline at the last box as from the tracker's box:
+    the frame is tracked, the box is the body's and the tracker is corrected onto it. An outline
+    smaller than RESUME_SHARE of the last box (a sliver at the border) is held as before, and so
+    is every frame with the option off (its default; on for ideal and flash-LiDAR depth)."""
+    from track3d.estimators import create_estimator
+    from track3d.boxes import iou_2d
+    from track3d.tracker import RESUME_SHARE, resume_outline_for, sensor_options
+
+    class Judge(_SelfJudging):
+        corrected = None
+
+        def correct(self, box):
+            self.corrected = np.asarray(box, float)
+
+    img, pts, box = _frame(0)
+    for on in (False, True):
+        judge = Judge()
+        t = Track3D(CAM, judge, create_estimator("baseline"), lost_after=3, resume_outline=on)
+        t.init(img, box, 0, points=pts)
+        first = t.update(img, pts)
+        judge.lost, judge.corrected = True, None
+        out = [t.update(img, pts) for _ in range(4)]
+        if on:
+            assert [r.status for r in out] == [TRACKING] * 4 and out[-1].held_frames == 0
+            assert iou_2d(out[-1].box2d, first.box2d) > 0.95 and judge.corrected is not None
+            np.testing.assert_allclose(out[-1].box3d, first.box3d, atol=0.05)
+        else:
+            assert [r.status for r in out] == [NO_POINTS] * 4 and judge.corrected is None
+    # the last box four times the body's area: its outline is a sliver of it, held
+    judge = Judge()
+    t = Track3D(CAM, judge, create_estimator("baseline"), lost_after=3, resume_outline=True)
+    big = np.array([box[0] - box[2] / 2, box[1] - box[3] / 2, 2 * box[2], 2 * box[3]])
+    assert RESUME_SHARE > 0.25
+    t.init(img, big, 0, points=pts)
+    judge.lost = True
+    r = t.update(img, pts)
+    assert r.status == NO_POINTS and judge.corrected is None and np.array_equal(r.box2d, t.box2d)
+    assert resume_outline_for("ideal") and resume_outline_for("flash-lidar")
+    assert not resume_outline_for("tof") and not resume_outline_for("stereo") and not resume_outline_for(None)
+    assert sensor_options("ideal")["resume_outline"] is True
+    assert Track3D(CAM, Judge(), create_estimator("baseline"), resume_outline=True).describe()["options"]["resume_outline"]
+    assert "resume_outline" not in Track3D(CAM, Judge(), create_estimator("baseline")).describe()["options"]
+    with pytest.raises(ValueError, match="resume_outline must be True or False"):
+        Track3D(CAM, Judge(), create_estimator("baseline"), resume_outline=1)

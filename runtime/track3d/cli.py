@@ -148,6 +148,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="with the box moved to hold the outline (--outline-contain), pull its sides in off image "
                         "texture the depth did not match (stereo: a moon or a star field behind the body; default by "
                         "the depth sensor, track3d.tracker.texture_trim_for: on for stereo, off for the others)")
+    t.add_argument("--resume-outline", action=argparse.BooleanOptionalAction, default=None,
+                   help="when a 2D tracker that judges its loss (EdgeTrack) calls a frame lost while the depth's "
+                        "outline at its last box holds the body in view, go on from the outline (default by the "
+                        "depth sensor, track3d.tracker.resume_outline_for: on for ideal and flash-LiDAR depth)")
     t.add_argument("--front-filter", type=_front_filter, default=None, metavar="ALPHA,BETA|off",
                    help="follow the 3D box's front face over frames with an alpha-beta filter, e.g. 0.8,0.2 "
                         "(0 < ALPHA <= 1, 0 <= BETA <= 1; off: none; default by the depth sensor, "
@@ -322,7 +326,7 @@ def _cmd_track(a) -> int:
                        hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad,
                        front_quantile=a.front_quantile, front_filter=a.front_filter, silhouette=a.silhouette,
                        outline_share=a.outline_share,
-                       outline_contain=a.outline_contain, texture_trim=a.texture_trim, dark_side=a.dark_side, fusion_cover=a.fusion_cover, sun=not a.no_sun,
+                       outline_contain=a.outline_contain, texture_trim=a.texture_trim, resume_outline=a.resume_outline, dark_side=a.dark_side, fusion_cover=a.fusion_cover, sun=not a.no_sun,
                        body_views=a.body_views,
                        frustum_margin=margin,
                        # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's

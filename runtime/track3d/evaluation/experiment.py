@@ -74,6 +74,7 @@ class TrackerSpec:
     outline_share: float | None = None       # None: by the sequence's depth sensor (outline_share_for)
     outline_contain: bool | None = None      # None: by the sequence's depth sensor (outline_contain_for)
     texture_trim: bool | None = None         # None: by the sequence's depth sensor (texture_trim_for)
+    resume_outline: bool | None = None       # None: by the sequence's depth sensor (resume_outline_for)
     dark_side: float | None = None           # None: by the sequence's depth sensor (dark_side_for)
     fusion_cover: float | None = None        # None: by the sequence's depth sensor (fusion_cover_for)
     sun: bool = True                         # the sequence's sun direction (Sequence.sun_direction) to Track3D
