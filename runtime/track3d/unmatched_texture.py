@@ -40,6 +40,23 @@ def _first(profile: np.ndarray, share: float) -> int | None:
     return int(hit[0]) if len(hit) else None
 
 
+def _low_side(profile: np.ndarray, origin: int, edge: float, side: float) -> float:
+    """A low side (left, top) at `side` pulled in: `profile` (per column or row from `origin`)
+    scanned from the one before `edge` (the outline's side less the slack) down to `side`; the
+    side moves to just past the first entry at TEXTURE_SHARE or more, else stays."""
+    s, e = min(int(np.floor(edge)) - origin, len(profile)), max(int(np.floor(side)) - origin, 0)
+    k = _first(profile[e:s][::-1], TEXTURE_SHARE) if s > e else None
+    return side if k is None else float(origin + s - k)
+
+
+def _high_side(profile: np.ndarray, origin: int, edge: float, side: float) -> float:
+    """A high side (right, bottom) at `side` pulled in: scanned from `edge` up to `side`; the side
+    moves to the first entry at TEXTURE_SHARE or more, else stays."""
+    s, e = max(int(np.ceil(edge)) - origin, 0), min(int(np.ceil(side)) - origin, len(profile))
+    k = _first(profile[s:e], TEXTURE_SHARE) if e > s else None
+    return side if k is None else float(origin + s + k)
+
+
 def trim_unmatched(box: np.ndarray, lit: np.ndarray, image: np.ndarray, returns: int,
                    blind_px: float = 0.0, slack: float = 2.0) -> np.ndarray:
     """The 2D box (4,) float64 [x, y, w, h] with each side that reaches past the stereo outline
@@ -83,29 +100,13 @@ def trim_unmatched(box: np.ndarray, lit: np.ndarray, image: np.ndarray, returns:
     if blind > 0:
         cols[:blind] = 0.0
     if reach[0]:   # left: from the outline's left edge (less the slack) outwards
-        s, e = int(np.floor(lx0 - slack)) - rx0, int(np.floor(x0)) - rx0
-        s, e = min(s, len(cols)), max(e, 0)
-        k0 = _first(cols[e:s][::-1], TEXTURE_SHARE) if s > e else None
-        if k0 is not None:
-            x0 = float(rx0 + s - k0)
+        x0 = _low_side(cols, rx0, lx0 - slack, x0)
     if reach[2]:   # right
-        s, e = int(np.ceil(lx1 + slack)) - rx0, int(np.ceil(x1)) - rx0
-        s, e = max(s, 0), min(e, len(cols))
-        k0 = _first(cols[s:e], TEXTURE_SHARE) if e > s else None
-        if k0 is not None:
-            x1 = float(rx0 + s + k0)
+        x1 = _high_side(cols, rx0, lx1 + slack, x1)
     if reach[1]:   # top
-        s, e = int(np.floor(ly0 - slack)) - ry0, int(np.floor(y0)) - ry0
-        s, e = min(s, len(rows)), max(e, 0)
-        k0 = _first(rows[e:s][::-1], TEXTURE_SHARE) if s > e else None
-        if k0 is not None:
-            y0 = float(ry0 + s - k0)
+        y0 = _low_side(rows, ry0, ly0 - slack, y0)
     if reach[3]:   # bottom
-        s, e = int(np.ceil(ly1 + slack)) - ry0, int(np.ceil(y1)) - ry0
-        s, e = max(s, 0), min(e, len(rows))
-        k0 = _first(rows[s:e], TEXTURE_SHARE) if e > s else None
-        if k0 is not None:
-            y1 = float(ry0 + s + k0)
+        y1 = _high_side(rows, ry0, ly1 + slack, y1)
     out = b.copy()   # an axis left as it was keeps its numbers (x + w - x need not give w back)
     if (x0, x1) != (b[0], b[0] + b[2]):
         out[0], out[2] = x0, x1 - x0
