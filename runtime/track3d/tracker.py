@@ -1108,8 +1108,10 @@ class Track3D:
                 n, asked = int(len(self._frustum(points, self.box2d.copy())[0])), True
                 status = NO_POINTS if n >= self.evidence_points else LOST
                 if status == NO_POINTS and self.silhouette > 0.0 and not callable(points):
-                    whole = self._resumed_outline(points) if self.resume_outline else None
-                    measured = whole is None and self._held_outline(points)
+                    # the returns' outline at the last box, read once for both rules
+                    sil = silhouette_box(points, self.box2d, self._M, self._size, self.z_range, self.silhouette)
+                    whole = self._resumed_outline(points, sil[0]) if self.resume_outline else None
+                    measured = whole is None and self._held_outline(points, sil)
                 elif status == NO_POINTS and self.outline_contain and not callable(points):
                     measured = self._held_lit(points, image)
                 ms["frustum"] = (time.perf_counter() - t0) * 1e3 - ms["track2d"]
@@ -1253,14 +1255,13 @@ class Track3D:
             return None
         return b
 
-    def _resumed_outline(self, points: np.ndarray) -> np.ndarray | None:
+    def _resumed_outline(self, points: np.ndarray, outline: np.ndarray | None) -> np.ndarray | None:
         """For a frame the 2D tracker calls lost while the depth holds the body at its last box
         (`resume_outline`): the returns' outline there when it holds at least RESUME_SHARE of the
         last box's area in the image, is not cut by the image border on one side only and its
         returns do not reach the sensor's range (the body in view, not a sliver at the border, a
         body coming in or a cap); the loop goes on from it as from the tracker's box. None: the
-        frame is held (`_held_outline`)."""
-        outline, _, _ = silhouette_box(points, self.box2d, self._M, self._size, self.z_range, self.silhouette)
+        frame is held (`_held_outline`). `outline`: silhouette_box's at the last box."""
         if outline is None:
             return None
         W, H = self._size
@@ -1297,13 +1298,13 @@ class Track3D:
             return near
         return points
 
-    def _held_outline(self, points: np.ndarray) -> bool:
+    def _held_outline(self, points: np.ndarray, sil: tuple) -> bool:
         """A frame the 2D tracker calls lost while the depth holds the body at its last box (a
         sliver at the image border): the 3D box from the returns' outline there; True when it was
         measured. The 2D box and the tracker stay as they were: corrected onto a sliver, the
-        tracker did not re-acquire the body when it came back whole."""
-        outline, near, region = silhouette_box(points, self.box2d, self._M, self._size, self.z_range,
-                                               self.silhouette)
+        tracker did not re-acquire the body when it came back whole. `sil`: silhouette_box's
+        (outline, search points, search region) at the last box."""
+        outline, near, region = sil
         if outline is None:
             return False
         return self._measure_held(self._region_cloud(outline, near, region, points), outline)
