@@ -92,6 +92,9 @@ def test_resume_refuses_other_settings(tmp_path):
     (["--fov", "200"], "field of view"),
     (["--train", "0", "--test", "0"], "train/test"),
     (["--seed", "-3"], "seed"),
+    (["--sun-phase", "120:100"], "sun phase"),
+    (["--sun-phase", "10:175"], "sun phase"),
+    (["--sun-phase", "-5:20"], "sun phase"),
 ])
 def test_bad_arguments_give_clear_errors(tmp_path, capsys, argv, needle):
     out = tmp_path / "bad"
@@ -103,12 +106,38 @@ def test_bad_arguments_give_clear_errors(tmp_path, capsys, argv, needle):
 
 def test_argparse_errors(capsys):
     for argv in (["generate", "--preset", "huge", "--out", "x"], ["generate", "--resolution", "abc", "--out", "x"],
-                 ["generate"]):
+                 ["generate"], ["generate", "--sun-phase", "90", "--out", "x"]):
         with pytest.raises(SystemExit) as e:
             main(argv)
         assert e.value.code == 2
     err = capsys.readouterr().err
-    assert "huge" in err and "resolution" in err and "--out" in err
+    assert "huge" in err and "resolution" in err and "--out" in err and "100:150" in err
+
+
+def test_sun_phase_range_relights_a_sequence_and_keeps_its_other_draws():
+    import math
+
+    from track3d_sim.generate import _identity
+    from track3d_sim.sequence import _sun
+
+    for seed in range(20):
+        base = _sun(np.random.default_rng(seed))
+        lit = _sun(np.random.default_rng(seed), (100.0, 150.0))
+        assert 100.0 <= lit["phase_deg"] <= 150.0
+        assert lit["irradiance"] == base["irradiance"]
+        # the same azimuth: the in-plane parts of the two directions point the same way
+        (bx, by, bz), (lx, ly, lz) = base["direction"], lit["direction"]
+        assert math.atan2(ly, lx) == pytest.approx(math.atan2(by, bx), abs=1e-9)
+        assert math.degrees(math.acos(-lz)) == pytest.approx(lit["phase_deg"])
+        # the default draw itself, by hand: |N(0, 55)| capped at 150 deg, then the azimuth
+        rng = np.random.default_rng(seed)
+        phase = min(abs(rng.normal(0.0, 55.0)), 150.0)
+        assert base["phase_deg"] == phase
+        assert math.degrees(math.acos(-bz)) == pytest.approx(phase)
+    assert _sun(np.random.default_rng(0), (120.0, 120.0))["phase_deg"] == 120.0
+    # recorded in the run's identity (and dataset.json) only when set: older datasets still resume
+    assert "sun_phase" not in _identity(make_settings("tiny", seed=0))
+    assert _identity(make_settings("tiny", seed=0, sun_phase=(100, 150)))["sun_phase"] == [100.0, 150.0]
 
 
 def test_foreign_output_folder_is_refused(tmp_path, capsys):

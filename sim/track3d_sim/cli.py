@@ -27,6 +27,15 @@ def _resolution(text: str):
         raise argparse.ArgumentTypeError(f"resolution must look like 640x480, got {text!r}") from None
 
 
+def _phase_range(text: str):
+    """LO:HI in degrees; the range itself is checked by make_settings."""
+    try:
+        lo, hi = text.split(":")
+        return float(lo), float(hi)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"sun phase must look like 100:150 (degrees), got {text!r}") from None
+
+
 def _mesh(text: str):
     """PATH or PATH:SIZE_M"""
     path, size = text, None
@@ -88,6 +97,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "noise that implies (docs/simulator.md 'Camera effects'; default: off, fixed camera)")
     g.add_argument("--motion-blur", action="store_true", dest="motion_blur",
                    help="blur fast frames by averaging sub-exposure renders (default: off)")
+    g.add_argument("--sun-phase", type=_phase_range, dest="sun_phase", metavar="LO:HI",
+                   help="draw each sequence's phase angle (sun-body-camera, degrees) uniformly in LO..HI, "
+                        "0 <= LO <= HI <= 170, e.g. 100:150 for a set of crescents lit from behind; the "
+                        "sequences keep their bodies, motions and scenes (default: the natural mix, "
+                        "|N(0, 55)| capped at 150, mostly front-lit)")
     g.add_argument("--subdivisions", type=int, help="icosphere subdivisions of procedural meshes (6 = 82k faces; "
                                                     "default: from the preset)")
     g.add_argument("--mesh", action="append", type=_mesh, default=[], metavar="PATH[:SIZE_M]",
@@ -145,13 +159,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _join_dash_values(argv: list[str]) -> list[str]:
-    """`--resolution -320x240` -> `--resolution=-320x240`: argparse takes a value starting with "-"
+    """`--resolution -320x240` -> `--resolution=-320x240` (and `--sun-phase -5:20`): argparse takes a value starting with "-"
     (other than a plain negative number) for a flag and says "expected one argument"; joined, the
     value reaches its check, which names what is wrong with it."""
     out, i = [], 0
     while i < len(argv):
-        if argv[i] == "--resolution" and i + 1 < len(argv) and re.match(r"-\d", argv[i + 1]):
-            out.append(f"--resolution={argv[i + 1]}")
+        if argv[i] in ("--resolution", "--sun-phase") and i + 1 < len(argv) and re.match(r"-\d", argv[i + 1]):
+            out.append(f"{argv[i]}={argv[i + 1]}")
             i += 2
         else:
             out.append(argv[i])
@@ -175,7 +189,7 @@ def main(argv=None) -> int:
                                      sensors=args.sensors, points_only=args.points_only or None,
                                      mesh_dir=args.mesh_dir, auto_exposure=args.auto_exposure or None,
                                      motion_blur=args.motion_blur or None,
-                                     shape_generators=args.shape_generators)
+                                     shape_generators=args.shape_generators, sun_phase=args.sun_phase)
             generate(settings, args.out, workers=args.workers, overwrite=args.overwrite,
                      progress=not args.no_progress, ray=args.ray)
         elif args.cmd == "restereo":

@@ -84,7 +84,8 @@ def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
     Overrides besides the preset keys: meshes (list of paths or {"path", "size_m"}), mesh_dir
     (folder: every mesh file in it, cycled over the sequences), sensors (names or "a,b"),
     points_only (bool), unseen_generators (names or "a,b"), shape_generators (names or "a,b": the
-    generators of train and test; None = the default ones). Raises SimError (one line)."""
+    generators of train and test; None = the default ones), sun_phase ([lo, hi] degrees: the phase
+    angle drawn uniformly in it; None = the default mix). Raises SimError (one line)."""
     if preset not in PRESETS:
         raise SimError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
     s = dict(PRESETS[preset])
@@ -121,6 +122,7 @@ def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
     s["points_only"] = bool(s.get("points_only", False))
     s["auto_exposure"] = bool(s.get("auto_exposure", False))
     s["motion_blur"] = bool(s.get("motion_blur", False))
+    s["sun_phase"] = _sun_phase(s.get("sun_phase"))
     if s["points_only"] and SENSORS_NEEDING_IMAGES & set(sensors):
         raise SimError(f"--points-only renders no images, but the depth sensor(s) "
                        f"{', '.join(sorted(SENSORS_NEEDING_IMAGES & set(sensors)))} measure depth from them")
@@ -144,6 +146,20 @@ def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
     return s
 
 
+def _sun_phase(value) -> list[float] | None:
+    """The phase-angle range [lo, hi] in degrees (0 <= lo <= hi <= 170), or None (the default mix).
+    Beyond 170 deg the camera would see almost nothing of a lit body."""
+    if value is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise SimError(f"sun phase must be two numbers LO:HI in degrees, got {value!r}") from None
+    if not (0.0 <= lo <= hi <= 170.0):
+        raise SimError(f"sun phase range {lo:g}:{hi:g} deg must satisfy 0 <= LO <= HI <= 170")
+    return [lo, hi]
+
+
 def camera_of(settings: dict):
     from track3d.camera import Camera
     return Camera.from_fov(settings["width"], settings["height"], settings["fov_x_deg"])
@@ -163,7 +179,8 @@ def _identity(settings: dict) -> dict:
     return {"generator_version": __version__,
             "generators": body_sources(False, pool, settings.get("unseen_generators") or ()),
             "meshes": _public_meshes(settings), **{k: settings[k] for k in keys},
-            **({"shape_generators": list(pool)} if pool is not None else {})}
+            **({"shape_generators": list(pool)} if pool is not None else {}),
+            **({"sun_phase": list(settings["sun_phase"])} if settings.get("sun_phase") is not None else {})}
 
 
 def plan_of(settings: dict):

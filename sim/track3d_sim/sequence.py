@@ -200,18 +200,24 @@ def _rngs(seed: int, spec: SeqSpec):
     return {k: np.random.default_rng(s) for k, s in zip(names, ss.spawn(len(names)))}, ss
 
 
-def _sun(rng: np.random.Generator) -> dict:
+def _sun(rng: np.random.Generator, phase_range: tuple[float, float] | None = None) -> dict:
     """Sun direction (unit vector toward the sun, left camera frame) and irradiance.
 
     The phase angle (sun - body - observer) is mostly below ~90 deg so most of the visible
     surface is lit, sometimes large (thin crescents). Irradiance is mostly LOW (paper Fig. 4d):
-    log-normal with median 0.35 of the exposure-saturating irradiance."""
+    log-normal with median 0.35 of the exposure-saturating irradiance.
+
+    phase_range (degrees, lo <= hi): the phase is drawn uniformly in it instead. It is drawn
+    after the default draws, so a sequence keeps its azimuth and irradiance (and every other
+    stream) and only its lighting changes: a stress set is the default set lit from elsewhere."""
     phase = min(abs(rng.normal(0.0, 55.0)), 150.0)
     az = rng.uniform(0, 2 * np.pi)
+    E = float(np.clip(rng.lognormal(math.log(0.35), 0.5), 0.05, 1.6))
+    if phase_range is not None:
+        phase = float(rng.uniform(phase_range[0], phase_range[1]))
     a = math.radians(phase)
     # rotate the "toward camera" direction (0,0,-1) by the phase angle about an in-plane axis
     d = np.array([math.sin(a) * math.cos(az), math.sin(a) * math.sin(az), -math.cos(a)])
-    E = float(np.clip(rng.lognormal(math.log(0.35), 0.5), 0.05, 1.6))
     return {"direction": d.tolist(), "phase_deg": phase, "irradiance": E}
 
 
@@ -251,7 +257,8 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
     H, W, N = camera.height, camera.width, int(settings["frames"])
     tan_half = camera.tan_half
     motion = make_motion(rng["motion"], N, shape.radius, tan_half, inertia=shape.inertia())
-    sun = _sun(rng["sun"])
+    phase_range = settings.get("sun_phase")
+    sun = _sun(rng["sun"], tuple(phase_range) if phase_range is not None else None)
     sun_dir = np.asarray(sun["direction"])
     margin = max(4, int(0.06 * W))
     if not points_only:  # the scene's draws only shape the images
