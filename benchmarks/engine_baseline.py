@@ -60,7 +60,20 @@ def build_parser() -> ArgumentParser:
     ap = ArgumentParser(description=__doc__)
     ap.add_argument("--results", required=True, type=Path, help="folder holding engine-<sensor>/ result folders")
     ap.add_argument("--out", required=True, type=Path, help="folder for engine_baseline.json / .md")
+    ap.add_argument("--update", action="store_true",
+                    help="replace only the rows of the sensors found under --results and keep the other "
+                         "sensors' rows of the existing --out/engine_baseline.json (re-running one sensor's sets "
+                         "without the others'; default: write the rows found, nothing else)")
     return ap
+
+
+def merge(old: list[dict], new: list[dict]) -> list[dict]:
+    """`new` with the rows of `old` whose sensor is not in `new`, in the table's order."""
+    sensors = {r["sensor"] for r in new}
+    key = {s: i for i, s in enumerate(SENSOR_ORDER)}
+    rows = [r for r in old if r["sensor"] not in sensors] + list(new)
+    rows.sort(key=lambda x: (key.get(x["sensor"], 99), x["split"], x["protocol"], x["tracker"]))
+    return rows
 
 
 def main(argv=None) -> int:
@@ -69,6 +82,13 @@ def main(argv=None) -> int:
     if not rows:
         print(f"engine_baseline: error: no engine-*/*-report/report.json under {a.results}", file=sys.stderr)
         return 2
+    if a.update:
+        old = a.out / "engine_baseline.json"
+        try:
+            rows = merge(json.loads(old.read_text())["rows"], rows)
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            print(f"engine_baseline: error: --update needs a readable {old}: {e}", file=sys.stderr)
+            return 2
     write_json(a.out / "engine_baseline.json", {"rows": rows})
     (a.out / "engine_baseline.md").write_text(markdown(rows))
     print(markdown(rows))

@@ -372,3 +372,32 @@ def test_icp_poses_follow_the_true_rotation_of_a_simulated_body(tiny_dataset):
         R, T, _ = bench.icp_poses(seq, projective=projective)
         err = angle((R[f1].T @ R[f0]).T @ (Rt[f0] @ Rt[f1].T))
         assert err < 0.15 * turned, (projective, err, turned)
+
+
+def test_engine_baseline_update_replaces_only_the_sensors_it_found(tmp_path, capsys):
+    """--update: a re-run of one sensor's sets replaces that sensor's rows and keeps the others';
+    without a readable table to update it says so in one line."""
+    import engine_baseline
+
+    def row(sensor, tracker, ao):
+        return {"sensor": sensor, "split": "test", "protocol": "onepass", "tracker": tracker, "ao_2d": None,
+                "ao_bev": None, "ao_3d": ao, "ace_3d": None, "restarts": 0, "frames": 60}
+
+    old = [row("ideal", "a", 0.9), row("stereo", "a", 0.5), row("stereo", "gone", 0.4), row("tof", "a", 0.8)]
+    new = [row("stereo", "a", 0.6)]
+    merged = engine_baseline.merge(old, new)
+    assert [(r["sensor"], r["tracker"], r["ao_3d"]) for r in merged] == [
+        ("ideal", "a", 0.9), ("tof", "a", 0.8), ("stereo", "a", 0.6)]
+    rep = tmp_path / "R" / "engine-stereo" / "test-onepass-report"
+    rep.mkdir(parents=True)
+    (rep / "report.json").write_text(json.dumps({"dataset": "data/engine-stereo", "trackers": {
+        "a": {"overall": {"ao_3d": 0.6}}}}))
+    assert engine_baseline.main(["--results", str(tmp_path / "R"), "--out", str(tmp_path / "out"), "--update"]) == 2
+    assert "--update needs a readable" in capsys.readouterr().err
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "engine_baseline.json").write_text(json.dumps({"rows": old}))
+    assert engine_baseline.main(["--results", str(tmp_path / "R"), "--out", str(out), "--update"]) == 0
+    rows = json.loads((out / "engine_baseline.json").read_text())["rows"]
+    assert [(r["sensor"], r["tracker"]) for r in rows] == [("ideal", "a"), ("tof", "a"), ("stereo", "a")]
+    assert rows[-1]["ao_3d"] == 0.6
