@@ -179,3 +179,21 @@ def test_track_passes_resume_outline_to_the_loop_and_records_it_when_on(synth, t
     assert main(["track", "--data", str(synth), "--tracker", "mosse", "--estimator", "baseline", "--sequence", "a",
                  flag, "--results", str(res), "--video", "none", "--quiet"]) == 0
     assert json.dumps(read_run_record(res, "test", "mosse+baseline")).count('"resume_outline": true') == recorded
+
+
+@pytest.mark.parametrize("flags,recorded", [(["--outline-share-phase", "90"], '"outline_share_phase": 90.0'),
+                                            ([], '"outline_share_phase"'),   # the synthetic set's sensor: off
+                                            (["--outline-share-phase", "180"], '"outline_share_phase"')])
+def test_track_passes_outline_share_phase_to_the_loop_and_records_it_when_on(synth, tmp_path, flags, recorded):
+    from track3d.evaluation.results import read_run_record
+    from track3d.tracker import outline_share_phase_for
+
+    res = tmp_path / "res"
+    assert main(["track", "--data", str(synth), "--tracker", "mosse", "--estimator", "baseline", "--sequence", "a",
+                 *flags, "--results", str(res), "--video", "none", "--quiet"]) == 0
+    on = bool(flags) and flags[-1] != "180"
+    assert json.dumps(read_run_record(res, "test", "mosse+baseline")).count(recorded) == int(on)
+    assert outline_share_phase_for("stereo") == 90.0 and outline_share_phase_for("ideal") == 180.0
+    with pytest.raises(SystemExit) as e:
+        main(["track", "--data", str(synth), "--outline-share-phase", "200", "--results", str(res)])
+    assert e.value.code == 2

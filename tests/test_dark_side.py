@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from track3d.camera import Camera
-from track3d.dark_side import check_sun, dark_share, dark_side_box, reach_dark_side
+from track3d.dark_side import check_sun, dark_share, dark_side_box, phase_deg, reach_dark_side
 
 CAM = Camera.from_fov(200, 200, 60.0)   # cx = cy = 100: a box centred there looks along z
 
@@ -51,6 +51,47 @@ def test_reach_dark_side_only_pushes_the_sides_away_from_the_sun():
     np.testing.assert_allclose(reach_dark_side([90, 90, 20, 20], dark, sun, CAM), [60, 90, 50, 20])
     up = np.array([0.0, -1.0, 0.0])      # sun above: dark side at high y
     np.testing.assert_allclose(reach_dark_side([60, 60, 60, 50], dark, up, CAM), [60, 60, 60, 80])
+
+
+def test_phase_deg_hand_cases():
+    """At the image centre the phase is the angle between the sun and the camera (-z): sun
+    behind the camera 0, across the line of sight 90, behind the body 180, halfway 45 / 135. Off
+    the centre the box's own ray counts: a box at the right edge of a 60-degree view looks 30
+    degrees right, so seen from the body the observer lies 120 degrees from a sun along +x (lit
+    more from behind than a body on the axis) and 60 degrees from one along -x."""
+    box = np.array([75.0, 75.0, 50.0, 50.0])
+    for sun, want in (([0, 0, -1.0], 0.0), ([1.0, 0, 0], 90.0), ([0, 0, 1.0], 180.0),
+                      ([1.0, 0, -1.0], 45.0), ([0, 1.0, 1.0], 135.0)):
+        assert phase_deg(box, check_sun(sun), CAM) == pytest.approx(want)
+    right = np.array([199.0, 95.0, 2.0, 10.0])   # centre x = 200: tan 30 deg off the axis
+    assert phase_deg(right, check_sun([1.0, 0, 0]), CAM) == pytest.approx(120.0, abs=1e-6)
+    assert phase_deg(right, check_sun([-1.0, 0, 0]), CAM) == pytest.approx(60.0, abs=1e-6)
+
+
+def test_past_the_share_phase_the_lit_outline_moves_no_box():
+    """The tracker boxes the whole sphere; the depth holds its lit half (sun along +x: 90 degrees
+    at the box). With outline_share 0.3 and no fusion weight the fusion starts from 0.3 x the lit
+    outline + 0.7 x the tracker's box; with the sun known and outline_share_phase below 90 it
+    starts from the tracker's box; at or above 90, or with the sun unknown, the share stays. The
+    option is recorded only when on."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import Track3D
+
+    img, pts, true2d, lit = _half_lit_sphere()
+    shared = 0.3 * lit + 0.7 * true2d
+    for limit, sun, want in ((180.0, [1.0, 0, 0], shared), (60.0, [1.0, 0, 0], true2d),
+                             (120.0, [1.0, 0, 0], shared), (60.0, None, shared)):
+        t = Track3D(CAM, _Lit(true2d), create_estimator("baseline"), silhouette=0.0, outline_share=0.3,
+                    outline_share_phase=limit, weight_3d=0.0)
+        t.set_sun(sun)
+        t.init(img, true2d)
+        r = t.update(img, pts)
+        np.testing.assert_allclose(r.box2d, want, atol=1e-6, err_msg=f"{limit} {sun}")
+        opts = t.describe()["options"]
+        assert opts.get("outline_share_phase") == (None if limit == 180.0 else limit)
+    for bad in (-1.0, 181.0, float("nan")):
+        with pytest.raises(ValueError, match="outline_share_phase"):
+            Track3D(CAM, _Lit(true2d), create_estimator("baseline"), outline_share_phase=bad)
 
 
 def test_check_sun():

@@ -139,6 +139,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="with the outline off (--silhouette 0), its share in the box the 2D fusion starts from and "
                         "the 2D tracker is corrected with (0: none; default by the depth sensor, "
                         "track3d.tracker.outline_share_for: stereo 0.3, others 0)")
+    t.add_argument("--outline-share-phase", type=bounded(float, 0, high=180), default=None, metavar="DEG",
+                   help="with the sun's direction known (meta.json sun), the largest phase angle at the 2D box "
+                        "(sun - body - camera, degrees) at which the outline keeps its --outline-share: past it the "
+                        "lit part is a crescent, not the body's size (180: always; default by the depth sensor, "
+                        "track3d.tracker.outline_share_phase_for)")
     t.add_argument("--outline-contain", action=argparse.BooleanOptionalAction, default=None,
                    help="with the outline off (--silhouette 0), move the 2D tracker's box (its size kept) to hold "
                         "the outline before the frustum and the fusion, and with no returns near it go to the body "
@@ -297,6 +302,8 @@ def _cmd_track(a) -> int:
         a.silhouette = stereo.get("silhouette")
     if a.depth == "stereo" and a.outline_share is None:
         a.outline_share = stereo.get("outline_share")
+    if a.depth == "stereo" and a.outline_share_phase is None:
+        a.outline_share_phase = stereo.get("outline_share_phase")
     if a.depth == "stereo" and a.outline_contain is None:
         a.outline_contain = stereo.get("outline_contain")
     if a.depth == "stereo" and a.texture_trim is None:
@@ -325,7 +332,7 @@ def _cmd_track(a) -> int:
                        evidence_points=a.evidence_points, reacquire_threshold=a.reacquire_threshold,
                        hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad,
                        front_quantile=a.front_quantile, front_filter=a.front_filter, silhouette=a.silhouette,
-                       outline_share=a.outline_share,
+                       outline_share=a.outline_share, outline_share_phase=a.outline_share_phase,
                        outline_contain=a.outline_contain, texture_trim=a.texture_trim, resume_outline=a.resume_outline, dark_side=a.dark_side, fusion_cover=a.fusion_cover, sun=not a.no_sun,
                        body_views=a.body_views,
                        frustum_margin=margin,

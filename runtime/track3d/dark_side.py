@@ -18,7 +18,7 @@ import numpy as np
 
 from .camera import Camera
 
-__all__ = ["check_sun", "dark_share", "dark_side_box", "reach_dark_side", "DARK_SHARE_CAP"]
+__all__ = ["check_sun", "dark_share", "dark_side_box", "phase_deg", "reach_dark_side", "DARK_SHARE_CAP"]
 
 # The largest extension, as a share of the lit outline's extent toward the sun: past ~110 degrees
 # of phase the sphere's ratio (1 - cos a) / (1 + cos a) runs away (a thin crescent, 14x at 150
@@ -39,6 +39,15 @@ def check_sun(direction) -> np.ndarray | None:
     if not (np.all(np.isfinite(d)) and n > 1e-12):
         raise ValueError(f"sun direction must be 3 finite numbers of non-zero length, got {d.tolist()}")
     return d / n
+
+
+def phase_deg(box2d: np.ndarray, sun: np.ndarray, camera: Camera) -> float:
+    """The phase angle (sun - body - observer, degrees in [0, 180]) at the centre ray of the box
+    [x, y, w, h]: 0 with the sun behind the camera (the body fully lit), above 90 a crescent."""
+    x, y, w, h = (float(v) for v in box2d)
+    ray = np.array([(x + w / 2.0 - camera.cx) / camera.fx, (y + h / 2.0 - camera.cy) / camera.fy, 1.0])
+    c = float(-(np.asarray(sun, dtype=np.float64) @ ray) / np.linalg.norm(ray))
+    return float(np.degrees(np.arccos(min(max(c, -1.0), 1.0))))
 
 
 def _sun_at(box2d: np.ndarray, sun: np.ndarray, camera: Camera) -> tuple[float, np.ndarray] | None:

@@ -47,7 +47,7 @@ from typing import Callable
 import numpy as np
 
 from .body_views import BodyViews, BodyViewsParams, hold_back_face
-from .dark_side import check_sun, dark_side_box, reach_dark_side
+from .dark_side import check_sun, dark_side_box, phase_deg, reach_dark_side
 from .camera import Camera
 from .estimators import BoxEstimator, create_estimator
 from .frames import MAX_COORD_M, check_category, check_image, check_init_box
@@ -477,6 +477,35 @@ def outline_share_for(depth_sensor: str | None) -> float:
     return SENSOR_OUTLINE_SHARES.get(_sensor_key(depth_sensor), OUTLINE_SHARE)
 
 
+# With the sun's direction known (`Track3D.set_sun`), the largest phase angle (degrees, at the 2D
+# box's centre ray, track3d.dark_side.phase_deg) at which the lit outline keeps its share
+# (outline_share): past 90 degrees the lit part is a crescent, less than half the body's disc,
+# and its share pulled EdgeTrack's box onto the crescent, the tracker corrected onto it frame
+# after frame. 180: always (and always when the sun is unknown). Chosen on a back-lit stereo
+# calibration set (`track3d-sim generate --preset small --seed 3 --train 0 --test 12 --test-unseen
+# 12 --frames 60 --sensors stereo --sun-phase 100:150`: the seed-3 set's bodies lit from behind),
+# EdgeTrack one pass, AO_3d pooled over the 24 sequences at 180 (the share always) / 135 / 120 /
+# 90: 0.5022 / 0.5242 / 0.5263 / 0.5287 (the share 0.15 instead of 0.3: 0.5190; NanoTrack v2
+# 0.4993, oracle 2D boxes 0.6089). Checked on a 300-frame back-lit set (seed 43, 6 + 6, phases
+# 100-150): 0.5210 -> 0.5641 at 90 (10 of 12 sequences up, by up to +0.21; two down, -0.037 and
+# -0.014; 120: 0.5539; NanoTrack v2 0.5353, oracle 0.6684), and on the front-lit stereo
+# calibration sets of seeds 3 and 9 (the same command without --sun-phase): seed 9 has no body
+# past 80 degrees and did not move (0.7397); seed 3 0.7013 -> 0.7012, three sequences moved, at
+# 103 / 80 (its box's ray past 90) / 96 degrees: +0.042 / +0.030 / -0.076. Measured on the
+# back-lit seed-3 set and not kept: the dark side (DARK_SIDE) 0.1 / 0.25: 0.4384 / 0.4086 (its
+# push at 150 degrees overshot bodies whose dark side the background or ambient light shows);
+# fusion_cover 0.05 / 0.1 / 0.2: 0.5036 / 0.5023 / 0.5034; no containment: 0.4410; weight_3d 0:
+# 0.4712; weight_2d 1 / 0.5: 0.4960 / 0.4928. There the oracle's error is the hidden depth: with
+# the ground truth's depth extent and centre depth put in, its AO_3d goes 0.61 -> 0.83.
+OUTLINE_SHARE_PHASE = 180.0
+SENSOR_OUTLINE_SHARE_PHASES = {"stereo": 90.0}
+
+
+def outline_share_phase_for(depth_sensor: str | None) -> float:
+    """The phase angle past which the lit outline has no share (OUTLINE_SHARE_PHASE's notes)."""
+    return SENSOR_OUTLINE_SHARE_PHASES.get(_sensor_key(depth_sensor), OUTLINE_SHARE_PHASE)
+
+
 # Where the outline is off, the 2D tracker's box is moved (its size kept) to hold the outline
 # shrunk by CONTAIN_SLACK_PX on each side (`silhouette.contain`): the frustum, the cross-section,
 # the fusion and the tracker's correction start from it. Stereo's outline is the lit part, so it
@@ -564,14 +593,16 @@ def body_views_for(depth_sensor: str | None) -> bool:
 def sensor_options(depth_sensor: str | None) -> dict:
     """Track3D's options chosen by the depth sensor (None: unknown): frustum_margin, weight_3d,
     weight_2d, measured_faces, edge_pad, front_quantile, front_filter, silhouette, outline_share,
-    outline_contain, texture_trim, dark_side, fusion_cover, body_views, resume_outline (the fifteen tables
-    above)."""
+    outline_share_phase, outline_contain, texture_trim, dark_side, fusion_cover, body_views, resume_outline
+    (the sixteen tables above)."""
     return {"frustum_margin": frustum_margin_for(depth_sensor), "weight_3d": fusion_weight_for(depth_sensor),
             "weight_2d": section_weight_for(depth_sensor), "measured_faces": measured_faces_for(depth_sensor),
             "edge_pad": edge_pad_for(depth_sensor), "front_quantile": front_quantile_for(depth_sensor),
             "front_filter": front_filter_for(depth_sensor),
             "silhouette": silhouette_for(depth_sensor),
-            "outline_share": outline_share_for(depth_sensor), "outline_contain": outline_contain_for(depth_sensor),
+            "outline_share": outline_share_for(depth_sensor),
+            "outline_share_phase": outline_share_phase_for(depth_sensor),
+            "outline_contain": outline_contain_for(depth_sensor),
             "texture_trim": texture_trim_for(depth_sensor), "resume_outline": resume_outline_for(depth_sensor),
             "dark_side": dark_side_for(depth_sensor), "fusion_cover": fusion_cover_for(depth_sensor),
             "body_views": body_views_for(depth_sensor)}
@@ -643,7 +674,8 @@ class Track3D:
                  reacquire_threshold: float | None = REACQUIRE_THRESHOLD, hold_cut_size: float = HOLD_CUT_SIZE,
                  edge_pad: float = EDGE_PAD, front_quantile: float = FRONT_QUANTILE,
                  front_filter: tuple[float, float] | None = FRONT_FILTER,
-                 silhouette: float = SILHOUETTE, outline_share: float = OUTLINE_SHARE, outline_contain: bool = False,
+                 silhouette: float = SILHOUETTE, outline_share: float = OUTLINE_SHARE,
+                 outline_share_phase: float = OUTLINE_SHARE_PHASE, outline_contain: bool = False,
                  dark_side: float = DARK_SIDE, fusion_cover: float = FUSION_COVER, texture_trim: bool = False,
                  resume_outline: bool = False,
                  body_views: bool | BodyViewsParams = BODY_VIEWS):
@@ -707,6 +739,9 @@ class Track3D:
         if not (np.isfinite(float(outline_share)) and 0.0 <= float(outline_share) <= 1.0):
             raise ValueError(f"outline_share must be in [0, 1] (0: off), got {outline_share}")
         self.outline_share = float(outline_share)
+        if not (np.isfinite(float(outline_share_phase)) and 0.0 <= float(outline_share_phase) <= 180.0):
+            raise ValueError(f"outline_share_phase must be in [0, 180] degrees (180: always), got {outline_share_phase}")
+        self.outline_share_phase = float(outline_share_phase)
         if not isinstance(outline_contain, (bool, np.bool_)):
             raise ValueError(f"outline_contain must be True or False, got {outline_contain!r}")
         self.outline_contain = bool(outline_contain)
@@ -794,7 +829,7 @@ class Track3D:
         min_points, lost_after, min_score, frustum_margin, depth_range_m, weight_2d, measured_faces,
         depth_smoothing, evidence_points, reacquire_threshold, hold_cut_size, edge_pad, front_quantile,
         front_filter, silhouette,
-        outline_share, outline_contain, texture_trim, resume_outline, dark_side, fusion_cover, body_views)."""
+        outline_share, outline_share_phase, outline_contain, texture_trim, resume_outline, dark_side, fusion_cover, body_views)."""
         t = cls(camera, create_tracker(tracker, **(tracker_options or {})),
                 create_estimator(estimator, **(estimator_options or {})), **options)
         t.tracker_name, t.estimator_name = str(tracker).lower(), str(estimator).lower()
@@ -1181,7 +1216,7 @@ class Track3D:
         # returns on a few of the box's pixels (stereo: a body mostly in shadow, depth only where
         # the images have texture) outline a sliver of the body, not its extent in the image
         sparse = self.fusion_cover > 0.0 and len(pts) < self.fusion_cover * float(seen[2]) * float(seen[3])
-        if self.outline_share > 0.0 and lit is not None and self.fusion and not sparse:
+        if self.outline_share > 0.0 and lit is not None and self.fusion and not sparse and not self._crescent(seen):
             start = self.outline_share * lit + (1.0 - self.outline_share) * seen
         t2 = time.perf_counter()
         ms["frustum"] = (t2 - t1) * 1e3
@@ -1231,6 +1266,12 @@ class Track3D:
                         _tracker_score(self.tracker2d))
         return self._judge(r, estimated=est is not None, seen=_judges_loss(self.tracker2d),
                            empty=est is None and len(pts) == 0)
+
+    def _crescent(self, box2d: np.ndarray) -> bool:
+        """Whether the sun is known and lies past `outline_share_phase` at the box: the lit outline
+        is then a crescent, not the body's size (OUTLINE_SHARE_PHASE)."""
+        return (self.sun is not None and self.outline_share_phase < 180.0
+                and phase_deg(box2d, self.sun, self.camera) > self.outline_share_phase)
 
     def _whole_body(self, points, at_last: int | None) -> np.ndarray | None:
         """For a frame the 2D tracker calls lost with no returns left at its last box (`at_last`:
@@ -1475,6 +1516,9 @@ class Track3D:
                         **({"front_quantile": self.front_quantile} if self.front_quantile > 0.0 else {}),
                         **({"front_filter": list(self.front_filter)} if self.front_filter is not None else {}),
                         "silhouette": self.silhouette, "outline_share": self.outline_share,
+                        # only when on: the records of runs without it stay as they were
+                        **({"outline_share_phase": self.outline_share_phase}
+                           if self.outline_share_phase < OUTLINE_SHARE_PHASE else {}),
                         "outline_contain": self.outline_contain,
                         **({"texture_trim": True} if self.texture_trim else {}),
                         **({"resume_outline": True} if self.resume_outline else {}),

@@ -72,6 +72,7 @@ class TrackerSpec:
     front_filter: tuple[float, float] | bool | None = None   # None: by the sensor (front_filter_for); False: off
     silhouette: float | None = None          # None: by the sequence's depth sensor (silhouette_for)
     outline_share: float | None = None       # None: by the sequence's depth sensor (outline_share_for)
+    outline_share_phase: float | None = None   # None: by the sequence's depth sensor (outline_share_phase_for)
     outline_contain: bool | None = None      # None: by the sequence's depth sensor (outline_contain_for)
     texture_trim: bool | None = None         # None: by the sequence's depth sensor (texture_trim_for)
     resume_outline: bool | None = None       # None: by the sequence's depth sensor (resume_outline_for)
