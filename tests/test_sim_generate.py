@@ -135,6 +135,16 @@ def test_sun_phase_range_relights_a_sequence_and_keeps_its_other_draws():
         assert base["phase_deg"] == phase
         assert math.degrees(math.acos(-bz)) == pytest.approx(phase)
     assert _sun(np.random.default_rng(0), (120.0, 120.0))["phase_deg"] == 120.0
+    # the settings reach the renderer: a tiny points-only sequence records a phase in the range
+    from track3d_sim.generate import camera_of
+    from track3d_sim.sequence import plan, render_sequence
+
+    st = make_settings("tiny", seed=5, frames=1, points_only=True, sun_phase=(120, 130))
+    spec = plan(1, 0)[0]
+    lit = render_sequence(spec, st, camera_of(st), None)["meta"]["sun"]
+    base = render_sequence(spec, make_settings("tiny", seed=5, frames=1, points_only=True), camera_of(st),
+                           None)["meta"]["sun"]
+    assert 120.0 <= lit["phase_deg"] <= 130.0 and lit["irradiance"] == base["irradiance"]
     # recorded in the run's identity (and dataset.json) only when set: older datasets still resume
     assert "sun_phase" not in _identity(make_settings("tiny", seed=0))
     assert _identity(make_settings("tiny", seed=0, sun_phase=(100, 150)))["sun_phase"] == [100.0, 150.0]
