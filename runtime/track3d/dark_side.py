@@ -41,21 +41,24 @@ def check_sun(direction) -> np.ndarray | None:
     return d / n
 
 
+def _centre_ray(box2d: np.ndarray, camera: Camera) -> np.ndarray:
+    """The unit (3,) ray through the centre of the box [x, y, w, h]."""
+    x, y, w, h = (float(v) for v in box2d)
+    ray = np.array([(x + w / 2.0 - camera.cx) / camera.fx, (y + h / 2.0 - camera.cy) / camera.fy, 1.0])
+    return ray / np.linalg.norm(ray)
+
+
 def phase_deg(box2d: np.ndarray, sun: np.ndarray, camera: Camera) -> float:
     """The phase angle (sun - body - observer, degrees in [0, 180]) at the centre ray of the box
     [x, y, w, h]: 0 with the sun behind the camera (the body fully lit), above 90 a crescent."""
-    x, y, w, h = (float(v) for v in box2d)
-    ray = np.array([(x + w / 2.0 - camera.cx) / camera.fx, (y + h / 2.0 - camera.cy) / camera.fy, 1.0])
-    c = float(-(np.asarray(sun, dtype=np.float64) @ ray) / np.linalg.norm(ray))
+    c = float(-(np.asarray(sun, dtype=np.float64) @ _centre_ray(box2d, camera)))   # the observer back along the ray
     return float(np.degrees(np.arccos(min(max(c, -1.0), 1.0))))
 
 
 def _sun_at(box2d: np.ndarray, sun: np.ndarray, camera: Camera) -> tuple[float, np.ndarray] | None:
     """(cos a, u) at the box's centre ray: a the phase angle, u (2,) the unit image direction
     toward the sun; None when the sun lies along that ray (no side)."""
-    x, y, w, h = (float(v) for v in box2d)
-    ray = np.array([(x + w / 2.0 - camera.cx) / camera.fx, (y + h / 2.0 - camera.cy) / camera.fy, 1.0])
-    ray /= np.linalg.norm(ray)
+    ray = _centre_ray(box2d, camera)
     across = sun - float(sun @ ray) * ray      # the sun's direction across the line of sight
     u = np.array([across[0] * camera.fx, across[1] * camera.fy])
     n = float(np.linalg.norm(u))
