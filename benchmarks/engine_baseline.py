@@ -45,9 +45,13 @@ def collect(results: Path) -> list[dict]:
             rows.append({"sensor": sensor, "split": split, "protocol": protocol, "tracker": name,
                          "dataset": Path(r["dataset"]).name, "cpu": r.get("cpu"),
                          **{k: ov.get(k) for _, k, _ in COLUMNS}, "models": models_of_run(t.get("run"))})
+    return ordered(rows)
+
+
+def ordered(rows: list[dict]) -> list[dict]:
+    """The table's row order: sensor (SENSOR_ORDER), split, protocol, tracker."""
     key = {s: i for i, s in enumerate(SENSOR_ORDER)}
-    rows.sort(key=lambda x: (key.get(x["sensor"], 99), x["split"], x["protocol"], x["tracker"]))
-    return rows
+    return sorted(rows, key=lambda x: (key.get(x["sensor"], 99), x["split"], x["protocol"], x["tracker"]))
 
 
 def markdown(rows: list[dict]) -> str:
@@ -70,10 +74,7 @@ def build_parser() -> ArgumentParser:
 def merge(old: list[dict], new: list[dict]) -> list[dict]:
     """`new` with the rows of `old` whose sensor is not in `new`, in the table's order."""
     sensors = {r["sensor"] for r in new}
-    key = {s: i for i, s in enumerate(SENSOR_ORDER)}
-    rows = [r for r in old if r["sensor"] not in sensors] + list(new)
-    rows.sort(key=lambda x: (key.get(x["sensor"], 99), x["split"], x["protocol"], x["tracker"]))
-    return rows
+    return ordered([r for r in old if r["sensor"] not in sensors] + list(new))
 
 
 def main(argv=None) -> int:
