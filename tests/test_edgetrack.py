@@ -575,6 +575,20 @@ def test_cli_eval_and_time_run_on_an_exported_model(trained, tiny_dataset, tmp_p
     assert "edgetrack search 256" in capsys.readouterr().out
 
 
+def test_cli_eval_without_a_model_evaluates_the_shipped_pair(tiny_dataset, tmp_path):
+    """`eval` without --model ran no tracker and wrote a report of zero sequences."""
+    from track3d.onnxmodel import MODELS_DIR
+    from track3d_train.edgetrack.cli import main
+
+    if not (MODELS_DIR / "edgetrack_search.onnx").is_file():
+        pytest.skip("no EdgeTrack model shipped")
+    assert main(["eval", "--data", str(tiny_dataset), "--max-sequences", "1", "--quiet",
+                 "--out", str(tmp_path / "e.json")]) == 0
+    report = json.loads((tmp_path / "e.json").read_text())
+    assert report["sequences"] == 1 and list(report["trackers"]) == ["edgetrack"]
+    assert 0.0 <= report["trackers"]["edgetrack"]["ao_2d"] <= 1.0
+
+
 def test_cli_export_writes_a_new_prefix_and_refuses_a_shipped_one(trained, tmp_path, capsys, monkeypatch):
     """The command line of the export: a fresh prefix is written (parity printed); the shipped
     models' folder needs --force."""

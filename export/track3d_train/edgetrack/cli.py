@@ -97,6 +97,10 @@ def _eval(a) -> int:
     if a.model:
         specs.insert(0, TrackerSpec("edgetrack", "none", threads=a.threads, tracker_options={"model": a.model},
                                     name=f"model {Path(a.model).name}"))
+    elif "edgetrack" not in a.compare:
+        # without --model the shipped pair is the model under test (it once evaluated nothing and
+        # wrote a report of zero sequences)
+        specs.insert(0, TrackerSpec("edgetrack", "none", threads=a.threads))
     from track3d.jsonable import jsonable, write_json
 
     rows = evaluate_2d(a.data, a.split, specs, max_sequences=a.max_sequences or None, quiet=a.quiet)
@@ -278,7 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(fn=_export)
 
     v = sub.add_parser("eval", help="one-pass AO_2d + lost precision/recall on a split", formatter_class=d)
-    v.add_argument("--model", help="prefix of <name>_template/_search.onnx")
+    v.add_argument("--model", help="prefix of <name>_template/_search.onnx (default: the shipped pair)")
     v.add_argument("--data", required=True, help="dataset root")
     v.add_argument("--split", default="test", help="dataset split")
     v.add_argument("--compare", nargs="*", default=[], help="registered 2D trackers to run on the same frames")
