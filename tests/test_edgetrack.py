@@ -589,6 +589,64 @@ def test_cli_eval_without_a_model_evaluates_the_shipped_pair(tiny_dataset, tmp_p
     assert 0.0 <= report["trackers"]["edgetrack"]["ao_2d"] <= 1.0
 
 
+def test_an_exported_pair_comes_back_to_torch_exactly_and_fine_tunes(trained, tmp_path, capsys):
+    """`--init-from` an exported pair (a prefix, either file, a shipped name): the export folded
+    every BatchNorm into its convolution; converted back, the net's outputs equal the graphs'
+    and, calibrated on crops, its training mode starts near the same function; a fine-tune runs
+    from it."""
+    import torch
+
+    from track3d_train.edgetrack.export import parity
+    from track3d_train.edgetrack.from_onnx import is_exported_pair, model_from_onnx
+    from track3d_train.edgetrack.train import train
+
+    prefix = trained["root"] / "model" / "et"
+    assert is_exported_pair(prefix) and is_exported_pair(trained["px"]) and is_exported_pair(trained["pz"])
+    assert not is_exported_pair(trained["root"] / "run" / "ckpt.pt")
+    net, ck = model_from_onnx(trained["pz"])
+    p = parity(net, trained["pz"], trained["px"])
+    assert p["kernel_max_abs"] < 1e-5 and p["logit_max_abs"] < 1e-4, p
+    assert p["ltrb_max_abs"] < 1e-4 * max(1.0, p["ltrb_scale"]), p
+    assert ck["config"]["widths"] == list(TINY["widths"])
+
+    g = torch.Generator().manual_seed(1)
+    z = net.normalise(torch.randint(0, 256, (8, 128, 128, 3), dtype=torch.uint8, generator=g))
+    x = net.normalise(torch.randint(0, 256, (8, 256, 256, 3), dtype=torch.uint8, generator=g))
+    cal, _ = model_from_onnx(prefix, calibration=(z.numpy(), x.numpy()))
+    with torch.no_grad():
+        ref = net(z, x)[0]
+        assert float((cal(z, x)[0] - ref).abs().max()) < 1e-4       # eval mode: exact either way
+        gaps = [float((m.train()(z, x)[0] - ref).abs().max()) for m in (net, cal)]
+    assert gaps[1] < 0.5 * gaps[0], gaps                               # training mode: near it when calibrated
+
+    summary = train(EdgeTrackConfig(**TINY), trained["root"] / "cache", tmp_path / "ft", steps=2, batch=4,
+                    init_from=str(prefix), val_every=1000, progress=False)
+    assert summary["step"] == 2 and f"initialised from {prefix}" in capsys.readouterr().out
+
+
+def test_shipped_edgetrack_comes_back_to_torch_by_name():
+    from track3d.onnxmodel import MODELS_DIR
+    from track3d_train.edgetrack.export import parity
+    from track3d_train.edgetrack.from_onnx import is_exported_pair, model_from_onnx
+
+    if not (MODELS_DIR / "edgetrack_search.onnx").is_file():
+        pytest.skip("no EdgeTrack model shipped")
+    assert is_exported_pair("edgetrack")
+    net, _ = model_from_onnx("edgetrack")
+    p = parity(net, MODELS_DIR / "edgetrack_template.onnx", MODELS_DIR / "edgetrack_search.onnx")
+    assert p["logit_max_abs"] < 1e-4 and p["ltrb_max_abs"] < 1e-4 * max(1.0, p["ltrb_scale"]), p
+    with pytest.raises(ValueError, match="not an EdgeTrack search graph"):
+        model_from_onnx(MODELS_DIR / "a3boxnet.onnx")
+
+
+def test_cli_init_from_a_file_that_is_no_pair_is_one_line(trained, tmp_path):
+    r = subprocess.run([sys.executable, "-m", "track3d_train.cli", "edgetrack", "train", "--cache",
+                        str(trained["root"] / "cache"), "--out", str(tmp_path / "r"), "--init-from",
+                        str(tmp_path / "none.onnx"), "--max-steps", "1"], capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "none" in r.stderr
+
+
 def test_cli_export_writes_a_new_prefix_and_refuses_a_shipped_one(trained, tmp_path, capsys, monkeypatch):
     """The command line of the export: a fresh prefix is written (parity printed); the shipped
     models' folder needs --force."""

@@ -257,7 +257,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None,
                    help="stop (and checkpoint) after this many minutes of training, summed over resumed runs "
                         "(default: none, only --max-steps)")
-    t.add_argument("--init-from", help="start from another run's checkpoint (fine-tuning)")
+    t.add_argument("--init-from", help="start from another run's checkpoint or from an exported pair (a prefix, "
+                                       "either .onnx file, or a shipped name such as edgetrack): fine-tuning")
     t.add_argument("--border-cut", type=bounded(float, low=0.0, high=1.0), default=0.0,
                    help="share of target pairs cut at a simulated image border (slivers of a body leaving "
                         "the view; a resumed run keeps its own)")

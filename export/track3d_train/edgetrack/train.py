@@ -143,6 +143,17 @@ def plot_curves(log_path, json_path, png_path, title="EdgeTrack training") -> No
     plt.close(fig)
 
 
+def _onnx_source(source, sampler, net, pairs: int = 64) -> dict:
+    """An exported pair (e.g. the shipped one) as an init_from checkpoint; the folded BatchNorms
+    take their statistics from `pairs` training pairs of `sampler` (`from_onnx`)."""
+    from .from_onnx import model_from_onnx
+
+    z, x, _ = sampler.sample(pairs)
+    with torch.no_grad():
+        crops = (net.normalise(torch.from_numpy(z)).numpy(), net.normalise(torch.from_numpy(x)).numpy())
+    return model_from_onnx(source, calibration=crops)[1]
+
+
 def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: int = 32, lr: float = 3e-3,
           weight_decay: float = 1e-4, seed: int = 0, threads: int = 1, time_budget_s: float | None = None,
           ckpt_every_s: float = 180.0, log_every: int = 10, val_every: int = 200, val_sequences: int = 2,
@@ -187,9 +198,16 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
         print(f"resumed from {ck_path} at step {step} ({elapsed0 / 60:.1f} min trained)")
     else:
         if init_from:
-            from ..checkpoint import load_checkpoint_dict
+            from .from_onnx import is_exported_pair
 
-            src = load_checkpoint_dict(init_from, "EdgeTrack")
+            if is_exported_pair(init_from):
+                src = _onnx_source(init_from, PairSampler(cache, bg[nbg_val:], cfg.exemplar_size, cfg.instance_size,
+                                                          max_gap=max_gap, sequences=train_ids, seed=20_000 + seed,
+                                                          border_cut=border_cut), net)
+            else:
+                from ..checkpoint import load_checkpoint_dict
+
+                src = load_checkpoint_dict(init_from, "EdgeTrack")
             net.load_state_dict(src["model"])
             print(f"initialised from {init_from} (step {src.get('step')})")
         if log_path.exists():
