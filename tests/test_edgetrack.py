@@ -622,6 +622,13 @@ def test_an_exported_pair_comes_back_to_torch_exactly_and_fine_tunes(trained, tm
     summary = train(EdgeTrackConfig(**TINY), trained["root"] / "cache", tmp_path / "ft", steps=2, batch=4,
                     init_from=str(prefix), val_every=1000, progress=False)
     assert summary["step"] == 2 and f"initialised from {prefix}" in capsys.readouterr().out
+    from track3d.onnxmodel import OnnxModel
+    from track3d_train.cli import main as train_main
+
+    assert train_main(["edgetrack", "export", "--checkpoint", str(tmp_path / "ft" / "ckpt.pt"),
+                       "--out", str(tmp_path / "m" / "ft")]) == 0
+    meta = OnnxModel(tmp_path / "m" / "ft_search.onnx", 1, "edgetrack-search").meta
+    assert meta["training"]["fine_tuned_from"]["name"] == "et" and meta["training"]["steps"] == 2
 
 
 def test_shipped_edgetrack_comes_back_to_torch_by_name():

@@ -80,6 +80,8 @@ def _export(a) -> int:
              "training": {"steps": ck.get("step"), "batch": ck.get("batch"), "seed": ck.get("seed"),
                           "elapsed_s": round(float(ck.get("elapsed_s", 0)), 1), "data": data,
                           "border_cut": float(ck.get("border_cut", 0.0))}}
+    if ck.get("init_from"):            # a fine-tune: the model it started from
+        extra["training"]["fine_tuned_from"] = ck["init_from"]
     if ck.get("pad") is not None:     # the colour the runtime's crop fills outside the image with
         extra["pad"] = [float(v) for v in ck["pad"]]
     pz, px = export_onnx(net, a.out, extra)

@@ -188,6 +188,7 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
     net = EdgeTrack(cfg)
     opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=weight_decay)
     step, elapsed0 = 0, 0.0
+    origin = ck.get("init_from") if ck is not None else None   # what a fine-tune started from (its export says)
     if ck is not None:
         net.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optim"])
@@ -209,6 +210,8 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
 
                 src = load_checkpoint_dict(init_from, "EdgeTrack")
             net.load_state_dict(src["model"])
+            origin = {"name": Path(str(init_from)).name, "step": src.get("step"),
+                      "train_data_hash": (src.get("imported_from") or src).get("train_data_hash")}
             print(f"initialised from {init_from} (step {src.get('step')})")
         if log_path.exists():
             log_path.unlink()
@@ -220,7 +223,7 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
         save_checkpoint(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
                         "config": net.cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
                         "batch": batch, "seed": seed, "border_cut": border_cut, "calib": [net.cfg.calib_a, net.cfg.calib_b],
-                        "pad": sampler.pad, **data_info})
+                        "pad": sampler.pad, "init_from": origin, **data_info})
 
     net.train()
     t_start = time.perf_counter()
