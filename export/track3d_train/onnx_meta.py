@@ -60,6 +60,26 @@ def read_metadata(model) -> dict:
     return json.loads(props[META_KEY])
 
 
+def exported_weights(path: str | Path, kind: str, what: str) -> tuple[dict, dict, list]:
+    """(metadata, initialisers by name, (weight, bias or None) of every Conv node in graph order)
+    of an exported model whose metadata kind is `kind`; ValueError naming `what` for any other
+    ONNX file. The reader the from-ONNX converters (A3BoxNet, EdgeTrack) share."""
+    import onnx
+    from onnx import numpy_helper
+
+    m = onnx.load(str(path))
+    try:
+        meta = read_metadata(m)
+    except ValueError:
+        meta = {}
+    if meta.get("kind") != kind:
+        raise ValueError(f"{path} is not {what} (its metadata kind is {meta.get('kind')!r})")
+    init = {t.name: numpy_helper.to_array(t) for t in m.graph.initializer}
+    convs = [(init[n.input[1]], init[n.input[2]] if len(n.input) > 2 else None)
+             for n in m.graph.node if n.op_type == "Conv"]
+    return meta, init, convs
+
+
 def attach_metadata(onnx_path: str | Path, meta: dict) -> None:
     """Store `meta` (JSON-serialisable, must hold 'kind' and 'version') in the ONNX file, with
     the standard ONNX fields filled."""

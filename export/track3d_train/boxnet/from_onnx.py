@@ -19,26 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..onnx_meta import exported_weights
+
 __all__ = ["model_from_onnx"]
-
-
-def _graph(path: Path):
-    import onnx
-    from onnx import numpy_helper
-
-    from ..onnx_meta import read_metadata
-
-    m = onnx.load(str(path))
-    try:
-        meta = read_metadata(m)
-    except ValueError:
-        meta = {}
-    if meta.get("kind") != "a3boxnet":
-        raise ValueError(f"{path} is not an A3BoxNet model (its metadata kind is {meta.get('kind')!r})")
-    init = {t.name: numpy_helper.to_array(t) for t in m.graph.initializer}
-    convs = [(init[n.input[1]], init[n.input[2]] if len(n.input) > 2 else None)
-             for n in m.graph.node if n.op_type == "Conv"]
-    return meta, init, convs
 
 
 def model_from_onnx(path: str | Path, calibration: np.ndarray | None = None):
@@ -52,7 +35,7 @@ def model_from_onnx(path: str | Path, calibration: np.ndarray | None = None):
     from .model import A3BoxNet, BoxNetConfig
 
     path = Path(path)
-    meta, init, convs = _graph(path)
+    meta, init, convs = exported_weights(path, "a3boxnet", "an A3BoxNet model")
     cfg = BoxNetConfig(num_points=int(meta["num_points"]), num_categories=int(meta["num_categories"]),
                        use_category=bool(meta["use_category"]), width=float(meta["width"]),
                        size_norm=str(meta.get("size_norm", "points")))

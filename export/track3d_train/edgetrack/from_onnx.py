@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..onnx_meta import exported_weights
+
 __all__ = ["model_from_onnx", "is_exported_pair"]
 
 
@@ -55,23 +57,9 @@ def is_exported_pair(source: str | Path) -> bool:
 
 
 def _graph(path: Path):
-    import onnx
-    from onnx import numpy_helper
-
-    from ..onnx_meta import read_metadata
-
     if not path.is_file():
         raise FileNotFoundError(f"model file {path} does not exist")
-    m = onnx.load(str(path))
-    try:
-        meta = read_metadata(m)
-    except ValueError:
-        meta = {}
-    if meta.get("kind") != "edgetrack-search":
-        raise ValueError(f"{path} is not an EdgeTrack search graph (its metadata kind is {meta.get('kind')!r})")
-    init = {t.name: numpy_helper.to_array(t) for t in m.graph.initializer}
-    convs = [(init[n.input[1]], init[n.input[2]] if len(n.input) > 2 else None)
-             for n in m.graph.node if n.op_type == "Conv"]
+    meta, _, convs = exported_weights(path, "edgetrack-search", "an EdgeTrack search graph")
     return meta, convs
 
 
