@@ -80,6 +80,19 @@ def exported_weights(path: str | Path, kind: str, what: str) -> tuple[dict, dict
     return meta, init, convs
 
 
+def set_folded_bn(bn, mean, var, shift=0.0) -> None:
+    """Set a BatchNorm after a convolution whose BatchNorm the export folded: x + shift in eval mode
+    ((x - mean) / sqrt(var + eps) times its weight sqrt(var + eps), plus its bias mean + shift), and
+    in training mode about the same for a batch with this channel mean and variance. The from-ONNX
+    converters' one rule (A3BoxNet's convolutions carry their bias themselves: shift 0)."""
+    import torch
+
+    bn.running_mean.copy_(mean)
+    bn.running_var.copy_(var)
+    bn.weight.copy_(torch.sqrt(var + bn.eps))
+    bn.bias.copy_(mean + shift)
+
+
 def attach_metadata(onnx_path: str | Path, meta: dict) -> None:
     """Store `meta` (JSON-serialisable, must hold 'kind' and 'version') in the ONNX file, with
     the standard ONNX fields filled."""

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..onnx_meta import exported_weights
+from ..onnx_meta import exported_weights, set_folded_bn
 
 __all__ = ["model_from_onnx"]
 
@@ -62,7 +62,7 @@ def model_from_onnx(path: str | Path, calibration: np.ndarray | None = None):
                                  f"{tuple(conv.weight.shape)}")
             conv.weight.copy_(torch.from_numpy(np.array(w)))
             conv.bias.copy_(torch.from_numpy(np.array(b)) if b is not None else torch.zeros_like(conv.bias))
-            _set_bn(bn, torch.zeros(bn.num_features), torch.ones(bn.num_features) - bn.eps)
+            set_folded_bn(bn, torch.zeros(bn.num_features), torch.ones(bn.num_features) - bn.eps)
         if calibration is not None:
             _calibrate(model, folded, calibration)
     model.eval()
@@ -70,17 +70,6 @@ def model_from_onnx(path: str | Path, calibration: np.ndarray | None = None):
           "imported_from": {"file": path.name, "exported": meta.get("exported"),
                             "train_data_hash": meta.get("train_data_hash")}}
     return model, ck
-
-
-def _set_bn(bn, mean, var) -> None:
-    """A BatchNorm that is the identity in eval mode and, in training mode, maps a batch with this
-    channel mean and variance about onto itself."""
-    import torch
-
-    bn.running_mean.copy_(mean)
-    bn.running_var.copy_(var)
-    bn.weight.copy_(torch.sqrt(var + bn.eps))
-    bn.bias.copy_(mean)
 
 
 def _calibrate(model, folded, calibration) -> None:
@@ -107,4 +96,4 @@ def _calibrate(model, folded, calibration) -> None:
             h.remove()
     for _, bn in folded:
         mean, var = stats[bn]
-        _set_bn(bn, mean.float(), var.float().clamp_min(1e-6))
+        set_folded_bn(bn, mean.float(), var.float().clamp_min(1e-6))

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..onnx_meta import exported_weights
+from ..onnx_meta import exported_weights, set_folded_bn
 
 __all__ = ["model_from_onnx", "is_exported_pair"]
 
@@ -118,25 +118,13 @@ def model_from_onnx(source: str | Path, calibration: tuple[np.ndarray, np.ndarra
             if bn is None:        # an output layer: its own bias
                 conv.bias.copy_(bias)
             else:                 # folded: the BatchNorm is the identity plus the folded bias
-                _set_bn(bn, torch.zeros(bn.num_features), torch.ones(bn.num_features) - bn.eps, bias)
+                set_folded_bn(bn, torch.zeros(bn.num_features), torch.ones(bn.num_features) - bn.eps, bias)
         if calibration is not None:
             _calibrate(net, list(bn_after.items()), calibration)
     net.eval()
     ck = {"model": net.state_dict(), "config": cfg.to_dict(), "step": 0,
           "imported_from": {"file": path.name, "train_data_hash": meta.get("train_data_hash")}}
     return net, ck
-
-
-def _set_bn(bn, mean, var, shift) -> None:
-    """A BatchNorm that is x + shift in eval mode ((x - mean) / sqrt(var + eps) times its weight
-    sqrt(var + eps), plus its bias mean + shift) and, in training mode, maps a batch with this
-    channel mean and variance about the same way."""
-    import torch
-
-    bn.running_mean.copy_(mean)
-    bn.running_var.copy_(var)
-    bn.weight.copy_(torch.sqrt(var + bn.eps))
-    bn.bias.copy_(mean + shift)
 
 
 def _calibrate(net, folded, calibration) -> None:
@@ -168,4 +156,4 @@ def _calibrate(net, folded, calibration) -> None:
         mean = s / c
         var = (s2 / c - mean * mean).clamp_min(1e-6)
         shift = bn.bias.detach().double() - bn.running_mean.double()   # the folded bias
-        _set_bn(bn, mean.float(), var.float(), shift.float())
+        set_folded_bn(bn, mean.float(), var.float(), shift.float())
