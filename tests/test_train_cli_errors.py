@@ -76,6 +76,30 @@ def test_a_frustum_cache_from_prepare_reads_and_a_damaged_one_is_named(tmp_path,
         _one_line(capsys, "is not a frustum cache made by `track3d-train boxnet prepare`", why)
 
 
+def test_a_prepare_killed_while_writing_leaves_no_cache_behind(tmp_path, monkeypatch):
+    """The recipes skip a cache that exists (their steps resume), so a frustum cache appears only
+    once complete: it used to be written in place, and a job killed mid-write left a truncated
+    .npz that the next run took as done."""
+    from track3d.synthetic import make_synthetic_dataset
+    from track3d_train.boxnet import data
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 3})
+    out = tmp_path / "c.npz"
+    real = np.savez
+
+    def killed(f, **arrays):
+        real(f, points=arrays["points"])   # part of the file written ...
+        raise KeyboardInterrupt            # ... then the job is killed
+
+    monkeypatch.setattr(data.np, "savez", killed)
+    with pytest.raises(KeyboardInterrupt):
+        data.prepare_split(root, "test", out, jitters=0, min_points=4, progress=False)
+    assert not out.exists()
+    monkeypatch.setattr(data.np, "savez", real)
+    assert data.prepare_split(root, "test", out, jitters=0, min_points=4, progress=False) == out
+    assert len(data.PointCache(out)) > 0 and [p.name for p in tmp_path.iterdir() if p.is_file()] == ["c.npz"]
+
+
 def test_siamfc_and_edgetrack_train_name_a_path_that_is_not_a_crop_cache(tmp_path, capsys):
     from track3d_train.siamfc.data import build_cache, synthetic_sequences
 

@@ -131,12 +131,17 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
             "jitter": spec.__dict__, "sequences": [s.name for s in seqs], "frame_step": frame_step,
             "categories": list(ds.categories.get("shape_families", [])),
             "num_categories": len(ds.categories.get("shape_families", [])) or 3}
-    np.savez(out, points=np.concatenate(pts), offsets=np.asarray(offs, np.int64),
-             gt3d=np.asarray(rec["gt3d"], np.float64), baseline=np.asarray(rec["baseline"], np.float64),
-             box2d=np.asarray(rec["box2d"], np.float64), category=np.asarray(rec["category"], np.int64),
-             seq=np.asarray(rec["seq"], np.int64), frame=np.asarray(rec["frame"], np.int64),
-             n_full=np.asarray(rec["n_full"], np.int64), jittered=np.asarray(rec["jittered"], np.int8),
-             info=np.frombuffer(json.dumps(info).encode(), dtype=np.uint8))
+    # Written under another name and renamed when complete: a recipe skips a cache that exists,
+    # so a job killed while writing (hundreds of MB) must not leave a truncated file at `out`.
+    part = out.with_name(out.name + ".part")
+    with open(part, "wb") as f:
+        np.savez(f, points=np.concatenate(pts), offsets=np.asarray(offs, np.int64),
+                 gt3d=np.asarray(rec["gt3d"], np.float64), baseline=np.asarray(rec["baseline"], np.float64),
+                 box2d=np.asarray(rec["box2d"], np.float64), category=np.asarray(rec["category"], np.int64),
+                 seq=np.asarray(rec["seq"], np.int64), frame=np.asarray(rec["frame"], np.int64),
+                 n_full=np.asarray(rec["n_full"], np.int64), jittered=np.asarray(rec["jittered"], np.int8),
+                 info=np.frombuffer(json.dumps(info).encode(), dtype=np.uint8))
+    part.replace(out)
     return out
 
 
