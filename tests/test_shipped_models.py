@@ -12,6 +12,7 @@ SHIPPED = {
     "a3boxnet_narrow.onnx": "a3boxnet",
     "a3boxnet.onnx": "a3boxnet",
     "a3boxnet_stereo.onnx": "a3boxnet",
+    "a3boxnet_stereo_backlit.onnx": "a3boxnet",
     "siamfc_edge_exemplar.onnx": "siamfc-exemplar",
     "siamfc_edge_search.onnx": "siamfc-search",
     "siamfc_faithful_exemplar.onnx": "siamfc-exemplar",
@@ -27,9 +28,11 @@ def test_shipped_model_is_present_and_carries_its_metadata(name):
         np.testing.assert_allclose(np.asarray(m.meta["size_templates"]), SIZE_TEMPLATES, atol=1e-6)
         assert m.meta["num_points"] >= 64 and len(m.meta["train_data_hash"]) == 64
         # a sensor's own model says so, and is a fine-tune of the shared one
-        assert m.meta.get("depth_sensor") == ("stereo" if name == "a3boxnet_stereo.onnx" else None)
+        assert m.meta.get("depth_sensor") == ("stereo" if name.startswith("a3boxnet_stereo") else None)
         if name == "a3boxnet_stereo.onnx":
             assert m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet.onnx"
+        if name == "a3boxnet_stereo_backlit.onnx":   # the stereo model, shown crescents
+            assert m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet_stereo.onnx"
         # the default is the full-width model cut to half width and distilled from it
         if name == "a3boxnet_narrow.onnx":
             assert m.meta["width"] == 0.5 and m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet_narrow.onnx"  # its recipe's last stage

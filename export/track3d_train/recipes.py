@@ -253,6 +253,46 @@ A3BOXNET_STEREO = Recipe(
     notes=("`parent` is the shipped a3boxnet.onnx by name (or any A3BoxNet .onnx / checkpoint path).",),
 )
 
+A3BOXNET_STEREO_BACKLIT = Recipe(
+    name="a3boxnet-stereo-backlit",
+    makes="{runs}/boxnet-stereo-backlit/a3boxnet_stereo_backlit.onnx",
+    description="A3BoxNet for block-matching stereo depth of bodies lit from behind (track3d.boxnet.BACKLIT_MODELS, "
+                "run past 100 degrees of phase when the sun is known): the shipped stereo model fine-tuned on "
+                "crescents only, 138 sequences x 50 frames of every generator but the held-out ones lit at "
+                "90-160 degrees of phase (three seeds); ~40 min on one thread.",
+    knobs={"preset": "small", "train_a": 48, "train_b": 60, "train_c": 30, "frames": 50, "phase": "90:160",
+           "jitters": 3, "epoch_samples": 4000, "batch": 32, "max_steps": 0, "epochs": 40, "minutes": 40,
+           "lr": 1.5e-4, "threads": 1, "workers": 1, "parent": "a3boxnet_stereo.onnx"},
+    tiny={"preset": "tiny", "train_a": 1, "train_b": 1, "train_c": 1, "frames": 4, "jitters": 1, "epoch_samples": 16,
+          "batch": 8, "max_steps": 2, "epochs": 1, "minutes": 5},
+    steps=tuple(
+        s for seed, n in (("11", "a"), ("13", "b"), ("14", "c")) for s in (
+            Step(f"data: stereo bodies lit from behind (seed {seed})", _a(
+                f"track3d-sim generate --preset {{preset}} --seed {seed} --train {{train_{n}}} --test 0 "
+                f"--test-unseen 1 --frames {{frames}} --sun-phase {{phase}} --sensors stereo "
+                f"--out {{data}}/stereo-backlit-s{seed} --workers {{workers}} --quiet")),
+            Step(f"cache: frustums of jittered ground-truth boxes (seed {seed})", _a(
+                f"track3d-train boxnet prepare --data {{data}}/stereo-backlit-s{seed} --split train "
+                f"--jitters {{jitters}} --out {{runs}}/boxnet-stereo-backlit/cache/stereo-backlit-s{seed}.npz --quiet"),
+                done_when=f"{{runs}}/boxnet-stereo-backlit/cache/stereo-backlit-s{seed}.npz"))
+    ) + (
+        Step("train: fine-tune the shipped stereo model (its ONNX) on the crescents", _a(
+            "track3d-train boxnet train --cache {runs}/boxnet-stereo-backlit/cache/stereo-backlit-s11.npz "
+            "{runs}/boxnet-stereo-backlit/cache/stereo-backlit-s13.npz "
+            "{runs}/boxnet-stereo-backlit/cache/stereo-backlit-s14.npz --num-points 512 --epochs {epochs} "
+            "--epoch-samples {epoch_samples} --batch {batch} --max-steps {max_steps} --flip-y --scale-aug 0.15 "
+            "--no-category --threads {threads} --quiet --out {runs}/boxnet-stereo-backlit/run "
+            "--time-budget-min {minutes} --stretch-aug 0.3 --size-norm extent --lr {lr} --init-from {parent}")),
+        Step("export with a parity check", _a(
+            "track3d-train boxnet export --checkpoint {runs}/boxnet-stereo-backlit/run/best.pt "
+            "--out {runs}/boxnet-stereo-backlit/a3boxnet_stereo_backlit.onnx --depth-sensor stereo")),
+    ),
+    notes=("`parent` is the shipped a3boxnet_stereo.onnx by name (recipe a3boxnet-stereo; or any A3BoxNet .onnx / "
+           "checkpoint path).",
+           "The training picks the epoch of the best validation AO_3d (best.pt); the validation sequences are "
+           "every 8th of the caches'.",),
+)
+
 A3BOXNET_NARROW = Recipe(
     name="a3boxnet-narrow",
     makes="{runs}/boxnet-narrow/a3boxnet_narrow.onnx",
@@ -335,7 +375,7 @@ A3BOXNET_NARROW = Recipe(
 )
 
 RECIPES: dict[str, Recipe] = {r.name: r for r in (A3BOXNET_ENGINE, A3BOXNET_NARROW, A3BOXNET_STEREO,
-                                                  EDGETRACK_ENGINE, SIAMFC)}
+                                                  A3BOXNET_STEREO_BACKLIT, EDGETRACK_ENGINE, SIAMFC)}
 
 
 def recipe(name: str) -> Recipe:

@@ -24,6 +24,7 @@ from .size_coding import SIZE_CODINGS, SizeCoding, size_coding
 
 __all__ = [
     "KIND", "DEFAULT_MODEL", "NARROW_MODEL", "FULL_WIDTH_MODEL", "SENSOR_MODELS", "model_for_sensor", "SIZE_NORMS",
+    "BACKLIT_MODELS", "BACKLIT_PHASE_DEG", "backlit_model_for",
     "MAX_EXTENT_M", "INPUT_POINTS", "INPUT_CATEGORY", "OUTPUTS", "VIEWS", "SENSOR_VIEWS", "views_for", "MIRRORS",
     "one_hot", "average_boxes", "A3BoxNetEstimator", "create",
 ]
@@ -52,6 +53,24 @@ SENSOR_MODELS = {"stereo": "a3boxnet_stereo.onnx"}
 def model_for_sensor(depth_sensor: str | None) -> Path:
     """The shipped A3BoxNet file for clouds of this depth sensor (None or unknown: the shared one)."""
     return shipped_model(SENSOR_MODELS.get(str(depth_sensor or "").lower(), DEFAULT_MODEL))
+
+
+# Bodies lit from behind. Past 90 degrees of phase a stereo camera sees a crescent: depth only on
+# the lit limb, the body's near side dark, its centre and depth hidden behind it (docs/models.md,
+# "the hidden depth of crescents"). With the sun's direction known (Track3D.set_sun) and the phase
+# at the 2D box past BACKLIT_PHASE_DEG, the estimator runs the sensor's back-lit model instead:
+# the sensor's model fine-tuned on bodies lit from behind only (recipe a3boxnet-stereo-backlit).
+# 100 rather than the outline share's 90 (tracker.SENSOR_OUTLINE_SHARE_PHASES): a body just past
+# 90 degrees is still half lit, and there the sensor's own model did as well (chosen on the
+# stereo calibration sets, docs/models.md); a body lit from the front never meets the model.
+BACKLIT_MODELS = {"stereo": "a3boxnet_stereo_backlit.onnx"}
+BACKLIT_PHASE_DEG = 100.0
+
+
+def backlit_model_for(depth_sensor: str | None) -> Path | None:
+    """The shipped A3BoxNet file for this sensor's bodies lit from behind, or None (none shipped)."""
+    name = BACKLIT_MODELS.get(str(depth_sensor or "").lower())
+    return None if name is None else shipped_model(name)
 
 
 # Test-time views: the box is the average of `views` passes of the network over one frustum, view
@@ -114,18 +133,33 @@ class A3BoxNetEstimator:
     per call so that the same points always give the same box (deterministic); precision /
     engine: the model variant ("fp32" | "int8" | "bf16" | "auto", "onnxruntime" | "openvino" |
     "auto", see track3d.onnxmodel; the choice is in ``.model.choice``); views: test-time views
-    averaged per box, 1..16 (default: `views_for(depth_sensor)`; see VIEWS), run as one batch.
+    averaged per box, 1..16 (default: `views_for(depth_sensor)`; see VIEWS), run as one batch;
+    backlit_model: the model for frames whose phase angle (``estimate(..., phase_deg=)``) is past
+    `backlit_phase` degrees (default: the sensor's, BACKLIT_MODELS, unless `model` is given; it
+    runs with this estimator's other options, in ``.backlit``); backlit_phase: that gate,
+    0..180 (180: never).
     """
 
     name = KIND
     # estimate() takes the loop's frustum bounds (Track3D passes them: no second pass over the points)
     takes_bounds = True
+    # estimate() takes the phase angle at the 2D box when the loop knows the sun (BACKLIT_MODELS)
+    takes_phase = True
     # a guess of the whole body: the loop keeps its hidden back face and measures the rest
     amodal = True
 
     def __init__(self, model: str | Path | None = None, threads: int = 1, num_points: int | None = None,
                  seed: int = 0, precision: str = "fp32", engine: str = "onnxruntime",
-                 depth_sensor: str | None = None, views: int | None = None):
+                 depth_sensor: str | None = None, views: int | None = None,
+                 backlit_model: str | Path | None = None, backlit_phase: float = BACKLIT_PHASE_DEG):
+        try:
+            self.backlit_phase = float(backlit_phase)
+        except (TypeError, ValueError):
+            raise ValueError(f"backlit_phase must be degrees in 0..180, got {backlit_phase!r:.80}") from None
+        if isinstance(backlit_phase, bool) or not 0.0 <= self.backlit_phase <= 180.0:
+            raise ValueError(f"backlit_phase must be degrees in 0..180, got {backlit_phase!r:.80}")
+        if backlit_model is None and model is None and self.backlit_phase < 180.0:
+            backlit_model = backlit_model_for(depth_sensor)
         if views is None:
             views = views_for(depth_sensor)
         if isinstance(views, bool) or not isinstance(views, (int, np.integer)) or not 1 <= views <= MAX_VIEWS:
@@ -156,10 +190,21 @@ class A3BoxNetEstimator:
         if INPUT_POINTS not in names or (self.use_category and INPUT_CATEGORY not in names):
             raise ModelError(f"{self.model.path}: inputs {sorted(names)} are not an A3BoxNet's")
         self._with_category = INPUT_CATEGORY in names
+        self.backlit: A3BoxNetEstimator | None = None
+        if backlit_model is not None and self.backlit_phase < 180.0:
+            self.backlit = A3BoxNetEstimator(backlit_model, threads, num_points, seed, precision, engine,
+                                             views=views, backlit_phase=180.0)
+            if self.backlit.use_category != self.use_category or self.backlit.size_norm != self.size_norm:
+                raise ModelError(f"{self.backlit.model.path}: its category input or box coding differs from "
+                                 f"{self.model.path.name}'s")
+            # held here too, so that run records (Track3D.describe) and network timings see it
+            self.backlit_net = self.backlit.model
 
     def __repr__(self) -> str:
         v = f", views={self.views}" if self.views != 1 else ""
-        return f"A3BoxNetEstimator({self.model.path.name}, N={self.num_points}, threads={self.threads}{v})"
+        b = (f", backlit={self.backlit.model.path.name} past {self.backlit_phase:g} deg"
+             if self.backlit is not None else "")
+        return f"A3BoxNetEstimator({self.model.path.name}, N={self.num_points}, threads={self.threads}{v}{b})"
 
     def sample(self, points: np.ndarray, view: int = 0) -> np.ndarray:
         """The N points view `view` sees (sampling seed + view; not mirrored)."""
@@ -174,14 +219,19 @@ class A3BoxNetEstimator:
             feeds[INPUT_CATEGORY] = one_hot(np.reshape(category, (-1,)), self.num_categories)
         return self.model.run(feeds, list(OUTPUTS))
 
-    def estimate(self, points: np.ndarray, category: int, bounds: np.ndarray | None = None) -> np.ndarray:
+    def estimate(self, points: np.ndarray, category: int, bounds: np.ndarray | None = None,
+                 phase_deg: float | None = None) -> np.ndarray:
         """Frustum points (n, 3) float32, n >= 1, and the coarse category -> box (6,) float64.
 
         bounds: (2, 3) [min; max] of the points, if the caller has them (the loop's frustum pass
         does); computed here otherwise, and only by codings that read them (``coding.needs_bounds``).
+        phase_deg: the phase angle at the 2D box (track3d.dark_side.phase_deg) when the sun is
+        known, else None; past `backlit_phase` the back-lit model answers (``.backlit``).
         Raises ValueError on points, bounds or a category outside the contract (track3d.frames).
         The values are checked on the sample the network sees (N points) and on the bounds, not
         point by point over the whole frustum."""
+        if self.backlit is not None and phase_deg is not None and float(phase_deg) > self.backlit_phase:
+            return self.backlit.estimate(points, category, bounds)
         category = check_category(category, self.num_categories)
         pts = check_estimator_points(points, finite=False)
         sample = self.sample(pts) if self.views == 1 else np.stack([self.sample(pts, k) for k in range(self.views)])

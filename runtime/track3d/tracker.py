@@ -811,6 +811,8 @@ class Track3D:
             tracker2d.reacquire_threshold = max(own, self.reacquire_threshold)
         # an estimator whose estimate() takes bounds= gets the frustum pass's [min; max] (A3BoxNet)
         self._estimator_takes_bounds = bool(getattr(estimator, "takes_bounds", False))
+        # ... and phase_deg= (the phase angle at the 2D box, with the sun known)
+        self._estimator_takes_phase = bool(getattr(estimator, "takes_phase", False))
         self.category = -1
         self.box2d = np.full(4, np.nan)
         self.box3d = np.full(6, np.nan)
@@ -886,16 +888,22 @@ class Track3D:
         out[0, 2] = np.partition(pts[:, 2], k)[k]
         return out
 
-    def _estimate(self, pts: np.ndarray, bounds: np.ndarray) -> np.ndarray | None:
+    def _estimate(self, pts: np.ndarray, bounds: np.ndarray, box2d: np.ndarray) -> np.ndarray | None:
+        """The estimator's box for the frustum `pts` (its [min; max] `bounds`) cut with `box2d`."""
         # The checks use the frustum pass's bounds: no second pass over a large frustum.
         if len(pts) < self.min_points:
             return None
         lo, hi = bounds
         if (hi - lo).max() < MIN_SPREAD_M or lo.min() < -MAX_COORD_M or hi.max() > MAX_COORD_M:
             return None
+        extra = {}
+        if self._estimator_takes_bounds:
+            extra["bounds"] = bounds
+        if self._estimator_takes_phase and self.sun is not None:
+            # a model of its own for bodies lit from behind (track3d.boxnet.BACKLIT_MODELS)
+            extra["phase_deg"] = phase_deg(box2d, self.sun, self.camera)
         try:
-            b = (self.estimator.estimate(pts, self.category, bounds=bounds) if self._estimator_takes_bounds
-                 else self.estimator.estimate(pts, self.category))
+            b = self.estimator.estimate(pts, self.category, **extra)
             b = np.asarray(b, dtype=np.float64).reshape(-1)
         except ValueError:  # points outside the estimator's domain (e.g. A3BoxNet's extent)
             return None
@@ -1056,7 +1064,7 @@ class Track3D:
         self._started = True
         if points is not None and self.needs_points:
             pts, bounds = self._frustum(points, b)
-            est = self._estimate(pts, bounds)
+            est = self._estimate(pts, bounds, b)
             if est is not None:
                 self.box3d = self._report(est, self._measured(pts, bounds), b)
 
@@ -1220,7 +1228,7 @@ class Track3D:
             start = self.outline_share * lit + (1.0 - self.outline_share) * seen
         t2 = time.perf_counter()
         ms["frustum"] = (t2 - t1) * 1e3
-        est = self._estimate(pts, bounds)
+        est = self._estimate(pts, bounds, seen)
         status = TRACKING
         if est is None:
             status = NO_POINTS
@@ -1378,7 +1386,7 @@ class Track3D:
         pts, bounds = self._frustum(cloud, box)
         if reaches_range(bounds, box, self.camera, self.depth_range_m):
             return False
-        est = self._estimate(pts, bounds)
+        est = self._estimate(pts, bounds, box)
         if est is None:
             return False
         self.box3d = self._report(est, self._measured(pts, bounds), box)
