@@ -32,6 +32,7 @@ def gated():
 
 def test_the_gate_picks_the_model_by_phase(cloud, gated):
     pts, b = cloud
+    assert gated.takes_phase
     front = A3BoxNetEstimator(shipped_model(NARROW_MODEL)).estimate(pts, -1, b)
     back = A3BoxNetEstimator(shipped_model(FULL_WIDTH_MODEL)).estimate(pts, -1, b)
     assert not np.allclose(front, back)
@@ -52,9 +53,10 @@ def test_the_gate_is_optional_and_checked(cloud):
     pts, b = cloud
     front = A3BoxNetEstimator(shipped_model(NARROW_MODEL))
     assert front.backlit is None                       # no sensor, no model given: one model
+    assert not front.takes_phase                       # so the loop computes no phase for it
     never = A3BoxNetEstimator(shipped_model(NARROW_MODEL), backlit_model=shipped_model(FULL_WIDTH_MODEL),
                               backlit_phase=180)
-    assert never.backlit is None
+    assert never.backlit is None and not never.takes_phase
     np.testing.assert_array_equal(never.estimate(pts, -1, b, phase_deg=170.0), front.estimate(pts, -1, b))
     later = A3BoxNetEstimator(shipped_model(NARROW_MODEL), backlit_model=shipped_model(FULL_WIDTH_MODEL),
                               backlit_phase=120)

@@ -143,8 +143,9 @@ class A3BoxNetEstimator:
     name = KIND
     # estimate() takes the loop's frustum bounds (Track3D passes them: no second pass over the points)
     takes_bounds = True
-    # estimate() takes the phase angle at the 2D box when the loop knows the sun (BACKLIT_MODELS)
-    takes_phase = True
+    # estimate() reads the phase angle at the 2D box (the loop passes it with the sun known) only
+    # with a back-lit model; set per instance, so that the loop computes no phase it would not use
+    takes_phase = False
     # a guess of the whole body: the loop keeps its hidden back face and measures the rest
     amodal = True
 
@@ -199,6 +200,7 @@ class A3BoxNetEstimator:
                                  f"{self.model.path.name}'s")
             # held here too, so that run records (Track3D.describe) and network timings see it
             self.backlit_net = self.backlit.model
+            self.takes_phase = True
 
     def __repr__(self) -> str:
         v = f", views={self.views}" if self.views != 1 else ""
