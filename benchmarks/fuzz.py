@@ -184,7 +184,9 @@ class Env:
         from track3d.estimators import create_estimator
 
         if name not in self._est:
-            self._est[name] = create_estimator(name)
+            # stereo's A3BoxNet carries the back-lit model and its gate (estimate(..., phase_deg=))
+            self._est[name] = create_estimator(name, depth_sensor="stereo") if name == "a3boxnet" else \
+                create_estimator(name)
         return self._est[name]
 
     def dataset(self) -> Path:
@@ -245,8 +247,13 @@ def _t_estimator(name):
             odd = [np.zeros((5, 4)), np.zeros(9), [[1, 2, 3]] * 20, "points", np.zeros((3, 3), bool), [[1, 2], [3]]]
             pts = odd[int(rng.integers(0, len(odd)))]
         cat = rand_category(rng)
+        extra = {}
+        if getattr(est, "takes_phase", False) and rng.random() < 0.5:
+            odd = [float("nan"), -1.0, 181.0, "x", [120.0], True]
+            extra["phase_deg"] = (float(rng.uniform(0.0, 180.0)) if rng.random() < 0.9
+                                  else odd[int(rng.integers(0, len(odd)))])
         try:
-            box = est.estimate(pts, cat)
+            box = est.estimate(pts, cat, **extra)
         except ValueError:
             return "clean_error"
         p = np.asarray(pts, dtype=np.float64)

@@ -64,6 +64,13 @@ def test_the_gate_is_optional_and_checked(cloud):
     for bad in (-1, 181, "x", True, float("nan")):
         with pytest.raises(ValueError, match="backlit_phase must be degrees in 0..180"):
             A3BoxNetEstimator(shipped_model(NARROW_MODEL), backlit_phase=bad)
+    for bad in (-0.5, 180.5, float("nan"), float("inf"), "far", True, np.array([120.0, 130.0]), [150.0]):
+        with pytest.raises(ValueError, match="phase_deg must be degrees in 0..180 or None"):
+            never.estimate(pts, -1, b, phase_deg=bad)   # checked with or without a back-lit model
+        with pytest.raises(ValueError, match="phase_deg must be degrees in 0..180 or None"):
+            front.estimate(pts, -1, b, phase_deg=bad)
+    np.testing.assert_array_equal(front.estimate(pts, -1, b, phase_deg=np.float32(150.0)),
+                                  front.estimate(pts, -1, b))
     with pytest.raises(ModelError, match="does not exist"):
         A3BoxNetEstimator(shipped_model(NARROW_MODEL), backlit_model="no/such/model.onnx")
 

@@ -123,6 +123,19 @@ def one_hot(category, num_categories: int) -> np.ndarray:
     return out.reshape(c.shape + (num_categories,))
 
 
+def _check_phase(phase_deg) -> float:
+    """A phase angle in degrees, 0..180, as a float; ValueError otherwise (NaN, a bool, an array)."""
+    if isinstance(phase_deg, (bool, np.bool_)) or np.ndim(phase_deg) != 0:
+        raise ValueError(f"phase_deg must be degrees in 0..180 or None, got {phase_deg!r:.80}")
+    try:
+        ph = float(phase_deg)
+    except (TypeError, ValueError):
+        raise ValueError(f"phase_deg must be degrees in 0..180 or None, got {phase_deg!r:.80}") from None
+    if not 0.0 <= ph <= 180.0:
+        raise ValueError(f"phase_deg must be degrees in 0..180 or None, got {phase_deg!r:.80}")
+    return ph
+
+
 class A3BoxNetEstimator:
     """The box estimator behind the loop's seam: ``estimate(points (n,3), category) -> (6,)``.
 
@@ -232,7 +245,7 @@ class A3BoxNetEstimator:
         Raises ValueError on points, bounds or a category outside the contract (track3d.frames).
         The values are checked on the sample the network sees (N points) and on the bounds, not
         point by point over the whole frustum."""
-        if self.backlit is not None and phase_deg is not None and float(phase_deg) > self.backlit_phase:
+        if phase_deg is not None and _check_phase(phase_deg) > self.backlit_phase and self.backlit is not None:
             return self.backlit.estimate(points, category, bounds)
         category = check_category(category, self.num_categories)
         pts = check_estimator_points(points, finite=False)
