@@ -123,16 +123,16 @@ def one_hot(category, num_categories: int) -> np.ndarray:
     return out.reshape(c.shape + (num_categories,))
 
 
-def _check_phase(phase_deg) -> float:
-    """A phase angle in degrees, 0..180, as a float; ValueError otherwise (NaN, a bool, an array)."""
-    if isinstance(phase_deg, (bool, np.bool_)) or np.ndim(phase_deg) != 0:
-        raise ValueError(f"phase_deg must be degrees in 0..180 or None, got {phase_deg!r:.80}")
+def _check_phase(value, what: str = "phase_deg must be degrees in 0..180 or None") -> float:
+    """A phase angle in degrees, 0..180, as a float; ValueError `what` otherwise (NaN, a bool, an array)."""
+    if isinstance(value, (bool, np.bool_)) or np.ndim(value) != 0:
+        raise ValueError(f"{what}, got {value!r:.80}")
     try:
-        ph = float(phase_deg)
+        ph = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"phase_deg must be degrees in 0..180 or None, got {phase_deg!r:.80}") from None
+        raise ValueError(f"{what}, got {value!r:.80}") from None
     if not 0.0 <= ph <= 180.0:
-        raise ValueError(f"phase_deg must be degrees in 0..180 or None, got {phase_deg!r:.80}")
+        raise ValueError(f"{what}, got {value!r:.80}")
     return ph
 
 
@@ -166,12 +166,7 @@ class A3BoxNetEstimator:
                  seed: int = 0, precision: str = "fp32", engine: str = "onnxruntime",
                  depth_sensor: str | None = None, views: int | None = None,
                  backlit_model: str | Path | None = None, backlit_phase: float = BACKLIT_PHASE_DEG):
-        try:
-            self.backlit_phase = float(backlit_phase)
-        except (TypeError, ValueError):
-            raise ValueError(f"backlit_phase must be degrees in 0..180, got {backlit_phase!r:.80}") from None
-        if isinstance(backlit_phase, bool) or not 0.0 <= self.backlit_phase <= 180.0:
-            raise ValueError(f"backlit_phase must be degrees in 0..180, got {backlit_phase!r:.80}")
+        self.backlit_phase = _check_phase(backlit_phase, "backlit_phase must be degrees in 0..180")
         if backlit_model is None and model is None and self.backlit_phase < 180.0:
             backlit_model = backlit_model_for(depth_sensor)
         if views is None:
