@@ -202,6 +202,14 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--restart-skip", type=bounded(int, 1), default=1,
                    help="re-initialise this many frames after a zero-3D-IoU frame (default 1: the next)")
     t.add_argument("--no-restart", action="store_true", help="never re-initialise from the ground truth")
+    t.add_argument("--init-3d", action="store_true",
+                   help="3D single-object tracking's start (KITTI's protocol): every initialisation also gets the "
+                        "ground truth's 3D box of that frame, whose depth extent holds while the body has not turned "
+                        "(track3d.first_box); another protocol: the results are named <tracker>+<estimator>-init3d "
+                        "unless --name is given")
+    t.add_argument("--first-box-fade", type=bounded(float, above=0, high=10), default=None, metavar="CHANGE",
+                   help="with --init-3d, the relative change of the lateral extents at which the first box's depth "
+                        "no longer counts (default track3d.first_box.FIRST_BOX_FADE, 0.2)")
     t.add_argument("--depth", choices=("map", "stereo"), default="map",
                    help="point clouds from the dataset's depth maps (map, default) or computed from its "
                         "left/right images by semi-global matching around the 2D box (stereo)")
@@ -330,7 +338,7 @@ def _cmd_track(a) -> int:
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
                        weight_2d=weight_2d, measured_faces=faces, depth_smoothing=a.depth_smoothing,
                        evidence_points=a.evidence_points, reacquire_threshold=a.reacquire_threshold,
-                       hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad,
+                       hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad, first_box_fade=a.first_box_fade,
                        front_quantile=a.front_quantile, front_filter=a.front_filter, silhouette=a.silhouette,
                        outline_share=a.outline_share, outline_share_phase=a.outline_share_phase,
                        outline_contain=a.outline_contain, texture_trim=a.texture_trim, resume_outline=a.resume_outline, dark_side=a.dark_side, fusion_cover=a.fusion_cover, sun=not a.no_sun,
@@ -343,8 +351,12 @@ def _cmd_track(a) -> int:
         spec.name = spec.label + "-views-" + "-".join(f"{k}={v}" for k, v in sorted(views_opts.items()))
     if a.depth == "stereo" and not a.name:
         spec.name = spec.label + "-stereo"   # keep the depth-map results of the same pair
+    if a.first_box_fade is not None and not a.init_3d:
+        raise ValueError("--first-box-fade weighs the first 3D box: it needs --init-3d")
+    if a.init_3d and not a.name:
+        spec.name = spec.label + "-init3d"   # another protocol: never the same folder as the 2D start's
     exp = Experiment(a.data, a.split, a.results, sequences=_unique(a.sequences), max_frames=a.frames,
-                     restart=not a.no_restart, restart_skip=a.restart_skip, depth=a.depth)
+                     restart=not a.no_restart, restart_skip=a.restart_skip, depth=a.depth, init_3d=a.init_3d)
     results = Path(a.results)
     if results.exists() and not results.is_dir():
         raise ValueError(f"--results {results} is a file, not a folder")

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_image", "check_estimator_points", "check_point_bounds", "point_bounds", "check_category", "check_init_box",
+__all__ = ["check_image", "check_estimator_points", "check_point_bounds", "point_bounds", "check_category", "check_init_box", "check_init_box3d",
            "is_integer", "MAX_COORD_M", "MAX_BOX_SCALE", "MIN_BOX_SIDE"]
 
 MAX_COORD_M = 1e5     # metres: beyond, float32 points lose centimetres and the nets never saw such scenes
@@ -97,6 +97,23 @@ def check_category(category, num_categories: int | None = None) -> int:
         top = "" if num_categories is None else f"{int(num_categories) - 1}"
         raise ValueError(f"category must be in -1..{top or 'any'}, got {category!r}")
     return c
+
+
+def check_init_box3d(box) -> np.ndarray:
+    """Return a first 3D box [cx, cy, cz, sx, sy, sz] (camera frame, metres) as (6,) float64, or
+    raise ValueError: not 6 finite numbers, a size not above 0, the centre not in front of the
+    camera, or a coordinate beyond MAX_COORD_M."""
+    try:
+        b = np.asarray(box, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"a 3D box is 6 numbers [cx, cy, cz, sx, sy, sz] (metres), got {box!r:.80}") from None
+    if b.shape != (6,) or not np.all(np.isfinite(b)):
+        shown = str(b.tolist()) if box is not None else "None"
+        raise ValueError(f"a 3D box is 6 finite numbers [cx, cy, cz, sx, sy, sz] (metres), got {shown:.120}")
+    if np.any(b[3:] <= 0.0) or b[2] <= 0.0 or np.any(np.abs(b) > MAX_COORD_M):
+        raise ValueError(f"a 3D box needs sizes above 0 and its centre in front of the camera (cz > 0), "
+                         f"within {MAX_COORD_M:g} m, got {b.tolist()}")
+    return b
 
 
 def check_init_box(box, size: tuple[int, int]) -> np.ndarray:

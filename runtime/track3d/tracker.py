@@ -50,7 +50,8 @@ from .body_views import BodyViews, BodyViewsParams, hold_back_face
 from .dark_side import check_sun, dark_side_box, phase_deg, reach_dark_side
 from .camera import Camera
 from .estimators import BoxEstimator, create_estimator
-from .frames import MAX_COORD_M, check_category, check_image, check_init_box
+from .first_box import FIRST_BOX_FADE, check_fade, with_first_depth
+from .frames import MAX_COORD_M, check_category, check_image, check_init_box, check_init_box3d
 from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
 from .silhouette import contain, find_body, past_border, silhouette_box
@@ -678,7 +679,7 @@ class Track3D:
                  outline_share_phase: float = OUTLINE_SHARE_PHASE, outline_contain: bool = False,
                  dark_side: float = DARK_SIDE, fusion_cover: float = FUSION_COVER, texture_trim: bool = False,
                  resume_outline: bool = False,
-                 body_views: bool | BodyViewsParams = BODY_VIEWS):
+                 body_views: bool | BodyViewsParams = BODY_VIEWS, first_box_fade: float = FIRST_BOX_FADE):
         if not isinstance(camera, Camera):
             raise TypeError(f"camera must be a track3d.Camera, got {type(camera).__name__}")
         if not 0.0 <= float(weight_3d) <= 1.0:
@@ -760,6 +761,8 @@ class Track3D:
         self.sun: np.ndarray | None = None   # unit (3,) toward the sun, camera frame (set_sun)
         if not isinstance(body_views, (bool, np.bool_, BodyViewsParams)):
             raise ValueError(f"body_views must be True, False or a BodyViewsParams, got {body_views!r}")
+        self.first_box_fade = check_fade(first_box_fade)
+        self._first = None   # the first 3D box, when init() was given one (track3d.first_box)
         self.body_views = isinstance(body_views, BodyViewsParams) or bool(body_views)
         # the past views only push an amodal estimator's guessed back face
         self._views = (BodyViews(camera, body_views if isinstance(body_views, BodyViewsParams) else None)
@@ -1007,7 +1010,7 @@ class Track3D:
                 self._carry_area = area
             if clear or not area < CARRY_SLIVER * self._carry_area:   # (nan: no clear box yet)
                 self._carry_from, self._carry_box = np.array(box2d, dtype=np.float64), np.array(box, dtype=np.float64)
-        return box
+        return box if self._first is None else with_first_depth(box, self._first, self.first_box_fade)
 
     def _filter_front(self, box: np.ndarray) -> np.ndarray:
         """`box` moved along the line of sight (its size kept) to put its front face at the
@@ -1036,14 +1039,20 @@ class Track3D:
         self.sun = check_sun(direction)
 
     def init(self, image: np.ndarray, box2d: np.ndarray, category: int = -1,
-             points: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+             points: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
+             box3d: np.ndarray | None = None) -> None:
         """Start on `image` with the target in `box2d` [x, y, w, h]; category: coarse category.
 
         points: the frame's cloud (N, 3) or a callable box2d -> cloud (as in `update`), optional;
         when given the first 3D box is estimated from its frustum so that a later empty frustum
         has a box to keep.
+        box3d: the body's 3D box in this frame, (6,) [cx, cy, cz, sx, sy, sz] camera frame, metres,
+        optional (3D single-object tracking's start): it is the first box, and its depth extent
+        holds the reported boxes' while the body has not turned (track3d.first_box,
+        `first_box_fade`).
         """
         b = check_init_box(box2d, self._size)
+        first = None if box3d is None else check_init_box3d(box3d)
         category = check_category(category, getattr(self.estimator, "num_categories", None))
         image = self.camera.undistort_image(check_image(image, self._size))
         self.category = category
@@ -1059,6 +1068,7 @@ class Track3D:
         self._carry_from = self._carry_box = None
         self._carry_area = float("nan")
         self._front = (float("nan"), 0.0)
+        self._first = first
         if self._views is not None:
             self._views.reset()
         self._started = True
@@ -1067,6 +1077,8 @@ class Track3D:
             est = self._estimate(pts, bounds, b)
             if est is not None:
                 self.box3d = self._report(est, self._measured(pts, bounds), b)
+        if first is not None:
+            self.box3d = first.copy()
 
     def _judge(self, r: TrackResult, estimated: bool, seen: bool = False, empty: bool = False) -> TrackResult:
         """Count held and bad frames; after `lost_after` bad frames in a row the target is lost.
@@ -1425,6 +1437,7 @@ class Track3D:
             "body_views": None if self._views is None else self._views.get_state(),
             "sun": None if self.sun is None else self.sun.tolist(),
             "front": list(self._front) if np.isfinite(self._front[0]) else None,
+            "first_box": None if self._first is None else self._first.tolist(),
         })
 
     def set_state(self, state: dict) -> None:
@@ -1471,6 +1484,8 @@ class Track3D:
             sun = check_sun(st.get("sun"))   # None: unknown, or a state from before the sun
             front = st.get("front")   # None: no filtered front face yet, or an older state
             front = (float("nan"), 0.0) if front is None else (float(front[0]), float(front[1]))
+            first = st.get("first_box")   # None: started without a 3D box, or an older state
+            first = None if first is None else check_init_box3d(first)
             views = None
             if self._views is not None and st.get("body_views") is not None:
                 views = BodyViews(self.camera, self._views.params)
@@ -1488,6 +1503,7 @@ class Track3D:
         self._carry_from, self._carry_box, self._carry_area = carry_from, carry_box, carry_area
         self.sun = sun
         self._front = front
+        self._first = first
         if self._views is not None:   # a state without views (an older one, or views off): they start over
             if views is None:
                 self._views.reset()
@@ -1534,7 +1550,9 @@ class Track3D:
                         **({"dark_side": self.dark_side} if self.dark_side > 0.0 else {}),
                         **({"fusion_cover": self.fusion_cover} if self.fusion_cover > 0.0 else {}),
                         # only when on: the records of runs without the views stay as they were
-                        **({"body_views": asdict(self._views.params)} if self._views is not None else {})},
+                        **({"body_views": asdict(self._views.params)} if self._views is not None else {}),
+                        # only when not the default: the records of earlier runs stay as they were
+                        **({"first_box_fade": self.first_box_fade} if self.first_box_fade != FIRST_BOX_FADE else {})},
             "models": models,
         }
 

@@ -16,6 +16,10 @@ on the first frame with the target present, no restarts. 2D only is the null est
 (``TrackerSpec(tracker, estimator="none")``): the loop runs the 2D tracker alone, reads no
 depth, and the scores have no 3D values; so a 2D tracker and a 3D tracker are scored by the
 same code on the same threshold grids (metrics).
+
+``init_3d=True`` is 3D single-object tracking's start (KITTI's protocol): every (re-)initialisation
+also hands the tracker the ground truth's 3D box of that frame (Track3D.init's ``box3d``). Its
+results are of another protocol and are named apart (``<name>-init3d`` by the CLI).
 """
 from __future__ import annotations
 
@@ -78,6 +82,7 @@ class TrackerSpec:
     resume_outline: bool | None = None       # None: by the sequence's depth sensor (resume_outline_for)
     dark_side: float | None = None           # None: by the sequence's depth sensor (dark_side_for)
     fusion_cover: float | None = None        # None: by the sequence's depth sensor (fusion_cover_for)
+    first_box_fade: float | None = None      # None: track3d.first_box.FIRST_BOX_FADE (used with a first 3D box)
     sun: bool = True                         # the sequence's sun direction (Sequence.sun_direction) to Track3D
     body_views: bool | BodyViewsParams | None = None   # None: by the sequence's depth sensor (body_views_for)
     threads: int = 1
@@ -118,6 +123,7 @@ class TrackerSpec:
                            **({} if self.reacquire_threshold is None else
                               {"reacquire_threshold": self.reacquire_threshold or None}),
                            **({} if self.hold_cut_size is None else {"hold_cut_size": self.hold_cut_size}),
+                           **({} if self.first_box_fade is None else {"first_box_fade": self.first_box_fade}),
                            **self.sensor_options(seq.depth_sensor))
         if self.sun:
             t.set_sun(getattr(seq, "sun_direction", None))   # a sequence-like object may not record one
@@ -204,8 +210,9 @@ def _gt_ok(seq: Sequence, i: int) -> bool:
 
 def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, max_frames: int | None = None,
                  restart: bool = True, restart_skip: int = 1, overlay: OverlayWriter | None = None,
-                 bar: Progress | None = None, depth: str = "map") -> SequenceResult:
+                 bar: Progress | None = None, depth: str = "map", init_3d: bool = False) -> SequenceResult:
     """Track one sequence under the restart protocol; returns its per-frame results.
+    init_3d: each initialisation also gets the frame's ground-truth 3D box (3D tracking's start).
 
     depth: "map" = clouds from the stored depth maps; "stereo" = from the left/right images
     (`track3d.stereo.StereoCloud`, disparity only around the 2D box, timed as tracker time)."""
@@ -250,7 +257,10 @@ def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, ma
                 continue
             if seek is not None:
                 seek(i)
-            track.init(image, seq.gt2d[i], seq.category, points=points)
+            if init_3d and needs_points:
+                track.init(image, seq.gt2d[i], seq.category, points=points, box3d=seq.gt3d[i])
+            else:
+                track.init(image, seq.gt2d[i], seq.category, points=points)
             t2 = time.perf_counter()
             box2d[i], raw[i], status[i] = seq.gt2d[i], seq.gt2d[i], INIT
             if needs_points:   # a 2D-only run reports no 3D box, not even the ground truth's
@@ -285,6 +295,10 @@ def _comparison_warnings(names: list[str], runs: dict, lengths: dict) -> list[st
     if len(set(settings.values())) > 1:
         desc = ", ".join(f"{n}: restart={v[0]} skip={v[1]}" for n, v in settings.items())
         out.append(f"the runs used different restart settings ({desc})")
+    starts = {n: bool(r.get("init_3d", False)) for n, r in runs.items() if r}
+    if len(set(starts.values())) > 1:
+        given = ", ".join(n for n, v in starts.items() if v)
+        out.append(f"some runs were given the first 3D box ({given}: init_3d) and the others not: another protocol")
     missing = [n for n, r in runs.items() if not r]
     if missing:
         out.append(f"no run record ({', '.join(missing)}): restart settings and models unknown")
@@ -297,8 +311,9 @@ class Experiment:
     def __init__(self, root: str | Path, split: str = "test", result_dir: str | Path = "results",
                  report_dir: str | Path = "reports", sequences: list[str] | None = None,
                  max_frames: int | None = None, restart: bool = True, restart_skip: int = 1,
-                 depth: str = "map", max_sequences: int | None = None):
-        """sequences: names to run (default: the whole split); max_sequences: only the first N."""
+                 depth: str = "map", max_sequences: int | None = None, init_3d: bool = False):
+        """sequences: names to run (default: the whole split); max_sequences: only the first N;
+        init_3d: every initialisation also gets the ground truth's 3D box (run_sequence)."""
         self.dataset = Dataset(root)
         self.split = split
         all_seqs = self.dataset.sequences(split)
@@ -326,6 +341,7 @@ class Experiment:
         if depth not in DEPTH_SOURCES:
             raise ValueError(f"depth must be one of {', '.join(DEPTH_SOURCES)}, got {depth!r}")
         self.depth = depth
+        self.init_3d = bool(init_3d)
 
     def folder(self, name: str, seq: str) -> Path:
         return result_folder(self.result_dir, self.split, name, seq)
@@ -376,7 +392,7 @@ class Experiment:
             try:
                 with Progress(n, f"{name} {seq.name}", enabled=False if quiet else None) as bar:
                     res = run_sequence(factory, seq, self.max_frames, self.restart, self.restart_skip, writer, bar,
-                                       depth=self.depth)
+                                       depth=self.depth, init_3d=self.init_3d)
             except BaseException:
                 if writer is not None:
                     writer.close()
@@ -450,7 +466,9 @@ class Experiment:
                 "dataset": Path(self.dataset.root).resolve().name, "versions": versions(),
                 "labels": {seq.name: labels_digest(seq) for seq in self.sequences},
                 "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-                "frames": {}}
+                "frames": {},
+                # only when on: the records of runs without it stay as they were
+                **({"init_3d": True} if self.init_3d else {})}
 
     # --- evaluation ----------------------------------------------------------------------------
     def _read(self, name: str, seq: Sequence):

@@ -142,7 +142,7 @@ def read_run_record(result_dir: str | Path, split: str, tracker: str) -> dict | 
 
 def run_config_key(rec: dict) -> dict:
     """The part of a run record that decides the outputs (what must match to share a folder):
-    names, options, models (by hash), restart settings; not threads, dates or frame counts."""
+    names, options, models (by hash), restart settings, a first 3D box given; not threads, dates or frame counts."""
     d = rec.get("track3d", {})
 
     def opts(o: dict) -> dict:
@@ -155,7 +155,9 @@ def run_config_key(rec: dict) -> dict:
             "tracker_options": opts(d.get("tracker_options", {})),
             "estimator_options": opts(d.get("estimator_options", {})),
             "options": d.get("options"), "models": sorted(m.get("sha256", "") for m in d.get("models", [])),
-            "restart": rec.get("restart"), "restart_skip": rec.get("restart_skip")}
+            "restart": rec.get("restart"), "restart_skip": rec.get("restart_skip"),
+            # only when on: the keys of runs without it stay as they were
+            **({"init_3d": True} if rec.get("init_3d") else {})}
 
 
 def write_run_record(result_dir: str | Path, split: str, tracker: str, rec: dict) -> Path:
