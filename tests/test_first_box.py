@@ -169,7 +169,7 @@ def test_cli_names_the_protocol_apart_and_warns_when_compared(synth, tmp_path, c
     err = lambda r: np.abs(r.box3d[1:, 5] - gt[1:, 5]).mean()   # noqa: E731
     assert err(given) < err(plain) / 2.0
     rec = json.loads((res / "test" / "fade" / "run.json").read_text())
-    assert rec["init_3d"] is True and rec["track3d"]["options"]["first_box_fade"] == 0.4
+    assert rec["init_3d"] is True and rec["first_box_fade"] == 0.4
     capsys.readouterr()
     assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(tmp_path / "rep"),
                  "--no-plots", "--quiet"]) == 0
@@ -191,5 +191,12 @@ def test_cli_errors(synth, tmp_path, capsys, extra, message):
     assert "error:" in err and message in err and "Traceback" not in err
 
 
-def test_the_default_fade_is_the_measured_one():
-    assert FIRST_BOX_FADE == 0.2   # docs/runtime.md, "A known first 3D box": chosen on calibration sets
+def test_the_fades_are_the_measured_ones():
+    from track3d.tracker import first_box_fade_for, sensor_options
+
+    # chosen on calibration sets (track3d.tracker.SENSOR_FIRST_BOX_FADES)
+    assert FIRST_BOX_FADE == 0.2 == first_box_fade_for("ideal") == first_box_fade_for(None)
+    assert first_box_fade_for("Stereo") == sensor_options("stereo")["first_box_fade"] == first_box_fade_for("tof") == 0.5
+    spec = TrackerSpec("oracle", "baseline")
+    assert spec.sensor_options("stereo")["first_box_fade"] == 0.5
+    assert TrackerSpec("oracle", "baseline", first_box_fade=0.3).sensor_options("stereo")["first_box_fade"] == 0.3

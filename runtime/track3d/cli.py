@@ -209,7 +209,8 @@ def _parser() -> argparse.ArgumentParser:
                         "unless --name is given")
     t.add_argument("--first-box-fade", type=bounded(float, above=0, high=10), default=None, metavar="CHANGE",
                    help="with --init-3d, the relative change of the lateral extents at which the first box's depth "
-                        "no longer counts (default track3d.first_box.FIRST_BOX_FADE, 0.2)")
+                        "no longer counts (default by the depth sensor, track3d.tracker.first_box_fade_for: 0.5 for "
+                        "stereo and ToF, 0.2 for the others)")
     t.add_argument("--depth", choices=("map", "stereo"), default="map",
                    help="point clouds from the dataset's depth maps (map, default) or computed from its "
                         "left/right images by semi-global matching around the 2D box (stereo)")
@@ -338,7 +339,8 @@ def _cmd_track(a) -> int:
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
                        weight_2d=weight_2d, measured_faces=faces, depth_smoothing=a.depth_smoothing,
                        evidence_points=a.evidence_points, reacquire_threshold=a.reacquire_threshold,
-                       hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad, first_box_fade=a.first_box_fade,
+                       hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad,
+                       first_box_fade=a.first_box_fade if a.first_box_fade is not None else stereo.get("first_box_fade"),
                        front_quantile=a.front_quantile, front_filter=a.front_filter, silhouette=a.silhouette,
                        outline_share=a.outline_share, outline_share_phase=a.outline_share_phase,
                        outline_contain=a.outline_contain, texture_trim=a.texture_trim, resume_outline=a.resume_outline, dark_side=a.dark_side, fusion_cover=a.fusion_cover, sun=not a.no_sun,

@@ -591,11 +591,28 @@ def body_views_for(depth_sensor: str | None) -> bool:
     return SENSOR_BODY_VIEWS.get(_sensor_key(depth_sensor), BODY_VIEWS)
 
 
+# How far the lateral extents may move before a known first 3D box's depth no longer counts
+# (track3d.first_box; used only when init() is given a 3D box). Stereo's and ToF's extents move
+# from frame to frame with their noise, not only as the body turns: they hold the first depth
+# over a wider change. Chosen one pass (EdgeTrack, `track3d track --init-3d --first-box-fade F`)
+# on calibration sets, AO_3d train-like / held-out shapes (12 + 12 x 60 frames): ideal seed 9,
+# fade 0.1 / 0.2 / 0.3 / 0.5: 0.928 / 0.908, 0.930 / 0.920, 0.924 / 0.921, 0.917 / 0.914
+# (without the box 0.904 / 0.881); stereo seed 3, 0.2 / 0.35 / 0.5 / 0.75: 0.735 / 0.752,
+# 0.742 / 0.762, 0.744 / 0.764, 0.741 / 0.765 (without 0.686 / 0.716); ToF seed 5, 0.2 / 0.35 /
+# 0.5: 0.772 / 0.790, - / 0.802, 0.780 / 0.807 (without 0.707 / 0.700).
+SENSOR_FIRST_BOX_FADES = {"stereo": 0.5, "tof": 0.5}
+
+
+def first_box_fade_for(depth_sensor: str | None) -> float:
+    """The first 3D box's fade (track3d.first_box) for this sensor (None: unknown, FIRST_BOX_FADE)."""
+    return SENSOR_FIRST_BOX_FADES.get(_sensor_key(depth_sensor), FIRST_BOX_FADE)
+
+
 def sensor_options(depth_sensor: str | None) -> dict:
     """Track3D's options chosen by the depth sensor (None: unknown): frustum_margin, weight_3d,
     weight_2d, measured_faces, edge_pad, front_quantile, front_filter, silhouette, outline_share,
-    outline_share_phase, outline_contain, texture_trim, dark_side, fusion_cover, body_views, resume_outline
-    (the sixteen tables above)."""
+    outline_share_phase, outline_contain, texture_trim, dark_side, fusion_cover, body_views, resume_outline,
+    first_box_fade (the seventeen tables above)."""
     return {"frustum_margin": frustum_margin_for(depth_sensor), "weight_3d": fusion_weight_for(depth_sensor),
             "weight_2d": section_weight_for(depth_sensor), "measured_faces": measured_faces_for(depth_sensor),
             "edge_pad": edge_pad_for(depth_sensor), "front_quantile": front_quantile_for(depth_sensor),
@@ -606,7 +623,9 @@ def sensor_options(depth_sensor: str | None) -> dict:
             "outline_contain": outline_contain_for(depth_sensor),
             "texture_trim": texture_trim_for(depth_sensor), "resume_outline": resume_outline_for(depth_sensor),
             "dark_side": dark_side_for(depth_sensor), "fusion_cover": fusion_cover_for(depth_sensor),
-            "body_views": body_views_for(depth_sensor)}
+            "body_views": body_views_for(depth_sensor), "first_box_fade": first_box_fade_for(depth_sensor)}
+
+
 STATE_VERSION = 1
 
 
@@ -1550,9 +1569,7 @@ class Track3D:
                         **({"dark_side": self.dark_side} if self.dark_side > 0.0 else {}),
                         **({"fusion_cover": self.fusion_cover} if self.fusion_cover > 0.0 else {}),
                         # only when on: the records of runs without the views stay as they were
-                        **({"body_views": asdict(self._views.params)} if self._views is not None else {}),
-                        # only when not the default: the records of earlier runs stay as they were
-                        **({"first_box_fade": self.first_box_fade} if self.first_box_fade != FIRST_BOX_FADE else {})},
+                        **({"body_views": asdict(self._views.params)} if self._views is not None else {})},
             "models": models,
         }
 

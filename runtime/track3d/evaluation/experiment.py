@@ -82,7 +82,7 @@ class TrackerSpec:
     resume_outline: bool | None = None       # None: by the sequence's depth sensor (resume_outline_for)
     dark_side: float | None = None           # None: by the sequence's depth sensor (dark_side_for)
     fusion_cover: float | None = None        # None: by the sequence's depth sensor (fusion_cover_for)
-    first_box_fade: float | None = None      # None: track3d.first_box.FIRST_BOX_FADE (used with a first 3D box)
+    first_box_fade: float | None = None      # None: by the sequence's depth sensor (first_box_fade_for; used with a first 3D box)
     sun: bool = True                         # the sequence's sun direction (Sequence.sun_direction) to Track3D
     body_views: bool | BodyViewsParams | None = None   # None: by the sequence's depth sensor (body_views_for)
     threads: int = 1
@@ -123,7 +123,6 @@ class TrackerSpec:
                            **({} if self.reacquire_threshold is None else
                               {"reacquire_threshold": self.reacquire_threshold or None}),
                            **({} if self.hold_cut_size is None else {"hold_cut_size": self.hold_cut_size}),
-                           **({} if self.first_box_fade is None else {"first_box_fade": self.first_box_fade}),
                            **self.sensor_options(seq.depth_sensor))
         if self.sun:
             t.set_sun(getattr(seq, "sun_direction", None))   # a sequence-like object may not record one
@@ -460,6 +459,7 @@ class Experiment:
 
         track = factory(self.sequences[0])
         desc = track.describe() if hasattr(track, "describe") else {}
+        fade = getattr(track, "first_box_fade", None)
         del track
         return {"track3d": desc, "threads": getattr(spec, "threads", None), "restart": self.restart,
                 "restart_skip": self.restart_skip, "max_frames": self.max_frames, "split": self.split,
@@ -468,7 +468,7 @@ class Experiment:
                 "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
                 "frames": {},
                 # only when on: the records of runs without it stay as they were
-                **({"init_3d": True} if self.init_3d else {})}
+                **({"init_3d": True, "first_box_fade": fade} if self.init_3d else {})}
 
     # --- evaluation ----------------------------------------------------------------------------
     def _read(self, name: str, seq: Sequence):
