@@ -155,6 +155,22 @@ def rand_box(rng, w=160, h=120) -> list:
     return [float(rng.integers(0, w)), float(rng.integers(0, h)), float(rng.integers(1, w)), float(rng.integers(1, h))]
 
 
+def rand_box3d(rng):
+    """None, or a first 3D box for Track3D.init: plausible, tiny, huge, special values, wrong length."""
+    if rng.random() < 0.6:   # mostly none: the update path keeps its share of the cases
+        return None
+    kind = int(rng.integers(1, 6))
+    if kind == 1:
+        return [float(v) for v in rng.uniform([-5, -5, 2, 0.2, 0.2, 0.2], [5, 5, 40, 12, 12, 12])]
+    if kind == 2:  # tiny or huge sizes, near or far
+        return [0.0, 0.0, float(10 ** rng.uniform(-3, 6)), *[float(10 ** rng.uniform(-300, 6)) for _ in range(3)]]
+    if kind == 3:  # specials
+        return [float(v) for v in rng.choice(SPECIALS, 6)]
+    if kind == 4:  # wrong length
+        return [1.0] * int(rng.choice([0, 3, 5, 7]))
+    return [float(v) for v in rng.normal(0, 10, 6)]
+
+
 def rand_category(rng):
     return rng.choice(np.array([-1, 0, 1, 2, 5, 13, -2, 14, 10 ** 20, 1.5, 2.0, True, "1", None, np.nan,
                                 np.int64(3)], dtype=object))
@@ -295,7 +311,8 @@ def _t_loop(name):
         t.set_sun(_rand_sun(rng))
         img = rand_image(rng)
         try:
-            t.init(img, rand_box(rng), rand_category(rng), points=rand_cloud(rng) if rng.random() < 0.5 else None)
+            t.init(img, rand_box(rng), rand_category(rng), points=rand_cloud(rng) if rng.random() < 0.5 else None,
+                   box3d=rand_box3d(rng))
         except ValueError:
             return "clean_error"
         for _ in range(3):

@@ -205,7 +205,22 @@ def table2_engine_table(root: Path) -> str:
     return _table2(root, TABLE2_ENGINE_ROWS)
 
 
-TABLES = {"speed": speed_table, "engine": engine_table, "long": long_table, "table2": table2_table, "table2_engine": table2_engine_table}
+def first_box_table(root: Path) -> str:
+    """Track3D (EdgeTrack, one pass) started from the 2D box alone and from the first 3D box
+    (`track3d track --init-3d`; first_box/engine_baseline.json), AO_3d / ACE_3d (m)."""
+    now = {(r["sensor"], r["split"], r["tracker"]): r for r in _load(root, "first_box/engine_baseline.json")["rows"]}
+
+    def pair(key):
+        r = now.get(key)
+        return "-" if r is None else f"{r['ao_3d']:.3f} / {r['ace_3d']:.3f}"
+
+    rows = [[s, sp, pair((s, sp, "edgetrack+a3boxnet")), f"**{pair((s, sp, 'edgetrack+a3boxnet-init3d'))}**"]
+            for s, sp in ENGINE_SPLITS if (s, sp, "edgetrack+a3boxnet") in now]
+    return markdown_table(["depth", "split", "Track3D default, one pass: 2D start", "with the first 3D box"], rows)
+
+
+TABLES = {"speed": speed_table, "engine": engine_table, "long": long_table, "table2": table2_table,
+          "table2_engine": table2_engine_table, "first_box": first_box_table}
 
 
 def render(readme: str, root: Path) -> str:
