@@ -214,9 +214,11 @@ def first_box_table(root: Path) -> str:
         r = now.get(key)
         return "-" if r is None else f"{r['ao_3d']:.3f} / {r['ace_3d']:.3f}"
 
-    rows = [[s, sp, pair((s, sp, "edgetrack+a3boxnet")), f"**{pair((s, sp, 'edgetrack+a3boxnet-init3d'))}**"]
+    rows = [[s, sp, pair((s, sp, "edgetrack+a3boxnet")), f"**{pair((s, sp, 'edgetrack+a3boxnet-init3d'))}**",
+             pair((s, sp, "nano+a3boxnet")), pair((s, sp, "nano+a3boxnet-init3d"))]
             for s, sp in ENGINE_SPLITS if (s, sp, "edgetrack+a3boxnet") in now]
-    return markdown_table(["depth", "split", "Track3D default, one pass: 2D start", "with the first 3D box"], rows)
+    return markdown_table(["depth", "split", "Track3D default, one pass: 2D start", "with the first 3D box",
+                           "NanoTrack v2 + A3BoxNet, one pass: 2D start", "with the first 3D box"], rows)
 
 
 TABLES = {"speed": speed_table, "engine": engine_table, "long": long_table, "table2": table2_table,
