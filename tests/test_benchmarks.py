@@ -150,6 +150,40 @@ def test_the_long_table_bolds_each_sensors_default(tmp_path):
     assert lines.index(ideal) < lines.index(stereo)
 
 
+
+def test_the_aims_table_judges_each_aim_on_its_own_numbers(tmp_path):
+    """Hand cases: an aim met exactly at its bounds, one missed by its ACE alone, the held-out
+    gap just inside and just outside 0.03, a missing run shown as '-', and the speed aim."""
+    import readme_tables
+
+    def row(sensor, split, protocol, tracker, ao, ace):
+        return {"sensor": sensor, "split": split, "protocol": protocol, "tracker": tracker, "ao_3d": ao, "ace_3d": ace}
+
+    short = [row("ideal", "test", "restart", "oracle+a3boxnet", 0.85, 0.25),             # both bounds: met
+             row("ideal", "test_unseen", "restart", "oracle+a3boxnet", 0.90, 0.31),     # ACE over: not met
+             row("ideal", "test", "onepass", "edgetrack+a3boxnet", 0.90, 0.20),
+             row("ideal", "test_unseen", "onepass", "edgetrack+a3boxnet", 0.875, 0.40),  # gap -0.025: met
+             row("tof", "test", "onepass", "edgetrack+a3boxnet", 0.749, 0.10)]           # AO under: not met
+    long_ = [row("ideal", "test", "onepass", "edgetrack+a3boxnet", 0.90, 0.20),
+             row("ideal", "test_unseen", "onepass", "edgetrack+a3boxnet", 0.865, 0.20)]  # gap -0.035: not met
+    for rel, rows in (("engine_current", short), ("long_watch", long_)):
+        f = tmp_path / readme_tables.RESULTS / rel / "engine_baseline.json"
+        f.parent.mkdir(parents=True)
+        f.write_text(json.dumps({"rows": rows}))
+    f = tmp_path / readme_tables.RESULTS / readme_tables.SPEED_ROWS[0][1]
+    f.parent.mkdir(parents=True)
+    f.write_text(json.dumps({"results": [{"config": readme_tables.SPEED_ROWS[0][2], "backend": "onnxruntime",
+                                          "precision": "fp32", "fps_median": 149.6}]}))
+    cells = {line.split(" | ")[0][2:]: line.split(" | ")[1:]
+             for line in readme_tables.aims_table(tmp_path).splitlines()[2:]}
+    aims = [a[0] for a in readme_tables.AIMS]
+    assert cells[aims[0]] == ["0.850 / 0.250 m: met", "- |"]
+    assert cells[aims[1]][0] == "0.900 / 0.310 m: **not met**"
+    assert cells[aims[3]] == ["0.875 vs 0.900 (-0.025): met", "0.865 vs 0.900 (-0.035): **not met** |"]
+    tof = next(a for a in aims if "tof depth, test:" in a)
+    assert cells[tof] == ["0.749: **not met**", "- |"]
+    assert next(v for k, v in cells.items() if "150 FPS" in k)[0] == "149 FPS: **not met**"
+
 @pytest.mark.skipif(not hasattr(__import__("os"), "sched_setaffinity"), reason="no CPU affinity here")
 def test_pin_threads_pins_every_thread_and_widens_again():
     import cv2
