@@ -256,6 +256,19 @@ def _aim_cell(rows: dict, kind: str, sensor: str, split: str, tracker: str, ao: 
     return f"{text}: {'met' if met else '**not met**'}"
 
 
+def _peer_cell(rows: dict, protocol: str) -> str:
+    """EdgeTrack's loop against NanoTrack v2's in the same loop, AO_3d per (sensor, split): how
+    many ahead, level (within 0.0005: the same at the table's 3 decimals) and behind."""
+    d = [rows[(s, sp, protocol, "edgetrack+a3boxnet")]["ao_3d"] - rows[(s, sp, protocol, "nano+a3boxnet")]["ao_3d"]
+         for s, sp in ENGINE_SPLITS
+         if (s, sp, protocol, "edgetrack+a3boxnet") in rows and (s, sp, protocol, "nano+a3boxnet") in rows]
+    if not d:
+        return "-"
+    ahead, behind = sum(x >= 0.0005 for x in d), sum(x <= -0.0005 for x in d)
+    return (f"ahead on {ahead}, level on {len(d) - ahead - behind}, behind on {behind} of {len(d)}: "
+            f"{'met' if behind == 0 else '**not met**'}")
+
+
 def aims_table(root: Path) -> str:
     """Where the shipped loop stands against its aims, from the committed result JSON: every
     accuracy aim on the 60-frame sets and on the long watches, and the speed aim (>= 150 FPS on
@@ -265,6 +278,9 @@ def aims_table(root: Path) -> str:
 
     short, long_ = rows_of("engine_current/engine_baseline.json"), rows_of("long_watch/engine_baseline.json")
     rows = [[label, _aim_cell(short, *spec), _aim_cell(long_, *spec)] for label, *spec in AIMS]
+    rows += [[f"Track3D default vs NanoTrack v2 + A3BoxNet (peer), {name}: at or ahead on every sensor and split",
+              _peer_cell(short, protocol), _peer_cell(long_, protocol) if protocol == "onepass" else "-"]
+             for protocol, name in (("onepass", "one pass"), ("restart", "with restarts"))]
     label, rel, config, _ = SPEED_ROWS[0]
     r = next(x for x in _load(root, rel)["results"] if x["config"] == config and x["backend"] == "onnxruntime"
              and x["precision"] == "fp32")

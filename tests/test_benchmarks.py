@@ -153,7 +153,8 @@ def test_the_long_table_bolds_each_sensors_default(tmp_path):
 
 def test_the_aims_table_judges_each_aim_on_its_own_numbers(tmp_path):
     """Hand cases: an aim met exactly at its bounds, one missed by its ACE alone, the held-out
-    gap just inside and just outside 0.03, a missing run shown as '-', and the speed aim."""
+    gap just inside and just outside 0.03, a missing run shown as '-', the peer level within
+    0.0005 and behind, and the speed aim."""
     import readme_tables
 
     def row(sensor, split, protocol, tracker, ao, ace):
@@ -163,7 +164,9 @@ def test_the_aims_table_judges_each_aim_on_its_own_numbers(tmp_path):
              row("ideal", "test_unseen", "restart", "oracle+a3boxnet", 0.90, 0.31),     # ACE over: not met
              row("ideal", "test", "onepass", "edgetrack+a3boxnet", 0.90, 0.20),
              row("ideal", "test_unseen", "onepass", "edgetrack+a3boxnet", 0.875, 0.40),  # gap -0.025: met
-             row("tof", "test", "onepass", "edgetrack+a3boxnet", 0.749, 0.10)]           # AO under: not met
+             row("tof", "test", "onepass", "edgetrack+a3boxnet", 0.749, 0.10),           # AO under: not met
+             row("ideal", "test", "onepass", "nano+a3boxnet", 0.8996, 0.20),             # the peer 0.0004 behind: level
+             row("tof", "test", "onepass", "nano+a3boxnet", 0.760, 0.10)]                # the peer ahead
     long_ = [row("ideal", "test", "onepass", "edgetrack+a3boxnet", 0.90, 0.20),
              row("ideal", "test_unseen", "onepass", "edgetrack+a3boxnet", 0.865, 0.20)]  # gap -0.035: not met
     for rel, rows in (("engine_current", short), ("long_watch", long_)):
@@ -183,6 +186,9 @@ def test_the_aims_table_judges_each_aim_on_its_own_numbers(tmp_path):
     tof = next(a for a in aims if "tof depth, test:" in a)
     assert cells[tof] == ["0.749: **not met**", "- |"]
     assert next(v for k, v in cells.items() if "150 FPS" in k)[0] == "149 FPS: **not met**"
+    peer = [v for k, v in cells.items() if "NanoTrack" in k]
+    assert peer[0] == ["ahead on 0, level on 1, behind on 1 of 2: **not met**", "- |"]   # one pass
+    assert peer[1] == ["-", "- |"]                                                       # no restart runs
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "sched_setaffinity"), reason="no CPU affinity here")
 def test_pin_threads_pins_every_thread_and_widens_again():
