@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -68,7 +69,7 @@ def test_oracle_baseline_run_and_report(synth, tmp_path):
     assert len(row.split()) == 13 and row.split()[1:13] == [f"{v:+.3f}" for v in ov["bias_3d"]] + \
         [f"{v:.3f}" for v in ov["mae_3d"]]
     for name in ("success_2d", "success_bev", "success_3d", "precision_2d", "precision_3d", "errors_3d",
-                 "trajectory_s0001", "trajectory_s0002"):
+                 "trajectory_s0001", "trajectory_s0002", "depth_s0001", "depth_s0002"):
         assert (tmp_path / "rep" / f"{name}.png").stat().st_size > 1000
 
 
@@ -211,3 +212,21 @@ def test_null_estimator_loop_reports_the_2d_box_and_no_3d_box(synth):
     t.init(seq.image(0), seq.gt2d[0], seq.category, points=None)
     out = t.update(seq.image(1), None)
     assert out.status == "tracking" and np.array_equal(out.box2d, seq.gt2d[1]) and np.isnan(out.box3d).all()
+
+
+def test_line_of_sight_plot_draws_each_boxs_near_and_far_faces(tmp_path, monkeypatch):
+    """Hand case: a box at cz 10 m, 2 m deep, has its near face at 9 m and its far face at 11 m;
+    an absent frame is a gap in the ground truth's lines; one pair of lines per tracker."""
+    pytest.importorskip("matplotlib")
+    from track3d.evaluation import plots as P
+
+    drawn = {}
+    monkeypatch.setattr(P, "_save", lambda fig, path: drawn.setdefault("fig", fig) and Path(path))
+    gt = np.array([[0, 0, 10, 1, 1, 2], [0, 0, 12, 1, 1, 4], [0, 0, 14, 1, 1, 2]], float)
+    est = np.array([[0, 0, 10, 1, 1, 3], [0, 0, 12, 1, 1, 2], [0, 0, 13, 1, 1, 2]], float)
+    P.line_of_sight_plot(gt, {"t": est}, tmp_path / "d.png", absent=np.array([False, True, False]))
+    lines = {ln.get_label(): ln.get_ydata() for ln in drawn["fig"].axes[0].get_lines()}
+    np.testing.assert_allclose(lines["ground truth: near face"], [9, np.nan, 13])
+    np.testing.assert_allclose(lines["ground truth: far face"], [11, np.nan, 15])
+    np.testing.assert_allclose(lines["t: near"], [8.5, 11, 12])
+    np.testing.assert_allclose(lines["t: far"], [11.5, 13, 14])

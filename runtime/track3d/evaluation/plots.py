@@ -1,4 +1,5 @@
-"""Plots of an evaluation: success / precision curves and 3D trajectories (the paper's Fig. 10-12).
+"""Plots of an evaluation: success / precision curves and 3D trajectories (the paper's Fig. 10-12),
+and the near and far faces along the line of sight over time (where a hidden depth guessed wrong shows).
 
 matplotlib is optional (the `plot` extra): it is imported here, inside the functions, and a
 clear error says how to get it.
@@ -12,8 +13,8 @@ import numpy as np
 from .metrics import AXES_3D, CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, OverallScore
 from .results import INIT, read_result
 
-__all__ = ["pyplot", "curve_plots", "trajectory_plot", "trajectory_plots", "sequence_plot", "worst_sequences",
-           "axis_error_plot"]
+__all__ = ["pyplot", "curve_plots", "trajectory_plot", "trajectory_plots", "line_of_sight_plot", "sequence_plot",
+           "worst_sequences", "axis_error_plot"]
 
 
 def pyplot():
@@ -120,8 +121,38 @@ def trajectory_plot(gt3d: np.ndarray, tracks: dict[str, np.ndarray], path: str |
     return _save(fig, path)
 
 
+def line_of_sight_plot(gt3d: np.ndarray, tracks: dict[str, np.ndarray], path: str | Path, title: str = "",
+                       absent: np.ndarray | None = None) -> Path:
+    """The boxes' near and far faces along the line of sight (z = cz -/+ sz / 2, camera frame)
+    per frame: ground truth (black) vs each tracker's (T, 6) boxes. A depth sensor measures the
+    near face; the far face is the estimator's guess of the hidden side, so this is where its
+    error shows (a gap that stays between the far faces, a far face that follows the near one).
+    Frames with no box are gaps."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6.5, 3.6), dpi=100)
+    g = np.asarray(gt3d, np.float64).copy()
+    if absent is not None:
+        g[np.asarray(absent, bool)] = np.nan
+    t = np.arange(len(g))
+    ax.plot(t, g[:, 2] - g[:, 5] / 2, color="black", lw=2, label="ground truth: near face")
+    ax.plot(t, g[:, 2] + g[:, 5] / 2, color="black", lw=2, ls="--", label="ground truth: far face")
+    colour = _colours(tracks)
+    for name, boxes in tracks.items():
+        b = np.asarray(boxes, np.float64)
+        tb = np.arange(len(b))
+        ax.plot(tb, b[:, 2] - b[:, 5] / 2, lw=1, color=colour[name], label=f"{name}: near")
+        ax.plot(tb, b[:, 2] + b[:, 5] / 2, lw=1, ls="--", color=colour[name], label=f"{name}: far")
+    ax.set(xlabel="frame", ylabel="z, along the line of sight (m)")
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    return _save(fig, path)
+
+
 def trajectory_plots(exp, names: list[str], seq_names: list[str], out_dir: str | Path) -> list[Path]:
-    """One trajectory plot per sequence of the experiment `exp`, all trackers in `names`."""
+    """Per sequence of the experiment `exp`, all trackers in `names`: its 3D trajectory plot
+    (trajectory_<seq>.png) and, when some tracker has 3D boxes, its line-of-sight plot
+    (depth_<seq>.png)."""
     files = []
     by_name = {s.name: s for s in exp.sequences}
     for sn in seq_names:
@@ -138,6 +169,11 @@ def trajectory_plots(exp, names: list[str], seq_names: list[str], out_dir: str |
         restarts = {k: v[:n] for k, v in restarts.items()}
         files.append(trajectory_plot(seq.gt3d[:n], tracks, Path(out_dir) / f"trajectory_{sn}.png",
                                      f"3D trajectory, sequence {sn}", seq.absent[:n], restarts))
+        boxed = {k: v for k, v in tracks.items() if np.any(np.isfinite(v[:, 5]))}
+        if boxed:
+            files.append(line_of_sight_plot(seq.gt3d[:n], boxed, Path(out_dir) / f"depth_{sn}.png",
+                                            f"Near and far faces along the line of sight, sequence {sn}",
+                                            seq.absent[:n]))
     return files
 
 
