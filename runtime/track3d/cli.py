@@ -225,10 +225,11 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--out", default="reports", help="report folder (default ./reports)")
     e.add_argument("--no-plots", action="store_true", help="skip the plots (no matplotlib needed)")
     e.add_argument("--trajectories", type=bounded(int, 0), default=4,
-                   help="sequences with a 3D trajectory plot: the worst ones, lowest AO_3d averaged over the "
-                        "compared runs (default 4)")
+                   help="sequences with a 3D trajectory plot and a line-of-sight plot (depth_<seq>.png): the "
+                        "worst ones, lowest AO_3d averaged over the compared runs (default 4)")
     e.add_argument("--trajectories-of", choices=("worst", "first"), default="worst",
-                   help="which sequences get trajectory plots: the worst (default) or the split's first")
+                   help="which sequences get trajectory and line-of-sight plots: the worst (default) or the "
+                        "split's first")
 
     # The demo simulates its data, so it lives with the simulator (`track3d-sim demo`): the
     # runtime never imports the simulator. This entry only says where it went.
