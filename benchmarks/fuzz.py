@@ -10,7 +10,8 @@ classified as one of
   a CLI exiting 2 with one line on stderr);
 - ``wrong``: the call returned an answer that breaks the contract (a silent wrong answer);
 - ``crash``: another exception escaped, or the process died (a segfault);
-- ``hang``: a case took longer than --timeout seconds.
+- ``hang``: a case spent --timeout seconds of CPU (spinning) or ten times that of wall-clock
+  time (blocked) without finishing; a worker starved by other jobs is not a hang.
 
 Cases run in worker subprocesses (one at a time, niced): a crash or hang of third-party code
 (OpenCV) kills only the worker, which is counted and restarted at the next case.
@@ -683,6 +684,31 @@ def plan(cases: int) -> dict[str, int]:
     return counts
 
 
+# A case is a hang when its worker spent `timeout` seconds of CPU on it (spinning), or waited
+# HANG_WALL_FACTOR x timeout of wall-clock time (blocked). Wall-clock time alone called a starved
+# worker a hang: at nice 15 beside jobs at nice 0 on both cores a 0.9 s case took over 20 s, and
+# the worker started in its place (imports and models, a few CPU seconds) timed out next.
+HANG_WALL_FACTOR = 10.0
+
+
+def cpu_seconds(pid: int) -> float | None:
+    """User + system CPU seconds process `pid` has used (Linux /proc), or None where unknown."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def hang_verdict(cpu_used: float | None, waited: float, timeout: float) -> bool:
+    """Is a case that has used `cpu_used` CPU seconds (None: unknown) over `waited` wall-clock
+    seconds without finishing a hang? Spinning: `timeout` CPU seconds; blocked or starved:
+    HANG_WALL_FACTOR x timeout of wall-clock time; unknown CPU time: `timeout` of wall-clock time."""
+    if cpu_used is None:
+        return waited >= timeout
+    return cpu_used >= timeout or waited >= HANG_WALL_FACTOR * timeout
+
+
 def run_range(target: str, start: int, stop: int, seed: int, timeout: float, deadline: float, counts: dict,
               examples: list) -> int:
     """Run cases start..stop-1 of `target` in worker processes; returns the next case to run."""
@@ -691,13 +717,18 @@ def run_range(target: str, start: int, stop: int, seed: int, timeout: float, dea
         proc = subprocess.Popen([sys.executable, __file__, "--worker", target, "--seed", str(seed),
                                  "--start", str(case), "--stop", str(stop)], stdout=subprocess.PIPE,
                                 stderr=subprocess.DEVNULL, text=True, preexec_fn=lambda: os.nice(5))
+        t_case, cpu_case = time.time(), cpu_seconds(proc.pid)
         while True:
             if time.time() > deadline:
                 proc.kill()
                 proc.wait()
                 return case
-            r, _, _ = select.select([proc.stdout], [], [], timeout)
-            if not r:  # no case finished within the timeout: a hang
+            r, _, _ = select.select([proc.stdout], [], [], min(timeout, 1.0))
+            if not r:
+                cpu = cpu_seconds(proc.pid)
+                used = None if cpu is None or cpu_case is None else cpu - cpu_case
+                if not hang_verdict(used, time.time() - t_case, timeout):
+                    continue
                 proc.kill()
                 proc.wait()
                 counts[target]["hang"] += 1
@@ -713,6 +744,7 @@ def run_range(target: str, start: int, stop: int, seed: int, timeout: float, dea
                     case += 1
                 break
             c, out, detail = json.loads(line)
+            t_case, cpu_case = time.time(), cpu_seconds(proc.pid)
             counts[target][out] += 1
             case = c + 1
             if out in ("wrong", "crash", "hang") and len(examples) < 200:
@@ -728,7 +760,9 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--cases", type=int, default=100_000, help="total cases over all targets (default 100000)")
     ap.add_argument("--seed", type=int, default=0, help="fuzz seed (default 0)")
     ap.add_argument("--minutes", type=float, default=20.0, help="stop after this long, reporting the count reached (20)")
-    ap.add_argument("--timeout", type=float, default=20.0, help="seconds one case may take before it is a hang (20)")
+    ap.add_argument("--timeout", type=float, default=20.0,
+                    help="CPU seconds one case may take before it is a hang (20; ten times that of wall-clock "
+                         "time for a blocked case)")
     ap.add_argument("--targets", nargs="+", choices=sorted(TARGETS), help="only these targets (default all)")
     ap.add_argument("--rounds", type=int, default=10, help="targets are interleaved in this many rounds (10)")
     ap.add_argument("--out", type=Path, help="also write the counts as JSON here (default: print only)")

@@ -135,6 +135,23 @@ def test_mil_and_boosting_in_subprocesses(capsys):
     assert "crash=0" in out and "hang=0" in out and "wrong=0" in out
 
 
+def test_a_hang_is_cpu_spent_or_a_long_block_not_a_starved_worker():
+    """A loaded machine (fuzz workers at nice 15 beside jobs at nice 0) once made a 0.9 s case
+    take over 20 s of wall-clock time, counted a hang. Hand cases at timeout 20 s: 20 CPU
+    seconds is a hang at any wall time; 2 CPU seconds over 150 s of waiting is not (starved);
+    200 s of waiting is (blocked); with the CPU time unknown, wall-clock time decides."""
+    assert fuzz.hang_verdict(20.0, 25.0, 20.0)
+    assert not fuzz.hang_verdict(19.9, 25.0, 20.0)
+    assert not fuzz.hang_verdict(2.0, 150.0, 20.0)
+    assert fuzz.hang_verdict(2.0, 200.0, 20.0)
+    assert fuzz.hang_verdict(None, 20.0, 20.0) and not fuzz.hang_verdict(None, 19.0, 20.0)
+    me = fuzz.cpu_seconds(os.getpid())
+    if me is not None:   # Linux: this process's own CPU time, growing as it works
+        sum(i * i for i in range(300_000))
+        assert 0.0 < me <= fuzz.cpu_seconds(os.getpid())
+    assert fuzz.cpu_seconds(2 ** 22 + 12345) is None   # no such process
+
+
 @pytest.fixture(scope="module", params=["siamfc-edge", "edgetrack"])
 def learned(request):
     return Track3D.create(CAM, tracker=request.param, estimator="baseline")
