@@ -81,6 +81,11 @@ def _load(root: Path, rel: str) -> dict:
     return json.loads((root / RESULTS / rel).read_text())
 
 
+def _runs(root: Path, rel: str) -> dict:
+    """The rows of an engine_baseline.py result file by (sensor, split, protocol, tracker)."""
+    return {(r["sensor"], r["split"], r["protocol"], r["tracker"]): r for r in _load(root, rel)["rows"]}
+
+
 def speed_table(root: Path) -> str:
     rows = []
     for label, rel, config, bold in SPEED_ROWS:
@@ -96,10 +101,7 @@ def speed_table(root: Path) -> str:
 def engine_table(root: Path) -> str:
     """Before (engine_baseline: the models shipped before the data engine's retraining) and now
     (engine_current: the shipped models), on the same sequences, AO_3d / ACE_3d (m)."""
-    def rows_of(rel):
-        return {(r["sensor"], r["split"], r["protocol"], r["tracker"]): r for r in _load(root, rel)["rows"]}
-
-    before, now = rows_of("engine_baseline/engine_baseline.json"), rows_of("engine_current/engine_baseline.json")
+    before, now = _runs(root, "engine_baseline/engine_baseline.json"), _runs(root, "engine_current/engine_baseline.json")
 
     def pair(by, key):
         r = by.get(key)
@@ -124,8 +126,7 @@ def long_table(root: Path) -> str:
     past views and without them, AO_3d / ACE_3d (m), the default in bold: the views for the range
     sensors (their runs without are named ...-noviews), one view for stereo depth (its runs with
     the views are named ...-views)."""
-    now = {(r["sensor"], r["split"], r["protocol"], r["tracker"]): r
-           for r in _load(root, "long_watch/engine_baseline.json")["rows"]}
+    now = _runs(root, "long_watch/engine_baseline.json")
 
     def pair(key):
         r = now.get(key)
@@ -273,10 +274,7 @@ def aims_table(root: Path) -> str:
     """Where the shipped loop stands against its aims, from the committed result JSON: every
     accuracy aim on the 60-frame sets and on the long watches, and the speed aim (>= 150 FPS on
     one core) from the speed table's run."""
-    def rows_of(rel):
-        return {(r["sensor"], r["split"], r["protocol"], r["tracker"]): r for r in _load(root, rel)["rows"]}
-
-    short, long_ = rows_of("engine_current/engine_baseline.json"), rows_of("long_watch/engine_baseline.json")
+    short, long_ = _runs(root, "engine_current/engine_baseline.json"), _runs(root, "long_watch/engine_baseline.json")
     rows = [[label, _aim_cell(short, *spec), _aim_cell(long_, *spec)] for label, *spec in AIMS]
     rows += [[f"Track3D default vs NanoTrack v2 + A3BoxNet (peer), {name}: at or ahead on every sensor and split",
               _peer_cell(short, protocol), _peer_cell(long_, protocol) if protocol == "onepass" else "-"]
