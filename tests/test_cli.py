@@ -31,6 +31,21 @@ def test_track_then_eval(synth, tmp_path, capsys):
     report = json.loads((rep / "report.json").read_text())
     assert report["sequences"] == ["a"]
     assert (rep / "success_3d.png").is_file() and (rep / "trajectory_a.png").is_file()
+    # how sure the means are: each run's interval, the second against the first (sorted names)
+    assert report["paired"]["baseline"] == "mosse+a3boxnet-nofusion"
+    pair = report["paired"]["trackers"]["oracle+a3boxnet"]["ao_3d"]
+    seqs = {n: report["trackers"][n]["sequences"]["a"]["ao_3d"] for n in report["trackers"]}
+    assert pair["sequences"] == 1 and pair["mean"] == pytest.approx(seqs["oracle+a3boxnet"] - seqs["mosse+a3boxnet-nofusion"])
+    assert report["trackers"]["oracle+a3boxnet"]["intervals"]["ao_3d"] == [seqs["oracle+a3boxnet"]] * 2
+    assert "better" in out and "dAO_3d vs mosse+a3boxnet-nofusion" in out
+    # --baseline chooses the run the others are compared with
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--quiet", "--no-plots",
+                 "--baseline", "oracle+a3boxnet"]) == 0
+    assert "dAO_3d vs oracle+a3boxnet" in capsys.readouterr().out
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--quiet",
+                 "--baseline", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert "--baseline nope is not one of the compared runs" in err and "Traceback" not in err
 
 
 @pytest.mark.parametrize("argv, message", [

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from track3d.evaluation.metrics import (CE2D_THRESHOLDS, IOU_THRESHOLDS, LostScore, average_scores,
-                                        axis_errors_3d, precision_curve, score_lost, score_sequence,
-                                        success_curve)
+                                        axis_errors_3d, bootstrap_interval, compare_paired, precision_curve,
+                                        score_lost, score_sequence, success_curve)
 
 
 def test_success_curve_hand_case():
@@ -165,3 +165,40 @@ def test_lost_scores_add_up_and_say_nan_without_a_denominator():
     assert t == LostScore(3, 4, 4, 2, 1) and t.precision == 0.75 and t.recall == 0.75 and t.reacquired_share == 0.5
     assert np.isnan(LostScore().precision) and np.isnan(LostScore().recall) and np.isnan(LostScore().reacquired_share)
     assert t.summary()["lost_precision"] == 0.75 and t.summary()["returns"] == 2
+
+
+def test_bootstrap_interval_hand_cases():
+    # The mean of three draws from {1, 2, 3}: 1 with probability 1/27 = 0.037 (> 0.025), so the
+    # 95% interval's ends are the extreme means 1 and 3; at 80%, P(mean <= 4/3) = (1 + 3) / 27 =
+    # 0.148 > 0.10 > P(mean = 1): the ends are 4/3 and 8/3.
+    assert bootstrap_interval([1.0, 2.0, 3.0]) == (1.0, 3.0)
+    lo, hi = bootstrap_interval([3.0, 1.0, 2.0], level=0.8)
+    assert lo == pytest.approx(4 / 3) and hi == pytest.approx(8 / 3)
+    # nan values are left out; one value is its own interval; none gives nan
+    assert bootstrap_interval([1.0, np.nan, 2.0, 3.0]) == (1.0, 3.0)
+    assert bootstrap_interval([0.7]) == (0.7, 0.7)
+    assert all(np.isnan(bootstrap_interval([np.nan])))
+    # a fixed seed: the same numbers every time
+    v = np.linspace(0.5, 0.9, 12)
+    assert bootstrap_interval(v) == bootstrap_interval(v)
+    lo, hi = bootstrap_interval(v)
+    assert lo < v.mean() < hi
+    for bad in ({"level": 1.0}, {"level": 0.0}, {"resamples": 0}):
+        with pytest.raises(ValueError):
+            bootstrap_interval(v, **bad)
+
+
+def test_compare_paired_hand_cases():
+    base = {"a": 0.5, "b": 0.6, "c": 0.7, "d": 0.8}
+    # per-sequence differences +0.01, 0, -0.01 (d has no value in the run: not paired)
+    p = compare_paired("ao_3d", base, {"a": 0.51, "b": 0.6, "c": 0.69, "e": 0.1})
+    assert (p.sequences, p.better, p.worse) == (3, 1, 1)
+    assert p.mean == pytest.approx(0.0, abs=1e-12)
+    assert p.lo == pytest.approx(-0.01) and p.hi == pytest.approx(0.01)   # as the {1, 2, 3} case
+    # a centre error is better when it falls: -0.1 is better, +0.004 within the margin
+    q = compare_paired("ace_3d", {"a": 0.5, "b": 0.6}, {"a": 0.4, "b": 0.604})
+    assert (q.better, q.worse) == (1, 0) and q.mean == pytest.approx(-0.048)
+    # nothing in common: nan, no sequence moved
+    r = compare_paired("ao_3d", {"a": 0.5}, {"b": 0.5})
+    assert r.sequences == 0 and np.isnan(r.mean) and np.isnan(r.lo) and (r.better, r.worse) == (0, 0)
+    assert set(p.summary()) == {"metric", "sequences", "mean", "lo", "hi", "better", "worse", "level", "margin"}

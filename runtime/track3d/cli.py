@@ -16,7 +16,7 @@ from .argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias, 
 
 __all__ = ["main"]
 
-from .evaluation.tables import axis_table, summary_table  # noqa: E402  (the tables of a report)
+from .evaluation.tables import axis_table, paired_table, summary_table  # noqa: E402  (the tables of a report)
 from .threads import set_threads  # noqa: E402
 
 def _options(pairs: list[str] | None) -> dict:
@@ -223,6 +223,9 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--results", default="results", help="result folder of `track3d track` (default ./results)")
     e.add_argument("--trackers", nargs="+", help="result names to compare (default: all in the folder)")
     e.add_argument("--out", default="reports", help="report folder (default ./reports)")
+    e.add_argument("--baseline", metavar="NAME",
+                   help="the run the others are compared with sequence by sequence (mean difference, its "
+                        "bootstrap interval, sequences better / worse; default: the first compared run)")
     e.add_argument("--no-plots", action="store_true", help="skip the plots (no matplotlib needed)")
     e.add_argument("--trajectories", type=bounded(int, 0), default=4,
                    help="sequences with a 3D trajectory plot and a line-of-sight plot (depth_<seq>.png): the "
@@ -431,8 +434,10 @@ def _cmd_eval(a) -> int:
             notes.append(f"scored {len(have)} of the split's {len(exp.sequences)} sequences (those every "
                          f"compared run has; --sequence to choose)")
         exp.sequences = have
+    if a.baseline is not None and a.baseline not in names:
+        raise ValueError(f"--baseline {a.baseline} is not one of the compared runs: {', '.join(names)}")
     report = exp.report(names, plots=not a.no_plots, trajectories=a.trajectories,
-                        worst_first=a.trajectories_of == "worst")
+                        worst_first=a.trajectories_of == "worst", baseline=a.baseline)
     if notes:   # into report.json as well
         report["warnings"] = notes + report.get("warnings", [])
         write_json(Path(a.out) / "report.json", report)
@@ -440,6 +445,9 @@ def _cmd_eval(a) -> int:
     axes = axis_table(report)
     if axes:
         print(axes)
+    sure = paired_table(report)
+    if sure:
+        print(sure)
     for w in report.get("warnings", []):
         print(f"track3d eval: WARNING: {w}", file=sys.stderr)
     print(f"report: {Path(a.out) / 'report.json'}")

@@ -41,8 +41,8 @@ from ..machine import cpu_name
 from ..progress import Progress
 from ..tracker import LOST, STAGES, Track3D, sensor_options
 from .draw import OverlayWriter, draw_overlay
-from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, LostScore, SequenceScore, average_scores,
-                      score_lost, score_sequence)
+from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, CI_LEVEL, INTERVAL_METRICS, IOU_THRESHOLDS, MOVED, LostScore,
+                      SequenceScore, average_scores, bootstrap_interval, compare_paired, score_lost, score_sequence)
 from .results import (INIT, SKIPPED, SequenceResult, read_result, read_run_record, result_folder, run_config_key,
                       write_result, write_run_record)
 
@@ -519,12 +519,18 @@ class Experiment:
             rows.append(res.stage_ms[res.tracked])
         return np.concatenate(rows) if rows else np.zeros((0, len(STAGES)))
 
-    def report(self, names: list[str], plots: bool = True, trajectories: int = 4, worst_first: bool = True) -> dict:
+    def report(self, names: list[str], plots: bool = True, trajectories: int = 4, worst_first: bool = True,
+               baseline: str | None = None) -> dict:
         """Scores, report.json and plots (success/precision curves, AO per sequence, 3D trajectories
         of `trajectories` sequences: the worst ones, lowest mean AO over the runs, unless
         `worst_first` is False, then the first ones) in report_dir.
         Each tracker's "lost" holds how its status "lost" matched the absent frames (score_lost:
-        from each sequence's first initialisation on; precision / recall also in "overall")."""
+        from each sequence's first initialisation on; precision / recall also in "overall");
+        its "intervals" the bootstrap intervals of its means over sequences (INTERVAL_METRICS,
+        metrics.bootstrap_interval). "paired": every other run against `baseline` (default: the
+        first of `names`), sequence by sequence (metrics.compare_paired)."""
+        if baseline is not None and baseline not in names:
+            raise ValueError(f"baseline {baseline!r} is not one of the compared runs: {', '.join(names)}")
         self.report_dir.mkdir(parents=True, exist_ok=True)
         self._remove_old_plots()
         report: dict = {
@@ -557,6 +563,16 @@ class Experiment:
                 "run": rec or None,
                 "restart": rec.get("restart"), "restart_skip": rec.get("restart_skip"),
             }
+        for name in names:
+            report["trackers"][name]["intervals"] = {
+                k: list(bootstrap_interval([getattr(sc, k) for sc in per_sequence[name] if sc.frames > 0]))
+                for k in INTERVAL_METRICS}
+        base = baseline if baseline is not None else names[0]
+        values = {n: {k: {sc.name: getattr(sc, k) for sc in per_sequence[n] if sc.frames > 0} for k in INTERVAL_METRICS}
+                  for n in names}
+        report["paired"] = {"baseline": base, "level": CI_LEVEL, "margin": MOVED,
+                            "trackers": {n: {k: compare_paired(k, values[base][k], values[n][k]).summary()
+                                             for k in INTERVAL_METRICS} for n in names if n != base}}
         report["warnings"] = label_warnings + _comparison_warnings(names, runs, lengths)
         known = [(r["restart"], r["restart_skip"]) for r in runs.values() if r]
         if known and len(set(known)) == 1 and len(known) == len(names):

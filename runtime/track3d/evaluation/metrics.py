@@ -27,6 +27,14 @@ estimator that guesses the hidden depth of a body shows it in cz and sz.
 Over sequences: the mean of the per-sequence values (paper eq. for AO^3d and ACE^3d: every
 sequence weighs the same), curves averaged likewise; restarts are summed; FPS is frames over
 time summed over all sequences. IoU and centre error come from track3d.boxes (one formula).
+
+How sure a mean over a few sequences is (:func:`bootstrap_interval`): the percentile bootstrap
+interval of the mean over sequences (resampling whole sequences, CI_LEVEL, a fixed seed: the
+same numbers on every run). Two runs on the same sequences (:func:`compare_paired`): the mean of
+their per-sequence differences with its bootstrap interval, and how many sequences moved by more
+than MOVED either way, better or worse by the metric's sense (LOWER_IS_BETTER). Nine or twelve
+sequences are few: on the data engine's sets an AO_3d interval spans +-0.02 to +-0.05, so a change
+of a mean by 0.005 is a claim only where the paired interval says so.
 """
 from __future__ import annotations
 
@@ -40,6 +48,8 @@ __all__ = [
     "IOU_THRESHOLDS", "CE2D_THRESHOLDS", "CE3D_THRESHOLDS", "success_curve", "precision_curve",
     "SequenceScore", "OverallScore", "score_sequence", "average_scores", "KINDS", "SCALARS", "SCALARS_2D",
     "LostScore", "score_lost", "REACQUIRE_IOU", "AXES_3D", "axis_errors_3d",
+    "CI_LEVEL", "BOOTSTRAP_RESAMPLES", "MOVED", "LOWER_IS_BETTER", "INTERVAL_METRICS", "bootstrap_interval", "PairedComparison",
+    "compare_paired",
 ]
 
 IOU_THRESHOLDS = np.linspace(0.0, 1.0, 101)
@@ -277,3 +287,64 @@ def score_lost(lost: np.ndarray, absent: np.ndarray, pred2d: np.ndarray, gt2d: n
                 reacquired += 1
     return LostScore(lost_true=int(np.sum(lost & absent)), lost_reported=int(lost.sum()),
                      absent_frames=int(absent.sum()), returns=returns, reacquired=reacquired)
+
+
+CI_LEVEL = 0.95              # the intervals' coverage
+BOOTSTRAP_RESAMPLES = 10000  # resamples of the sequences (an AO interval's ends move by ~0.003 between seeds)
+MOVED = 0.005                # a sequence counts as better or worse when its score moved by more than this
+LOWER_IS_BETTER = frozenset({"ace_2d", "ace_3d"})
+INTERVAL_METRICS = ("ao_2d", "ao_3d", "ace_3d")   # the per-sequence scores a report gives intervals of
+
+
+def bootstrap_interval(values, level: float = CI_LEVEL, resamples: int = BOOTSTRAP_RESAMPLES,
+                       seed: int = 0) -> tuple[float, float]:
+    """Percentile bootstrap interval (lo, hi) of the mean of `values` (one per sequence; nan
+    values dropped): the means of `resamples` draws of as many values with replacement, cut at
+    (1 - level) / 2 on each side (numpy's "lower" / "higher" percentiles: the interval's ends are
+    means a resample can take). (nan, nan) without values; (v, v) for one value."""
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    v = v[np.isfinite(v)]
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    if int(resamples) < 1:
+        raise ValueError(f"resamples must be >= 1, got {resamples}")
+    if len(v) == 0:
+        return float("nan"), float("nan")
+    rng = np.random.default_rng(seed)
+    means = v[rng.integers(0, len(v), size=(int(resamples), len(v)))].mean(axis=1)
+    tail = (1.0 - level) / 2.0
+    return (float(np.quantile(means, tail, method="lower")),
+            float(np.quantile(means, 1.0 - tail, method="higher")))
+
+
+@dataclass(frozen=True)
+class PairedComparison:
+    """One run against a baseline on the same sequences, for one per-sequence metric: `mean` of
+    (run - baseline) over the `sequences` both have, its bootstrap interval [lo, hi] at `level`,
+    and how many sequences got `better` / `worse` by more than `margin` (by the metric's sense)."""
+
+    metric: str
+    sequences: int
+    mean: float
+    lo: float
+    hi: float
+    better: int
+    worse: int
+    level: float = CI_LEVEL
+    margin: float = MOVED
+
+    def summary(self) -> dict:
+        return asdict(self)
+
+
+def compare_paired(metric: str, baseline: dict[str, float], run: dict[str, float], level: float = CI_LEVEL,
+                   margin: float = MOVED, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> PairedComparison:
+    """`run` against `baseline`, both {sequence name: per-sequence value of `metric`}: paired over
+    the sequences where both values are finite (see PairedComparison)."""
+    names = [n for n in baseline if n in run and np.isfinite(baseline[n]) and np.isfinite(run[n])]
+    d = np.array([float(run[n]) - float(baseline[n]) for n in names], dtype=np.float64)
+    lo, hi = bootstrap_interval(d, level, resamples, seed)
+    sign = -1.0 if metric in LOWER_IS_BETTER else 1.0
+    return PairedComparison(metric=metric, sequences=len(d), mean=float(d.mean()) if len(d) else float("nan"),
+                            lo=lo, hi=hi, better=int(np.sum(sign * d > margin)), worse=int(np.sum(sign * d < -margin)),
+                            level=level, margin=margin)

@@ -4,7 +4,7 @@ from __future__ import annotations
 from ..table_text import cell
 from .metrics import AXES_3D
 
-__all__ = ["TABLE_COLUMNS", "columns", "summary_table", "axis_table"]
+__all__ = ["TABLE_COLUMNS", "columns", "summary_table", "axis_table", "paired_table"]
 
 TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
                  ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
@@ -42,6 +42,35 @@ def axis_table(report: dict) -> str:
             continue
         rows.append([name] + [cell(v, "{:+.3f}") for v in ov["bias_3d"]] + [cell(v, "{:.3f}") for v in ov["mae_3d"]])
     return _aligned(rows) if len(rows) > 1 else ""
+
+
+def paired_table(report: dict) -> str:
+    """How sure the means are: AO_3d (AO_2d when no run has 3D boxes) over sequences with its
+    bootstrap interval per run, and each run against the report's baseline sequence by sequence
+    (the mean difference, its interval, the sequences better / worse by more than the margin);
+    "" for a report without intervals (one written before them)."""
+    trackers, paired = report["trackers"], report.get("paired")
+    if not trackers or paired is None or any("intervals" not in t for t in trackers.values()):
+        return ""
+    has_3d = any("bias_3d" in t["overall"] for t in trackers.values())
+    key, label = ("ao_3d", "AO_3d") if has_3d else ("ao_2d", "AO_2d")
+    pct = f"{round(100 * paired['level'])}%"
+    rows = [["name", label, f"{pct} interval", f"d{label} vs {paired['baseline']}", f"{pct} interval", "better",
+             "worse"]]
+    for name, t in trackers.items():
+        lo, hi = t["intervals"][key]
+        row = [name, cell(t["overall"].get(key), "{:.3f}"), f"{cell(lo, '{:.3f}')} .. {cell(hi, '{:.3f}')}"]
+        p = paired["trackers"].get(name, {}).get(key)
+        if p is None:
+            row += ["-", "-", "-", "-"]
+        else:
+            row += [cell(p["mean"], "{:+.4f}"), f"{cell(p['lo'], '{:+.4f}')} .. {cell(p['hi'], '{:+.4f}')}",
+                    str(p["better"]), str(p["worse"])]
+        rows.append(row)
+    n = max(t["overall"].get("sequences", 0) for t in trackers.values())
+    head = (f"over {n} sequences, bootstrap intervals; better / worse: sequences whose {label} moved by more "
+            f"than {paired['margin']:g}")
+    return head + "\n" + _aligned(rows)
 
 
 def _aligned(rows: list[list[str]]) -> str:
