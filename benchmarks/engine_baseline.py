@@ -44,7 +44,9 @@ def collect(results: Path) -> list[dict]:
             ov = t["overall"]
             rows.append({"sensor": sensor, "split": split, "protocol": protocol, "tracker": name,
                          "dataset": Path(r["dataset"]).name, "cpu": r.get("cpu"),
-                         **{k: ov.get(k) for _, k, _ in COLUMNS}, "models": models_of_run(t.get("run"))})
+                         **{k: ov.get(k) for _, k, _ in COLUMNS}, "models": models_of_run(t.get("run")),
+                         # the means' bootstrap intervals over sequences (reports since they have them)
+                         **({"intervals": t["intervals"]} if t.get("intervals") else {})})
     return ordered(rows)
 
 

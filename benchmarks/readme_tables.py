@@ -15,6 +15,8 @@ import re
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from benchlib.paper import TABLE2
 
 from track3d.argparsing import ArgumentParser, run_main
@@ -241,6 +243,14 @@ AIMS = (
 _AIM_RUNS = {"oracle": ("restart", "oracle+a3boxnet"), "edgetrack": ("onepass", "edgetrack+a3boxnet")}
 
 
+def _interval(row: dict, key: str, fmt: str) -> str:
+    """' (lo-hi)': the row's bootstrap interval of `key` over sequences, '' for a row without one."""
+    iv = (row.get("intervals") or {}).get(key)
+    if not iv or any(v is None or not np.isfinite(v) for v in iv):
+        return ""
+    return f" ({fmt.format(iv[0])}-{fmt.format(iv[1])})"
+
+
 def _aim_cell(rows: dict, kind: str, sensor: str, split: str, tracker: str, ao: float, ace) -> str:
     protocol, name = _AIM_RUNS[tracker]
     r = rows.get((sensor, split, protocol, name))
@@ -253,7 +263,8 @@ def _aim_cell(rows: dict, kind: str, sensor: str, split: str, tracker: str, ao: 
         d = r["ao_3d"] - t["ao_3d"]
         return f"{r['ao_3d']:.3f} vs {t['ao_3d']:.3f} ({d:+.3f}): {'met' if d >= -ao else '**not met**'}"
     met = r["ao_3d"] >= ao and (ace is None or r["ace_3d"] <= ace)
-    text = f"{r['ao_3d']:.3f}" + (f" / {r['ace_3d']:.3f} m" if ace is not None else "")
+    text = f"{r['ao_3d']:.3f}" + _interval(r, "ao_3d", "{:.3f}") + (
+        f" / {r['ace_3d']:.3f}" + _interval(r, "ace_3d", "{:.2f}") + " m" if ace is not None else "")
     return f"{text}: {'met' if met else '**not met**'}"
 
 

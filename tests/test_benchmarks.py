@@ -160,13 +160,16 @@ def test_the_aims_table_judges_each_aim_on_its_own_numbers(tmp_path):
     def row(sensor, split, protocol, tracker, ao, ace):
         return {"sensor": sensor, "split": split, "protocol": protocol, "tracker": tracker, "ao_3d": ao, "ace_3d": ace}
 
-    short = [row("ideal", "test", "restart", "oracle+a3boxnet", 0.85, 0.25),             # both bounds: met
+    short = [{**row("ideal", "test", "restart", "oracle+a3boxnet", 0.85, 0.25),          # both bounds: met
+              "intervals": {"ao_3d": [0.8, 0.9], "ace_3d": [0.2, 0.3]}},                 # shown with the values
              row("ideal", "test_unseen", "restart", "oracle+a3boxnet", 0.90, 0.31),     # ACE over: not met
              row("ideal", "test", "onepass", "edgetrack+a3boxnet", 0.90, 0.20),
              row("ideal", "test_unseen", "onepass", "edgetrack+a3boxnet", 0.875, 0.40),  # gap -0.025: met
              row("tof", "test", "onepass", "edgetrack+a3boxnet", 0.749, 0.10),           # AO under: not met
              row("ideal", "test", "onepass", "nano+a3boxnet", 0.8996, 0.20),             # the peer 0.0004 behind: level
-             row("tof", "test", "onepass", "nano+a3boxnet", 0.760, 0.10)]                # the peer ahead
+             row("tof", "test", "onepass", "nano+a3boxnet", 0.760, 0.10),                # the peer ahead
+             {**row("tof", "test_unseen", "onepass", "edgetrack+a3boxnet", 0.70, 0.10),  # an interval of no
+              "intervals": {"ao_3d": [float("nan"), float("nan")]}}]                    # sequence: not shown
     long_ = [row("ideal", "test", "onepass", "edgetrack+a3boxnet", 0.90, 0.20),
              row("ideal", "test_unseen", "onepass", "edgetrack+a3boxnet", 0.865, 0.20)]  # gap -0.035: not met
     for rel, rows in (("engine_current", short), ("long_watch", long_)):
@@ -180,11 +183,12 @@ def test_the_aims_table_judges_each_aim_on_its_own_numbers(tmp_path):
     cells = {line.split(" | ")[0][2:]: line.split(" | ")[1:]
              for line in readme_tables.aims_table(tmp_path).splitlines()[2:]}
     aims = [a[0] for a in readme_tables.AIMS]
-    assert cells[aims[0]] == ["0.850 / 0.250 m: met", "- |"]
+    assert cells[aims[0]] == ["0.850 (0.800-0.900) / 0.250 (0.20-0.30) m: met", "- |"]
     assert cells[aims[1]][0] == "0.900 / 0.310 m: **not met**"
     assert cells[aims[3]] == ["0.875 vs 0.900 (-0.025): met", "0.865 vs 0.900 (-0.035): **not met** |"]
     tof = next(a for a in aims if "tof depth, test:" in a)
     assert cells[tof] == ["0.749: **not met**", "- |"]
+    assert cells[next(a for a in aims if "tof depth, held-out" in a)] == ["0.700: **not met**", "- |"]
     assert next(v for k, v in cells.items() if "150 FPS" in k)[0] == "149 FPS: **not met**"
     peer = [v for k, v in cells.items() if "NanoTrack" in k]
     assert peer[0] == ["ahead on 0, level on 1, behind on 1 of 2: **not met**", "- |"]   # one pass
