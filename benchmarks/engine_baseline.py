@@ -40,13 +40,17 @@ def collect(results: Path) -> list[dict]:
         sensor = rep.parents[1].name.removeprefix("engine-")
         split, _, protocol = rep.parent.name.removesuffix("-report").rpartition("-")
         r = json.loads(rep.read_text())
+        paired = r.get("paired") or {}
         for name, t in r["trackers"].items():
             ov = t["overall"]
             rows.append({"sensor": sensor, "split": split, "protocol": protocol, "tracker": name,
                          "dataset": Path(r["dataset"]).name, "cpu": r.get("cpu"),
                          **{k: ov.get(k) for _, k, _ in COLUMNS}, "models": models_of_run(t.get("run")),
                          # the means' bootstrap intervals over sequences (reports since they have them)
-                         **({"intervals": t["intervals"]} if t.get("intervals") else {})})
+                         **({"intervals": t["intervals"]} if t.get("intervals") else {}),
+                         # ... and this run against the report's baseline, sequence by sequence
+                         **({"paired": {"baseline": paired["baseline"], **paired["trackers"][name]}}
+                            if name in paired.get("trackers", {}) else {})})
     return ordered(rows)
 
 

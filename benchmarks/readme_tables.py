@@ -270,15 +270,25 @@ def _aim_cell(rows: dict, kind: str, sensor: str, split: str, tracker: str, ao: 
 
 def _peer_cell(rows: dict, protocol: str) -> str:
     """EdgeTrack's loop against NanoTrack v2's in the same loop, AO_3d per (sensor, split): how
-    many ahead, level (within 0.0005: the same at the table's 3 decimals) and behind."""
-    d = [rows[(s, sp, protocol, "edgetrack+a3boxnet")]["ao_3d"] - rows[(s, sp, protocol, "nano+a3boxnet")]["ao_3d"]
-         for s, sp in ENGINE_SPLITS
-         if (s, sp, protocol, "edgetrack+a3boxnet") in rows and (s, sp, protocol, "nano+a3boxnet") in rows]
-    if not d:
+    many ahead, level (within 0.0005: the same at the table's 3 decimals) and behind; when every
+    pair was compared sequence by sequence (NanoTrack's row "paired" against EdgeTrack's, from
+    one report), how many of the leads and of the losses lie beyond the paired 95% interval."""
+    pairs = [(rows[(s, sp, protocol, "edgetrack+a3boxnet")], rows[(s, sp, protocol, "nano+a3boxnet")])
+             for s, sp in ENGINE_SPLITS
+             if (s, sp, protocol, "edgetrack+a3boxnet") in rows and (s, sp, protocol, "nano+a3boxnet") in rows]
+    if not pairs:
         return "-"
+    d = [e["ao_3d"] - n["ao_3d"] for e, n in pairs]
     ahead, behind = sum(x >= 0.0005 for x in d), sum(x <= -0.0005 for x in d)
-    return (f"ahead on {ahead}, level on {len(d) - ahead - behind}, behind on {behind} of {len(d)}: "
-            f"{'met' if behind == 0 else '**not met**'}")
+    # NanoTrack - EdgeTrack per sequence: EdgeTrack surely ahead when the interval lies below 0
+    iv = [(n.get("paired") or {}) for _, n in pairs]
+    sure = all(p.get("baseline") == "edgetrack+a3boxnet" and "ao_3d" in p for p in iv)
+    sure_ahead = sum(x >= 0.0005 and p["ao_3d"]["hi"] < 0 for x, p in zip(d, iv)) if sure else 0
+    sure_behind = sum(x <= -0.0005 and p["ao_3d"]["lo"] > 0 for x, p in zip(d, iv)) if sure else 0
+    def n(k: int, s: int) -> str:
+        return f"{k} ({s} beyond the paired 95% interval)" if sure and k else str(k)
+    return (f"ahead on {n(ahead, sure_ahead)}, level on {len(d) - ahead - behind}, behind on "
+            f"{n(behind, sure_behind)} of {len(d)}: {'met' if behind == 0 else '**not met**'}")
 
 
 def aims_table(root: Path) -> str:

@@ -166,8 +166,10 @@ def test_the_aims_table_judges_each_aim_on_its_own_numbers(tmp_path):
              row("ideal", "test", "onepass", "edgetrack+a3boxnet", 0.90, 0.20),
              row("ideal", "test_unseen", "onepass", "edgetrack+a3boxnet", 0.875, 0.40),  # gap -0.025: met
              row("tof", "test", "onepass", "edgetrack+a3boxnet", 0.749, 0.10),           # AO under: not met
-             row("ideal", "test", "onepass", "nano+a3boxnet", 0.8996, 0.20),             # the peer 0.0004 behind: level
-             row("tof", "test", "onepass", "nano+a3boxnet", 0.760, 0.10),                # the peer ahead
+             {**row("ideal", "test", "onepass", "nano+a3boxnet", 0.8996, 0.20),          # the peer 0.0004 behind: level
+              "paired": {"baseline": "edgetrack+a3boxnet", "ao_3d": {"lo": -0.001, "hi": 0.0002}}},
+             {**row("tof", "test", "onepass", "nano+a3boxnet", 0.760, 0.10),             # the peer ahead, beyond
+              "paired": {"baseline": "edgetrack+a3boxnet", "ao_3d": {"lo": 0.002, "hi": 0.02}}},  # the interval
              {**row("tof", "test_unseen", "onepass", "edgetrack+a3boxnet", 0.70, 0.10),  # an interval of no
               "intervals": {"ao_3d": [float("nan"), float("nan")]}}]                    # sequence: not shown
     long_ = [row("ideal", "test", "onepass", "edgetrack+a3boxnet", 0.90, 0.20),
@@ -191,8 +193,14 @@ def test_the_aims_table_judges_each_aim_on_its_own_numbers(tmp_path):
     assert cells[next(a for a in aims if "tof depth, held-out" in a)] == ["0.700: **not met**", "- |"]
     assert next(v for k, v in cells.items() if "150 FPS" in k)[0] == "149 FPS: **not met**"
     peer = [v for k, v in cells.items() if "NanoTrack" in k]
-    assert peer[0] == ["ahead on 0, level on 1, behind on 1 of 2: **not met**", "- |"]   # one pass
+    assert peer[0] == ["ahead on 0, level on 1, behind on 1 (1 beyond the paired 95% interval) of 2: **not met**",
+                       "- |"]                                                             # one pass
     assert peer[1] == ["-", "- |"]                                                       # no restart runs
+    # a pair not compared sequence by sequence: the counts alone
+    del short[5]["paired"]
+    (tmp_path / readme_tables.RESULTS / "engine_current" / "engine_baseline.json").write_text(json.dumps({"rows": short}))
+    line = next(x for x in readme_tables.aims_table(tmp_path).splitlines() if "NanoTrack" in x and "one pass" in x)
+    assert "ahead on 0, level on 1, behind on 1 of 2: **not met**" in line
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "sched_setaffinity"), reason="no CPU affinity here")
 def test_pin_threads_pins_every_thread_and_widens_again():
