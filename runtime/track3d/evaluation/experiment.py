@@ -563,13 +563,12 @@ class Experiment:
                 "run": rec or None,
                 "restart": rec.get("restart"), "restart_skip": rec.get("restart_skip"),
             }
-        for name in names:
-            report["trackers"][name]["intervals"] = {
-                k: list(bootstrap_interval([getattr(sc, k) for sc in per_sequence[name] if sc.frames > 0]))
-                for k in INTERVAL_METRICS}
-        base = baseline if baseline is not None else names[0]
         values = {n: {k: {sc.name: getattr(sc, k) for sc in per_sequence[n] if sc.frames > 0} for k in INTERVAL_METRICS}
                   for n in names}
+        for name in names:
+            report["trackers"][name]["intervals"] = {k: list(bootstrap_interval(list(values[name][k].values())))
+                                                     for k in INTERVAL_METRICS}
+        base = baseline if baseline is not None else names[0]
         report["paired"] = {"baseline": base, "level": CI_LEVEL, "margin": MOVED,
                             "trackers": {n: {k: compare_paired(k, values[base][k], values[n][k]).summary()
                                              for k in INTERVAL_METRICS} for n in names if n != base}}
