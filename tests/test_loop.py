@@ -307,7 +307,8 @@ def test_the_frustum_margin_follows_the_depth_sensor(tmp_path):
     from track3d.tracker import fusion_weight_for
 
     assert fusion_weight_for("stereo") == 0.15
-    assert fusion_weight_for("ideal") == fusion_weight_for("flash-lidar") == fusion_weight_for(None) == WEIGHT_3D == 0.3
+    assert fusion_weight_for(None) == WEIGHT_3D == 0.3
+    assert fusion_weight_for("ideal") == fusion_weight_for("Flash-LiDAR") == 0.0   # the outline is the 2D box
     assert fusion_weight_for("tof") == 0.15
     assert spec.build(a).weight_3d == WEIGHT_3D and spec.build(b).weight_3d == 0.15
     assert TrackerSpec("oracle", "baseline", weight_3d=0.5).build(b).weight_3d == 0.5   # an explicit weight wins

@@ -100,8 +100,9 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--estimator-option", action="append", metavar="KEY=VALUE", help="option of the estimator")
     t.add_argument("--no-fusion", action="store_true", help="report the 2D tracker's box, no 2D-3D fusion")
     t.add_argument("--weight-3d", type=bounded(float, 0, high=1), default=None,
-                   help="fusion weight of the projected 3D box (default: by the depth sensor, the paper's 0.3, "
-                        "0.15 for ToF and stereo; track3d.tracker.fusion_weight_for)")
+                   help="fusion weight of the projected 3D box (default: by the depth sensor: 0 for ideal and "
+                        "flash-LiDAR depth, whose outline sets the 2D box, 0.15 for ToF and stereo, the paper's 0.3 "
+                        "for an unknown sensor; track3d.tracker.fusion_weight_for)")
     t.add_argument("--weight-2d", type=bounded(float, 0, high=1), default=None,
                    help="weight of the 2D box in the 3D box's cross-section (the reverse fusion; default: by the "
                         "depth sensor, 0, 0.75 for stereo; track3d.tracker.section_weight_for)")

@@ -213,8 +213,15 @@ def frustum_margin_for(depth_sensor: str | None) -> float:
 # the 2D box onto the cap; one pass on held-out ToF sequences
 # (seeds 3 and 5, 12 each), AO_3d at 0.3 -> 0.15 -> 0: EdgeTrack 0.701 -> 0.703 -> 0.695 and
 # 0.710 -> 0.728 -> 0.697, SiamFC-edge (0.3 -> 0.15) 0.649 -> 0.658 and 0.619 -> 0.630: ToF fuses
-# at 0.15. The others keep the paper's 0.3.
-SENSOR_FUSION_WEIGHTS = {"stereo": 0.15, "tof": 0.15}
+# at 0.15. Ideal and flash-LiDAR depth fuse nothing since the loop takes the 2D box from the
+# returns' outline (SILHOUETTE), which is the body's silhouette to a pixel or a flash LiDAR's cell:
+# the 3D box's centre section projects smaller than the silhouette of a near, deep body and pulled
+# the box in (a flash-LiDAR long watch's test 0005, 12-15 px on a side). EdgeTrack one pass on the
+# calibration sets (ideal seeds 7 / 9, flash-LiDAR 3 / 5, both splits), 0.3 -> 0: AO_2d +0.016 to
+# +0.042 on all eight splits, AO_3d -0.0004 to +0.0000 (one sequence of 96 down by more than
+# 0.005); ToF at 0 was mixed (AO_3d -0.0027 / +0.0055 / +0.0015 / -0.0001, seeds 3 / 5) and keeps
+# 0.15. An unknown sensor keeps the paper's 0.3.
+SENSOR_FUSION_WEIGHTS = {"stereo": 0.15, "tof": 0.15, "ideal": 0.0, "flash-lidar": 0.0}
 
 
 def fusion_weight_for(depth_sensor: str | None) -> float:
@@ -1177,6 +1184,7 @@ class Track3D:
             # Lost in 2D: report the last box, keep the last 3D estimate.
             raw = raw if raw.shape == (4,) and _valid_box2d(raw) else self.box2d.copy()
             status, n, asked, measured, whole = LOST, 0, False, False, None
+            held = None   # the outline a held frame's 3D box was measured from: its reported 2D box
             if (self.evidence_points and self.needs_points and points is not None
                     and _judges_loss(self.tracker2d) and _valid_box2d(self.box2d)):
                 # the body may still be in view (a sliver at the border): ask the depth, in the
@@ -1188,6 +1196,7 @@ class Track3D:
                     sil = silhouette_box(points, self.box2d, self._M, self._size, self.z_range, self.silhouette)
                     whole = self._resumed_outline(points, sil[0]) if self.resume_outline else None
                     measured = whole is None and self._held_outline(points, sil)
+                    held = sil[0] if measured else None
                 elif status == NO_POINTS and self.outline_contain and not callable(points):
                     measured = self._held_lit(points, image)
                 ms["frustum"] = (time.perf_counter() - t0) * 1e3 - ms["track2d"]
@@ -1195,8 +1204,8 @@ class Track3D:
                                                     if status == LOST else None)
             if body is None:
                 ms["total"] = (time.perf_counter() - t0) * 1e3
-                r = TrackResult(self._shown(self.box2d), raw, self.box3d.copy(), status, n, ms,
-                                _tracker_score(self.tracker2d))
+                r = TrackResult(self._shown(self.box2d if held is None else held), raw, self.box3d.copy(), status,
+                                n, ms, _tracker_score(self.tracker2d))
                 # a 3D box measured from the body's outline in the depth is the body in view: not
                 # a bad frame (EVIDENCE_POINTS' notes)
                 return self._judge(r, estimated=False, seen=measured)
@@ -1383,9 +1392,11 @@ class Track3D:
     def _held_outline(self, points: np.ndarray, sil: tuple) -> bool:
         """A frame the 2D tracker calls lost while the depth holds the body at its last box (a
         sliver at the image border): the 3D box from the returns' outline there; True when it was
-        measured. The 2D box and the tracker stay as they were: corrected onto a sliver, the
-        tracker did not re-acquire the body when it came back whole. `sil`: silhouette_box's
-        (outline, search points, search region) at the last box."""
+        measured. The frame reports that outline as its 2D box (the sliver in view, as the label
+        is: the last box, reported before, was 0.13-0.34 IoU_2d on a body leaving the view), but the
+        loop's own box and the tracker stay as they were: corrected onto a sliver, the tracker did
+        not re-acquire the body when it came back whole. `sil`: silhouette_box's (outline, search
+        points, search region) at the last box."""
         outline, near, region = sil
         if outline is None:
             return False
