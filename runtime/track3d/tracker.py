@@ -1181,7 +1181,8 @@ class Track3D:
         t1 = time.perf_counter()
         ms["track2d"] = (t1 - t0) * 1e3
         if not ok or raw.shape != (4,) or not _valid_box2d(raw):
-            # Lost in 2D: report the last box, keep the last 3D estimate.
+            # Lost in 2D: report the last box (a held frame: the outline its 3D box was measured from),
+            # keep the last 3D estimate.
             raw = raw if raw.shape == (4,) and _valid_box2d(raw) else self.box2d.copy()
             status, n, asked, measured, whole = LOST, 0, False, False, None
             held = None   # the outline a held frame's 3D box was measured from: its reported 2D box
