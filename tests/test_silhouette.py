@@ -474,7 +474,8 @@ def test_a_lost_tracker_is_taken_to_the_body_the_depth_shows_whole():
     """EdgeTrack lost a body that swung back into view (accuracy set test 0005: 15 frames lost
     while the depth showed it whole). With the outline on, a frame the tracker calls lost with
     no returns at its last box goes on from the body in the whole view's depth, and the tracker
-    is corrected onto it; a body at the image border, no depth, or the outline off keep 'lost'."""
+    is corrected onto it; no depth or the outline off keep 'lost' (a body at the image border:
+    the next test)."""
     from track3d.estimators import create_estimator
     from track3d.tracker import LOST, TRACKING, Track3D
 
@@ -500,10 +501,49 @@ def test_a_lost_tracker_is_taken_to_the_body_the_depth_shows_whole():
     np.testing.assert_allclose(tr.corrected, r.box2d)
     np.testing.assert_array_equal(r.box2d_raw, [10, 10, 20, 20])          # the tracker's own answer
     assert 10.0 < r.box3d[2] < 10.5
-    for kw in ({"mask": at_border}, {"mask": elsewhere, "silhouette": 0.0}, {"mask": elsewhere, "empty": True}):
+    for kw in ({"mask": elsewhere, "silhouette": 0.0}, {"mask": elsewhere, "empty": True}):
         r, tr = run(**kw)
         assert r.status == LOST and tr.corrected is None
         np.testing.assert_array_equal(r.box2d, [10, 10, 20, 20])
+
+
+def test_a_lost_tracker_with_the_body_at_the_border_is_held_on_it():
+    """A body that left the view at the border and came back there (ideal long watch, test 0005):
+    EdgeTrack, drifted onto the sky, called it lost with no returns at its last box, and the loop
+    kept the last 3D box for 7 frames ('lost') while the depth showed the body at the border.
+    The frame is held on that body: its 3D box measured from the outline, the outline reported,
+    status 'no_points' (not a bad frame); the tracker is not corrected onto a body the border cuts
+    (it did not re-acquire the body when it came back whole: held-out 0011), so the next frame
+    with the body whole goes on from it as before."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import LOST, NO_POINTS, TRACKING, Track3D
+
+    start = np.zeros((120, 160), bool)
+    start[10:30, 10:30] = True
+    at_border = np.zeros((120, 160), bool)
+    at_border[60:90, 140:160] = True        # the body cut by the right border
+    whole = np.zeros((120, 160), bool)
+    whole[60:90, 110:140] = True
+    image = np.zeros((120, 160, 3), np.uint8)
+    tr = _losing([10.0, 10.0, 20.0, 20.0])()
+    t = Track3D(CAM, tr, create_estimator("baseline"), silhouette=0.5, weight_3d=0.0, lost_after=1)
+    t.init(image, [10, 10, 20, 20], points=_cloud(start))
+    first = t.box3d.copy()
+    held = [t.update(image, _cloud(at_border)) for _ in range(3)]
+    assert [r.status for r in held] == [NO_POINTS] * 3 and t.bad_frames == 0
+    np.testing.assert_allclose(held[0].box2d, [139.5, 59.5, 20.5, 31], atol=1.0)   # the outline, clipped
+    assert tr.corrected is None
+    np.testing.assert_allclose(t.box2d, [10, 10, 20, 20])                          # the loop's own box
+    assert held[0].box3d[0] > first[0] + 1.0                                      # measured at the border
+    back = t.update(image, _cloud(whole))
+    assert back.status == TRACKING
+    np.testing.assert_allclose(tr.corrected, back.box2d)
+    # no body in the depth: lost, the last 3D box kept
+    t = Track3D(CAM, _losing([10.0, 10.0, 20.0, 20.0])(), create_estimator("baseline"), silhouette=0.5)
+    t.init(image, [10, 10, 20, 20], points=_cloud(start))
+    r = t.update(image, np.zeros((0, 3), np.float32))
+    assert r.status == LOST
+    np.testing.assert_array_equal(r.box3d, t.box3d)
 
 
 def test_a_lost_tracker_with_returns_at_its_last_box_is_not_moved():
