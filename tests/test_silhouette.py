@@ -659,6 +659,47 @@ def test_a_lost_tracker_on_a_lit_body_is_held_and_measured_not_lost():
     assert [r.status for r in old] == [NO_POINTS, NO_POINTS, LOST, LOST, LOST, LOST]
 
 
+def test_a_lost_tracker_on_a_lit_body_in_view_goes_on_from_it_with_resume_outline():
+    """Stereo (the outline is the lit part, `outline_contain`) with `resume_outline`: EdgeTrack
+    called a half-lit body lost while the depth showed it in its last box, and the held 2D box
+    stayed there for 74 frames (README stereo long watch, test 0005: IoU_2d 0.53-0.81 while the
+    body moved on). The frame goes on from the last box moved onto the lit outline: 'tracking',
+    the tracker corrected onto that box, which follows the lit part. A lit outline cut by the
+    image border on one side only (a body leaving the view) stays held."""
+    from track3d.estimators import create_estimator
+    from track3d.tracker import NO_POINTS, TRACKING, Track3D
+
+    box = [30.0, 30.0, 80.0, 60.0]
+    image = np.zeros((120, 160, 3), np.uint8)
+
+    def lit(dx, x0=30, w=40):   # the lit part of the body: pixels x x0+dx..x0+dx+w-1, y 30..89
+        m = np.zeros((120, 160), bool)
+        m[30:90, max(x0 + dx, 0):x0 + w + dx] = True
+        return _cloud(m)
+
+    def run(resume, x0=30, w=40):
+        tr = _losing(box)()
+        tr.update = lambda image: (True, np.array(box))
+        t = Track3D(CAM, tr, create_estimator("baseline"), silhouette=0.0, outline_share=0.3,
+                    outline_contain=True, weight_3d=0.15, resume_outline=resume)
+        t.init(image, box, points=lit(0))
+        t.update(image, lit(0))
+        tr.corrected = None
+        tr.update = lambda image: (tr.__setattr__("lost", True), (False, np.array(box)))[1]
+        return t, tr, [t.update(image, lit(k * 4, x0, w)) for k in range(1, 4)]
+
+    t, tr, on = run(True)
+    assert [r.status for r in on] == [TRACKING] * 3 and tr.corrected is not None
+    assert on[-1].box2d[0] > on[0].box2d[0] + 4.0          # it follows the lit part right
+    np.testing.assert_allclose(t.box2d, tr.corrected)
+    _, tr_off, off = run(False)
+    assert [r.status for r in off] == [NO_POINTS] * 3 and tr_off.corrected is None
+    assert all(np.array_equal(r.box2d, off[0].box2d) for r in off)
+    _, tr_cut, cut = run(True, x0=-20, w=80)               # cut by the left border only
+    assert [r.status for r in cut] == [NO_POINTS] * 3 and tr_cut.corrected is None
+    assert [r.status for r in run(True, x0=10, w=80)[2]] == [TRACKING] * 3   # the same body, whole
+
+
 def test_a_held_frame_reports_the_sliver_in_view_and_keeps_its_own_box():
     """A 2D tracker that calls a body leaving the view lost, while the depth holds a sliver of it
     at the last box: the frame is held and its 3D box measured from the sliver's outline, and it

@@ -470,7 +470,7 @@ def test_a_lost_tracker_goes_on_from_the_outline_of_a_body_in_view():
         judge.lost = True
         assert t.update(img, cloud).status == want
     assert resume_outline_for("ideal") and resume_outline_for("flash-lidar")
-    assert resume_outline_for("tof") and not resume_outline_for("stereo") and not resume_outline_for(None)
+    assert resume_outline_for("tof") and resume_outline_for("stereo") and not resume_outline_for(None)
     assert sensor_options("ideal")["resume_outline"] is True
     assert Track3D(CAM, Judge(), create_estimator("baseline"), resume_outline=True).describe()["options"]["resume_outline"]
     assert "resume_outline" not in Track3D(CAM, Judge(), create_estimator("baseline")).describe()["options"]

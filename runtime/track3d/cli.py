@@ -156,8 +156,9 @@ def _parser() -> argparse.ArgumentParser:
                         "the depth sensor, track3d.tracker.texture_trim_for: on for stereo, off for the others)")
     t.add_argument("--resume-outline", action=argparse.BooleanOptionalAction, default=None,
                    help="when a 2D tracker that judges its loss (EdgeTrack) calls a frame lost while the depth's "
-                        "outline at its last box holds the body in view, go on from the outline (default by the "
-                        "depth sensor, track3d.tracker.resume_outline_for: on for the range sensors: ideal, ToF, flash-LiDAR)")
+                        "outline at its last box holds the body in view, go on from the outline (stereo: from the "
+                        "last box moved onto the lit outline; default by the depth sensor, "
+                        "track3d.tracker.resume_outline_for: on for every sensor named, off for an unknown one)")
     t.add_argument("--front-filter", type=_front_filter, default=None, metavar="ALPHA,BETA|off",
                    help="follow the 3D box's front face over frames with an alpha-beta filter, e.g. 0.8,0.2 "
                         "(0 < ALPHA <= 1, 0 <= BETA <= 1; off: none; default by the depth sensor, "
