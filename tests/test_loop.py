@@ -138,6 +138,26 @@ def test_frames_that_break_the_contract_are_refused(frames):
     assert t.update(img[:, ::-1], pts).status == TRACKING               # a strided view is fine
 
 
+def test_a_bad_cloud_is_refused_before_the_loop_moves_on(frames):
+    """A cloud that breaks the contract (None with a 3D estimator, another shape, strings) is
+    refused before the 2D tracker runs: the refused frame leaves the tracker as it was (the 2D
+    tracker used to have taken its step already), and None's message names the way to say
+    "no depth this frame" (an empty cloud: no_points)."""
+    img, pts, b2, _ = frames[1]
+    fake = _Scripted([(True, b2)] * 2)
+    t = Track3D(CAM, fake, create_estimator("baseline"))
+    t.init(frames[0][0], frames[0][2], 0)
+    for bad, match in ((None, r"empty \(0, 3\) array"), (pts[:, :2], r"\(N, 3\)"), ("cloud", "numbers"),
+                       (np.array([object()] * 3), "numbers")):
+        with pytest.raises(ValueError, match=match):
+            t.update(img, bad)
+    assert len(fake.script) == 2 and not fake.corrected        # the 2D tracker was not stepped
+    assert t.update(img, np.zeros((0, 3), np.float32)).status == NO_POINTS
+    assert t.update(img, pts).status == TRACKING
+    with pytest.raises(ValueError, match=r"\(N, 3\)"):
+        t.init(frames[0][0], frames[0][2], 0, points=pts[:, :2])
+
+
 def test_thin_or_degenerate_frustums_are_no_points(frames):
     """A handful of points, or a stuck / quantised cloud with every point at one place, holds no
     shape: the estimator's answer (a zero-size box) would be a silent wrong answer."""

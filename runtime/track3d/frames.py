@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_image", "check_estimator_points", "check_point_bounds", "point_bounds", "check_category", "check_init_box", "check_init_box3d",
+__all__ = ["check_image", "check_cloud", "check_estimator_points", "check_point_bounds", "point_bounds", "check_category", "check_init_box", "check_init_box3d",
            "is_integer", "MAX_COORD_M", "MAX_BOX_SCALE", "MIN_BOX_SIDE"]
 
 MAX_COORD_M = 1e5     # metres: beyond, float32 points lose centimetres and the nets never saw such scenes
@@ -33,6 +33,26 @@ def check_image(image, size: tuple[int, int] | None = None) -> np.ndarray:
     if size is not None and (a.shape[1], a.shape[0]) != (int(size[0]), int(size[1])):
         raise ValueError(f"image is {a.shape[1]}x{a.shape[0]} but the camera is {int(size[0])}x{int(size[1])}")
     return a if a.flags.c_contiguous else np.ascontiguousarray(a)
+
+
+def check_cloud(points, needed: bool = True):
+    """A frame's cloud as the loop takes it: an (N, 3) array of numbers (N >= 0, nan / inf
+    allowed) returned as an ndarray, a callable box2d -> cloud returned as is, or None when not
+    `needed` (a 2D-only loop); else ValueError. Checked before the loop changes any state, so a
+    bad cloud leaves the tracker as it was (the 2D tracker used to have moved on already)."""
+    if callable(points):
+        return points
+    if points is None:
+        if needed:
+            raise ValueError("points is None but the 3D box estimator needs the frame's cloud: for a frame without "
+                             "depth pass an empty (0, 3) array (status no_points), for a dropped frame update(None, None)")
+        return None
+    p = np.asarray(points)
+    if p.dtype.kind not in "fiub":
+        raise ValueError(f"points must be an (N, 3) array of numbers, got dtype {p.dtype}")
+    if p.size and (p.ndim != 2 or p.shape[1] != 3):
+        raise ValueError(f"points must have shape (N, 3), got {p.shape}")
+    return p
 
 
 def check_estimator_points(points, dtype=np.float32, finite: bool = True) -> np.ndarray:

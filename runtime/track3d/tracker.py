@@ -51,7 +51,7 @@ from .dark_side import check_sun, dark_side_box, phase_deg, reach_dark_side
 from .camera import Camera
 from .estimators import BoxEstimator, create_estimator
 from .first_box import FIRST_BOX_FADE, check_fade, with_first_depth
-from .frames import MAX_COORD_M, check_category, check_image, check_init_box, check_init_box3d
+from .frames import MAX_COORD_M, check_category, check_cloud, check_image, check_init_box, check_init_box3d
 from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
 from .silhouette import contain, find_body, past_border, silhouette_box
@@ -1090,6 +1090,7 @@ class Track3D:
         first = None if box3d is None else check_init_box3d(box3d)
         category = check_category(category, getattr(self.estimator, "num_categories", None))
         image = self.camera.undistort_image(check_image(image, self._size))
+        points = check_cloud(points, needed=False) if self.needs_points else None
         self.category = category
         self.tracker2d.init(image, b)
         self.box2d = b.copy()
@@ -1167,7 +1168,9 @@ class Track3D:
         """Track into the next frame: image (H, W, 3) uint8 RGB, points (N, 3) float32 cloud, or a
         callable box2d -> (N, 3) cloud that the loop calls with the 2D tracker's box (a stereo
         camera computes depth only there: `track3d.stereo.StereoCloud.bind`; its time counts in
-        the "frustum" stage); None with the null estimator ("none": 2D only).
+        the "frustum" stage); None with the null estimator ("none": 2D only). A frame without depth
+        is an empty (0, 3) cloud (status no_points); a cloud that breaks the contract (None with a
+        3D estimator, another shape, not numbers) is refused with ValueError before any state moves.
 
         image None: a dropped frame, see :meth:`skip`. Before init(): ValueError (it used to
         answer "lost" with nan boxes, which a caller could take for a real loss)."""
@@ -1177,6 +1180,8 @@ class Track3D:
         ms: dict[str, float] = dict.fromkeys(STAGES, 0.0)
         t0 = time.perf_counter()
         image = self.camera.undistort_image(check_image(image, self._size))
+        if self.needs_points:
+            points = check_cloud(points)
         res = self.tracker2d.update(image)
         own = None   # the tracker's own box when the loop went on from another (the depth's body)
         try:
