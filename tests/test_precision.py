@@ -214,6 +214,9 @@ def test_bad_precision_or_engine_is_one_clear_error():
         OnnxModel(path, engine="tensorrt")
     with pytest.raises(EngineUnavailable, match="openvino"):
         OnnxModel(path, engine="onnxruntime", precision="bf16")
+    # a model without an int8 twin (the stereo model): the message names the way out
+    with pytest.raises(ModelError, match="no int8 variant of a3boxnet_stereo.onnx .*precision 'auto'"):
+        OnnxModel(MODELS_DIR / "a3boxnet_stereo.onnx", precision="int8")
     if _has_openvino() and variant_path(path, "int8").is_file():
         with pytest.raises(EngineUnavailable, match="onnxruntime only"):
             OnnxModel(path, engine="openvino", precision="int8")

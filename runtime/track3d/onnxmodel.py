@@ -231,7 +231,8 @@ class OnnxModel:
         else:
             file = variant_path(self.path, precision)
             if not file.is_file():
-                raise ModelError(f"no {precision} variant of {self.path.name} ({file.name} does not exist)")
+                raise ModelError(f"no {precision} variant of {self.path.name} ({file.name} does not exist; "
+                                 f"precision 'auto' runs each network in the fastest variant it has)")
             session = open_session(file, self.threads, engine, precision)
             choice = {"engine": engine, "precision": precision, "file": file.name, "reason": "asked for"}
         self.choice: dict = choice
