@@ -65,17 +65,21 @@ def allowed_cpus() -> list[int]:
     return list(range(core_count()))
 
 
+def _thread_ids() -> list[int]:
+    """The process's thread ids (Linux: /proc/self/task); [0], the calling thread, elsewhere."""
+    try:
+        return [int(t) for t in os.listdir("/proc/self/task")]
+    except OSError:
+        return [0]
+
+
 def pin(cpus) -> bool:
     """Set the affinity of EVERY thread of the process (os.sched_setaffinity(0) sets only the
     calling thread's; pools started earlier would keep the old set). False where unsupported."""
     cpus = set(int(c) for c in cpus)
     if not hasattr(os, "sched_setaffinity"):
         return False
-    try:
-        tids = [int(t) for t in os.listdir("/proc/self/task")]
-    except OSError:
-        tids = [0]
-    for tid in tids:
+    for tid in _thread_ids():
         try:
             os.sched_setaffinity(tid, cpus)
         except OSError:  # a thread that just exited
@@ -103,11 +107,7 @@ def affinity_of_all_threads() -> list[int]:
     if not hasattr(os, "sched_getaffinity"):
         return allowed_cpus()
     cpus: set[int] = set()
-    try:
-        tids = [int(t) for t in os.listdir("/proc/self/task")]
-    except OSError:
-        tids = [0]
-    for tid in tids:
+    for tid in _thread_ids():
         try:
             cpus |= os.sched_getaffinity(tid)
         except OSError:
