@@ -38,6 +38,7 @@ from track3d.estimators import EstimatorUnavailable
 from track3d.jsonable import write_json
 from track3d.machine import pin_threads
 from track3d.onnxmodel import MODELS_DIR, ModelError
+from track3d.stereo import StereoCloud
 from track3d.table_text import cell
 from track3d.trackers2d import TrackerUnavailable
 
@@ -60,12 +61,14 @@ def run_config(camera, sequences, cfg: dict, threads: int, frames: int, torch_ne
             stand_ins += given.values()
         del reference
         run_cfg = {**cfg, "tracker_options": opts["2d"], "estimator_options": opts["3d"]}
-    r = time_loop(build(camera, run_cfg, threads), sequences, frames)
+    stereo = StereoCloud(camera, follow_depth=cfg["stereo_follow"]) if "stereo_follow" in cfg else None
+    r = time_loop(build(camera, run_cfg, threads), sequences, frames, stereo=stereo)
     unchecked = [m.meta.get("kind") for m in stand_ins if m.check is None]
     if unchecked:
         raise EquivalenceError(f"torch model(s) {unchecked} never ran during warm-up: equivalence not checked")
     out = {"config": cfg["label"], "tracker": cfg["tracker"], "estimator": cfg["estimator"],
            "backend": cfg["backend"], "precision": cfg["precision"], "threads": threads, "fusion": True, **r,
+           **({"depth": "stereo from the pair", "stereo_follow": cfg["stereo_follow"]} if stereo is not None else {}),
            "models": {"tracker_options": {k: str(v) for k, v in cfg.get("tracker_options", {}).items()},
                       "estimator_options": {k: str(v) for k, v in cfg.get("estimator_options", {}).items()}}}
     if cfg["backend"] == "torch":
@@ -94,6 +97,11 @@ def make_configs(args, torch_nets: TorchNets | None) -> tuple[list[dict], list[d
         label = f"{tracker}:{estimator}" + (f"@{model}" if model else "")
         base = {"label": label, "tracker": tracker, "estimator": estimator,
                 "tracker_options": topt, "estimator_options": eopt, "backend": "onnxruntime", "precision": "fp32"}
+        if args.depth == "stereo":
+            # one row per depth-following setting, side by side in this run
+            configs += [{**base, "label": f"{label} stereo follow {k:g}", "depth_sensor": "stereo",
+                         "stereo_follow": k} for k in args.stereo_follow]
+            continue
         configs.append(base)
         if torch_nets is not None:
             need = torch_nets.needed(tracker, estimator)
@@ -195,6 +203,13 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--config", action="append", default=None, metavar="TRACKER:ESTIMATOR[@MODEL]",
                     help="configurations to run (default: siamfc-edge:a3boxnet siamfc:a3boxnet kcf:baseline); "
                          "@MODEL: this configuration's A3BoxNet .onnx (e.g. two box nets side by side in one run)")
+    ap.add_argument("--depth", choices=("map", "stereo"), default="map",
+                    help="map: clouds from the stored depth maps; stereo: matched from the pair inside each "
+                         "update, around the 2D box (track3d.stereo.StereoCloud), with the stereo loop options "
+                         "and A3BoxNet model (default map)")
+    ap.add_argument("--stereo-follow", type=float, nargs="+", default=[1.5], metavar="K",
+                    help="with --depth stereo: StereoParams.follow_depth values, one row each (0: the full "
+                         "disparity range every frame; default 1.5)")
     ap.add_argument("--tag", default=None, help="result file name tag (default: the host name)")
     add_out_argument(ap, flag="--out-dir")
     ap.add_argument("--siamfc-edge-model", type=Path, default=None, metavar="PREFIX",
@@ -223,7 +238,9 @@ def main(argv=None) -> int:
     configs, skipped = make_configs(args, torch_nets)
     for s in skipped:
         print(f"skip {s['config']} ({s['backend']}): {s['reason']}", file=sys.stderr)
-    camera, seqs = load_frames(args.data, args.split, args.preload, args.sequences)
+    if args.depth == "stereo" and (args.torch or args.int8):
+        raise SystemExit("--depth stereo runs the ONNX fp32 configurations only (not with --torch or --int8)")
+    camera, seqs = load_frames(args.data, args.split, args.preload, args.sequences, depth=args.depth)
     print(f"preloaded {sum(len(f) for _, f in seqs)} frames of {len(seqs)} sequences", file=sys.stderr)
     rec = start_record("track3d end-to-end FPS", data=str(args.data), split=args.split, frames_requested=args.frames)
     results, failed = [], []

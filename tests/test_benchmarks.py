@@ -73,6 +73,23 @@ def test_bench_fps_times_the_networks_it_passes_in(tiny_dataset, tmp_path):
     assert "| kcf:baseline |" in (out / "fps_t.md").read_text()
 
 
+def test_bench_fps_matches_the_pair_inside_the_loop_with_depth_stereo(tiny_dataset, tmp_path):
+    """--depth stereo: the clouds are matched from the pair inside each update (their time in the
+    frustum stage), one row per --stereo-follow value; not with --int8 / --torch."""
+    import bench_fps
+
+    out = tmp_path / "fps"
+    assert bench_fps.main(["--data", str(tiny_dataset), "--frames", "5", "--preload", "40", "--threads", "1",
+                           "--config", "kcf:baseline", "--depth", "stereo", "--stereo-follow", "0", "1.5",
+                           "--tag", "s", "--out-dir", str(out)]) == 0
+    rows = {r["config"]: r for r in json.loads((out / "fps_s.json").read_text())["results"]}
+    assert set(rows) == {"kcf:baseline stereo follow 0", "kcf:baseline stereo follow 1.5"}
+    for k, r in zip((0.0, 1.5), rows.values()):
+        assert r["stereo_follow"] == k and r["depth"] == "stereo from the pair" and r["frames"] == 5
+    with pytest.raises(SystemExit, match="--depth stereo"):
+        bench_fps.main(["--data", str(tiny_dataset), "--depth", "stereo", "--int8", "--out-dir", str(out)])
+
+
 def test_torch_stand_ins_are_passed_to_the_tracker_and_checked(tmp_path):
     """A torch module of the same weights, behind OnnxModel's interface, given to SiamFCTracker
     as its models: it tracks, counts its time and checks itself against onnxruntime once."""

@@ -361,3 +361,85 @@ def test_stereo_images_other_than_uint8_rgb_or_gray_are_refused(kind):
         StereoMatcher(small).depth(*pair)
     assert StereoCloud(small).bind(left, right)([10, 10, 50, 50]).shape[1] == 3   # uint8 RGB is taken
     assert StereoCloud(small).bind(left[..., 0], right[..., 0])([10, 10, 50, 50]).shape[1] == 3   # and grey
+
+
+# --- following the body's depth (StereoCloud, follow_depth) ---------------------------------------
+
+def test_disparities_to_a_depth_by_hand():
+    """fx B = 772.5 px x 0.4 m = 309.0: down to 10 m the search needs d < 30.9 (+1, the
+    interpolation's room), so 32 disparities; down to 5 m 62.8 -> 64; nearer than z_min_m or an
+    unknown depth: the full range (208)."""
+    m = StereoMatcher(CAM)
+    assert round(m.fb, 1) == 309.0 and m.num_disparities == 208
+    assert m.disparities_to(10.0) == 32 and m.disparities_to(5.0) == 64
+    for z in (1.0, 0.0, -3.0, np.nan, np.inf):
+        assert m.disparities_to(z) == 208
+
+
+def _starry(cam: Camera, seed: int = 3) -> np.ndarray:
+    """A textured sky at infinity: the same picture in both cameras (disparity 0)."""
+    g = np.random.default_rng(seed).uniform(0, 90, (cam.height, cam.width))
+    return cv2.GaussianBlur(g, (0, 0), 1.0)
+
+
+def test_a_followed_search_gives_the_body_s_depth_and_no_false_sky():
+    """After the first window the search covers only the depths the body can be at (a sphere at
+    7-9 m: 64 disparities, not 208), the body's depth as the full search gives it, and the sky
+    behind it, textured, still matches as sky (a search cut at both ends of the body's
+    disparities matched 2,000 points of a starry sky among the body's depths). The sphere's front
+    at 7.0 m: 309.0 / (7.0 / 1.5) + 1 = 67.2 -> 80 disparities."""
+    left, right, z = render_pair(CAM, (0.5, 0.2, 9.0), 2.0, background=_starry(CAM))
+    box = _box(z)
+    cloud = StereoCloud(CAM)
+    first = cloud.bind(left, right)(box)
+    assert cloud.last_disparities == 208 and cloud.depth_range is not None
+    followed = cloud.bind(left, right)(box)
+    assert cloud.last_disparities == 80
+    full = StereoCloud(CAM, follow_depth=0)
+    ref = full.bind(left, right)(box)
+    assert full.last_disparities == 208 and full.depth_range is None
+    np.testing.assert_array_equal(first, ref)
+    assert abs(len(followed) - len(ref)) < 0.02 * len(ref)
+    r = np.linalg.norm(followed - np.array([0.5, 0.2, 9.0]), axis=1)
+    assert np.mean(np.abs(r - 2.0) < 0.3) > 0.99                  # nothing of the sky
+    assert np.median(np.abs(r - 2.0)) < 0.1
+
+
+def test_a_body_nearer_than_the_followed_search_is_found_again():
+    """A body nearer than the followed search reaches (a depth left from another body, or a jump)
+    is not only holes: SGBM matches much of its texture at wrong disparities inside the search
+    (a sphere at 7-9 m searched down to 26 m: ~19,000 returns at 22-60 m). Fewer returns per
+    pixel than FOLLOW_MIN_SHARE of the last window's: the window is matched again over the full
+    range, and the depth followed from it. Without a last window to compare with (a restored
+    state without it), the followed search is not trusted either."""
+    left, right, z = render_pair(CAM, (0.5, 0.2, 9.0), 2.0)
+    box = _box(z)
+    ref = StereoCloud(CAM, follow_depth=0).bind(left, right)(box)
+    wrong = StereoCloud(CAM).matcher.points_window(left, right, box, 16)
+    assert len(wrong) > 1000 and np.median(wrong[:, 2]) > 15.0      # what a blind search would give
+    cloud = StereoCloud(CAM)
+    cloud.bind(left, right)(box)
+    cloud.depth_range = (40.0, 45.0)                           # 16 disparities: down to ~26 m
+    pts = cloud.bind(left, right)(box)
+    assert cloud.last_disparities == 208
+    np.testing.assert_array_equal(pts, ref)
+    assert 6.5 < cloud.depth_range[0] < 7.5
+    cloud.set_state({"depth_range": [40.0, 45.0]})            # no density: not trusted
+    np.testing.assert_array_equal(cloud.bind(left, right)(box), ref)
+    cloud.reset()
+    assert cloud.depth_range is None and cloud.density is None
+
+
+def test_stereo_cloud_state_round_trips_and_refuses_damage():
+    cloud = StereoCloud(CAM)
+    assert cloud.get_state() == {"depth_range": None, "density": None}
+    good = {"depth_range": [8.0, 11.5], "density": 0.4}
+    cloud.set_state(good)
+    assert cloud.get_state() == good
+    for bad in ({"depth_range": [11.0, 8.0]}, {"depth_range": [0.0, 5.0]}, {"depth_range": [np.nan, 5.0]},
+                {"depth_range": [1.0]}, {"depth_range": "far"}, {"density": 2.0}, {"density": "x"}, [8.0, 11.5]):
+        with pytest.raises(ValueError, match="damaged StereoCloud state"):
+            cloud.set_state(bad)
+    assert cloud.get_state() == good                             # a refused state changes nothing
+    with pytest.raises(ValueError, match="follow_depth"):
+        StereoParams(follow_depth=0.5)

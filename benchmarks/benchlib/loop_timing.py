@@ -17,21 +17,23 @@ import numpy as np
 from track3d.dataset import Dataset
 from track3d.machine import affinity_of_all_threads
 from track3d.onnxmodel import run_ms_of
-from track3d.tracker import Track3D
+from track3d.stereo import StereoCloud
+from track3d.tracker import Track3D, sensor_options
 
 __all__ = ["STAGES", "load_frames", "build", "time_loop"]
 
 STAGES = ("crop", "net2d", "post2d", "frustum", "boxnet_other", "net3d", "fusion", "overhead", "end_to_end")
 
 
-def load_frames(data: Path, split: str, max_frames: int, max_sequences: int):
-    """(camera, [(sequence, [(image, points, box2d)...])]) preloaded in memory, absent frames kept."""
+def load_frames(data: Path, split: str, max_frames: int, max_sequences: int, depth: str = "map"):
+    """(camera, [(sequence, [(image, points, box2d)...])]) preloaded in memory, absent frames kept;
+    depth "stereo": the right image in place of the points (the loop matches the pair)."""
     ds = Dataset(data)
     out, total = [], 0
     for seq in ds.sequences(split)[:max_sequences]:
         frames = []
         for i in range(len(seq)):
-            frames.append((seq.image(i), seq.points(i), seq.gt2d[i]))
+            frames.append((seq.image(i), seq.right_image(i) if depth == "stereo" else seq.points(i), seq.gt2d[i]))
             total += 1
             if total >= max_frames:
                 break
@@ -43,15 +45,19 @@ def load_frames(data: Path, split: str, max_frames: int, max_sequences: int):
 
 def build(camera, cfg: dict, threads: int, fusion: bool = True) -> Track3D:
     """Track3D of cfg["tracker"] / cfg["estimator"] with their options (models included) at
-    `threads` threads."""
+    `threads` threads; cfg["depth_sensor"] (optional): that sensor's loop options and A3BoxNet."""
+    sensor = cfg.get("depth_sensor")
     topt = {"threads": threads, **cfg.get("tracker_options", {})}
-    eopt = {"threads": threads, **cfg.get("estimator_options", {})}
+    eopt = {"threads": threads, **({"depth_sensor": sensor} if sensor and cfg["estimator"] == "a3boxnet" else {}),
+            **cfg.get("estimator_options", {})}
     return Track3D.create(camera, cfg["tracker"], cfg["estimator"], tracker_options=topt, estimator_options=eopt,
-                          fusion=fusion)
+                          fusion=fusion, **(sensor_options(sensor) if sensor else {}))
 
 
-def time_loop(t3d: Track3D, sequences, frames: int, warm: int = 20) -> dict:
-    """Per-stage median / p99 / mean ms and FPS over `frames` measured updates."""
+def time_loop(t3d: Track3D, sequences, frames: int, warm: int = 20, stereo: StereoCloud | None = None) -> dict:
+    """Per-stage median / p99 / mean ms and FPS over `frames` measured updates. stereo: the
+    frames hold right images (load_frames(depth="stereo")) and this matcher computes each
+    update's cloud around the 2D box inside the update (its time in the "frustum" stage)."""
     rows: dict[str, list] = {k: [] for k in STAGES}
     statuses: dict[str, int] = {}
     done = 0
@@ -63,9 +69,14 @@ def time_loop(t3d: Track3D, sequences, frames: int, warm: int = 20) -> dict:
             if first is None:
                 continue
             img, pts, box = fr[first]
+            if stereo is not None:
+                stereo.reset()
+                pts = stereo.bind(img, pts)
             t3d.init(img, box, seq.category, points=pts)
             for img, pts, _ in fr[first + 1:]:
                 progressed = True
+                if stereo is not None:
+                    pts = stereo.bind(img, pts)
                 n2, n3 = run_ms_of(t3d.tracker2d), run_ms_of(t3d.estimator)
                 t = time.perf_counter()
                 res = t3d.update(img, pts)

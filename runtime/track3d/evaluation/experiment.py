@@ -256,6 +256,8 @@ def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, ma
                 continue
             if seek is not None:
                 seek(i)
+            if stereo is not None:
+                stereo.reset()     # a (re-)start: the body's depth is not the last track's
             if init_3d and needs_points:
                 track.init(image, seq.gt2d[i], seq.category, points=points, box3d=seq.gt3d[i])
             else:
