@@ -443,3 +443,30 @@ def test_stereo_cloud_state_round_trips_and_refuses_damage():
     assert cloud.get_state() == good                             # a refused state changes nothing
     with pytest.raises(ValueError, match="follow_depth"):
         StereoParams(follow_depth=0.5)
+
+
+def test_a_stereo_loop_restored_from_both_states_goes_on_bit_identically():
+    """The matcher's followed depth is state beside the Track3D's: a loop restored from both
+    goes on exactly as the uninterrupted one (the search range, the cloud and every box)."""
+    frames = _sphere_frames(6)
+    runs = []
+    for restore in (False, True):
+        cloud = StereoCloud(CAM)
+        t = Track3D.from_default(CAM, depth_sensor="stereo")
+        t.init(frames[0][0], frames[0][2], points=cloud.bind(frames[0][0], frames[0][1]))
+        for left, right, *_ in frames[1:3]:
+            t.update(left, cloud.bind(left, right))
+        if restore:
+            state = json.loads(json.dumps({"track": t.get_state(), "stereo": cloud.get_state()}))
+            assert state["stereo"]["depth_range"] is not None
+            cloud = StereoCloud(CAM)
+            t = Track3D.from_default(CAM, depth_sensor="stereo")
+            t.set_state(state["track"])
+            cloud.set_state(state["stereo"])
+        out = []
+        for left, right, *_ in frames[3:]:
+            r = t.update(left, cloud.bind(left, right))
+            out.append((r.box2d.tolist(), r.box3d.tolist(), r.num_points, cloud.last_disparities))
+        runs.append(out)
+    assert runs[0] == runs[1]
+    assert all(o[3] < 208 for o in runs[0])       # the followed search ran
