@@ -473,7 +473,7 @@ def t_stereo(rng, env):
     from track3d.tracker import STATUSES, Track3D, sensor_options
 
     params = {"edge_erode_px": int(rng.integers(0, 3)), "block_size": int(rng.choice([1, 3, 5, 7])),
-              "z_min_m": float(rng.choice([0.3, 1.5, 20.0]))}
+              "z_min_m": float(rng.choice([0.3, 1.5, 20.0])), "follow_depth": float(rng.choice([0.0, 1.0, 1.5, 4.0]))}
     left, right = rand_pair(rng)
     try:
         points = StereoCloud(env.cam, **params).bind(left, right)
@@ -483,10 +483,11 @@ def t_stereo(rng, env):
         expect(a.dtype == np.uint8 and a.shape[:2] == (env.cam.height, env.cam.width)
                and (a.ndim == 2 or a.shape[2:] == (3,)), f"a stereo image {a.shape} {a.dtype} was taken")
     box = rand_box(rng)
-    p = points(box)
-    expect(isinstance(p, np.ndarray) and p.dtype == np.float32 and p.ndim == 2 and p.shape[1] == 3,
-           f"stereo cloud {type(p).__name__} {getattr(p, 'shape', None)} {getattr(p, 'dtype', None)}")
-    expect(bool(np.all(np.isfinite(p))) and bool(np.all(p[:, 2] > 0)), "stereo cloud not finite or z <= 0")
+    for b in (box, rand_box(rng) if rng.random() < 0.5 else box):   # a second window follows the first's depth
+        p = points(b)
+        expect(isinstance(p, np.ndarray) and p.dtype == np.float32 and p.ndim == 2 and p.shape[1] == 3,
+               f"stereo cloud {type(p).__name__} {getattr(p, 'shape', None)} {getattr(p, 'dtype', None)}")
+        expect(bool(np.all(np.isfinite(p))) and bool(np.all(p[:, 2] > 0)), "stereo cloud not finite or z <= 0")
     # the default loop, or stereo's options (the outline read from the callable's cloud)
     t = Track3D(env.cam, _Scripted(rng), env.estimator("baseline"),
                 **(sensor_options("stereo") if rng.random() < 0.5 else {}))
