@@ -62,13 +62,16 @@ def run_config(camera, sequences, cfg: dict, threads: int, frames: int, torch_ne
         del reference
         run_cfg = {**cfg, "tracker_options": opts["2d"], "estimator_options": opts["3d"]}
     stereo = StereoCloud(camera, follow_depth=cfg["stereo_follow"]) if "stereo_follow" in cfg else None
-    r = time_loop(build(camera, run_cfg, threads), sequences, frames, stereo=stereo)
+    t3d = build(camera, run_cfg, threads)
+    networks = [{k: m.get(k) for k in ("file", "engine", "precision")} for m in t3d.describe()["models"]]
+    r = time_loop(t3d, sequences, frames, stereo=stereo)
     unchecked = [m.meta.get("kind") for m in stand_ins if m.check is None]
     if unchecked:
         raise EquivalenceError(f"torch model(s) {unchecked} never ran during warm-up: equivalence not checked")
     out = {"config": cfg["label"], "tracker": cfg["tracker"], "estimator": cfg["estimator"],
            "backend": cfg["backend"], "precision": cfg["precision"], "threads": threads, "fusion": True, **r,
            **({"depth": "stereo from the pair", "stereo_follow": cfg["stereo_follow"]} if stereo is not None else {}),
+           "networks": networks,
            "models": {"tracker_options": {k: str(v) for k, v in cfg.get("tracker_options", {}).items()},
                       "estimator_options": {k: str(v) for k, v in cfg.get("estimator_options", {}).items()}}}
     if cfg["backend"] == "torch":
@@ -97,10 +100,21 @@ def make_configs(args, torch_nets: TorchNets | None) -> tuple[list[dict], list[d
         label = f"{tracker}:{estimator}" + (f"@{model}" if model else "")
         base = {"label": label, "tracker": tracker, "estimator": estimator,
                 "tracker_options": topt, "estimator_options": eopt, "backend": "onnxruntime", "precision": "fp32"}
+        if args.precision != ["fp32"]:
+            # side by side: fp32, and every network in the variant precision="auto" picks on this CPU
+            auto = {"precision": "auto", "engine": "auto"}
+            bases = [base if p == "fp32" else {**base, "label": f"{label} auto", "precision": "auto",
+                                                "tracker_options": {**topt, **auto}, "estimator_options": {**eopt, **auto}}
+                     for p in args.precision]
+            if args.depth != "stereo":
+                configs += bases
+                continue
+        else:
+            bases = [base]
         if args.depth == "stereo":
             # one row per depth-following setting, side by side in this run
-            configs += [{**base, "label": f"{label} stereo follow {k:g}", "depth_sensor": "stereo",
-                         "stereo_follow": k} for k in args.stereo_follow]
+            configs += [{**b, "label": f"{b['label']} stereo follow {k:g}", "depth_sensor": "stereo",
+                         "stereo_follow": k} for b in bases for k in args.stereo_follow]
             continue
         configs.append(base)
         if torch_nets is not None:
@@ -210,6 +224,10 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--stereo-follow", type=float, nargs="+", default=[1.5], metavar="K",
                     help="with --depth stereo: StereoParams.follow_depth values, one row each (0: the full "
                          "disparity range every frame; default 1.5)")
+    ap.add_argument("--precision", choices=("fp32", "auto"), nargs="+", default=["fp32"],
+                    help="one row per value, side by side: fp32, every network at fp32 on onnxruntime; auto, "
+                         "each in the engine and precision track3d.variant_choice picks on this CPU "
+                         "(precision=auto, engine=auto; the row records the picks; default fp32)")
     ap.add_argument("--tag", default=None, help="result file name tag (default: the host name)")
     add_out_argument(ap, flag="--out-dir")
     ap.add_argument("--siamfc-edge-model", type=Path, default=None, metavar="PREFIX",
@@ -238,8 +256,9 @@ def main(argv=None) -> int:
     configs, skipped = make_configs(args, torch_nets)
     for s in skipped:
         print(f"skip {s['config']} ({s['backend']}): {s['reason']}", file=sys.stderr)
-    if args.depth == "stereo" and (args.torch or args.int8):
-        raise SystemExit("--depth stereo runs the ONNX fp32 configurations only (not with --torch or --int8)")
+    if (args.depth == "stereo" or args.precision != ["fp32"]) and (args.torch or args.int8):
+        raise SystemExit("--depth stereo and --precision auto run the ONNX configurations only (not with --torch "
+                         "or --int8)")
     camera, seqs = load_frames(args.data, args.split, args.preload, args.sequences, depth=args.depth)
     print(f"preloaded {sum(len(f) for _, f in seqs)} frames of {len(seqs)} sequences", file=sys.stderr)
     rec = start_record("track3d end-to-end FPS", data=str(args.data), split=args.split, frames_requested=args.frames)

@@ -90,6 +90,25 @@ def test_bench_fps_matches_the_pair_inside_the_loop_with_depth_stereo(tiny_datas
         bench_fps.main(["--data", str(tiny_dataset), "--depth", "stereo", "--int8", "--out-dir", str(out)])
 
 
+def test_bench_fps_puts_auto_beside_fp32_and_records_the_picks(tiny_dataset, tmp_path, monkeypatch):
+    """--precision fp32 auto: one row each in the same run; each row names the engine and
+    precision every network ran in (auto's picks; the fp32 row all onnxruntime fp32)."""
+    import bench_fps
+
+    monkeypatch.setenv("TRACK3D_CACHE_DIR", str(tmp_path / "cache"))
+    out = tmp_path / "fps"
+    assert bench_fps.main(["--data", str(tiny_dataset), "--frames", "3", "--preload", "20", "--threads", "1",
+                           "--config", "edgetrack:a3boxnet", "--precision", "fp32", "auto", "--tag", "p",
+                           "--out-dir", str(out)]) == 0
+    rows = {r["config"]: r for r in json.loads((out / "fps_p.json").read_text())["results"]}
+    assert set(rows) == {"edgetrack:a3boxnet", "edgetrack:a3boxnet auto"}
+    fp32 = rows["edgetrack:a3boxnet"]["networks"]
+    assert {n["file"] for n in fp32} >= {"edgetrack_search.onnx", "a3boxnet_narrow.onnx"}
+    assert all((n["engine"], n["precision"]) == ("onnxruntime", "fp32") for n in fp32)
+    assert rows["edgetrack:a3boxnet auto"]["precision"] == "auto"
+    assert all(n["precision"] in ("fp32", "int8", "bf16") for n in rows["edgetrack:a3boxnet auto"]["networks"])
+
+
 def test_torch_stand_ins_are_passed_to_the_tracker_and_checked(tmp_path):
     """A torch module of the same weights, behind OnnxModel's interface, given to SiamFCTracker
     as its models: it tracks, counts its time and checks itself against onnxruntime once."""
