@@ -245,6 +245,35 @@ def test_cli_track_with_stereo_depth(tmp_path, capsys):
     assert "invalid choice: 'lidar'" in capsys.readouterr().err
 
 
+def test_cli_stereo_options_set_the_matcher_and_name_and_key_the_results(tmp_path, capsys):
+    """--stereo-option KEY=VALUE sets StereoParams for --depth stereo: its results get their own
+    name, the run record holds the matcher's settings (so a run with other settings never shares
+    a folder with them), and a bad key, value or use is one line."""
+    from track3d.cli import main
+    from track3d.evaluation.results import read_run_record, run_config_key
+
+    data = _stereo_dataset(tmp_path / "ds", CAM)
+    res = tmp_path / "res"
+    base = ["track", "--data", str(data), "--tracker", "oracle", "--estimator", "baseline", "--results", str(res),
+            "--video", "none", "--quiet"]
+    assert main(base + ["--depth", "stereo", "--stereo-option", "follow_depth=0"]) == 0
+    assert main(base + ["--depth", "stereo"]) == 0
+    rec0 = read_run_record(res, "test", "oracle+baseline-stereo-follow_depth=0")
+    rec = read_run_record(res, "test", "oracle+baseline-stereo")
+    assert rec0["stereo"]["follow_depth"] == 0 and rec["stereo"]["follow_depth"] == 1.5
+    assert run_config_key(rec0) != run_config_key(rec)
+    assert main(base + ["--depth", "stereo", "--name", "oracle+baseline-stereo", "--stereo-option",
+                        "follow_depth=0"]) == 2          # another matcher's results under that name: refused
+    assert "another configuration" in capsys.readouterr().err
+    for bad, msg in ((["--stereo-option", "follow_depth=0"], "add --depth stereo"),
+                     (["--depth", "stereo", "--stereo-option", "nope=1"], "unknown --stereo-option nope"),
+                     (["--depth", "stereo", "--stereo-option", "z_min_m=near"], "z_min_m must be a finite number"),
+                     (["--depth", "stereo", "--stereo-option", "follow_depth=0.5"], "follow_depth must be 0")):
+        assert main(base + bad) == 2
+        err = capsys.readouterr().err
+        assert msg in err and len(err.strip().splitlines()) == 1
+
+
 def test_stereo_clouds_get_the_stereo_a3boxnet(tmp_path):
     """Block-matching stereo has a model of its own (track3d.boxnet.SENSOR_MODELS): chosen by the
     sequence's sensor in the evaluation, by --depth stereo in the CLI, by depth_sensor= in

@@ -216,6 +216,10 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--depth", choices=("map", "stereo"), default="map",
                    help="point clouds from the dataset's depth maps (map, default) or computed from its "
                         "left/right images by semi-global matching around the 2D box (stereo)")
+    t.add_argument("--stereo-option", action="append", metavar="KEY=VALUE",
+                   help="with --depth stereo, a setting of the matcher (track3d.stereo.StereoParams, e.g. "
+                        "follow_depth=0: the full disparity range every frame, z_min_m=3, mode=sgbm); the results "
+                        "are named <tracker>+<estimator>-stereo-KEY=VALUE unless --name is given")
     t.add_argument("--video", choices=("auto", "gif", "mp4", "none"), default="auto",
                    help="overlay format (default auto: gif when pillow is installed, else mp4; gif needs pillow)")
     t.add_argument("--video-sequences", type=bounded(int, 0), default=1, help="how many sequences get an overlay")
@@ -357,14 +361,34 @@ def _cmd_track(a) -> int:
                        tracker_options=topts, estimator_options=eopts, name=a.name)
     if views_opts and not a.name:   # keep the default views' results of the same pair
         spec.name = spec.label + "-views-" + "-".join(f"{k}={v}" for k, v in sorted(views_opts.items()))
+    stereo_opts = _options(a.stereo_option)
+    stereo_params = None
+    if stereo_opts:
+        from dataclasses import fields
+
+        from .stereo import StereoParams
+
+        if a.depth != "stereo":
+            raise ValueError("--stereo-option sets the matcher of --depth stereo: add --depth stereo")
+        known = {f.name for f in fields(StereoParams)}
+        unknown = sorted(set(stereo_opts) - known)
+        if unknown:
+            raise ValueError(f"unknown --stereo-option {', '.join(unknown)}: one of {', '.join(sorted(known))}")
+        try:
+            stereo_params = StereoParams(**stereo_opts)
+        except TypeError as e:   # a value of the wrong kind that the dataclass passed on
+            raise ValueError(f"bad --stereo-option: {e}") from None
     if a.depth == "stereo" and not a.name:
         spec.name = spec.label + "-stereo"   # keep the depth-map results of the same pair
+        if stereo_opts:
+            spec.name += "-" + "-".join(f"{k}={v}" for k, v in sorted(stereo_opts.items()))
     if a.first_box_fade is not None and not a.init_3d:
         raise ValueError("--first-box-fade weighs the first 3D box: it needs --init-3d")
     if a.init_3d and not a.name:
         spec.name = spec.label + "-init3d"   # another protocol: never the same folder as the 2D start's
     exp = Experiment(a.data, a.split, a.results, sequences=_unique(a.sequences), max_frames=a.frames,
-                     restart=not a.no_restart, restart_skip=a.restart_skip, depth=a.depth, init_3d=a.init_3d)
+                     restart=not a.no_restart, restart_skip=a.restart_skip, depth=a.depth, init_3d=a.init_3d,
+                     stereo_params=stereo_params)
     results = Path(a.results)
     if results.exists() and not results.is_dir():
         raise ValueError(f"--results {results} is a file, not a folder")

@@ -81,11 +81,23 @@ class StereoParams:
     mode: str = "3way"              # "3way" (default: as accurate as "sgbm" here, faster), "sgbm", "hh"
     window_margin_px: int = 16      # window mode: extra context around the box
     edge_erode_px: int = 1          # pixels this close to a hole are holes too (0 = off)
-    follow_depth: float = 1.5       # StereoCloud: search only the depths the body can be at, the last
-                                    # window's depths [z_lo, z_hi] widened to [z_lo / k, z_hi * k] (0: off,
-                                    # always the full range down to z_min_m)
+    follow_depth: float = 1.5       # StereoCloud: search only down to the nearest depth the body can be
+                                    # at, the last window's nearest z / k (0: off, always the full range
+                                    # down to z_min_m)
 
     def __post_init__(self) -> None:
+        for name in ("block_size", "uniqueness_ratio", "lr_max_diff_px", "speckle_window", "speckle_range_px",
+                     "window_margin_px"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+                raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
+        for name in ("z_min_m", "min_texture_dn", "min_disparity_px", "max_depth_m", "follow_depth"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v) \
+                    or v < 0:
+                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+        if not self.max_depth_m > 0:
+            raise ValueError(f"max_depth_m must be > 0, got {self.max_depth_m}")
         if self.block_size < 1 or self.block_size % 2 == 0:
             raise ValueError(f"block_size must be odd and >= 1, got {self.block_size}")
         if not self.z_min_m > 0:

@@ -238,7 +238,9 @@ def sensor_info(sensor: str) -> dict:
     if sensor == "stereo":
         from track3d.stereo import StereoParams
 
-        return {"name": "stereo", **asdict(StereoParams())}
+        # the maps are full-frame matches over the whole range: following a body's depth is the
+        # loop's (StereoCloud), not the sensor's
+        return {"name": "stereo", **{k: v for k, v in asdict(StereoParams()).items() if k != "follow_depth"}}
     return {"name": sensor}
 
 

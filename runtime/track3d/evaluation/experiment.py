@@ -27,7 +27,7 @@ import hashlib
 import json
 import shutil
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -39,6 +39,7 @@ from ..jsonable import write_json
 from ..dataset import Dataset, DatasetError, Sequence
 from ..machine import cpu_name
 from ..progress import Progress
+from ..stereo import StereoCloud, StereoParams
 from ..tracker import LOST, STAGES, Track3D, sensor_options
 from .draw import OverlayWriter, draw_overlay
 from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, CI_LEVEL, INTERVAL_METRICS, IOU_THRESHOLDS, MOVED, LostScore,
@@ -209,21 +210,21 @@ def _gt_ok(seq: Sequence, i: int) -> bool:
 
 def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, max_frames: int | None = None,
                  restart: bool = True, restart_skip: int = 1, overlay: OverlayWriter | None = None,
-                 bar: Progress | None = None, depth: str = "map", init_3d: bool = False) -> SequenceResult:
+                 bar: Progress | None = None, depth: str = "map", init_3d: bool = False,
+                 stereo_params: StereoParams | None = None) -> SequenceResult:
     """Track one sequence under the restart protocol; returns its per-frame results.
     init_3d: each initialisation also gets the frame's ground-truth 3D box (3D tracking's start).
 
     depth: "map" = clouds from the stored depth maps; "stereo" = from the left/right images
-    (`track3d.stereo.StereoCloud`, disparity only around the 2D box, timed as tracker time)."""
+    (`track3d.stereo.StereoCloud`, disparity only around the 2D box, timed as tracker time), with
+    the matcher's `stereo_params` (default StereoParams())."""
     if restart_skip < 1:
         raise ValueError(f"restart_skip must be >= 1, got {restart_skip}")
     if depth not in DEPTH_SOURCES:
         raise ValueError(f"depth must be one of {', '.join(DEPTH_SOURCES)}, got {depth!r}")
     stereo = None
     if depth == "stereo":
-        from ..stereo import StereoCloud
-
-        stereo = StereoCloud(seq.camera)
+        stereo = StereoCloud(seq.camera, stereo_params)
     n = len(seq) if max_frames is None else min(len(seq), int(max_frames))
     box2d = np.full((n, 4), np.nan)
     raw = np.full((n, 4), np.nan)
@@ -312,9 +313,11 @@ class Experiment:
     def __init__(self, root: str | Path, split: str = "test", result_dir: str | Path = "results",
                  report_dir: str | Path = "reports", sequences: list[str] | None = None,
                  max_frames: int | None = None, restart: bool = True, restart_skip: int = 1,
-                 depth: str = "map", max_sequences: int | None = None, init_3d: bool = False):
+                 depth: str = "map", max_sequences: int | None = None, init_3d: bool = False,
+                 stereo_params: StereoParams | None = None):
         """sequences: names to run (default: the whole split); max_sequences: only the first N;
-        init_3d: every initialisation also gets the ground truth's 3D box (run_sequence)."""
+        init_3d: every initialisation also gets the ground truth's 3D box (run_sequence);
+        stereo_params: the matcher's settings with depth "stereo" (default StereoParams())."""
         self.dataset = Dataset(root)
         self.split = split
         all_seqs = self.dataset.sequences(split)
@@ -342,6 +345,9 @@ class Experiment:
         if depth not in DEPTH_SOURCES:
             raise ValueError(f"depth must be one of {', '.join(DEPTH_SOURCES)}, got {depth!r}")
         self.depth = depth
+        if stereo_params is not None and depth != "stereo":
+            raise ValueError("stereo_params set the matcher of depth='stereo'")
+        self.stereo_params = stereo_params
         self.init_3d = bool(init_3d)
 
     def folder(self, name: str, seq: str) -> Path:
@@ -393,7 +399,7 @@ class Experiment:
             try:
                 with Progress(n, f"{name} {seq.name}", enabled=False if quiet else None) as bar:
                     res = run_sequence(factory, seq, self.max_frames, self.restart, self.restart_skip, writer, bar,
-                                       depth=self.depth, init_3d=self.init_3d)
+                                       depth=self.depth, init_3d=self.init_3d, stereo_params=self.stereo_params)
             except BaseException:
                 if writer is not None:
                     writer.close()
@@ -470,7 +476,9 @@ class Experiment:
                 "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
                 "frames": {},
                 # only when on: the records of runs without it stay as they were
-                **({"init_3d": True, "first_box_fade": fade} if self.init_3d else {})}
+                **({"init_3d": True, "first_box_fade": fade} if self.init_3d else {}),
+                # clouds matched from the pair: the matcher's settings decide them
+                **({"stereo": asdict(self.stereo_params or StereoParams())} if self.depth == "stereo" else {})}
 
     # --- evaluation ----------------------------------------------------------------------------
     def _read(self, name: str, seq: Sequence):

@@ -157,7 +157,8 @@ def run_config_key(rec: dict) -> dict:
             "options": d.get("options"), "models": sorted(m.get("sha256", "") for m in d.get("models", [])),
             "restart": rec.get("restart"), "restart_skip": rec.get("restart_skip"),
             # only when on: the keys of runs without it stay as they were
-            **({"init_3d": True, "first_box_fade": rec.get("first_box_fade")} if rec.get("init_3d") else {})}
+            **({"init_3d": True, "first_box_fade": rec.get("first_box_fade")} if rec.get("init_3d") else {}),
+            **({"stereo": rec["stereo"]} if rec.get("stereo") is not None else {})}
 
 
 def write_run_record(result_dir: str | Path, split: str, tracker: str, rec: dict) -> Path:
