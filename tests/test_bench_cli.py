@@ -91,6 +91,27 @@ def test_synthetic_frames_have_the_target():
     assert box[2] > 5 and box[3] > 5
 
 
+def test_bench_times_a_stereo_camera_s_loop_from_the_package_alone(capsys):
+    """--depth stereo: the synthetic sphere is also seen from the right camera (the same surface
+    texture, so the pair matches: its stereo cloud lies on the sphere), and the loop matches the
+    pair inside each update with the stereo loop options and model."""
+    from track3d.camera import Camera
+    from track3d.stereo import StereoCloud
+
+    cam = Camera.from_fov(640, 480, 45.0)
+    img, right, box = bench.synthetic_frames(cam, 2, stereo=True)[0]
+    assert right.shape == img.shape and right.dtype == np.uint8 and not np.array_equal(right, img)
+    pts = StereoCloud(cam).bind(img, right)(box)
+    r = np.linalg.norm(pts - np.array([-1.5, 0.8, 22.0]), axis=1)   # the first frame's sphere, radius 2 m
+    assert len(pts) > 1000 and np.median(np.abs(r - 2.0)) < 0.15
+    assert main(["bench", "--depth", "stereo", "--frames", "4", "--threads", "1", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["source"]["depth"].startswith("stereo from the pair")
+    assert "a3boxnet_stereo.onnx" in [m["file"] for m in rep["track3d"]["models"]]
+    assert rep["track3d"]["options"]["outline_contain"] is True          # stereo's loop options
+    assert rep["results"][0]["statuses"] == {"tracking": 4}
+
+
 def test_bench_on_a_dataset(tmp_path, capsys):
     from track3d.synthetic import make_synthetic_dataset
 

@@ -13,6 +13,9 @@ network, fusion) and end to end: median, p99, p99.9 and max milliseconds, and FP
 median end-to-end ms). The other processes' CPU load is measured before and after (and the
 load average recorded); a warning says when the machine was busy. ``models_only`` times each
 ONNX network alone, fed the inputs it saw in the loop (like onnxruntime_perf_test).
+``depth="stereo"``: a stereo camera's loop, the cloud matched from the pair around the 2D box
+inside each update (track3d.stereo.StereoCloud; the synthetic sphere is also rendered from the
+right camera), with the stereo sensor's loop options and A3BoxNet model.
 """
 from __future__ import annotations
 
@@ -51,6 +54,7 @@ class BenchConfig:
     sequences: tuple[str, ...] | None = None      # with data: these sequences, else the split's first
     synthetic_frames: int = 60
     models_only: bool = False
+    depth: str = "map"          # "map": clouds given (depth maps); "stereo": matched from the pair in the loop
     busy_seconds: float = 0.5
     extra: dict = field(default_factory=dict)
 
@@ -81,20 +85,20 @@ def _texture(h: int, w: int, seed: int = 0) -> np.ndarray:
     return np.clip(tex, 0.0, 1.0)
 
 
-def synthetic_frames(camera: Camera, n: int = 60, seed: int = 0):
+def synthetic_frames(camera: Camera, n: int = 60, seed: int = 0, stereo: bool = False):
     """n frames of a lit, textured sphere (radius 2 m) drifting across and towards the camera.
 
-    Returns [(image (H, W, 3) uint8 RGB, points (N, 3) float32, box2d (4,) float64)], category 0.
-    The texture is painted in longitude/latitude, so it turns with the sphere's rotation."""
+    Returns [(image (H, W, 3) uint8 RGB, points (N, 3) float32, box2d (4,) float64)], category 0;
+    stereo: the right camera's image (H, W, 3) uint8 in place of the points (the sphere seen from
+    +baseline). The texture is painted in longitude/latitude on the surface, so both cameras see
+    the same texture at the same point, and it turns with the sphere's rotation."""
     rays = camera.pixel_rays()
     tex = _texture(256, 512, seed)
     radius = 2.0
     light = np.array([-0.5, -0.4, -0.77])
     light /= np.linalg.norm(light)
-    out = []
-    for k in range(n):
-        f = k / max(n - 1, 1)
-        c = np.array([-1.5 + 3.0 * f, 0.8 - 1.2 * f, 22.0 - 8.0 * f])
+
+    def view(c: np.ndarray, k: int):
         hit, t, nrm = sphere_hits(rays, c, radius)
         shade = np.clip(nrm @ -light, 0.03, 1.0)
         lon = (np.arctan2(nrm[..., 0], nrm[..., 2]) / (2 * np.pi) + 0.5 + 0.01 * k) % 1.0
@@ -103,16 +107,26 @@ def synthetic_frames(camera: Camera, n: int = 60, seed: int = 0):
         img = np.zeros((camera.height, camera.width, 3), np.uint8)
         g = (255 * val).astype(np.uint8)
         img[hit] = np.stack([g, g, g], -1)[hit]
-        depth = np.where(hit, t, 0.0).astype(np.float32)
+        return img, hit, t
+
+    out = []
+    for k in range(n):
+        f = k / max(n - 1, 1)
+        c = np.array([-1.5 + 3.0 * f, 0.8 - 1.2 * f, 22.0 - 8.0 * f])
+        img, hit, t = view(c, k)
         vv, uu = np.nonzero(hit)
         box = np.array([uu.min(), vv.min(), uu.max() + 1 - uu.min(), vv.max() + 1 - vv.min()], np.float64)
-        out.append((img, camera.backproject_depth(depth), box))
+        if stereo:
+            out.append((img, view(c - camera.right_offset, k)[0], box))
+        else:
+            out.append((img, camera.backproject_depth(np.where(hit, t, 0.0).astype(np.float32)), box))
     return out
 
 
-def _dataset_frames(root: str, split: str, max_frames: int, names: tuple[str, ...] | None = None):
+def _dataset_frames(root: str, split: str, max_frames: int, names: tuple[str, ...] | None = None,
+                    stereo: bool = False):
     """(camera, category, frames) of the first sequences of a dataset split (or of `names`),
-    preloaded."""
+    preloaded; stereo: the right image in place of the points."""
     from .dataset import Dataset
 
     ds = Dataset(root)
@@ -122,7 +136,7 @@ def _dataset_frames(root: str, split: str, max_frames: int, names: tuple[str, ..
     passes = []
     total = 0
     for seq in seqs:
-        fr = [(seq.image(i), seq.points(i), seq.gt2d[i]) for i in range(len(seq))
+        fr = [(seq.image(i), seq.right_image(i) if stereo else seq.points(i), seq.gt2d[i]) for i in range(len(seq))
               if not seq.absent[i] and np.all(np.isfinite(seq.gt2d[i])) and seq.gt2d[i][2] > 0]
         if len(fr) >= 2:
             passes.append((seq.category, fr))
@@ -171,10 +185,13 @@ class _NetTimer:
 
 
 def _build(cfg: BenchConfig, camera: Camera, threads: int):
-    from .tracker import Track3D
+    from .tracker import Track3D, sensor_options
 
     topt: dict = dict(cfg.extra.get("tracker_options", {}))
     eopt: dict = dict(cfg.extra.get("estimator_options", {}))
+    stereo = cfg.depth == "stereo"
+    if stereo and cfg.estimator == "a3boxnet" and not cfg.boxnet_model:
+        eopt.setdefault("depth_sensor", "stereo")   # the stereo model (track3d.boxnet.SENSOR_MODELS)
     if cfg.tracker in NETWORK_TRACKERS or cfg.tracker_model:  # EdgeTrack was timed at 1 thread in every row
         topt["threads"] = threads
         if cfg.tracker_model:
@@ -183,7 +200,8 @@ def _build(cfg: BenchConfig, camera: Camera, threads: int):
         eopt["threads"] = threads
         if cfg.boxnet_model:
             eopt["model"] = cfg.boxnet_model
-    return Track3D.create(camera, cfg.tracker, cfg.estimator, tracker_options=topt, estimator_options=eopt)
+    return Track3D.create(camera, cfg.tracker, cfg.estimator, tracker_options=topt, estimator_options=eopt,
+                          **(sensor_options("stereo") if stereo else {}))
 
 
 # Built-in 2D trackers that run networks: they get the row's thread count as intra-op threads
@@ -193,7 +211,9 @@ NETWORK_TRACKERS = ("siamfc", "siamfc-edge", "edgetrack")
 STAGE_NAMES = ("track2d", "net2d", "frustum", "box3d", "net3d", "fusion", "end_to_end")
 
 
-def _time_loop(t3d, passes, frames: int) -> tuple[dict, dict, dict]:
+def _time_loop(t3d, passes, frames: int, stereo=None) -> tuple[dict, dict, dict]:
+    """stereo: a track3d.stereo.StereoCloud; the frames then hold right images, matched inside
+    each update (their time in the frustum stage)."""
     net2d = _NetTimer(t3d.tracker2d)
     net3d = _NetTimer(t3d.estimator)
     rows: dict[str, list] = {k: [] for k in STAGE_NAMES}
@@ -202,9 +222,14 @@ def _time_loop(t3d, passes, frames: int) -> tuple[dict, dict, dict]:
     while done < frames + WARMUP:
         for category, fr in passes:
             img, pts, box = fr[0]
+            if stereo is not None:
+                stereo.reset()
+                pts = stereo.bind(img, pts)
             t3d.init(img, box, category, points=pts)
             net2d.take(), net3d.take()
             for img, pts, _ in fr[1:]:
+                if stereo is not None:
+                    pts = stereo.bind(img, pts)
                 t = time.perf_counter()
                 res = t3d.update(img, pts)
                 e2e = (time.perf_counter() - t) * 1e3
@@ -253,16 +278,23 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
         raise ValueError(f"frames must be >= 1, got {cfg.frames}")
     if not cfg.threads or min(cfg.threads) < 1:
         raise ValueError(f"threads must be >= 1, got {cfg.threads}")
+    if cfg.depth not in ("map", "stereo"):
+        raise ValueError(f"depth must be 'map' or 'stereo', got {cfg.depth!r}")
+    stereo = cfg.depth == "stereo"
     say = log or (lambda s: None)
     if cfg.data:
-        camera, passes = _dataset_frames(cfg.data, cfg.split, max(cfg.synthetic_frames, 100), cfg.sequences)
+        camera, passes = _dataset_frames(cfg.data, cfg.split, max(cfg.synthetic_frames, 100), cfg.sequences, stereo)
         source = {"kind": "dataset", "data": str(cfg.data), "split": cfg.split,
                   **({"sequences": list(cfg.sequences)} if cfg.sequences else {})}
     else:
         camera = Camera.from_fov(640, 480, 45.0)
-        say(f"synthesising {cfg.synthetic_frames} frames (640x480 sphere) ...")
-        passes = [(0, synthetic_frames(camera, cfg.synthetic_frames))]
+        say(f"synthesising {cfg.synthetic_frames} frames (640x480 sphere{', stereo pair' if stereo else ''}) ...")
+        passes = [(0, synthetic_frames(camera, cfg.synthetic_frames, stereo=stereo))]
         source = {"kind": "synthetic", "frames": cfg.synthetic_frames, "width": 640, "height": 480}
+    if stereo:
+        from .stereo import StereoCloud
+
+        source["depth"] = "stereo from the pair (track3d.stereo.StereoCloud, matched in each update)"
     busy_before = machine.cpu_busy(cfg.busy_seconds)
     load_before = machine.load_average()
     allowed = machine.allowed_cpus()
@@ -279,7 +311,8 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
                                  f"(time the loop without --models-only)")
             say(f"{t3d.tracker_name}+{t3d.estimator_name} at {threads} thread(s) on CPU(s) {cpus} ...")
             wall0, cpu0 = time.perf_counter(), time.process_time()
-            stages, statuses, feeds = _time_loop(t3d, passes, min(cfg.frames, 200) if cfg.models_only else cfg.frames)
+            stages, statuses, feeds = _time_loop(t3d, passes, min(cfg.frames, 200) if cfg.models_only else cfg.frames,
+                                                 StereoCloud(camera) if stereo else None)
             wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
             row = {"threads": threads, "cpus": cpus, "pinned": pinned,
                    "note": None if len(cpus) == threads else f"only {len(cpus)} CPU(s) allowed",
@@ -328,7 +361,8 @@ def format_table(report: dict) -> str:
     lines = [f"CPU: {m['cpu']} ({m['arch']}, {m['logical_cpus']} logical CPUs; ISA: {' '.join(m['isa']) or 'n/a'})",
              "versions: " + ", ".join(f"{k} {v}" for k, v in m["versions"].items() if v),
              f"frames: {report['source']['kind']}"
-             + (f" {report['source'].get('data')}" if report["source"].get("data") else "")]
+             + (f" {report['source'].get('data')}" if report["source"].get("data") else "")
+             + (f"; depth: {report['source']['depth']}" if report["source"].get("depth") else "")]
     d = report.get("track3d") or {}
     models = ", ".join(f"{x['file']} ({x['sha256'][:12]})" for x in d.get("models", []))
     lines.append(f"tracker: {d.get('tracker')} + {d.get('estimator')}" + (f"; models: {models}" if models else ""))

@@ -265,6 +265,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="with --data: only these sequences (default: the split's first)")
     b.add_argument("--models-only", action="store_true",
                    help="time each network alone on the inputs it gets in the loop (onnxruntime_perf_test style)")
+    b.add_argument("--depth", choices=("map", "stereo"), default="map",
+                   help="map: the clouds are given (a depth sensor); stereo: a stereo camera's loop, the cloud "
+                        "matched from the left/right pair around the 2D box inside each update, with the stereo "
+                        "loop options and A3BoxNet model")
     b.add_argument("--out", metavar="JSON", help="also write the report as JSON here")
     b.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
     b.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
@@ -282,7 +286,7 @@ def _cmd_bench(a) -> int:
     cfg = BenchConfig(tracker=a.tracker, estimator=a.estimator, tracker_model=a.tracker_model,
                       boxnet_model=a.boxnet_model, frames=a.frames, threads=tuple(a.threads), data=a.data,
                       split=a.split, sequences=tuple(a.sequences) if a.sequences else None,
-                      models_only=a.models_only)
+                      models_only=a.models_only, depth=a.depth)
     for p in (a.tracker_model and Path(a.tracker_model).parent, a.boxnet_model):
         if p and not Path(p).exists():
             raise FileNotFoundError(f"no such model path: {p}")
