@@ -100,21 +100,18 @@ def make_configs(args, torch_nets: TorchNets | None) -> tuple[list[dict], list[d
         label = f"{tracker}:{estimator}" + (f"@{model}" if model else "")
         base = {"label": label, "tracker": tracker, "estimator": estimator,
                 "tracker_options": topt, "estimator_options": eopt, "backend": "onnxruntime", "precision": "fp32"}
-        if args.precision != ["fp32"]:
-            # side by side: fp32, and every network in the variant precision="auto" picks on this CPU
-            auto = {"precision": "auto", "engine": "auto"}
-            bases = [base if p == "fp32" else {**base, "label": f"{label} auto", "precision": "auto",
-                                                "tracker_options": {**topt, **auto}, "estimator_options": {**eopt, **auto}}
-                     for p in args.precision]
-            if args.depth != "stereo":
-                configs += bases
-                continue
-        else:
-            bases = [base]
+        # side by side: fp32, and every network in the variant precision="auto" picks on this CPU
+        auto = {"precision": "auto", "engine": "auto"}
+        bases = [base if p == "fp32" else {**base, "label": f"{label} auto", "precision": "auto",
+                                            "tracker_options": {**topt, **auto}, "estimator_options": {**eopt, **auto}}
+                 for p in args.precision]
         if args.depth == "stereo":
             # one row per depth-following setting, side by side in this run
             configs += [{**b, "label": f"{b['label']} stereo follow {k:g}", "depth_sensor": "stereo",
                          "stereo_follow": k} for b in bases for k in args.stereo_follow]
+            continue
+        if args.precision != ["fp32"]:   # no torch / int8 twins beside auto (main refuses the mix)
+            configs += bases
             continue
         configs.append(base)
         if torch_nets is not None:

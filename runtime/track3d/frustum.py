@@ -38,6 +38,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .frames import check_cloud
+
 __all__ = [
     "Z_MIN", "Z_MAX", "extract_frustum", "extract_frustum_numpy", "frustum_mask_numpy",
     "extract_frustum_bounds", "extract_frustum_bounds_numpy", "MAX_SAMPLE",
@@ -62,11 +64,11 @@ _MASK64 = (1 << 64) - 1
 
 
 def _check_points(points: np.ndarray) -> np.ndarray:
-    p = np.asarray(points)
-    if p.ndim != 2 or p.shape[1] != 3:
-        if p.size == 0:
-            return np.zeros((0, 3), np.float32)
-        raise ValueError(f"points must have shape (N, 3), got {p.shape}")
+    p = check_cloud(points)   # the loop's contract, one message (an empty cloud of any shape: no points)
+    if callable(p):
+        raise ValueError("points must be an (N, 3) array here, got a callable")
+    if p.size == 0:
+        return np.zeros((0, 3), np.float32)
     return np.ascontiguousarray(p, dtype=np.float32)
 
 

@@ -106,8 +106,7 @@ class StereoParams:
             raise ValueError(f"edge_erode_px must be an integer in 0..8, got {self.edge_erode_px!r}")
         if self.mode not in _MODES:
             raise ValueError(f"mode must be one of {', '.join(_MODES)}, got {self.mode!r}")
-        if not (np.isfinite(float(self.follow_depth)) and (float(self.follow_depth) == 0.0
-                                                           or float(self.follow_depth) >= 1.0)):
+        if 0.0 < self.follow_depth < 1.0:   # finite and >= 0: checked above
             raise ValueError(f"follow_depth must be 0 (off) or >= 1, got {self.follow_depth!r}")
 
 
