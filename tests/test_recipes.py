@@ -44,6 +44,10 @@ def test_tiny_recipe_runs_end_to_end(name, tmp_path):
     if name == "a3boxnet-stereo":   # a fine-tune of the shipped model, for stereo clouds
         meta = OnnxModel(made[-1], 1).meta
         assert meta["depth_sensor"] == "stereo" and meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet.onnx"
+    if name == "a3boxnet-stereo-narrow":   # half width, distilled from the shipped stereo model, for stereo clouds
+        meta = OnnxModel(tmp_path / "r" / "boxnet-stereo-narrow" / "a3boxnet_stereo_narrow.onnx", 1).meta
+        assert meta["depth_sensor"] == "stereo" and meta["width"] == 0.5
+        assert meta["trained"]["distilled_from"] == {"file": "a3boxnet_stereo.onnx", "weight": 1.0}
     if name == "a3boxnet-narrow":   # the default: half width, distilled from the full-width model, an int8 twin
         meta = OnnxModel(tmp_path / "r" / "boxnet-narrow" / "a3boxnet_narrow.onnx", 1).meta
         assert meta["width"] == 0.5 and meta["trained"]["distilled_from"] == {"file": "a3boxnet.onnx", "weight": 1.0}

@@ -253,6 +253,34 @@ A3BOXNET_STEREO = Recipe(
     notes=("`parent` is the shipped a3boxnet.onnx by name (or any A3BoxNet .onnx / checkpoint path).",),
 )
 
+A3BOXNET_STEREO_NARROW = Recipe(
+    name="a3boxnet-stereo-narrow",
+    makes="{runs}/boxnet-stereo-narrow/a3boxnet_stereo_narrow.onnx",
+    description="The stereo A3BoxNet at half width: the shipped stereo model (a3boxnet_stereo.onnx, recipe "
+                "a3boxnet-stereo) cut to half width and fine-tuned on the stereo recipe's bodies to fit both "
+                "the ground truth and the stereo model's outputs (distillation, ~45 min on one thread).",
+    knobs={"preset": "small", "train_a": 120, "train_b": 60, "frames": 25, "jitters": 3, "epoch_samples": 4000,
+           "batch": 32, "max_steps": 0, "minutes": 45, "threads": 1, "workers": 1, "width": 0.5,
+           "teacher": "a3boxnet_stereo.onnx", "distill_weight": 1.0},
+    tiny={"preset": "tiny", "train_a": 1, "train_b": 1, "frames": 4, "jitters": 1, "epoch_samples": 16, "batch": 8,
+          "max_steps": 2, "minutes": 5},
+    steps=A3BOXNET_STEREO.steps[:4] + (
+        Step("train: cut the stereo model to the width, fine-tune on ground truth + its outputs", _a(
+            "track3d-train boxnet train --cache {runs}/boxnet-stereo/cache/stereo-train-s2.npz "
+            "{runs}/boxnet-stereo/cache/stereo-train-s12.npz --num-points 512 --epochs 100 "
+            "--epoch-samples {epoch_samples} --batch {batch} --max-steps {max_steps} --flip-y --scale-aug 0.15 "
+            "--no-category --threads {threads} --quiet --out {runs}/boxnet-stereo-narrow/run "
+            "--time-budget-min {minutes} --stretch-aug 0.3 --size-norm extent --lr 3e-4 --width {width} "
+            "--init-from {teacher} --distill-from {teacher} --distill-weight {distill_weight}")),
+        Step("export with a parity check", _a(
+            "track3d-train boxnet export --checkpoint {runs}/boxnet-stereo-narrow/run/best.pt "
+            "--out {runs}/boxnet-stereo-narrow/a3boxnet_stereo_narrow.onnx --depth-sensor stereo")),
+    ),
+    notes=("The data and caches are the a3boxnet-stereo recipe's (made once for both).",
+           "`teacher` is the shipped a3boxnet_stereo.onnx by name (or any A3BoxNet .onnx / checkpoint path, e.g. "
+           "{runs}/boxnet-stereo/a3boxnet_stereo.onnx after the a3boxnet-stereo recipe).",),
+)
+
 A3BOXNET_STEREO_BACKLIT = Recipe(
     name="a3boxnet-stereo-backlit",
     makes="{runs}/boxnet-stereo-backlit/a3boxnet_stereo_backlit.onnx",
@@ -375,7 +403,7 @@ A3BOXNET_NARROW = Recipe(
 )
 
 RECIPES: dict[str, Recipe] = {r.name: r for r in (A3BOXNET_ENGINE, A3BOXNET_NARROW, A3BOXNET_STEREO,
-                                                  A3BOXNET_STEREO_BACKLIT, EDGETRACK_ENGINE, SIAMFC)}
+                                                  A3BOXNET_STEREO_NARROW, A3BOXNET_STEREO_BACKLIT, EDGETRACK_ENGINE, SIAMFC)}
 
 
 def recipe(name: str) -> Recipe:
