@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from track3d import bench, machine
+from track3d.boxnet import SENSOR_MODELS
 from track3d.cli import main
 
 
@@ -107,7 +108,7 @@ def test_bench_times_a_stereo_camera_s_loop_from_the_package_alone(capsys):
     assert main(["bench", "--depth", "stereo", "--frames", "4", "--threads", "1", "--json", "--quiet"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["source"]["depth"].startswith("stereo from the pair")
-    assert "a3boxnet_stereo.onnx" in [m["file"] for m in rep["track3d"]["models"]]
+    assert SENSOR_MODELS["stereo"] in [m["file"] for m in rep["track3d"]["models"]]
     assert rep["track3d"]["options"]["outline_contain"] is True          # stereo's loop options
     assert rep["results"][0]["statuses"] == {"tracking": 4}
 

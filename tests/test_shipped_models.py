@@ -12,6 +12,7 @@ SHIPPED = {
     "a3boxnet_narrow.onnx": "a3boxnet",
     "a3boxnet.onnx": "a3boxnet",
     "a3boxnet_stereo.onnx": "a3boxnet",
+    "a3boxnet_stereo_narrow.onnx": "a3boxnet",
     "a3boxnet_stereo_backlit.onnx": "a3boxnet",
     "siamfc_edge_exemplar.onnx": "siamfc-exemplar",
     "siamfc_edge_search.onnx": "siamfc-search",
@@ -31,6 +32,9 @@ def test_shipped_model_is_present_and_carries_its_metadata(name):
         assert m.meta.get("depth_sensor") == ("stereo" if name.startswith("a3boxnet_stereo") else None)
         if name == "a3boxnet_stereo.onnx":
             assert m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet.onnx"
+        if name == "a3boxnet_stereo_narrow.onnx":   # what the loop runs for stereo: the stereo model at half width
+            assert m.meta["width"] == 0.5 and m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet_stereo.onnx"
+            assert m.meta["trained"]["distilled_from"] == {"file": "a3boxnet_stereo.onnx", "weight": 1.0}
         if name == "a3boxnet_stereo_backlit.onnx":   # the stereo model, shown crescents
             assert m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet_stereo.onnx"
         # the default is the full-width model cut to half width and distilled from it
