@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from track3d.boxnet import (BACKLIT_PHASE_DEG, FULL_WIDTH_MODEL, NARROW_MODEL, A3BoxNetEstimator,
-                            backlit_model_for)
+from track3d.boxnet import (BACKLIT_PHASE_DEG, FULL_WIDTH_MODEL, NARROW_MODEL, STEREO_FULL_WIDTH_MODEL,
+                            A3BoxNetEstimator, backlit_model_for)
 from track3d.camera import Camera
 from track3d.dark_side import phase_deg
 from track3d.onnxmodel import ModelError, shipped_model
@@ -87,7 +87,16 @@ def test_sensors_get_their_backlit_model_unless_a_model_is_named():
     assert A3BoxNetEstimator(shipped_model(NARROW_MODEL), depth_sensor="stereo").backlit is None
     assert A3BoxNetEstimator(depth_sensor="stereo", backlit_phase=180).backlit is None
     assert Track3D.from_default(CAM, depth_sensor="stereo").estimator.backlit is not None
-    assert stereo.backlit.model.meta["trained"]["fine_tuned_from"]["file"] == stereo.model.path.name
+    # the back-lit model is a fine-tune of the full-width stereo model; the loop's is its half-width twin
+    assert stereo.backlit.model.meta["trained"]["fine_tuned_from"]["file"] == STEREO_FULL_WIDTH_MODEL
+    assert stereo.model.meta["trained"]["distilled_from"]["file"] == STEREO_FULL_WIDTH_MODEL
+    # a stereo model named by hand keeps the gate (it dropped it: the full-width stereo model chosen
+    # as documented lost the back-lit model without a word); a model of no sensor does not get it
+    full = A3BoxNetEstimator(STEREO_FULL_WIDTH_MODEL, depth_sensor="stereo")
+    assert full.backlit is not None and full.backlit.model.path == backlit_model_for("stereo")
+    assert A3BoxNetEstimator(STEREO_FULL_WIDTH_MODEL, depth_sensor="stereo", backlit_phase=180).backlit is None
+    assert A3BoxNetEstimator(STEREO_FULL_WIDTH_MODEL).backlit is None          # no sensor named
+    assert A3BoxNetEstimator(shipped_model(FULL_WIDTH_MODEL), depth_sensor="stereo").backlit is None
 
 
 def test_the_loop_hands_the_phase_at_its_box_only_with_the_sun_known(cloud):

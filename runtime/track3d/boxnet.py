@@ -141,6 +141,12 @@ def _check_phase(value, what: str = "phase_deg must be degrees in 0..180 or None
     return ph
 
 
+def _made_for(meta: dict, depth_sensor: str | None) -> bool:
+    """Whether a model's metadata names `depth_sensor` as the sensor it was trained for."""
+    made = str(meta.get("depth_sensor") or "").lower()
+    return bool(made) and made == str(depth_sensor or "").lower()
+
+
 class A3BoxNetEstimator:
     """The box estimator behind the loop's seam: ``estimate(points (n,3), category) -> (6,)``.
 
@@ -153,8 +159,9 @@ class A3BoxNetEstimator:
     "auto", see track3d.onnxmodel; the choice is in ``.model.choice``); views: test-time views
     averaged per box, 1..16 (default: `views_for(depth_sensor)`; see VIEWS), run as one batch;
     backlit_model: the model for frames whose phase angle (``estimate(..., phase_deg=)``) is past
-    `backlit_phase` degrees (default: the sensor's, BACKLIT_MODELS, unless `model` is given; it
-    runs with this estimator's other options, in ``.backlit``); backlit_phase: that gate,
+    `backlit_phase` degrees (default: the sensor's, BACKLIT_MODELS, unless `model` is given and
+    its metadata names another sensor or none; it runs with this estimator's other options, in
+    ``.backlit``); backlit_phase: that gate,
     0..180 (180: never).
     """
 
@@ -172,8 +179,7 @@ class A3BoxNetEstimator:
                  depth_sensor: str | None = None, views: int | None = None,
                  backlit_model: str | Path | None = None, backlit_phase: float = BACKLIT_PHASE_DEG):
         self.backlit_phase = _check_phase(backlit_phase, "backlit_phase must be degrees in 0..180")
-        if backlit_model is None and model is None and self.backlit_phase < 180.0:
-            backlit_model = backlit_model_for(depth_sensor)
+        explicit = model is not None
         if views is None:
             views = views_for(depth_sensor)
         if isinstance(views, bool) or not isinstance(views, (int, np.integer)) or not 1 <= views <= MAX_VIEWS:
@@ -204,6 +210,11 @@ class A3BoxNetEstimator:
         if INPUT_POINTS not in names or (self.use_category and INPUT_CATEGORY not in names):
             raise ModelError(f"{self.model.path}: inputs {sorted(names)} are not an A3BoxNet's")
         self._with_category = INPUT_CATEGORY in names
+        # An explicit model keeps the sensor's back-lit model only when it is itself that sensor's
+        # model (its metadata says so): the full-width stereo model chosen by hand lost the gate.
+        if (backlit_model is None and self.backlit_phase < 180.0
+                and (not explicit or _made_for(meta, depth_sensor))):
+            backlit_model = backlit_model_for(depth_sensor)
         self.backlit: A3BoxNetEstimator | None = None
         if backlit_model is not None and self.backlit_phase < 180.0:
             self.backlit = A3BoxNetEstimator(backlit_model, threads, num_points, seed, precision, engine,
