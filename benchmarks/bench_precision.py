@@ -173,7 +173,9 @@ def bench_accuracy(data: Path, split: str, out_dir: Path, tracker: str = "edgetr
     from track3d.trackers2d import TrackerUnavailable
 
     rows: dict[str, dict] = {}
-    with tempfile.TemporaryDirectory(dir=out_dir) as tmp:
+    # the runs' scratch lives in the system's temp folder: a run killed by a signal (SIGTERM skips
+    # the context manager's cleanup) left a tmpXXXX folder in the (committed) results folder
+    with tempfile.TemporaryDirectory(prefix="track3d-precision-") as tmp:
         for lab, topt, eopt in accuracy_configs(tracker, boxnet):
             if only and lab != "onnxruntime/fp32" and not any(lab.startswith(o) for o in only):
                 continue

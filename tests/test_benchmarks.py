@@ -3,6 +3,7 @@ script on the tiny dataset (no timed assertion: only that the wiring holds toget
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -348,19 +349,28 @@ def test_engine_rows_name_their_models():
     assert line.endswith("a3boxnet.onnx `abababababab`.") and readme_tables.models_line([{}], "x").endswith("not recorded.")
 
 
-def test_precision_accuracy_skips_a_variant_that_is_not_there(tmp_path):
+def test_precision_accuracy_skips_a_variant_that_is_not_there(tmp_path, monkeypatch):
     """A network without an int8 twin is a skipped row, not a crash of the whole run (the
-    registries raise TrackerUnavailable for a missing model file; it escaped before)."""
+    registries raise TrackerUnavailable for a missing model file; it escaped before). Its runs'
+    scratch is outside the results folder (a killed run left a tmp folder there)."""
     import bench_precision
 
+    import track3d.evaluation as evaluation
     from track3d.onnxmodel import MODELS_DIR, variant_path
     from track3d.synthetic import make_synthetic_dataset
 
+    roots, real = [], evaluation.Experiment
+    monkeypatch.setattr(evaluation, "Experiment", lambda data, split, out, **kw: (roots.append(Path(out)),
+                                                                               real(data, split, out, **kw))[1])
     assert not variant_path(MODELS_DIR / "edgetrack_search.onnx", "int8").is_file()
     data = make_synthetic_dataset(tmp_path / "d", {"a": 4})
-    acc = bench_precision.bench_accuracy(data, "test", tmp_path, "edgetrack", only=["onnxruntime/int8"])
+    out = tmp_path / "results"
+    out.mkdir()
+    acc = bench_precision.bench_accuracy(data, "test", out, "edgetrack", only=["onnxruntime/int8"])
     assert "skipped" in acc["rows"]["onnxruntime/int8 edgetrack only"]
     assert "restart" in acc["rows"]["onnxruntime/fp32"]
+    assert roots and not any(out in r.parents for r in roots)
+    assert not any(out.iterdir())
 
 
 def test_bench_accumulation_carries_a_view_onto_the_body_in_a_later_frame(tiny_dataset, tmp_path):
