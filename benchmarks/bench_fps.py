@@ -38,7 +38,7 @@ from track3d.estimators import EstimatorUnavailable
 from track3d.jsonable import write_json
 from track3d.machine import pin_threads
 from track3d.onnxmodel import MODELS_DIR, ModelError
-from track3d.stereo import StereoCloud
+from track3d.stereo import StereoCloud, StereoParams
 from track3d.table_text import cell
 from track3d.trackers2d import TrackerUnavailable
 
@@ -61,7 +61,8 @@ def run_config(camera, sequences, cfg: dict, threads: int, frames: int, torch_ne
             stand_ins += given.values()
         del reference
         run_cfg = {**cfg, "tracker_options": opts["2d"], "estimator_options": opts["3d"]}
-    stereo = StereoCloud(camera, follow_depth=cfg["stereo_follow"]) if "stereo_follow" in cfg else None
+    stereo = (StereoCloud(camera, follow_depth=cfg["stereo_follow"], max_match_px=cfg["stereo_max_match_px"])
+              if "stereo_follow" in cfg else None)
     t3d = build(camera, run_cfg, threads)
     networks = [{k: m.get(k) for k in ("file", "engine", "precision")} for m in t3d.describe()["models"]]
     r = time_loop(t3d, sequences, frames, stereo=stereo)
@@ -70,7 +71,8 @@ def run_config(camera, sequences, cfg: dict, threads: int, frames: int, torch_ne
         raise EquivalenceError(f"torch model(s) {unchecked} never ran during warm-up: equivalence not checked")
     out = {"config": cfg["label"], "tracker": cfg["tracker"], "estimator": cfg["estimator"],
            "backend": cfg["backend"], "precision": cfg["precision"], "threads": threads, "fusion": True, **r,
-           **({"depth": "stereo from the pair", "stereo_follow": cfg["stereo_follow"]} if stereo is not None else {}),
+           **({"depth": "stereo from the pair", "stereo_follow": cfg["stereo_follow"],
+               "stereo_max_match_px": cfg["stereo_max_match_px"]} if stereo is not None else {}),
            "networks": networks,
            "models": {"tracker_options": {k: str(v) for k, v in cfg.get("tracker_options", {}).items()},
                       "estimator_options": {k: str(v) for k, v in cfg.get("estimator_options", {}).items()}}}
@@ -106,9 +108,10 @@ def make_configs(args, torch_nets: TorchNets | None) -> tuple[list[dict], list[d
                                             "tracker_options": {**topt, **auto}, "estimator_options": {**eopt, **auto}}
                  for p in args.precision]
         if args.depth == "stereo":
-            # one row per depth-following setting, side by side in this run
-            configs += [{**b, "label": f"{b['label']} stereo follow {k:g}", "depth_sensor": "stereo",
-                         "stereo_follow": k} for b in bases for k in args.stereo_follow]
+            # one row per depth-following and row-binning setting, side by side in this run
+            configs += [{**b, "label": f"{b['label']} stereo follow {k:g}" + (f" rows past {px}" if px else ""),
+                         "depth_sensor": "stereo", "stereo_follow": k, "stereo_max_match_px": px}
+                        for b in bases for k in args.stereo_follow for px in args.stereo_max_match]
             continue
         if args.precision != ["fp32"]:   # no torch / int8 twins beside auto (main refuses the mix)
             configs += bases
@@ -221,6 +224,10 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--stereo-follow", type=float, nargs="+", default=[1.5], metavar="K",
                     help="with --depth stereo: StereoParams.follow_depth values, one row each (0: the full "
                          "disparity range every frame; default 1.5)")
+    ap.add_argument("--stereo-max-match", type=bounded(int, 0), nargs="+", default=[StereoParams().max_match_px],
+                    metavar="PX", help="with --depth stereo: StereoParams.max_match_px values, one row each (a "
+                                       "window of more pixels is matched with its rows averaged in bands; 0: every "
+                                       "row; default the matcher's)")
     ap.add_argument("--precision", choices=("fp32", "auto"), nargs="+", default=["fp32"],
                     help="one row per value, side by side: fp32, every network at fp32 on onnxruntime; auto, "
                          "each in the engine and precision track3d.variant_choice picks on this CPU "

@@ -473,7 +473,8 @@ def t_stereo(rng, env):
     from track3d.tracker import STATUSES, Track3D, sensor_options
 
     params = {"edge_erode_px": int(rng.integers(0, 3)), "block_size": int(rng.choice([1, 3, 5, 7])),
-              "z_min_m": float(rng.choice([0.3, 1.5, 20.0])), "follow_depth": float(rng.choice([0.0, 1.0, 1.5, 4.0]))}
+              "z_min_m": float(rng.choice([0.3, 1.5, 20.0])), "follow_depth": float(rng.choice([0.0, 1.0, 1.5, 4.0])),
+              "max_match_px": int(rng.choice([0, 1, 64, 16384]))}
     left, right = rand_pair(rng)
     try:
         points = StereoCloud(env.cam, **params).bind(left, right)

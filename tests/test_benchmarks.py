@@ -76,17 +76,19 @@ def test_bench_fps_times_the_networks_it_passes_in(tiny_dataset, tmp_path):
 
 def test_bench_fps_matches_the_pair_inside_the_loop_with_depth_stereo(tiny_dataset, tmp_path):
     """--depth stereo: the clouds are matched from the pair inside each update (their time in the
-    frustum stage), one row per --stereo-follow value; not with --int8 / --torch."""
+    frustum stage), one row per --stereo-follow and --stereo-max-match value; not with --int8 / --torch."""
     import bench_fps
 
     out = tmp_path / "fps"
     assert bench_fps.main(["--data", str(tiny_dataset), "--frames", "5", "--preload", "40", "--threads", "1",
                            "--config", "kcf:baseline", "--depth", "stereo", "--stereo-follow", "0", "1.5",
-                           "--tag", "s", "--out-dir", str(out)]) == 0
+                           "--stereo-max-match", "0", "1024", "--tag", "s", "--out-dir", str(out)]) == 0
     rows = {r["config"]: r for r in json.loads((out / "fps_s.json").read_text())["results"]}
-    assert set(rows) == {"kcf:baseline stereo follow 0", "kcf:baseline stereo follow 1.5"}
-    for k, r in zip((0.0, 1.5), rows.values()):
-        assert r["stereo_follow"] == k and r["depth"] == "stereo from the pair" and r["frames"] == 5
+    assert set(rows) == {"kcf:baseline stereo follow 0", "kcf:baseline stereo follow 1.5",
+                         "kcf:baseline stereo follow 0 rows past 1024", "kcf:baseline stereo follow 1.5 rows past 1024"}
+    for (k, px), r in zip(((0.0, 0), (0.0, 1024), (1.5, 0), (1.5, 1024)), rows.values()):
+        assert r["stereo_follow"] == k and r["stereo_max_match_px"] == px
+        assert r["depth"] == "stereo from the pair" and r["frames"] == 5
     with pytest.raises(SystemExit, match="--depth stereo"):
         bench_fps.main(["--data", str(tiny_dataset), "--depth", "stereo", "--int8", "--out-dir", str(out)])
 

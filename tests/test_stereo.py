@@ -499,3 +499,93 @@ def test_a_stereo_loop_restored_from_both_states_goes_on_bit_identically():
         runs.append(out)
     assert runs[0] == runs[1]
     assert all(o[3] < 208 for o in runs[0])       # the followed search ran
+
+
+def test_rows_binned_for_a_window_by_hand():
+    m = StereoMatcher(CAM, max_match_px=4096)
+    assert m.rows_for((0, 64, 0, 64)) == 1             # 4096 px: within the cap
+    assert m.rows_for((0, 100, 0, 60)) == 2            # 6000 px -> 3000 in bands of 2 rows
+    assert m.rows_for((0, 200, 0, 200)) == 4           # 40,000 px: 20,000 at 2, 10,000 at 4
+    assert m.rows_for((0, 640, 0, 480)) == 4           # 4 rows at most
+    assert StereoMatcher(CAM).rows_for((0, 640, 0, 480)) == 1   # 0: every row
+    with pytest.raises(ValueError, match="max_match_px"):
+        StereoParams(max_match_px=-1)
+
+
+@pytest.mark.parametrize("cap,rows", [(80000, 2), (40000, 4)])
+def test_a_window_of_binned_rows_gives_the_same_surface_with_fewer_points(pair, cap, rows):
+    """A window of more than max_match_px pixels is matched with its rows averaged in bands: about
+    1/k of the points, on the same sphere, at the same columns, the bands' rows mapped to their
+    centres (a band's first row instead would lift the cloud by k/2 px: 1.2 cm per px at 9 m)."""
+    left, right, z = pair
+    box = _box(z)
+    full = StereoMatcher(CAM).points_window(left, right, box)
+    m = StereoMatcher(CAM, max_match_px=cap)
+    assert m.rows_for(m.window(box)) == rows
+    pts = m.points_window(left, right, box)
+    assert pts.dtype == np.float32 and 0.7 < len(pts) / len(full) * rows < 1.3
+    r = np.linalg.norm(pts - np.array([0.5, 0.2, 9.0]), axis=1)
+    assert np.median(np.abs(r - 2.0)) < 0.03
+    u = pts[:, 0] / pts[:, 2] * CAM.fx + CAM.cx
+    assert abs(np.mean(u) - np.mean(full[:, 0] / full[:, 2] * CAM.fx + CAM.cx)) < 0.5
+    v = pts[:, 1] / pts[:, 2] * CAM.fy + CAM.cy
+    rows_true = np.nonzero((z > 0).any(axis=1))[0]
+    assert abs((v.min() + v.max()) / 2 - (rows_true[0] + rows_true[-1] + 1) / 2) < 0.25 * rows
+
+
+def test_a_binned_window_at_the_left_border_drops_what_the_right_camera_misses():
+    z_c = 9.0
+    l, r, z = render_pair(CAM, (-CAM.cx / CAM.fx * z_c + 1.5, 0.0, z_c), 2.0)
+    m = StereoMatcher(CAM, max_match_px=4000)
+    assert m.rows_for(m.window(_box(z))) == 4
+    pts = m.points_window(l, r, _box(z))
+    assert len(pts) > 5000
+    u = pts[:, 0] / pts[:, 2] * CAM.fx + CAM.cx
+    assert np.all(u - CAM.disparity(pts[:, 2]) >= -0.5)    # u - d >= 0 for the pixel's column
+    r_ = np.linalg.norm(pts - np.array([-CAM.cx / CAM.fx * z_c + 1.5, 0.0, z_c]), axis=1)
+    assert np.median(np.abs(r_ - 2.0)) < 0.05
+
+
+def test_a_followed_search_holds_across_binned_windows():
+    """The follow rule compares returns per pixel of the grid a window was matched on: a body
+    growing past max_match_px (every row, then bands of 2 rows) keeps its narrowed search
+    instead of falling back to the full range (half the returns per camera pixel)."""
+    frames = _sphere_frames(2)
+    a = frames[0][2]
+    u0, u1, v0, v1 = StereoMatcher(CAM).window(a)
+    cloud = StereoCloud(CAM, max_match_px=(u1 - u0) * (v1 - v0))
+    assert cloud.matcher.rows_for(cloud.matcher.window(a)) == 1
+    big = np.array([a[0] - 40, a[1] - 40, a[2] + 80, a[3] + 80])
+    assert cloud.matcher.rows_for(cloud.matcher.window(big)) == 2
+    cloud.bind(frames[0][0], frames[0][1])(a)
+    cloud.bind(frames[1][0], frames[1][1])(big)
+    assert cloud.last_disparities < cloud.matcher.num_disparities
+
+
+def test_a_frustum_cache_of_stereo_matched_clouds_is_the_loop_s_cloud(tmp_path):
+    """`track3d-train boxnet prepare --stereo-match MAX_PX`: each box's cloud matched from the pair
+    around it as the loop's StereoCloud does (rows binned past MAX_PX, the followed search from the
+    ground truth's near face), not the dataset's depth maps; a dataset without right images is
+    refused in one line."""
+    from track3d.frustum import extract_frustum
+    from track3d_train.boxnet.data import PointCache, prepare_split
+
+    data = _stereo_dataset(tmp_path / "ds", CAM, n=2)
+    out = prepare_split(data, "test", tmp_path / "c.npz", jitters=0, max_points=10 ** 6, progress=False,
+                        stereo_match=40000)
+    c = PointCache(out)
+    assert c.info["stereo_match"] == 40000 and len(c) == 2
+    from track3d.dataset import Dataset
+    seq = Dataset(data).sequences("test")[0]
+    m = StereoMatcher(CAM, max_match_px=40000)
+    for k in range(2):
+        box, g = seq.gt2d[k], seq.gt3d[k]
+        assert m.rows_for(m.window(box)) > 1
+        n = m.disparities_to((g[2] - g[5] / 2) / m.params.follow_depth)
+        want = extract_frustum(m.points_window(seq.image(k), seq.right_image(k), box, n), box.astype(np.float32), CAM.M)
+        assert c.n_full[k] == len(want) and len(want) < 0.6 * seq.points(k).shape[0]
+        np.testing.assert_array_equal(np.sort(c.points(k)[:, 2]), np.sort(want[:, 2]))
+    import shutil
+    shutil.rmtree(data / "test" / "s1" / "right")
+    with pytest.raises(ValueError, match="no right images"):
+        prepare_split(data, "test", tmp_path / "d.npz", jitters=0, progress=False, stereo_match=0)

@@ -46,6 +46,13 @@ than the search snaps there); a followed search that finds fewer than FOLLOW_MIN
 search reaches is matched at wrong disparities, not only left with holes) is repeated over the
 full range.
 
+Binned rows (`max_match_px`, clouds only: `points_window`, `StereoCloud`): a window of more
+pixels than `max_match_px` is matched with its rows averaged in bands of 2 (or 4, at most) from
+the image's top, so a large near body costs a half or a quarter of the matching; the columns stay
+the camera's, and with them the disparity's precision (depth is the disparity along a row). A
+band's return is one point at the band's centre row. The follow rule compares returns per pixel
+of the grid matched on. `depth`, `depth_window` and `disparity` match every row.
+
 Window mode: disparity is computed on the crop [x0 - D - m, x1 + m) x [y0 - m, y1 + m) of both
 images (D = search range, m = margin), which contains every right pixel a box pixel can
 match. Semi-global aggregation paths start at the crop border instead of the image border, so
@@ -84,10 +91,13 @@ class StereoParams:
     follow_depth: float = 1.5       # StereoCloud: search only down to the nearest depth the body can be
                                     # at, the last window's nearest z / k (0: off, always the full range
                                     # down to z_min_m)
+    max_match_px: int = 0           # clouds (points_window, StereoCloud): a window of more pixels than this
+                                    # is matched with its rows averaged in pairs (or fours) until it has at
+                                    # most this many (0: off, every row matched)
 
     def __post_init__(self) -> None:
         for name in ("block_size", "uniqueness_ratio", "lr_max_diff_px", "speckle_window", "speckle_range_px",
-                     "window_margin_px"):
+                     "window_margin_px", "max_match_px"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
@@ -140,17 +150,19 @@ class StereoMatcher:
         self.params = p
         self.fb = camera.fx * camera.baseline_m
         self.num_disparities = int(math.ceil(self.fb / p.z_min_m / 16.0)) * 16
-        self._sgbm: dict[int, cv2.StereoSGBM] = {}
+        self._sgbm: dict[tuple[int, int], cv2.StereoSGBM] = {}
 
-    def _matcher(self, n: int) -> cv2.StereoSGBM:
-        """OpenCV's SGBM for disparities [0, n) (n a multiple of 16)."""
-        m = self._sgbm.get(n)
+    def _matcher(self, n: int, rows: int = 1) -> cv2.StereoSGBM:
+        """OpenCV's SGBM for disparities [0, n) (n a multiple of 16) on the pair with `rows` rows
+        averaged into one (the speckle filter's blob size is in that grid's pixels)."""
+        m = self._sgbm.get((n, rows))
         if m is None:
             p, bs = self.params, self.params.block_size
-            m = self._sgbm[n] = cv2.StereoSGBM_create(
+            m = self._sgbm[n, rows] = cv2.StereoSGBM_create(
                 minDisparity=0, numDisparities=n, blockSize=bs, P1=8 * bs * bs, P2=32 * bs * bs,
                 disp12MaxDiff=p.lr_max_diff_px, uniquenessRatio=p.uniqueness_ratio,
-                speckleWindowSize=p.speckle_window, speckleRange=p.speckle_range_px, mode=_MODES[p.mode])
+                speckleWindowSize=p.speckle_window // rows, speckleRange=p.speckle_range_px,
+                mode=_MODES[p.mode])
         return m
 
     def disparities_to(self, z_near: float) -> int:
@@ -173,9 +185,11 @@ class StereoMatcher:
     def _min_width(self, n: int) -> int:
         return n + self.params.block_size + 1
 
-    def _disparity(self, gl: np.ndarray, gr: np.ndarray, pad: int = 0, n: int | None = None) -> np.ndarray:
+    def _disparity(self, gl: np.ndarray, gr: np.ndarray, pad: int = 0, n: int | None = None,
+                   rows: int = 1) -> np.ndarray:
         """Disparity (float32 px, 0 = invalid) of a (crop of a) gray pair, searched over [0, n)
-        (default the full range).
+        (default the full range). rows: each row of the pair is that many of the camera's averaged
+        (the columns, and so the disparities, are the camera's).
 
         pad: black columns added to the left of both images before matching (the crop starts at
         the image's left border): OpenCV leaves the first n columns of its input
@@ -191,7 +205,7 @@ class StereoMatcher:
             # OpenCV refuses (or crashes on) images not wider than the search range plus the block;
             # no pixel of such an image has its full search range anyway
             return np.zeros((gl.shape[0], gl.shape[1] - pad), np.float32)
-        d = self._matcher(n).compute(gl, gr).astype(np.float32) / 16.0
+        d = self._matcher(n, rows).compute(gl, gr).astype(np.float32) / 16.0
         if n < self.num_disparities:
             # a surface nearer than a narrowed search reaches snaps to its end, consistently in
             # both directions: the end is a hole
@@ -241,47 +255,80 @@ class StereoMatcher:
             return None
         return u0, u1, v0, v1
 
-    def _window_disparity(self, left: np.ndarray, right: np.ndarray, box2d,
-                          n: int | None) -> tuple[np.ndarray, tuple | None]:
+    def rows_for(self, window: tuple[int, int, int, int]) -> int:
+        """How many rows (1, 2 or 4) a cloud's `window` (u0, u1, v0, v1) is matched with averaged
+        into one: the fewest that leave it at most `max_match_px` pixels, at most 4 (0: 1, every
+        row). Rows, not columns: depth is the disparity along a row, its precision stays the
+        camera's (at 16384 px, bands of rows cost the loop 0.02 AO_3d, 2 x 2 pixel blocks 0.06;
+        docs/runtime.md "Stereo")."""
+        cap, (u0, u1, v0, v1) = self.params.max_match_px, window
+        k = 1
+        while cap > 0 and k < 4 and (u1 - u0) * (v1 - v0) > cap * k:
+            k *= 2
+        return k
+
+    def _window_disparity(self, left: np.ndarray, right: np.ndarray, box2d, n: int | None,
+                          binned: bool = False) -> tuple[np.ndarray, tuple | None, int]:
         """((v1-v0, u1-u0) float32 disparity of the window around `box2d`, 0 = none, its
-        (u0, u1, v0, v1)); an invalid box: an empty array and None."""
+        (u0, u1, v0, v1) and k, the rows averaged into one); an invalid box: an empty array, None,
+        1. binned: k = `rows_for(window)`, else 1; with k > 1 the window's rows v0, v1 and the
+        disparity map's are on the grid of k-row bands from the image's top (grid row i averages
+        the camera's rows k i .. k i + k - 1)."""
         gl, gr = self._check(left, right)
         win = self.window(box2d)
         if win is None:
-            return np.zeros((0, 0), np.float32), None
+            return np.zeros((0, 0), np.float32), None, 1
         n = self.num_disparities if n is None else int(n)
+        k = self.rows_for(win) if binned else 1
         u0, u1, v0, v1 = win
+        if k > 1:
+            v0, v1 = v0 // k, min(-(-v1 // k), self.camera.height // k)
+            if v1 <= v0:
+                return np.zeros((0, 0), np.float32), None, 1
         c0 = max(0, u0 - n)   # every right pixel the window can match
         c1 = min(self.camera.width, max(u1, c0 + self._min_width(n)))   # OpenCV's minimum width
         pad = n - (u0 - c0)     # > 0 only at the image's left border
-        d = self._disparity(np.ascontiguousarray(gl[v0:v1, c0:c1]), np.ascontiguousarray(gr[v0:v1, c0:c1]),
-                            pad=pad, n=n)
-        return d[:, u0 - c0:u1 - c0], win
+        if k > 1:
+            size = (c1 - c0, v1 - v0)
+            cl = cv2.resize(gl[v0 * k:v1 * k, c0:c1], size, interpolation=cv2.INTER_AREA)
+            cr = cv2.resize(gr[v0 * k:v1 * k, c0:c1], size, interpolation=cv2.INTER_AREA)
+        else:
+            cl, cr = np.ascontiguousarray(gl[v0:v1, c0:c1]), np.ascontiguousarray(gr[v0:v1, c0:c1])
+        d = self._disparity(cl, cr, pad=pad, n=n, rows=k)
+        return d[:, u0 - c0:u1 - c0], (u0, u1, v0, v1), k
 
     def depth_window(self, left: np.ndarray, right: np.ndarray, box2d,
                      n: int | None = None) -> tuple[np.ndarray, tuple | None]:
         """Depth of the window around `box2d` only: ((v1-v0, u1-u0) float64 z, 0 = none,
         (u0, u1, v0, v1)); an empty or invalid box gives an empty array and None. n: the
         disparities [0, n) searched (`disparities_to`), default the full range."""
-        d, win = self._window_disparity(left, right, box2d, n)
+        d, win, _ = self._window_disparity(left, right, box2d, n)
         return (np.zeros((0, 0)), None) if win is None else (self._to_depth(d), win)
 
     def points_window(self, left: np.ndarray, right: np.ndarray, box2d, n: int | None = None) -> np.ndarray:
-        """(N, 3) float32 cloud (left frame) of the window around `box2d` (n: as depth_window).
-        Converted where there is a disparity only (the window's depth map, built whole first, cost
-        1.3 ms of a 256 x 180 body's 8.4 ms window, measured alone on one core)."""
-        d, win = self._window_disparity(left, right, box2d, n)
+        """(N, 3) float32 cloud (left frame) of the window around `box2d` (n: as depth_window),
+        matched with rows averaged if the window has more than `max_match_px` pixels (`rows_for`)."""
+        return self._cloud(left, right, box2d, n)[0]
+
+    def _cloud(self, left: np.ndarray, right: np.ndarray, box2d, n: int | None) -> tuple[np.ndarray, int]:
+        """(points_window's cloud, the pixels of the grid it was matched on). Converted where there
+        is a disparity only (the window's depth map, built whole first, cost 1.3 ms of a 256 x 180
+        body's 8.4 ms window, measured alone on one core)."""
+        d, win, k = self._window_disparity(left, right, box2d, n, binned=True)
         if win is None:
-            return np.zeros((0, 3), np.float32)
+            return np.zeros((0, 3), np.float32), 0
         u0, _, v0, _ = win
         vv, uu = np.nonzero(d > 0)
         zz = self.fb / d[vv, uu].astype(np.float64)    # as _to_depth: the same z, bit for bit
         c = self.camera
         out = np.empty((len(zz), 3), np.float32)
         out[:, 0] = (uu + u0 + 0.5 - c.cx) / c.fx * zz
-        out[:, 1] = (vv + v0 + 0.5 - c.cy) / c.fy * zz
+        if k == 1:
+            out[:, 1] = (vv + v0 + 0.5 - c.cy) / c.fy * zz
+        else:    # a band's centre row in the camera's pixels
+            out[:, 1] = (k * (vv + v0 + 0.5) - c.cy) / c.fy * zz
         out[:, 2] = zz
-        return out
+        return out, d.size
 
 
 # StereoCloud's depth following: the depths of the last window are its returns' FOLLOW_QUANTILE
@@ -345,10 +392,8 @@ class StereoCloud:
         return self.matcher.disparities_to(self.depth_range[0] / k)
 
     def _points(self, gl: np.ndarray, gr: np.ndarray, box2d, n: int) -> tuple[np.ndarray, float]:
-        """(the window's cloud, its returns per pixel of the window)."""
-        pts = self.matcher.points_window(gl, gr, box2d, n)
-        win = self.matcher.window(box2d)
-        area = 0 if win is None else (win[1] - win[0]) * (win[3] - win[2])
+        """(the window's cloud, its returns per pixel of the grid it was matched on)."""
+        pts, area = self.matcher._cloud(gl, gr, box2d, n)
         return pts, (len(pts) / area if area else 0.0)
 
     def bind(self, left: np.ndarray, right: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:

@@ -31,7 +31,7 @@ def _prepare(a) -> int:
     t = time.time()
     p = prepare_split(a.data, a.split, a.out, jitters=a.jitters, oracle=not a.no_oracle, max_points=a.max_points,
                       min_points=a.min_points, spec=spec, seed=a.seed, max_sequences=a.max_sequences,
-                      frame_step=a.frame_step, progress=not a.quiet)
+                      frame_step=a.frame_step, progress=not a.quiet, stereo_match=a.stereo_match)
     from .data import PointCache
     c = PointCache(p)
     _log(f"wrote {p}: {len(c)} frustums from {len(set(c.seq.tolist()))} sequences in {time.time() - t:.0f} s")
@@ -118,6 +118,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--aspect-sigma", type=bounded(float, 0), default=0.05, help="log-aspect std")
     q.add_argument("--fail-prob", type=bounded(float, 0, high=1), default=0.1, help="probability of a 3x larger error")
     q.add_argument("--frame-step", type=bounded(int, 1), default=1, help="use every k-th frame")
+    q.add_argument("--stereo-match", type=bounded(int, 0), default=None, metavar="MAX_PX",
+                   help="clouds matched from the stereo pair around each box as the loop's StereoCloud does "
+                        "(`track3d track --depth stereo`), with --stereo-option max_match_px=MAX_PX (0: every row "
+                        "matched); default: the dataset's depth maps")
     q.add_argument("--max-sequences", type=bounded(int, 1), default=None, help="only the first k sequences")
     q.add_argument("--seed", type=bounded(int, 0), default=0, help="jitter / subsampling seed")
     q.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -27,7 +27,7 @@ import numpy as np
 from track3d.boxes import box3d_from_points, clip_box2d
 from track3d.boxnet import one_hot
 from track3d.size_coding import size_coding
-from track3d.dataset import GT2D, GT3D, META, Dataset
+from track3d.dataset import GT2D, GT3D, META, RIGHT_DIR, Dataset
 
 from ..caches import load_npz, not_a_cache
 from ..onnx_meta import hash_files
@@ -82,9 +82,15 @@ def split_hash(ds: Dataset, split: str) -> str:
 def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 3, oracle: bool = True,
                   max_points: int = 4096, min_points: int = 16, spec: JitterSpec = JitterSpec(),
                   seed: int = 0, max_sequences: int | None = None, frame_step: int = 1,
-                  progress: bool = True) -> Path:
-    """Build the frustum cache of one split; returns the .npz path (``out`` is a file or a folder)."""
+                  progress: bool = True, stereo_match: int | None = None) -> Path:
+    """Build the frustum cache of one split; returns the .npz path (``out`` is a file or a folder).
+
+    stereo_match: None, the frames' clouds (their depth maps); else each box's cloud is matched
+    from the stereo pair around it as the loop's `track3d.stereo.StereoCloud` does, with
+    ``max_match_px=stereo_match`` (0: every row), searching the disparities the loop's followed
+    search would (down to the ground-truth box's near face / follow_depth)."""
     from track3d.frustum import extract_frustum
+    from track3d.stereo import StereoMatcher
 
     ds = Dataset(root)
     seqs = ds.sequences(split)[:max_sequences]
@@ -96,6 +102,7 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
     cam = ds.camera
     M = cam.M
     rng = np.random.default_rng(seed)
+    matcher = None if stereo_match is None else StereoMatcher(cam, max_match_px=int(stereo_match))
     pts, offs = [], [0]
     rec = {k: [] for k in ("gt3d", "baseline", "box2d", "category", "seq", "frame", "n_full", "jittered")}
     frames = [(si, s, i) for si, s in enumerate(seqs) for i in range(0, len(s), frame_step) if not s.absent[i]]
@@ -104,13 +111,13 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
         from tqdm import tqdm
         it = tqdm(frames, desc=f"frustums {split}", unit="frame")
     for si, seq, i in it:
-        cloud = seq.points(i)
+        cloud = seq.points(i) if matcher is None else _StereoFrame(matcher, seq, i)
         boxes = ([(seq.gt2d[i], 0)] if oracle else []) + \
                 [(jitter_box(seq.gt2d[i], rng, spec, cam.width, cam.height), 1) for _ in range(jitters)]
         for box, jit in boxes:
             if box[2] < 1 or box[3] < 1:
                 continue
-            fr = extract_frustum(cloud, box.astype(np.float32), M)
+            fr = extract_frustum(cloud(box) if matcher is not None else cloud, box.astype(np.float32), M)
             if len(fr) < min_points:
                 continue
             keep = fr if len(fr) <= max_points else fr[rng.choice(len(fr), max_points, replace=False)]
@@ -127,7 +134,8 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
     if not pts:
         raise ValueError(f"no frustum with >= {min_points} points in split {split!r} of {root}")
     info = {"version": CACHE_VERSION, "root": str(ds.root), "split": split, "data_hash": h, "jitters": jitters,
-            "oracle": oracle, "max_points": max_points, "min_points": min_points, "seed": seed,
+            "oracle": oracle, "stereo_match": stereo_match, "max_points": max_points, "min_points": min_points,
+            "seed": seed,
             "jitter": spec.__dict__, "sequences": [s.name for s in seqs], "frame_step": frame_step,
             "categories": list(ds.categories.get("shape_families", [])),
             "num_categories": len(ds.categories.get("shape_families", [])) or 3}
@@ -143,6 +151,21 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
                  info=np.frombuffer(json.dumps(info).encode(), dtype=np.uint8))
     part.replace(out)
     return out
+
+
+class _StereoFrame:
+    """box -> the frame's cloud matched from its stereo pair around the box (prepare_split)."""
+
+    def __init__(self, matcher, seq, i: int):
+        if not (seq.path / RIGHT_DIR).is_dir():
+            raise ValueError(f"{seq.path} has no right images: --stereo-match needs a stereo dataset")
+        self.matcher, self.left, self.right = matcher, seq.image(i), seq.right_image(i)
+        g = seq.gt3d[i]
+        follow = matcher.params.follow_depth
+        self.n = matcher.disparities_to((g[2] - g[5] / 2.0) / follow) if follow > 0 else None
+
+    def __call__(self, box: np.ndarray) -> np.ndarray:
+        return self.matcher.points_window(self.left, self.right, box, self.n)
 
 
 ITEM_FIELDS = ("gt3d", "baseline", "box2d", "category", "seq", "frame", "n_full", "jittered")
