@@ -111,6 +111,22 @@ def test_bench_times_a_stereo_camera_s_loop_from_the_package_alone(capsys):
     assert SENSOR_MODELS["stereo"] in [m["file"] for m in rep["track3d"]["models"]]
     assert rep["track3d"]["options"]["outline_contain"] is True          # stereo's loop options
     assert rep["results"][0]["statuses"] == {"tracking": 4}
+    assert rep["source"]["stereo"]["max_match_px"] == 0                 # the matcher's settings, recorded
+
+
+def test_bench_takes_the_stereo_matcher_s_settings(capsys):
+    """--stereo-option KEY=VALUE sets the matcher of --depth stereo (e.g. binned rows), recorded in
+    the report; a key that is no setting, or the option without --depth stereo: one line, status 2."""
+    assert main(["bench", "--depth", "stereo", "--stereo-option", "max_match_px=1024", "--frames", "3",
+                 "--threads", "1", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["source"]["stereo"]["max_match_px"] == 1024 and rep["results"][0]["frames"] == 3
+    for bad, why in ((["--depth", "stereo", "--stereo-option", "rows=2"], "unknown --stereo-option rows"),
+                     (["--stereo-option", "max_match_px=1024"], "add --depth stereo"),
+                     (["--depth", "stereo", "--stereo-option", "max_match_px=-1"], "max_match_px must be")):
+        assert main(["bench", *bad, "--frames", "2", "--threads", "1", "--quiet"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert why in err and len(err.splitlines()) == 1
 
 
 def test_bench_on_a_dataset(tmp_path, capsys):

@@ -23,7 +23,7 @@ import gc
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -31,6 +31,9 @@ from . import machine
 from .camera import Camera
 from .synthetic import sphere_hits
 from .table_text import cell
+
+if TYPE_CHECKING:
+    from .stereo import StereoParams
 
 __all__ = ["BenchConfig", "run_bench", "format_table", "synthetic_frames", "percentiles", "BUSY_THRESHOLD"]
 
@@ -55,6 +58,7 @@ class BenchConfig:
     synthetic_frames: int = 60
     models_only: bool = False
     depth: str = "map"          # "map": clouds given (depth maps); "stereo": matched from the pair in the loop
+    stereo: StereoParams | None = None   # depth "stereo": the matcher's settings (None: the defaults)
     busy_seconds: float = 0.5
     extra: dict = field(default_factory=dict)
 
@@ -291,10 +295,14 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
         say(f"synthesising {cfg.synthetic_frames} frames (640x480 sphere{', stereo pair' if stereo else ''}) ...")
         passes = [(0, synthetic_frames(camera, cfg.synthetic_frames, stereo=stereo))]
         source = {"kind": "synthetic", "frames": cfg.synthetic_frames, "width": 640, "height": 480}
+    if cfg.stereo is not None and not stereo:
+        raise ValueError("stereo settings are for depth 'stereo' (the pair matched in the loop)")
     if stereo:
-        from .stereo import StereoCloud
+        from .stereo import StereoCloud, StereoParams
 
+        stereo_params = cfg.stereo or StereoParams()
         source["depth"] = "stereo from the pair (track3d.stereo.StereoCloud, matched in each update)"
+        source["stereo"] = dict(stereo_params.__dict__)
     busy_before = machine.cpu_busy(cfg.busy_seconds)
     load_before = machine.load_average()
     allowed = machine.allowed_cpus()
@@ -312,7 +320,7 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
             say(f"{t3d.tracker_name}+{t3d.estimator_name} at {threads} thread(s) on CPU(s) {cpus} ...")
             wall0, cpu0 = time.perf_counter(), time.process_time()
             stages, statuses, feeds = _time_loop(t3d, passes, min(cfg.frames, 200) if cfg.models_only else cfg.frames,
-                                                 StereoCloud(camera) if stereo else None)
+                                                 StereoCloud(camera, stereo_params) if stereo else None)
             wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
             row = {"threads": threads, "cpus": cpus, "pinned": pinned,
                    "note": None if len(cpus) == threads else f"only {len(cpus)} CPU(s) allowed",

@@ -19,6 +19,27 @@ __all__ = ["main"]
 from .evaluation.tables import axis_table, paired_table, summary_table  # noqa: E402  (the tables of a report)
 from .threads import set_threads  # noqa: E402
 
+def _stereo_params(opts: dict, depth: str):
+    """--stereo-option's KEY=VALUE pairs (parsed) as a track3d.stereo.StereoParams, None if none;
+    ValueError (one line) for a key that is not a setting, a bad value, or no --depth stereo."""
+    if not opts:
+        return None
+    from dataclasses import fields
+
+    from .stereo import StereoParams
+
+    if depth != "stereo":
+        raise ValueError("--stereo-option sets the matcher of --depth stereo: add --depth stereo")
+    known = {f.name for f in fields(StereoParams)}
+    unknown = sorted(set(opts) - known)
+    if unknown:
+        raise ValueError(f"unknown --stereo-option {', '.join(unknown)}: one of {', '.join(sorted(known))}")
+    try:
+        return StereoParams(**opts)
+    except TypeError as e:   # a value of the wrong kind that the dataclass passed on
+        raise ValueError(f"bad --stereo-option: {e}") from None
+
+
 def _options(pairs: list[str] | None) -> dict:
     """key=value pairs -> dict, values parsed as int / float / bool when they look like one."""
     out = {}
@@ -269,6 +290,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="map: the clouds are given (a depth sensor); stereo: a stereo camera's loop, the cloud "
                         "matched from the left/right pair around the 2D box inside each update, with the stereo "
                         "loop options and A3BoxNet model")
+    b.add_argument("--stereo-option", action="append", metavar="KEY=VALUE",
+                   help="with --depth stereo, a setting of the matcher (track3d.stereo.StereoParams, e.g. "
+                        "max_match_px=16384: a large window's rows averaged in bands, faster)")
     b.add_argument("--out", metavar="JSON", help="also write the report as JSON here")
     b.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
     b.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
@@ -286,7 +310,8 @@ def _cmd_bench(a) -> int:
     cfg = BenchConfig(tracker=a.tracker, estimator=a.estimator, tracker_model=a.tracker_model,
                       boxnet_model=a.boxnet_model, frames=a.frames, threads=tuple(a.threads), data=a.data,
                       split=a.split, sequences=tuple(a.sequences) if a.sequences else None,
-                      models_only=a.models_only, depth=a.depth)
+                      models_only=a.models_only, depth=a.depth,
+                      stereo=_stereo_params(_options(a.stereo_option), a.depth))
     for p in (a.tracker_model and Path(a.tracker_model).parent, a.boxnet_model):
         if p and not Path(p).exists():
             raise FileNotFoundError(f"no such model path: {p}")
@@ -366,22 +391,7 @@ def _cmd_track(a) -> int:
     if views_opts and not a.name:   # keep the default views' results of the same pair
         spec.name = spec.label + "-views-" + "-".join(f"{k}={v}" for k, v in sorted(views_opts.items()))
     stereo_opts = _options(a.stereo_option)
-    stereo_params = None
-    if stereo_opts:
-        from dataclasses import fields
-
-        from .stereo import StereoParams
-
-        if a.depth != "stereo":
-            raise ValueError("--stereo-option sets the matcher of --depth stereo: add --depth stereo")
-        known = {f.name for f in fields(StereoParams)}
-        unknown = sorted(set(stereo_opts) - known)
-        if unknown:
-            raise ValueError(f"unknown --stereo-option {', '.join(unknown)}: one of {', '.join(sorted(known))}")
-        try:
-            stereo_params = StereoParams(**stereo_opts)
-        except TypeError as e:   # a value of the wrong kind that the dataclass passed on
-            raise ValueError(f"bad --stereo-option: {e}") from None
+    stereo_params = _stereo_params(stereo_opts, a.depth)
     if a.depth == "stereo" and not a.name:
         spec.name = spec.label + "-stereo"   # keep the depth-map results of the same pair
         if stereo_opts:
