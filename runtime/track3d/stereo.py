@@ -86,8 +86,8 @@ class StereoParams:
     min_disparity_px: float = 1.0
     max_depth_m: float = 60.0
     mode: str = "3way"              # "3way" (default: as accurate as "sgbm" here, faster), "sgbm", "hh"
-    window_margin_px: int = 32      # window mode: extra context around the box (32: the loop's AO_3d +0.005
-                                    # over 16 on 6 stereo splits, the matching ~25% dearer; docs/runtime.md)
+    window_margin_px: int = 32      # window mode: extra context around the box (32: the loop's AO_3d +0.006
+                                    # over 16 on 14 stereo splits, the matching ~25% dearer; docs/runtime.md)
     edge_erode_px: int = 1          # pixels this close to a hole are holes too (0 = off)
     follow_depth: float = 1.5       # StereoCloud: search only down to the nearest depth the body can be
                                     # at, the last window's nearest z / k (0: off, always the full range
