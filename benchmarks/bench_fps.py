@@ -61,7 +61,8 @@ def run_config(camera, sequences, cfg: dict, threads: int, frames: int, torch_ne
             stand_ins += given.values()
         del reference
         run_cfg = {**cfg, "tracker_options": opts["2d"], "estimator_options": opts["3d"]}
-    stereo = (StereoCloud(camera, follow_depth=cfg["stereo_follow"], max_match_px=cfg["stereo_max_match_px"])
+    stereo = (StereoCloud(camera, follow_depth=cfg["stereo_follow"], max_match_px=cfg["stereo_max_match_px"],
+                          max_match_cost=cfg["stereo_max_match_cost"])
               if "stereo_follow" in cfg else None)
     t3d = build(camera, run_cfg, threads)
     networks = [{k: m.get(k) for k in ("file", "engine", "precision")} for m in t3d.describe()["models"]]
@@ -72,7 +73,8 @@ def run_config(camera, sequences, cfg: dict, threads: int, frames: int, torch_ne
     out = {"config": cfg["label"], "tracker": cfg["tracker"], "estimator": cfg["estimator"],
            "backend": cfg["backend"], "precision": cfg["precision"], "threads": threads, "fusion": True, **r,
            **({"depth": "stereo from the pair", "stereo_follow": cfg["stereo_follow"],
-               "stereo_max_match_px": cfg["stereo_max_match_px"]} if stereo is not None else {}),
+               "stereo_max_match_px": cfg["stereo_max_match_px"],
+               "stereo_max_match_cost": cfg["stereo_max_match_cost"]} if stereo is not None else {}),
            "networks": networks,
            "models": {"tracker_options": {k: str(v) for k, v in cfg.get("tracker_options", {}).items()},
                       "estimator_options": {k: str(v) for k, v in cfg.get("estimator_options", {}).items()}}}
@@ -109,9 +111,12 @@ def make_configs(args, torch_nets: TorchNets | None) -> tuple[list[dict], list[d
                  for p in args.precision]
         if args.depth == "stereo":
             # one row per depth-following and row-binning setting, side by side in this run
-            configs += [{**b, "label": f"{b['label']} stereo follow {k:g}" + (f" rows past {px}" if px else ""),
-                         "depth_sensor": "stereo", "stereo_follow": k, "stereo_max_match_px": px}
-                        for b in bases for k in args.stereo_follow for px in args.stereo_max_match]
+            configs += [{**b, "label": f"{b['label']} stereo follow {k:g}" + (f" rows past {px}" if px else "")
+                         + (f" cost past {c}" if c else ""),
+                         "depth_sensor": "stereo", "stereo_follow": k, "stereo_max_match_px": px,
+                         "stereo_max_match_cost": c}
+                        for b in bases for k in args.stereo_follow for px in args.stereo_max_match
+                        for c in args.stereo_max_cost]
             continue
         if args.precision != ["fp32"]:   # no torch / int8 twins beside auto (main refuses the mix)
             configs += bases
@@ -228,6 +233,10 @@ def build_parser() -> ArgumentParser:
                     metavar="PX", help="with --depth stereo: StereoParams.max_match_px values, one row each (a "
                                        "window of more pixels is matched with its rows averaged in bands; 0: every "
                                        "row; default the matcher's)")
+    ap.add_argument("--stereo-max-cost", type=bounded(int, 0), nargs="+", default=[StereoParams().max_match_cost],
+                    metavar="COST", help="with --depth stereo: StereoParams.max_match_cost values, one row each (a "
+                                         "window whose matching costs more, pixels x (disparities + 48), is "
+                                         "matched with its rows averaged in bands; 0: off; default the matcher's)")
     ap.add_argument("--precision", choices=("fp32", "auto"), nargs="+", default=["fp32"],
                     help="one row per value, side by side: fp32, every network at fp32 on onnxruntime; auto, "
                          "each in the engine and precision track3d.variant_choice picks on this CPU "

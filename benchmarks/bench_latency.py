@@ -13,6 +13,12 @@ garbage collections that ran during the update (gc.callbacks), then reports
 - whether spikes are periodic (the spread of the gaps between p99 frames);
 - the latency by frustum size (quartiles of num_points): the near, large targets.
 
+With --depth stereo the loop is a stereo camera's (Track3D.from_default(depth_sensor="stereo")):
+each update's cloud is matched from the pair around the 2D box (track3d.stereo.StereoCloud,
+reset at each sequence start) inside the update, and the report adds what the matcher did: the
+matching cost of each update (StereoCloud.last_cost), the tail's against the median, and the
+latency by cost quartile. --stereo-max-cost / --stereo-max-match set the matcher's caps.
+
 Writes JSON only with --out (nothing is written into the repository by default).
 """
 from __future__ import annotations
@@ -31,14 +37,18 @@ from track3d import machine
 from track3d.argparsing import ArgumentParser, bounded, run_main
 from track3d.dataset import Dataset
 from track3d.jsonable import write_json
+from track3d.stereo import StereoCloud, StereoParams
 from track3d.tracker import STAGES, Track3D
 
 
-def load(data: Path, split: str, max_frames: int):
+def load(data: Path, split: str, max_frames: int, depth: str = "map"):
+    """(camera, [(category, [(image, points or the right image, box2d)...])]) from each sequence's
+    first visible frame."""
     ds = Dataset(data)
     seqs, total = [], 0
     for seq in ds.sequences(split):
-        fr = [(seq.image(i), seq.points(i), seq.gt2d[i]) for i in range(min(len(seq), max_frames - total))]
+        second = seq.right_image if depth == "stereo" else seq.points
+        fr = [(seq.image(i), second(i), seq.gt2d[i]) for i in range(min(len(seq), max_frames - total))]
         first = next((k for k in range(len(fr)) if not seq.absent[k] and fr[k][2][2] > 0), None)
         if first is not None and len(fr) > first + 1:
             seqs.append((seq.category, fr[first:]))
@@ -66,6 +76,13 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--preload", type=int, default=400, help="frames kept in memory, looped over (default 400)")
     ap.add_argument("--cpu", type=int, default=None, help="pin every thread to this CPU (default: the lowest allowed)")
     ap.add_argument("--gc-freeze", action="store_true", help="gc.freeze() after warm-up (objects alive then are never scanned)")
+    ap.add_argument("--depth", choices=("map", "stereo"), default="map",
+                    help="map: clouds from the stored depth maps; stereo: matched from the pair inside each "
+                         "update (a stereo camera's loop; the dataset needs right images; default map)")
+    ap.add_argument("--stereo-max-cost", type=bounded(int, 0), default=StereoParams().max_match_cost, metavar="COST",
+                    help="with --depth stereo: StereoParams.max_match_cost (0: off; default the matcher's)")
+    ap.add_argument("--stereo-max-match", type=bounded(int, 0), default=StereoParams().max_match_px, metavar="PX",
+                    help="with --depth stereo: StereoParams.max_match_px (0: off; default the matcher's)")
     ap.add_argument("--out", type=Path, help="write the JSON report here (default: print only)")
     return ap
 
@@ -73,22 +90,36 @@ def build_parser() -> ArgumentParser:
 def main(argv=None) -> int:
     a = build_parser().parse_args(argv)
 
-    camera, seqs = load(a.data, a.split, a.preload)
+    stereo = a.depth == "stereo"
+    if not stereo and (a.stereo_max_cost != StereoParams().max_match_cost
+                       or a.stereo_max_match != StereoParams().max_match_px):
+        print("--stereo-max-cost / --stereo-max-match set the matcher of --depth stereo: add --depth stereo",
+              file=sys.stderr)
+        return 2
+    camera, seqs = load(a.data, a.split, a.preload, a.depth)
     if not seqs:
         print(f"no trackable sequence in {a.data}/{a.split}", file=sys.stderr)
         return 2
-    t3d = Track3D.from_default(camera, threads=1)
+    t3d = Track3D.from_default(camera, threads=1, depth_sensor="stereo" if stereo else None)
+    cloud = (StereoCloud(camera, max_match_cost=a.stereo_max_cost, max_match_px=a.stereo_max_match)
+             if stereo else None)
     cpu = min(machine.START_CPUS) if a.cpu is None else a.cpu
     machine.pin_threads(1, [cpu])
 
     gc_events: list[float] = []
     gc.callbacks.append(lambda phase, info: gc_events.append(time.perf_counter()) if phase == "start" else None)
-    total, stages, npts, gcs = [], {k: [] for k in STAGES}, [], []
+    total, stages, npts, gcs, costs = [], {k: [] for k in STAGES}, [], [], []
     done, measuring = 0, False
     while len(total) < a.frames:
         for category, fr in seqs:
-            t3d.init(fr[0][0], fr[0][2], category, points=fr[0][1])
+            pts = fr[0][1]
+            if cloud is not None:
+                cloud.reset()
+                pts = cloud.bind(fr[0][0], pts)
+            t3d.init(fr[0][0], fr[0][2], category, points=pts)
             for img, pts, _ in fr[1:]:
+                if cloud is not None:
+                    pts = cloud.bind(img, pts)   # a callable: the matching runs inside the update
                 n_gc = len(gc_events)
                 t = time.perf_counter()
                 res = t3d.update(img, pts)
@@ -105,6 +136,7 @@ def main(argv=None) -> int:
                     stages[k].append(res.ms[k])
                 npts.append(res.num_points)
                 gcs.append(len(gc_events) - n_gc)
+                costs.append(cloud.last_cost if cloud is not None else 0)
                 if len(total) >= a.frames:
                     break
             if len(total) >= a.frames:
@@ -122,7 +154,9 @@ def main(argv=None) -> int:
                     "loadavg": os.getloadavg(), "python": platform.python_version()},
         "config": {"tracker": t3d.describe()["tracker"], "estimator": t3d.describe()["estimator"], "threads": 1,
                    "frames": len(total),
-                   "gc_freeze": a.gc_freeze, "data": Path(a.data).name, "split": a.split},
+                   "gc_freeze": a.gc_freeze, "data": Path(a.data).name, "split": a.split, "depth": a.depth,
+                   **({"stereo": {"max_match_cost": a.stereo_max_cost, "max_match_px": a.stereo_max_match}}
+                      if stereo else {})},
         "total": stats(total_a),
         "stages_median_ms": {k: float(np.median(v)) for k, v in st.items()},
         "tail": {
@@ -138,6 +172,16 @@ def main(argv=None) -> int:
                                  "median_ms": float(np.median(total_a[bins == i])) if np.any(bins == i) else None}
                                 for i in range(4)],
     }
+    if stereo:
+        c = np.asarray(costs, dtype=np.float64)
+        cq = np.percentile(c, [25, 50, 75])
+        cbins = np.digitize(c, cq)
+        report["stereo_matching"] = {
+            "cost_median": float(np.median(c)), "cost_p99": float(np.percentile(c, 99)), "cost_max": float(c.max()),
+            "tail_cost_mean": float(c[tail].mean()),
+            "by_cost_quartile": [{"cost_upto": float(cq[i]) if i < 3 else float(c.max()),
+                                  "median_ms": float(np.median(total_a[cbins == i])) if np.any(cbins == i) else None}
+                                 for i in range(4)]}
     t = report["total"]
     print(f"{len(total)} updates: median {t['median_ms']:.2f} ms, p99 {t['p99_ms']:.2f} ({t['p99/median']:.2f}x), "
           f"p99.9 {t['p99.9_ms']:.2f} ({t['p99.9/median']:.2f}x), max {t['max_ms']:.2f} ({t['max/median']:.2f}x); "
@@ -148,6 +192,12 @@ def main(argv=None) -> int:
     print("median ms by frustum-size quartile: "
           + ", ".join(f"<= {b['num_points_upto']:.0f}: {b['median_ms']:.2f}" for b in report["by_frustum_quartile"]
                       if b["median_ms"] is not None))
+    if stereo:
+        m = report["stereo_matching"]
+        print(f"matching cost (px x (disparities + 48)): median {m['cost_median'] / 1e6:.1f}M, p99 "
+              f"{m['cost_p99'] / 1e6:.1f}M, max {m['cost_max'] / 1e6:.1f}M, the tail's {m['tail_cost_mean'] / 1e6:.1f}M; "
+              "median ms by cost quartile: " + ", ".join(f"<= {b['cost_upto'] / 1e6:.1f}M: {b['median_ms']:.2f}"
+                                                        for b in m["by_cost_quartile"] if b["median_ms"] is not None))
     if a.out:
         write_json(a.out, report)
         print(f"wrote {a.out}")

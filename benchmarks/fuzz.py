@@ -474,7 +474,8 @@ def t_stereo(rng, env):
 
     params = {"edge_erode_px": int(rng.integers(0, 3)), "block_size": int(rng.choice([1, 3, 5, 7])),
               "z_min_m": float(rng.choice([0.3, 1.5, 20.0])), "follow_depth": float(rng.choice([0.0, 1.0, 1.5, 4.0])),
-              "max_match_px": int(rng.choice([0, 1, 64, 16384]))}
+              "max_match_px": int(rng.choice([0, 1, 64, 16384])),
+              "max_match_cost": int(rng.choice([0, 1, 100000, 12000000]))}
     left, right = rand_pair(rng)
     try:
         points = StereoCloud(env.cam, **params).bind(left, right)

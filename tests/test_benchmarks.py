@@ -76,18 +76,23 @@ def test_bench_fps_times_the_networks_it_passes_in(tiny_dataset, tmp_path):
 
 def test_bench_fps_matches_the_pair_inside_the_loop_with_depth_stereo(tiny_dataset, tmp_path):
     """--depth stereo: the clouds are matched from the pair inside each update (their time in the
-    frustum stage), one row per --stereo-follow and --stereo-max-match value; not with --int8 / --torch."""
+    frustum stage), one row per --stereo-follow, --stereo-max-match and --stereo-max-cost value;
+    not with --int8 / --torch."""
+    import itertools
+
     import bench_fps
 
     out = tmp_path / "fps"
     assert bench_fps.main(["--data", str(tiny_dataset), "--frames", "5", "--preload", "40", "--threads", "1",
                            "--config", "kcf:baseline", "--depth", "stereo", "--stereo-follow", "0", "1.5",
-                           "--stereo-max-match", "0", "1024", "--tag", "s", "--out-dir", str(out)]) == 0
+                           "--stereo-max-match", "0", "1024", "--stereo-max-cost", "0", "50000",
+                           "--tag", "s", "--out-dir", str(out)]) == 0
     rows = {r["config"]: r for r in json.loads((out / "fps_s.json").read_text())["results"]}
-    assert set(rows) == {"kcf:baseline stereo follow 0", "kcf:baseline stereo follow 1.5",
-                         "kcf:baseline stereo follow 0 rows past 1024", "kcf:baseline stereo follow 1.5 rows past 1024"}
-    for (k, px), r in zip(((0.0, 0), (0.0, 1024), (1.5, 0), (1.5, 1024)), rows.values()):
-        assert r["stereo_follow"] == k and r["stereo_max_match_px"] == px
+    want = list(itertools.product((0.0, 1.5), (0, 1024), (0, 50000)))
+    assert list(rows) == [f"kcf:baseline stereo follow {k:g}" + (f" rows past {px}" if px else "")
+                          + (f" cost past {c}" if c else "") for k, px, c in want]
+    for (k, px, c), r in zip(want, rows.values()):
+        assert r["stereo_follow"] == k and r["stereo_max_match_px"] == px and r["stereo_max_match_cost"] == c
         assert r["depth"] == "stereo from the pair" and r["frames"] == 5
     with pytest.raises(SystemExit, match="--depth stereo"):
         bench_fps.main(["--data", str(tiny_dataset), "--depth", "stereo", "--int8", "--out-dir", str(out)])
@@ -274,6 +279,26 @@ def test_latency_record_names_the_tracker_that_ran(tmp_path):
     assert (rec["tracker"], rec["estimator"]) == (want["tracker"], want["estimator"])
 
 
+
+def test_latency_of_a_stereo_camera_s_loop_reports_what_the_matcher_did(tiny_dataset, tmp_path, capsys):
+    """bench_latency --depth stereo: the clouds matched from the pair inside each update, the
+    matching cost of every update recorded (the tail's, by quartile), the caps in the record;
+    the caps without --depth stereo: one line, status 2."""
+    import json
+
+    import bench_latency
+
+    out = tmp_path / "lat.json"
+    assert bench_latency.main(["--data", str(tiny_dataset), "--frames", "12", "--warmup", "2", "--depth", "stereo",
+                               "--stereo-max-cost", "2000000", "--out", str(out)]) == 0
+    rep = json.loads(out.read_text())
+    assert rep["config"]["depth"] == "stereo" and rep["config"]["frames"] == 12
+    assert rep["config"]["stereo"] == {"max_match_cost": 2000000, "max_match_px": 0}
+    m = rep["stereo_matching"]
+    assert 0 < m["cost_median"] <= m["cost_p99"] <= m["cost_max"]
+    assert len(m["by_cost_quartile"]) == 4 and "matching cost" in capsys.readouterr().out
+    assert bench_latency.main(["--data", str(tiny_dataset), "--stereo-max-cost", "5"]) == 2
+    assert "add --depth stereo" in capsys.readouterr().err
 
 def test_memory_bench_plays_one_watch_back_and_forth_and_records_each_window(tmp_path, capsys):
     """bench_memory: the frame order is a ping-pong (hand case), the run is one watch without a

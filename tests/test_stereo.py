@@ -451,6 +451,8 @@ def test_a_body_nearer_than_the_followed_search_is_found_again():
     cloud.depth_range = (40.0, 45.0)                           # 16 disparities: down to ~26 m
     pts = cloud.bind(left, right)(box)
     assert cloud.last_disparities == 208
+    win = cloud.matcher.window(box)     # both matches counted: the followed one and the retry
+    assert cloud.last_cost == cloud.matcher.match_cost(win, 16) + cloud.matcher.match_cost(win, 208)
     np.testing.assert_array_equal(pts, ref)
     assert 6.5 < cloud.depth_range[0] < 7.5
     cloud.set_state({"depth_range": [40.0, 45.0]})            # no density: not trusted
@@ -510,6 +512,52 @@ def test_rows_binned_for_a_window_by_hand():
     assert StereoMatcher(CAM).rows_for((0, 640, 0, 480)) == 1   # 0: every row
     with pytest.raises(ValueError, match="max_match_px"):
         StereoParams(max_match_px=-1)
+
+
+def test_match_cost_and_rows_binned_by_cost_by_hand():
+    from track3d.stereo import MATCH_PX_DISPARITIES
+    assert MATCH_PX_DISPARITIES == 48
+    m = StereoMatcher(CAM)
+    assert m.match_cost((10, 30, 5, 15), 16) == 200 * 64          # 20 x 10 px x (16 + 48)
+    assert m.match_cost((10, 30, 5, 15)) == 200 * (m.num_disparities + 48)   # the full range by default
+    win = (0, 100, 0, 100)                                           # 10,000 px
+    m = StereoMatcher(CAM, max_match_cost=640_000)
+    assert m.rows_for(win, 16) == 1                  # 10,000 x 64 = 640,000: within the cap
+    assert m.rows_for(win, 80) == 2                  # 1,280,000 -> 640,000 in bands of 2
+    assert m.rows_for(win, 208) == 4                 # 2,560,000 -> 640,000 in bands of 4
+    assert m.rows_for(win) == 4                      # the full range (208 here) by default
+    assert StereoMatcher(CAM, max_match_cost=100_000).rows_for(win, 16) == 4    # 4 rows at most
+    assert StereoMatcher(CAM, max_match_cost=400_000).rows_for(win, 16) == 2
+    # with both caps the stricter decides
+    assert StereoMatcher(CAM, max_match_cost=10 ** 9, max_match_px=4000).rows_for(win, 16) == 4
+    assert StereoMatcher(CAM, max_match_cost=400_000, max_match_px=10 ** 6).rows_for(win, 16) == 2
+    with pytest.raises(ValueError, match="max_match_cost"):
+        StereoParams(max_match_cost=-1)
+
+
+def test_a_cost_cap_bins_the_full_range_search_and_not_the_followed_one():
+    """max_match_cost bins a window by what its matching costs: the first window of a body (the
+    full range, 208 disparities) in bands of rows, the next (followed, fewer disparities) every
+    row: the dear frame is cut, the usual one keeps all its returns, bit for bit."""
+    frames = _sphere_frames(2)
+    a = frames[0][2]
+    full = StereoCloud(CAM)
+    ref0 = full.bind(frames[0][0], frames[0][1])(a)
+    ref1 = full.bind(frames[1][0], frames[1][1])(a)
+    n1 = full.last_disparities
+    assert n1 < 208
+    win = full.matcher.window(a)
+    cloud = StereoCloud(CAM, max_match_cost=full.matcher.match_cost(win, n1))
+    k = cloud.matcher.rows_for(win)          # (208 + 48) / (n1 + 48): 2 here
+    assert k == 2
+    pts0 = cloud.bind(frames[0][0], frames[0][1])(a)
+    assert 0.8 < len(pts0) / len(ref0) * k < 1.2
+    # what it matched: half the rows (to a band at the window's ends) over the full range
+    assert abs(cloud.last_cost - full.matcher.match_cost(win) / 2) <= (win[1] - win[0]) * (208 + 48)
+    pts1 = cloud.bind(frames[1][0], frames[1][1])(a)
+    assert cloud.last_disparities == n1 and cloud.matcher.rows_for(win, n1) == 1
+    assert cloud.last_cost == full.last_cost == full.matcher.match_cost(win, n1)
+    np.testing.assert_array_equal(pts1, ref1)
 
 
 @pytest.mark.parametrize("cap,rows", [(100000, 2), (50000, 4)])

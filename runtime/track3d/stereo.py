@@ -52,6 +52,11 @@ the image's top, so a large near body costs a half or a quarter of the matching;
 the camera's, and with them the disparity's precision (depth is the disparity along a row). A
 band's return is one point at the band's centre row. The follow rule compares returns per pixel
 of the grid matched on. `depth`, `depth_window` and `disparity` match every row.
+`max_match_cost` bins a window by its matching cost instead of its size (`match_cost`: pixels x
+(disparities searched + MATCH_PX_DISPARITIES), about proportional to the matcher's time): only
+the dearest windows, a large near body or a full-range search over a wide box, are binned, so
+the cost, and the loop's worst frames with it, are bounded (up to 4x the cap: 4 rows at most).
+A count, not a time: the same inputs give the same clouds on every machine.
 
 Window mode: disparity is computed on the crop [x0 - D - m, x1 + m) x [y0 - m, y1 + m) of both
 images (D = search range, m = margin), which contains every right pixel a box pixel can
@@ -95,10 +100,14 @@ class StereoParams:
     max_match_px: int = 0           # clouds (points_window, StereoCloud): a window of more pixels than this
                                     # is matched with its rows averaged in pairs (or fours) until it has at
                                     # most this many (0: off, every row matched)
+    max_match_cost: int = 0         # clouds: a window whose matching costs more than this (`match_cost`:
+                                    # pixels x (disparities + MATCH_PX_DISPARITIES)) is matched with its
+                                    # rows averaged in pairs (or fours) until it costs at most this: a
+                                    # bound on the loop's worst frames (0: off)
 
     def __post_init__(self) -> None:
         for name in ("block_size", "uniqueness_ratio", "lr_max_diff_px", "speckle_window", "speckle_range_px",
-                     "window_margin_px", "max_match_px"):
+                     "window_margin_px", "max_match_px", "max_match_cost"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
@@ -122,6 +131,11 @@ class StereoParams:
 
 
 RANGE_END_PX = 1.0   # a narrowed search's matches this close to its near end are holes (StereoCloud)
+# The matcher's per-pixel work that does not grow with the disparities searched (the texture test,
+# the cost's preparation, the filters), in disparities' worth: OpenCV's 3-way SGBM on one core took
+# about 68 ns a pixel plus 1.44 ns a pixel and disparity (windows of 9,000-152,000 px, 32-208
+# disparities; an Intel Xeon, 2026-11), so a window's time is about its pixels x (n + 48).
+MATCH_PX_DISPARITIES = 48
 
 _MODES = {"sgbm": cv2.STEREO_SGBM_MODE_SGBM, "hh": cv2.STEREO_SGBM_MODE_HH,
           "3way": cv2.STEREO_SGBM_MODE_SGBM_3WAY}
@@ -256,15 +270,24 @@ class StereoMatcher:
             return None
         return u0, u1, v0, v1
 
-    def rows_for(self, window: tuple[int, int, int, int]) -> int:
-        """How many rows (1, 2 or 4) a cloud's `window` (u0, u1, v0, v1) is matched with averaged
-        into one: the fewest that leave it at most `max_match_px` pixels, at most 4 (0: 1, every
-        row). Rows, not columns: depth is the disparity along a row, its precision stays the
-        camera's (at 16384 px, bands of rows cost the loop 0.02 AO_3d, 2 x 2 pixel blocks 0.06;
-        docs/runtime.md "Stereo")."""
-        cap, (u0, u1, v0, v1) = self.params.max_match_px, window
+    def match_cost(self, window: tuple[int, int, int, int], n: int | None = None) -> int:
+        """The matching cost of a `window` (u0, u1, v0, v1) searched over disparities [0, n) (default
+        the full range), every row: its pixels x (n + MATCH_PX_DISPARITIES)."""
+        u0, u1, v0, v1 = window
+        n = self.num_disparities if n is None else int(n)
+        return (u1 - u0) * (v1 - v0) * (n + MATCH_PX_DISPARITIES)
+
+    def rows_for(self, window: tuple[int, int, int, int], n: int | None = None) -> int:
+        """How many rows (1, 2 or 4) a cloud's `window` (u0, u1, v0, v1), searched over disparities
+        [0, n) (default the full range), is matched with averaged into one: the fewest that leave it
+        at most `max_match_px` pixels and at most `max_match_cost` (`match_cost` / k), at most 4
+        (both 0: 1, every row). Rows, not columns: depth is the disparity along a row, its precision
+        stays the camera's (at 16384 px, bands of rows cost the loop 0.02 AO_3d, 2 x 2 pixel blocks
+        0.06; docs/runtime.md "Stereo")."""
+        cap, cost_cap, (u0, u1, v0, v1) = self.params.max_match_px, self.params.max_match_cost, window
+        px, cost = (u1 - u0) * (v1 - v0), self.match_cost(window, n)
         k = 1
-        while cap > 0 and k < 4 and (u1 - u0) * (v1 - v0) > cap * k:
+        while k < 4 and ((cap > 0 and px > cap * k) or (cost_cap > 0 and cost > cost_cap * k)):
             k *= 2
         return k
 
@@ -280,7 +303,7 @@ class StereoMatcher:
         if win is None:
             return np.zeros((0, 0), np.float32), None, 1
         n = self.num_disparities if n is None else int(n)
-        k = self.rows_for(win) if binned else 1
+        k = self.rows_for(win, n) if binned else 1
         u0, u1, v0, v1 = win
         if k > 1:
             v0, v1 = v0 // k, min(-(-v1 // k), self.camera.height // k)
@@ -308,7 +331,8 @@ class StereoMatcher:
 
     def points_window(self, left: np.ndarray, right: np.ndarray, box2d, n: int | None = None) -> np.ndarray:
         """(N, 3) float32 cloud (left frame) of the window around `box2d` (n: as depth_window),
-        matched with rows averaged if the window has more than `max_match_px` pixels (`rows_for`)."""
+        matched with rows averaged if the window has more than `max_match_px` pixels or costs more than
+        `max_match_cost` (`rows_for`)."""
         return self._cloud(left, right, box2d, n)[0]
 
     def _cloud(self, left: np.ndarray, right: np.ndarray, box2d, n: int | None) -> tuple[np.ndarray, int]:
@@ -361,6 +385,8 @@ class StereoCloud:
         self.depth_range: tuple[float, float] | None = None   # the last window's body depths (m)
         self.density: float | None = None    # the last window's returns per pixel
         self.last_disparities: int = self.matcher.num_disparities   # [0, n) searched by the last call
+        self.last_cost: int = 0   # what the last call matched: its windows' pixels (of the grid matched
+                                  # on) x (disparities + MATCH_PX_DISPARITIES), a retry's included
 
     def reset(self) -> None:
         """Forget the body's depth: the next window searches the full range (a new body)."""
@@ -395,6 +421,7 @@ class StereoCloud:
     def _points(self, gl: np.ndarray, gr: np.ndarray, box2d, n: int) -> tuple[np.ndarray, float]:
         """(the window's cloud, its returns per pixel of the grid it was matched on)."""
         pts, area = self.matcher._cloud(gl, gr, box2d, n)
+        self.last_cost += area * (n + MATCH_PX_DISPARITIES)
         return pts, (len(pts) / area if area else 0.0)
 
     def bind(self, left: np.ndarray, right: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
@@ -402,6 +429,7 @@ class StereoCloud:
         gl, gr = self.matcher._check(left, right)
 
         def points(box2d) -> np.ndarray:
+            self.last_cost = 0
             n = self._search()
             pts, density = self._points(gl, gr, box2d, n)
             if n < self.matcher.num_disparities and (len(pts) < FOLLOW_MIN_POINTS or self.density is None
