@@ -64,6 +64,10 @@ def test_oracle_baseline_run_and_report(synth, tmp_path):
     from track3d.evaluation.tables import axis_table, summary_table
     head, row = summary_table(report).splitlines()[:2]
     assert "lost_P" in head and "lost_R" in head and "1.00    1.00" in row
+    # the tracker's time per update: its median, p99 and slowest over the timed frames, in the table
+    ms = exp.stage_ms("oracle+baseline")[:, -1]
+    assert len(ms) == 12 and ov["ms_median"] <= ov["ms_p99"] <= ov["ms_max"] == pytest.approx(ms.max())
+    assert head.split()[-1] == "p99_ms" and row.split()[-1] == f"{ov['ms_p99']:.1f}"
     head, row = axis_table(report).splitlines()
     assert head.split()[:4] == ["3D", "error", "(m)", "bias"] and row.split()[0] == "oracle+baseline"
     assert len(row.split()) == 13 and row.split()[1:13] == [f"{v:+.3f}" for v in ov["bias_3d"]] + \

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from track3d.evaluation.metrics import (CE2D_THRESHOLDS, IOU_THRESHOLDS, LostScore, average_scores,
-                                        axis_errors_3d, bootstrap_interval, compare_paired, precision_curve,
-                                        score_lost, score_sequence, success_curve)
+                                        axis_errors_3d, bootstrap_interval, compare_paired, latency_ms,
+                                        precision_curve, score_lost, score_sequence, success_curve)
 
 
 def test_success_curve_hand_case():
@@ -23,6 +23,13 @@ def test_precision_curve_hand_case():
     got = precision_curve([1.0, 5.0, np.nan], np.array([0.0, 1.0, 5.0, 10.0]))
     np.testing.assert_allclose(got, [0, 1 / 3, 2 / 3, 2 / 3])  # <= threshold; nan never counts
 
+
+def test_latency_hand_case():
+    # 1..100 ms: median 50.5, p99 by linear interpolation 99 + 0.01 x (100 - 99), the slowest 100
+    got = latency_ms(np.arange(1.0, 101.0).reshape(10, 10))
+    assert got == pytest.approx({"ms_median": 50.5, "ms_p99": 99.01, "ms_max": 100.0})
+    assert latency_ms([3.0, np.nan, 5.0]) == {"ms_median": 4.0, "ms_p99": pytest.approx(4.98), "ms_max": 5.0}
+    assert all(np.isnan(v) for v in latency_ms([]).values())
 
 def _seq():
     # frame 0: init (not scored); 1: partial overlap; 2: identical 2D / disjoint 3D; 3: absent.

@@ -43,7 +43,8 @@ from ..stereo import StereoCloud, StereoParams
 from ..tracker import LOST, STAGES, Track3D, sensor_options
 from .draw import OverlayWriter, draw_overlay
 from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, CI_LEVEL, INTERVAL_METRICS, IOU_THRESHOLDS, MOVED, LostScore,
-                      SequenceScore, average_scores, bootstrap_interval, compare_paired, score_lost, score_sequence)
+                      SequenceScore, average_scores, bootstrap_interval, compare_paired, latency_ms, score_lost,
+                      score_sequence)
 from .results import (INIT, SKIPPED, SequenceResult, read_result, read_run_record, result_folder, run_config_key,
                       write_result, write_run_record)
 
@@ -565,7 +566,8 @@ class Experiment:
             lost = self.score_lost(name).summary()
             report["trackers"][name] = {
                 "overall": {**ov.summary(), "lost_precision": lost["lost_precision"],
-                            "lost_recall": lost["lost_recall"], "result_frames": sum(lengths[name].values())},
+                            "lost_recall": lost["lost_recall"], "result_frames": sum(lengths[name].values()),
+                            **latency_ms(self.stage_ms(name)[:, STAGES.index("total")])},
                 "lost": lost,
                 "curves": ov.curves,
                 "sequences": {s.name: s.summary() for s in scores},
@@ -642,6 +644,6 @@ def evaluate_2d(root: str | Path, split: str, specs: list[TrackerSpec], result_d
             exp.run(spec, quiet=quiet)
             total_ms = exp.stage_ms(spec.label)[:, STAGES.index("total")]
             out[spec.label] = {**average_scores(exp.score(spec.label)).summary(),
-                               "ms_median": float(np.median(total_ms)) if len(total_ms) else float("nan"),
+                               "ms_median": latency_ms(total_ms)["ms_median"],
                                **exp.score_lost(spec.label, reacquire_frames).summary()}
         return out

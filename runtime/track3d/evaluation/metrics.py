@@ -27,6 +27,9 @@ estimator that guesses the hidden depth of a body shows it in cz and sz.
 Over sequences: the mean of the per-sequence values (paper eq. for AO^3d and ACE^3d: every
 sequence weighs the same), curves averaged likewise; restarts are summed; FPS is frames over
 time summed over all sequences. IoU and centre error come from track3d.boxes (one formula).
+Latency (:func:`latency_ms`): the median, p99 and slowest of the tracker's time per update over
+every timed frame of every sequence (FPS is a mean and hides the slow frames a flight computer's
+frame budget must hold).
 
 How sure a mean over a few sequences is (:func:`bootstrap_interval`): the percentile bootstrap
 interval of the mean over sequences (resampling whole sequences, CI_LEVEL, a fixed seed: the
@@ -49,7 +52,7 @@ __all__ = [
     "SequenceScore", "OverallScore", "score_sequence", "average_scores", "KINDS", "SCALARS", "SCALARS_2D",
     "LostScore", "score_lost", "REACQUIRE_IOU", "AXES_3D", "axis_errors_3d",
     "CI_LEVEL", "BOOTSTRAP_RESAMPLES", "MOVED", "LOWER_IS_BETTER", "INTERVAL_METRICS", "bootstrap_interval", "PairedComparison",
-    "compare_paired",
+    "compare_paired", "latency_ms",
 ]
 
 IOU_THRESHOLDS = np.linspace(0.0, 1.0, 101)
@@ -134,6 +137,16 @@ class SequenceScore:
              if k not in ("curves", "two_d_only") and not (self.two_d_only and k in _SCALARS_3D + _AXES)}
         d["fps"], d["fps_e2e"] = self.fps, self.fps_e2e
         return d
+
+
+def latency_ms(ms) -> dict[str, float]:
+    """{"ms_median", "ms_p99", "ms_max"} of per-update times `ms` (milliseconds, any shape; the
+    p99 by numpy's linear interpolation); nan for no time."""
+    a = np.asarray(ms, dtype=np.float64).reshape(-1)
+    a = a[np.isfinite(a)]
+    if not len(a):
+        return {"ms_median": float("nan"), "ms_p99": float("nan"), "ms_max": float("nan")}
+    return {"ms_median": float(np.median(a)), "ms_p99": float(np.percentile(a, 99)), "ms_max": float(a.max())}
 
 
 def score_sequence(name: str, pred2d: np.ndarray, pred3d: np.ndarray | None, gt2d: np.ndarray,

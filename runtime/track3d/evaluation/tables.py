@@ -10,7 +10,7 @@ TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"
                  ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
                  ("lost_P", "lost_precision", "{:.2f}"), ("lost_R", "lost_recall", "{:.2f}"),
                  ("restarts", "restarts", "{:d}"), ("frames", "frames", "{:d}"), ("FPS", "fps", "{:.1f}"),
-                 ("FPS_e2e", "fps_e2e", "{:.1f}"))
+                 ("FPS_e2e", "fps_e2e", "{:.1f}"), ("p99_ms", "ms_p99", "{:.1f}"))
 
 
 def columns(*keys: str) -> tuple[tuple[str, str, str], ...]:
