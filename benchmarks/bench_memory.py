@@ -39,6 +39,7 @@ from track3d.argparsing import ArgumentParser, bounded, run_main
 from track3d.dataset import Dataset
 from track3d.jsonable import write_json
 from track3d.evaluation.experiment import TrackerSpec
+from track3d.stereo import StereoCloud, StereoParams
 from track3d.tracker import STATUSES
 
 
@@ -102,12 +103,23 @@ def build_parser() -> ArgumentParser:
                          "malloc_trim), then read the resident memory again: what the process holds but "
                          "no longer uses")
     ap.add_argument("--cpu", type=int, default=None, help="pin every thread to this CPU (default: the lowest allowed)")
+    ap.add_argument("--depth", choices=("map", "stereo"), default="map",
+                    help="map: clouds from the stored depth maps; stereo: a stereo camera's watch, each "
+                         "update's cloud matched from the left/right pair around the 2D box (as `track3d track "
+                         "--depth stereo`; the matcher follows the body's depth across the watch; default map)")
+    ap.add_argument("--stereo-max-cost", type=bounded(int, 0), default=StereoParams().max_match_cost, metavar="COST",
+                    help="with --depth stereo: StereoParams.max_match_cost (0: off; default the matcher's)")
     ap.add_argument("--out", type=Path, help="write the JSON report here (default: print only)")
     return ap
 
 
 def main(argv=None) -> int:
     a = build_parser().parse_args(argv)
+    stereo = a.depth == "stereo"
+    if not stereo and a.stereo_max_cost != StereoParams().max_match_cost:
+        print("bench_memory.py: --stereo-max-cost sets the matcher of --depth stereo: add --depth stereo",
+              file=sys.stderr)
+        return 2
     ds = Dataset(a.data)
     seqs = ds.sequences(a.split)
     seq = next((s for s in seqs if a.sequence in (None, s.name)), None)
@@ -126,12 +138,15 @@ def main(argv=None) -> int:
     if len(idx) < 2:
         print(f"bench_memory.py: sequence {seq.name} has no two frames in a row with the body in view", file=sys.stderr)
         return 2
-    frames = [(seq.image(i), seq.points(i)) for i in idx]
+    # depth stereo: the right image in place of the cloud (the pair is matched inside each update)
+    frames = [(seq.image(i), seq.right_image(i) if stereo else seq.points(i)) for i in idx]
+    cloud = StereoCloud(seq.camera, max_match_cost=a.stereo_max_cost) if stereo else None
     sensor = seq.depth_sensor
     t3d = TrackerSpec("edgetrack", "a3boxnet", threads=1).build(seq)   # the loop `track3d track` runs
     cpu = min(machine.START_CPUS) if a.cpu is None else a.cpu
     machine.pin_threads(1, [cpu])
-    t3d.init(frames[0][0], seq.gt2d[idx[0]], seq.category, points=frames[0][1])
+    first = frames[0][1] if cloud is None else cloud.bind(*frames[0])
+    t3d.init(frames[0][0], seq.gt2d[idx[0]], seq.category, points=first)
 
     order = ping_pong(len(frames))
     next(order)
@@ -142,6 +157,8 @@ def main(argv=None) -> int:
     rss_loaded = resident_mb()
     for done in range(1, total + 1):
         img, pts = frames[next(order)]
+        if cloud is not None:
+            pts = cloud.bind(img, pts)   # a callable: the matching runs inside the update
         t = time.perf_counter()
         res = t3d.update(img, pts)
         window.append((time.perf_counter() - t) * 1e3)
@@ -169,7 +186,8 @@ def main(argv=None) -> int:
         "config": {"tracker": t3d.describe()["tracker"], "estimator": t3d.describe()["estimator"],
                    "depth_sensor": sensor, "threads": 1, "data": Path(a.data).name, "split": a.split,
                    "sequence": seq.name, "frames": len(frames), "updates": a.updates, "warmup": a.warmup,
-                   "every": a.every, "trim": a.trim},
+                   "every": a.every, "trim": a.trim, "depth": a.depth,
+                   **({"stereo": {"max_match_cost": a.stereo_max_cost}} if stereo else {})},
         "rss_mb_after_loading": rss_loaded,
         "rss_mb": growth(x, np.asarray(rss)),
         "rss_mb_after_trim": growth(x, np.asarray(rss_trimmed)) if rss_trimmed else None,
@@ -182,7 +200,8 @@ def main(argv=None) -> int:
                      "window_p99_ms": win_p99},
     }
     r, s = report["rss_mb"], report["state_kb"]
-    print(f"{a.updates} updates of {seq.name} ({len(frames)} frames back and forth, {sensor or 'unknown'} depth): "
+    print(f"{a.updates} updates of {seq.name} ({len(frames)} frames back and forth, {sensor or 'unknown'} depth"
+          f"{', matched from the pair' if stereo else ''}): "
           f"RSS {r['first']:.1f} -> {r['last']:.1f} MB (max {r['max']:.1f}, slope {r['slope_per_10k_updates']:+.2f} "
           f"MB / 10k updates); state {s['first']:.0f} -> {s['last']:.0f} kB (max {s['max']:.0f}); "
           + (f"window median {win_med[0]:.2f} -> {win_med[-1]:.2f} ms, p99 {win_p99[0]:.2f} -> {win_p99[-1]:.2f} ms; "

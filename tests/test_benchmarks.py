@@ -300,6 +300,7 @@ def test_latency_of_a_stereo_camera_s_loop_reports_what_the_matcher_did(tiny_dat
     assert bench_latency.main(["--data", str(tiny_dataset), "--stereo-max-cost", "5"]) == 2
     assert "add --depth stereo" in capsys.readouterr().err
 
+
 def test_memory_bench_plays_one_watch_back_and_forth_and_records_each_window(tmp_path, capsys):
     """bench_memory: the frame order is a ping-pong (hand case), the run is one watch without a
     restart, each window gives one reading, the statuses add up to the measured updates; an
@@ -325,6 +326,22 @@ def test_memory_bench_plays_one_watch_back_and_forth_and_records_each_window(tmp
     capsys.readouterr()
     assert bench_memory.main(["--data", str(data), "--sequence", "nope"]) == 2
     assert "no sequence 'nope'" in capsys.readouterr().err
+
+
+def test_memory_bench_of_a_stereo_camera_s_watch(tiny_dataset, tmp_path, capsys):
+    """bench_memory --depth stereo: the pair matched inside each update over the whole watch (the
+    matcher's cap recorded); the cap without --depth stereo: one line, status 2."""
+    import bench_memory
+
+    out = tmp_path / "mem.json"
+    assert bench_memory.main(["--data", str(tiny_dataset), "--updates", "20", "--warmup", "2", "--every", "10",
+                              "--depth", "stereo", "--stereo-max-cost", "1000000", "--out", str(out)]) == 0
+    rec = json.loads(out.read_text())
+    assert rec["config"]["depth"] == "stereo" and rec["config"]["stereo"] == {"max_match_cost": 1000000}
+    assert sum(rec["statuses"].values()) == 20 and len(rec["readings"]["window_median_ms"]) == 2
+    assert "matched from the pair" in capsys.readouterr().out
+    assert bench_memory.main(["--data", str(tiny_dataset), "--stereo-max-cost", "5"]) == 2
+    assert "add --depth stereo" in capsys.readouterr().err
 
 
 def test_precision_verdicts_pass_only_on_every_split(tmp_path):
