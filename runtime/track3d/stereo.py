@@ -137,6 +137,11 @@ RANGE_END_PX = 1.0   # a narrowed search's matches this close to its near end ar
 # disparities; an Intel Xeon, 2026-11), so a window's time is about its pixels x (n + 48).
 MATCH_PX_DISPARITIES = 48
 
+
+def _match_cost(pixels: int, n: int) -> int:
+    """The matching cost of `pixels` searched over disparities [0, n)."""
+    return int(pixels) * (int(n) + MATCH_PX_DISPARITIES)
+
 _MODES = {"sgbm": cv2.STEREO_SGBM_MODE_SGBM, "hh": cv2.STEREO_SGBM_MODE_HH,
           "3way": cv2.STEREO_SGBM_MODE_SGBM_3WAY}
 
@@ -275,7 +280,7 @@ class StereoMatcher:
         the full range), every row: its pixels x (n + MATCH_PX_DISPARITIES)."""
         u0, u1, v0, v1 = window
         n = self.num_disparities if n is None else int(n)
-        return (u1 - u0) * (v1 - v0) * (n + MATCH_PX_DISPARITIES)
+        return _match_cost((u1 - u0) * (v1 - v0), n)
 
     def rows_for(self, window: tuple[int, int, int, int], n: int | None = None) -> int:
         """How many rows (1, 2 or 4) a cloud's `window` (u0, u1, v0, v1), searched over disparities
@@ -421,7 +426,7 @@ class StereoCloud:
     def _points(self, gl: np.ndarray, gr: np.ndarray, box2d, n: int) -> tuple[np.ndarray, float]:
         """(the window's cloud, its returns per pixel of the grid it was matched on)."""
         pts, area = self.matcher._cloud(gl, gr, box2d, n)
-        self.last_cost += area * (n + MATCH_PX_DISPARITIES)
+        self.last_cost += _match_cost(area, n)
         return pts, (len(pts) / area if area else 0.0)
 
     def bind(self, left: np.ndarray, right: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
