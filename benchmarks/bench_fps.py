@@ -112,7 +112,7 @@ def make_configs(args, torch_nets: TorchNets | None) -> tuple[list[dict], list[d
         if args.depth == "stereo":
             # one row per depth-following and row-binning setting, side by side in this run
             configs += [{**b, "label": f"{b['label']} stereo follow {k:g}" + (f" rows past {px}" if px else "")
-                         + (f" cost past {c}" if c else ""),
+                         + (f" cost budget {c}" if c else ""),
                          "depth_sensor": "stereo", "stereo_follow": k, "stereo_max_match_px": px,
                          "stereo_max_match_cost": c}
                         for b in bases for k in args.stereo_follow for px in args.stereo_max_match
@@ -234,9 +234,9 @@ def build_parser() -> ArgumentParser:
                                        "window of more pixels is matched with its rows averaged in bands; 0: every "
                                        "row; default the matcher's)")
     ap.add_argument("--stereo-max-cost", type=bounded(int, 0), nargs="+", default=[StereoParams().max_match_cost],
-                    metavar="COST", help="with --depth stereo: StereoParams.max_match_cost values, one row each (a "
-                                         "window whose matching costs more, pixels x (disparities + 48), is "
-                                         "matched with its rows averaged in bands; 0: off; default the matcher's)")
+                    metavar="COST", help="with --depth stereo: StereoParams.max_match_cost values, one row each (each "
+                                         "update's matching budget, pixels x (disparities + 48): a dearer window "
+                                         "is matched with its rows averaged in bands; 0: off; default the matcher's)")
     ap.add_argument("--precision", choices=("fp32", "auto"), nargs="+", default=["fp32"],
                     help="one row per value, side by side: fp32, every network at fp32 on onnxruntime; auto, "
                          "each in the engine and precision track3d.variant_choice picks on this CPU "

@@ -16,8 +16,9 @@ garbage collections that ran during the update (gc.callbacks), then reports
 With --depth stereo the loop is a stereo camera's (Track3D.from_default(depth_sensor="stereo")):
 each update's cloud is matched from the pair around the 2D box (track3d.stereo.StereoCloud,
 reset at each sequence start) inside the update, and the report adds what the matcher did: the
-matching cost of each update (StereoCloud.last_cost), the tail's against the median, and the
-latency by cost quartile. --stereo-max-cost / --stereo-max-match set the matcher's caps.
+matching cost of each update (StereoCloud.last_cost), the tail's against the median, the
+latency by cost quartile and the updates left without a cloud (StereoCloud.last_dropped: the
+followed search's retry past the budget). --stereo-max-cost / --stereo-max-match set the matcher's caps.
 
 Writes JSON only with --out (nothing is written into the repository by default).
 """
@@ -108,7 +109,7 @@ def main(argv=None) -> int:
 
     gc_events: list[float] = []
     gc.callbacks.append(lambda phase, info: gc_events.append(time.perf_counter()) if phase == "start" else None)
-    total, stages, npts, gcs, costs = [], {k: [] for k in STAGES}, [], [], []
+    total, stages, npts, gcs, costs, dropped = [], {k: [] for k in STAGES}, [], [], [], 0
     done, measuring = 0, False
     while len(total) < a.frames:
         for category, fr in seqs:
@@ -137,6 +138,7 @@ def main(argv=None) -> int:
                 npts.append(res.num_points)
                 gcs.append(len(gc_events) - n_gc)
                 costs.append(cloud.last_cost if cloud is not None else 0)
+                dropped += bool(cloud is not None and cloud.last_dropped)
                 if len(total) >= a.frames:
                     break
             if len(total) >= a.frames:
@@ -179,6 +181,7 @@ def main(argv=None) -> int:
         report["stereo_matching"] = {
             "cost_median": float(np.median(c)), "cost_p99": float(np.percentile(c, 99)), "cost_max": float(c.max()),
             "tail_cost_mean": float(c[tail].mean()),
+            "dropped": dropped,   # updates whose retried search did not fit the budget: no cloud
             "by_cost_quartile": [{"cost_upto": float(cq[i]) if i < 3 else float(c.max()),
                                   "median_ms": float(np.median(total_a[cbins == i])) if np.any(cbins == i) else None}
                                  for i in range(4)]}
@@ -195,7 +198,8 @@ def main(argv=None) -> int:
     if stereo:
         m = report["stereo_matching"]
         print(f"matching cost (px x (disparities + 48)): median {m['cost_median'] / 1e6:.1f}M, p99 "
-              f"{m['cost_p99'] / 1e6:.1f}M, max {m['cost_max'] / 1e6:.1f}M, the tail's {m['tail_cost_mean'] / 1e6:.1f}M; "
+              f"{m['cost_p99'] / 1e6:.1f}M, max {m['cost_max'] / 1e6:.1f}M, the tail's {m['tail_cost_mean'] / 1e6:.1f}M, "
+              f"{m['dropped']} without a cloud (the retry past the budget); "
               "median ms by cost quartile: " + ", ".join(f"<= {b['cost_upto'] / 1e6:.1f}M: {b['median_ms']:.2f}"
                                                         for b in m["by_cost_quartile"] if b["median_ms"] is not None))
     if a.out:

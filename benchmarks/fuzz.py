@@ -478,7 +478,8 @@ def t_stereo(rng, env):
               "max_match_cost": int(rng.choice([0, 1, 100000, 12000000]))}
     left, right = rand_pair(rng)
     try:
-        points = StereoCloud(env.cam, **params).bind(left, right)
+        cloud = StereoCloud(env.cam, **params)
+        points = cloud.bind(left, right)
     except ValueError:
         return "clean_error"
     for a in (left, right):
@@ -490,6 +491,11 @@ def t_stereo(rng, env):
         expect(isinstance(p, np.ndarray) and p.dtype == np.float32 and p.ndim == 2 and p.shape[1] == 3,
                f"stereo cloud {type(p).__name__} {getattr(p, 'shape', None)} {getattr(p, 'dtype', None)}")
         expect(bool(np.all(np.isfinite(p))) and bool(np.all(p[:, 2] > 0)), "stereo cloud not finite or z <= 0")
+        expect(not cloud.last_dropped or len(p) == 0, "a dropped update returned a cloud")
+        # the cap is the update's budget whenever the dearest first match fits it in the coarsest bands
+        cap, win = params["max_match_cost"], cloud.matcher.window(b)
+        expect(cap == 0 or win is None or cloud.matcher.binned_cost(win, None, 8) > cap or cloud.last_cost <= cap,
+               f"an update matched {cloud.last_cost} past its budget {cap}")
     # the default loop, or stereo's options (the outline read from the callable's cloud)
     t = Track3D(env.cam, _Scripted(rng), env.estimator("baseline"),
                 **(sensor_options("stereo") if rng.random() < 0.5 else {}))

@@ -461,6 +461,45 @@ def test_a_body_nearer_than_the_followed_search_is_found_again():
     assert cloud.depth_range is None and cloud.density is None
 
 
+def test_a_cost_budget_holds_for_the_whole_update_the_retry_included():
+    """With max_match_cost the cap is the update's budget: a followed search that is not trusted
+    is repeated over the full range in what it left (coarser bands), and when even bands of 8 rows
+    do not fit, the update has no cloud (rather than the followed search's wrong depths) and the
+    next one searches the full range with the whole budget."""
+    left, right, z = render_pair(CAM, (0.5, 0.2, 9.0), 2.0)
+    box = _box(z)
+    m = StereoMatcher(CAM)
+    win = m.window(box)
+    first = m.match_cost(win, 16)                     # the followed search, every row
+    ref = StereoCloud(CAM, follow_depth=0).bind(left, right)(box)
+    for k in (2, 4, 8):
+        budget = first + m.binned_cost(win, 208, k)
+        cloud = StereoCloud(CAM, max_match_cost=budget)
+        cloud.set_state({"depth_range": [40.0, 45.0], "density": 0.5})    # 16 disparities: to ~26 m
+        pts = cloud.bind(left, right)(box)
+        assert cloud.last_disparities == 208 and not cloud.last_dropped
+        assert cloud.last_cost == budget                 # the retry in bands of k, to the unit
+        assert 0.7 < len(pts) / len(ref) * k < 1.3
+        assert 6.5 < cloud.depth_range[0] < 7.5          # the body's depth, not the search's 26 m+
+    cloud = StereoCloud(CAM, max_match_cost=first + m.binned_cost(win, 208, 8) - 1)
+    cloud.set_state({"depth_range": [40.0, 45.0], "density": 0.5})
+    pts = cloud.bind(left, right)(box)
+    assert pts.shape == (0, 3) and cloud.last_dropped and cloud.last_cost == first
+    assert cloud.depth_range is None                     # the next update: the full range
+    pts = cloud.bind(left, right)(box)
+    assert not cloud.last_dropped and cloud.last_disparities == 208 and len(pts) > 0
+    assert cloud.last_cost <= cloud.matcher.params.max_match_cost
+    # a first match dearer than bands of 8 rows can keep is matched in those: a cloud, over budget
+    tiny = StereoCloud(CAM, max_match_cost=1000)
+    assert len(tiny.bind(left, right)(box)) > 0 and not tiny.last_dropped
+    assert tiny.last_cost == m.binned_cost(win, 208, 8) > 1000
+    # without a cap both matches are made whatever they cost
+    free = StereoCloud(CAM)
+    free.set_state({"depth_range": [40.0, 45.0], "density": 0.5})
+    np.testing.assert_array_equal(free.bind(left, right)(box), ref)
+    assert free.last_cost == first + m.match_cost(win, 208) and not free.last_dropped
+
+
 def test_stereo_cloud_state_round_trips_and_refuses_damage():
     cloud = StereoCloud(CAM)
     assert cloud.get_state() == {"depth_range": None, "density": None}
@@ -515,22 +554,30 @@ def test_rows_binned_for_a_window_by_hand():
 
 
 def test_match_cost_and_rows_binned_by_cost_by_hand():
-    from track3d.stereo import MATCH_PX_DISPARITIES
-    assert MATCH_PX_DISPARITIES == 48
+    from track3d.stereo import BAND_SOURCE_COST, MATCH_PX_DISPARITIES
+    assert MATCH_PX_DISPARITIES == 48 and BAND_SOURCE_COST == 4
     m = StereoMatcher(CAM)
     assert m.match_cost((10, 30, 5, 15), 16) == 200 * 64          # 20 x 10 px x (16 + 48)
     assert m.match_cost((10, 30, 5, 15)) == 200 * (m.num_disparities + 48)   # the full range by default
-    win = (0, 100, 0, 100)                                           # 10,000 px
+    win = (300, 400, 0, 100)              # 10,000 px; searched over 16: columns 284..399 of both images
+    assert m.binned_cost(win, 16) == m.match_cost(win, 16) == 640_000
+    # bands of k from the image's top, plus averaging the crop's k x bands rows of 116 columns
+    assert m.binned_cost(win, 16, 2) == 100 * 50 * 64 + 4 * 116 * 50 * 2 == 366_400
+    assert m.binned_cost(win, 16, 4) == 100 * 25 * 64 + 4 * 116 * 25 * 4 == 206_400
+    assert m.binned_cost(win, 16, 8) == 100 * 13 * 64 + 4 * 116 * 13 * 8 == 131_456   # 13 bands: 0..103
+    assert m.binned_cost((300, 400, 3, 101), 16, 4) == 100 * 26 * 64 + 4 * 116 * 26 * 4   # bands 0..25
+    assert m.binned_cost((300, 310, 470, 480), 16, 8) == 10 * 2 * 64 + 4 * 26 * 2 * 8   # none past the image
+    assert m.binned_cost((0, 10, 0, 8), 16, 8) == 10 * 64 + 4 * 22 * 8   # OpenCV's minimum width: 16 + 5 + 1
+    for budget, k in ((640_000, 1), (400_000, 2), (210_000, 4), (140_000, 8), (100_000, 0)):
+        assert StereoMatcher(CAM, max_match_cost=budget).rows_for(win, 16) == k, budget
+        assert m.rows_for(win, 16, budget=budget) == k
     m = StereoMatcher(CAM, max_match_cost=640_000)
-    assert m.rows_for(win, 16) == 1                  # 10,000 x 64 = 640,000: within the cap
-    assert m.rows_for(win, 80) == 2                  # 1,280,000 -> 640,000 in bands of 2
-    assert m.rows_for(win, 208) == 4                 # 2,560,000 -> 640,000 in bands of 4
-    assert m.rows_for(win) == 4                      # the full range (208 here) by default
-    assert StereoMatcher(CAM, max_match_cost=100_000).rows_for(win, 16) == 4    # 4 rows at most
-    assert StereoMatcher(CAM, max_match_cost=400_000).rows_for(win, 16) == 2
-    # with both caps the stricter decides
+    assert m.rows_for(win, 80) == 4                  # 2 rows: 640,000 + 72,000 of averaging
+    assert m.rows_for(win, 208) == m.rows_for(win) == 8   # the full range (208 here) by default
+    # with both caps the larger k decides; the pixel cap alone bins in bands of 4 at most
     assert StereoMatcher(CAM, max_match_cost=10 ** 9, max_match_px=4000).rows_for(win, 16) == 4
     assert StereoMatcher(CAM, max_match_cost=400_000, max_match_px=10 ** 6).rows_for(win, 16) == 2
+    assert StereoMatcher(CAM, max_match_px=1).rows_for(win, 16) == 4
     with pytest.raises(ValueError, match="max_match_cost"):
         StereoParams(max_match_cost=-1)
 
@@ -547,13 +594,13 @@ def test_a_cost_cap_bins_the_full_range_search_and_not_the_followed_one():
     n1 = full.last_disparities
     assert n1 < 208
     win = full.matcher.window(a)
-    cloud = StereoCloud(CAM, max_match_cost=full.matcher.match_cost(win, n1))
-    k = cloud.matcher.rows_for(win)          # (208 + 48) / (n1 + 48): 2 here
-    assert k == 2
+    cloud = StereoCloud(CAM, max_match_cost=full.matcher.binned_cost(win, None, 2))
+    k = cloud.matcher.rows_for(win)
+    assert k == 2 and full.matcher.match_cost(win, n1) <= cloud.matcher.params.max_match_cost
     pts0 = cloud.bind(frames[0][0], frames[0][1])(a)
     assert 0.8 < len(pts0) / len(ref0) * k < 1.2
-    # what it matched: half the rows (to a band at the window's ends) over the full range
-    assert abs(cloud.last_cost - full.matcher.match_cost(win) / 2) <= (win[1] - win[0]) * (208 + 48)
+    # what it matched: bands of 2 rows over the full range
+    assert cloud.last_cost == cloud.matcher.binned_cost(win, None, 2) <= cloud.matcher.params.max_match_cost
     pts1 = cloud.bind(frames[1][0], frames[1][1])(a)
     assert cloud.last_disparities == n1 and cloud.matcher.rows_for(win, n1) == 1
     assert cloud.last_cost == full.last_cost == full.matcher.match_cost(win, n1)

@@ -292,8 +292,8 @@ def _parser() -> argparse.ArgumentParser:
                         "loop options and A3BoxNet model")
     b.add_argument("--stereo-option", action="append", metavar="KEY=VALUE",
                    help="with --depth stereo, a setting of the matcher (track3d.stereo.StereoParams, e.g. "
-                        "max_match_px=16384: a large window's rows averaged in bands, faster; max_match_cost=8000000: "
-                        "only the dearest windows, a bounded frame time)")
+                        "max_match_px=16384: a large window's rows averaged in bands, faster; max_match_cost=12000000: "
+                        "a matching budget per update, only the dearest windows binned: a bounded frame time)")
     b.add_argument("--out", metavar="JSON", help="also write the report as JSON here")
     b.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
     b.add_argument("--quiet", action="store_true", help="no progress messages on stderr")

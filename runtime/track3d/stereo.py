@@ -52,11 +52,16 @@ the image's top, so a large near body costs a half or a quarter of the matching;
 the camera's, and with them the disparity's precision (depth is the disparity along a row). A
 band's return is one point at the band's centre row. The follow rule compares returns per pixel
 of the grid matched on. `depth`, `depth_window` and `disparity` match every row.
-`max_match_cost` bins a window by its matching cost instead of its size (`match_cost`: pixels x
-(disparities searched + MATCH_PX_DISPARITIES), about proportional to the matcher's time): only
-the dearest windows, a large near body or a full-range search over a wide box, are binned, so
-the cost, and the loop's worst frames with it, are bounded (up to 4x the cap: 4 rows at most).
-A count, not a time: the same inputs give the same clouds on every machine.
+`max_match_cost` bounds what matching costs (`match_cost`: pixels x (disparities searched +
+MATCH_PX_DISPARITIES), about proportional to the matcher's time) instead of a window's size: only
+the dearest windows, a large near body or a full-range search over a wide box, are binned, in
+bands of up to MAX_COST_BAND_ROWS rows. In `StereoCloud` it is a budget per update: a followed
+search repeated over the full range gets what the first match left (in coarser bands), and when
+even the coarsest bands do not fit, the update has no cloud (the next one searches the full range
+with the whole budget) rather than the followed search's untrusted one. So an update's matching
+costs at most the cap, unless one window costs more than MAX_COST_BAND_ROWS times it (the whole
+640 x 480 frame over the full range: 78.6 M; such a window is matched in the coarsest bands). A
+count, not a time: the same inputs give the same clouds on every machine.
 
 Window mode: disparity is computed on the crop [x0 - D - m, x1 + m) x [y0 - m, y1 + m) of both
 images (D = search range, m = margin), which contains every right pixel a box pixel can
@@ -100,10 +105,11 @@ class StereoParams:
     max_match_px: int = 0           # clouds (points_window, StereoCloud): a window of more pixels than this
                                     # is matched with its rows averaged in pairs (or fours) until it has at
                                     # most this many (0: off, every row matched)
-    max_match_cost: int = 0         # clouds: a window whose matching costs more than this (`match_cost`:
-                                    # pixels x (disparities + MATCH_PX_DISPARITIES)) is matched with its
-                                    # rows averaged in pairs (or fours) until it costs at most this: a
-                                    # bound on the loop's worst frames (0: off)
+    max_match_cost: int = 0         # clouds: the matching budget of a call (StereoCloud: of an update, its
+                                    # retry included): a window dearer than this (`binned_cost`: pixels x
+                                    # (disparities + MATCH_PX_DISPARITIES)) is matched with its rows
+                                    # averaged in bands of 2, 4 or 8 until it fits: a bound on the loop's
+                                    # worst frames (0: off)
 
     def __post_init__(self) -> None:
         for name in ("block_size", "uniqueness_ratio", "lr_max_diff_px", "speckle_window", "speckle_range_px",
@@ -136,6 +142,18 @@ RANGE_END_PX = 1.0   # a narrowed search's matches this close to its near end ar
 # about 68 ns a pixel plus 1.44 ns a pixel and disparity (windows of 9,000-152,000 px, 32-208
 # disparities; an Intel Xeon, 2026-11), so a window's time is about its pixels x (n + 48).
 MATCH_PX_DISPARITIES = 48
+
+
+# max_match_px bins rows in bands of at most 4; a cost budget may go to 8 (a retried full-range
+# search in what the first match left): past that a band spans a body's features (8 rows of a
+# 100-row body) and the update goes without a cloud instead (StereoCloud)
+MAX_PX_BAND_ROWS = 4
+MAX_COST_BAND_ROWS = 8
+# Averaging a window's rows into bands reads every pixel of both crops (the search strip included)
+# once: about 4 of the cost's units per source pixel (the same host and windows, k = 2-8; without
+# it a band grid's matching was under-costed by 6-42% as k went 2 -> 8, and a budget's binned
+# updates took the longest)
+BAND_SOURCE_COST = 4
 
 
 def _match_cost(pixels: int, n: int) -> int:
@@ -282,40 +300,78 @@ class StereoMatcher:
         n = self.num_disparities if n is None else int(n)
         return _match_cost((u1 - u0) * (v1 - v0), n)
 
-    def rows_for(self, window: tuple[int, int, int, int], n: int | None = None) -> int:
-        """How many rows (1, 2 or 4) a cloud's `window` (u0, u1, v0, v1), searched over disparities
-        [0, n) (default the full range), is matched with averaged into one: the fewest that leave it
-        at most `max_match_px` pixels and at most `max_match_cost` (`match_cost` / k), at most 4
-        (both 0: 1, every row). Rows, not columns: depth is the disparity along a row, its precision
-        stays the camera's (at 16384 px, bands of rows cost the loop 0.02 AO_3d, 2 x 2 pixel blocks
-        0.06; docs/runtime.md "Stereo")."""
-        cap, cost_cap, (u0, u1, v0, v1) = self.params.max_match_px, self.params.max_match_cost, window
-        px, cost = (u1 - u0) * (v1 - v0), self.match_cost(window, n)
+    def _bands(self, window: tuple[int, int, int, int], k: int) -> tuple[int, int]:
+        """The rows (v0, v1) of the grid of k-row bands from the image's top that cover `window`'s
+        rows (grid row i averages the camera's rows k i .. k i + k - 1; only whole bands)."""
+        v0, v1 = window[2], window[3]
+        return (v0, v1) if k == 1 else (v0 // k, min(-(-v1 // k), self.camera.height // k))
+
+    def _columns(self, window: tuple[int, int, int, int], n: int) -> tuple[int, int]:
+        """The columns [c0, c1) of both images a window searched over [0, n) is matched on: every
+        right pixel its left pixels can match, at least OpenCV's minimum width."""
+        c0 = max(0, window[0] - n)
+        return c0, min(self.camera.width, max(window[1], c0 + self._min_width(n)))
+
+    def binned_cost(self, window: tuple[int, int, int, int], n: int | None = None, k: int = 1) -> int:
+        """The matching cost of `window` searched over [0, n) (default the full range) with its
+        rows averaged in bands of k: the band grid's pixels x (n + MATCH_PX_DISPARITIES), and for
+        k > 1 the averaging, BAND_SOURCE_COST per pixel of the crop's rows (`_columns`)."""
+        b0, b1 = self._bands(window, k)
+        n = self.num_disparities if n is None else int(n)
+        rows = max(0, b1 - b0)
+        cost = _match_cost((window[1] - window[0]) * rows, n)
+        if k > 1:
+            c0, c1 = self._columns(window, n)
+            cost += BAND_SOURCE_COST * (c1 - c0) * rows * k
+        return cost
+
+    def rows_for(self, window: tuple[int, int, int, int], n: int | None = None,
+                 budget: int | None = None) -> int:
+        """How many rows a cloud's `window` (u0, u1, v0, v1), searched over disparities [0, n)
+        (default the full range), is matched with averaged into one: the fewest (1, 2, 4) that leave
+        it at most `max_match_px` pixels (px / k), and the fewest (1, 2, 4, 8) whose band grid costs
+        at most `budget` (`binned_cost`; default `max_match_cost`, 0: no bound), the larger of the
+        two; 0 when the coarsest bands cost more than the budget. Rows, not columns: depth is the
+        disparity along a row, its precision stays the camera's (at 16384 px, bands of rows cost
+        the loop 0.02 AO_3d, 2 x 2 pixel blocks 0.06; docs/runtime.md "Stereo")."""
+        cap, (u0, u1, v0, v1) = self.params.max_match_px, window
+        if budget is None:
+            budget = self.params.max_match_cost or None
         k = 1
-        while k < 4 and ((cap > 0 and px > cap * k) or (cost_cap > 0 and cost > cost_cap * k)):
+        while k < MAX_PX_BAND_ROWS and cap > 0 and (u1 - u0) * (v1 - v0) > cap * k:
             k *= 2
+        if budget is not None:
+            while self.binned_cost(window, n, k) > budget:
+                if k >= MAX_COST_BAND_ROWS:
+                    return 0
+                k *= 2
         return k
 
     def _window_disparity(self, left: np.ndarray, right: np.ndarray, box2d, n: int | None,
-                          binned: bool = False) -> tuple[np.ndarray, tuple | None, int]:
+                          binned: bool = False, budget: int | None = None, strict: bool = False
+                          ) -> tuple[np.ndarray, tuple | None, int, int]:
         """((v1-v0, u1-u0) float32 disparity of the window around `box2d`, 0 = none, its
-        (u0, u1, v0, v1) and k, the rows averaged into one); an invalid box: an empty array, None,
-        1. binned: k = `rows_for(window)`, else 1; with k > 1 the window's rows v0, v1 and the
-        disparity map's are on the grid of k-row bands from the image's top (grid row i averages
-        the camera's rows k i .. k i + k - 1)."""
+        (u0, u1, v0, v1), k, the rows averaged into one, and what it cost, `binned_cost`); an
+        invalid box: an empty array, None, 1, 0. binned: k = `rows_for(window, n, budget)`, else 1; a window whose coarsest bands cost
+        more than the budget is matched in those, or not at all if `strict` (an empty array, None,
+        0, 0). With k > 1 the window's rows v0, v1 and the disparity map's are on the grid of k-row
+        bands from the image's top (`_bands`)."""
         gl, gr = self._check(left, right)
         win = self.window(box2d)
         if win is None:
-            return np.zeros((0, 0), np.float32), None, 1
+            return np.zeros((0, 0), np.float32), None, 1, 0
         n = self.num_disparities if n is None else int(n)
-        k = self.rows_for(win, n) if binned else 1
+        k = self.rows_for(win, n, budget) if binned else 1
+        if k == 0:
+            if strict:
+                return np.zeros((0, 0), np.float32), None, 0, 0
+            k = MAX_COST_BAND_ROWS
         u0, u1, v0, v1 = win
         if k > 1:
-            v0, v1 = v0 // k, min(-(-v1 // k), self.camera.height // k)
+            v0, v1 = self._bands(win, k)
             if v1 <= v0:
-                return np.zeros((0, 0), np.float32), None, 1
-        c0 = max(0, u0 - n)   # every right pixel the window can match
-        c1 = min(self.camera.width, max(u1, c0 + self._min_width(n)))   # OpenCV's minimum width
+                return np.zeros((0, 0), np.float32), None, 1, 0
+        c0, c1 = self._columns(win, n)
         pad = n - (u0 - c0)     # > 0 only at the image's left border
         if k > 1:
             size = (c1 - c0, v1 - v0)
@@ -324,29 +380,33 @@ class StereoMatcher:
         else:
             cl, cr = np.ascontiguousarray(gl[v0:v1, c0:c1]), np.ascontiguousarray(gr[v0:v1, c0:c1])
         d = self._disparity(cl, cr, pad=pad, n=n, rows=k)
-        return d[:, u0 - c0:u1 - c0], (u0, u1, v0, v1), k
+        return d[:, u0 - c0:u1 - c0], (u0, u1, v0, v1), k, self.binned_cost(win, n, k)
 
     def depth_window(self, left: np.ndarray, right: np.ndarray, box2d,
                      n: int | None = None) -> tuple[np.ndarray, tuple | None]:
         """Depth of the window around `box2d` only: ((v1-v0, u1-u0) float64 z, 0 = none,
         (u0, u1, v0, v1)); an empty or invalid box gives an empty array and None. n: the
         disparities [0, n) searched (`disparities_to`), default the full range."""
-        d, win, _ = self._window_disparity(left, right, box2d, n)
+        d, win, _, _ = self._window_disparity(left, right, box2d, n)
         return (np.zeros((0, 0)), None) if win is None else (self._to_depth(d), win)
 
     def points_window(self, left: np.ndarray, right: np.ndarray, box2d, n: int | None = None) -> np.ndarray:
         """(N, 3) float32 cloud (left frame) of the window around `box2d` (n: as depth_window),
         matched with rows averaged if the window has more than `max_match_px` pixels or costs more than
-        `max_match_cost` (`rows_for`)."""
+        `max_match_cost` (`rows_for`; a window whose coarsest bands cost more is matched in those)."""
         return self._cloud(left, right, box2d, n)[0]
 
-    def _cloud(self, left: np.ndarray, right: np.ndarray, box2d, n: int | None) -> tuple[np.ndarray, int]:
-        """(points_window's cloud, the pixels of the grid it was matched on). Converted where there
-        is a disparity only (the window's depth map, built whole first, cost 1.3 ms of a 256 x 180
+    def _cloud(self, left: np.ndarray, right: np.ndarray, box2d, n: int | None,
+               budget: int | None = None, strict: bool = False) -> tuple[np.ndarray, int, int]:
+        """(points_window's cloud, the pixels of the grid it was matched on, what the matching cost
+        (`binned_cost`); pixels -1: `strict` and the window does not fit `budget` (`rows_for`),
+        nothing matched). Converted where there is a
+        disparity only (the window's depth map, built whole first, cost 1.3 ms of a 256 x 180
         body's 8.4 ms window, measured alone on one core)."""
-        d, win, k = self._window_disparity(left, right, box2d, n, binned=True)
+        d, win, k, cost = self._window_disparity(left, right, box2d, n, binned=True, budget=budget,
+                                                 strict=strict)
         if win is None:
-            return np.zeros((0, 3), np.float32), 0
+            return np.zeros((0, 3), np.float32), (-1 if k == 0 else 0), 0
         u0, _, v0, _ = win
         vv, uu = np.nonzero(d > 0)
         zz = self.fb / d[vv, uu].astype(np.float64)    # as _to_depth: the same z, bit for bit
@@ -358,7 +418,7 @@ class StereoMatcher:
         else:    # a band's centre row in the camera's pixels
             out[:, 1] = (k * (vv + v0 + 0.5) - c.cy) / c.fy * zz
         out[:, 2] = zz
-        return out, d.size
+        return out, d.size, cost
 
 
 # StereoCloud's depth following: the depths of the last window are its returns' FOLLOW_QUANTILE
@@ -383,15 +443,20 @@ class StereoCloud:
     searching only the disparities of the depths the body can be at after the last window (the
     full range from `z_min_m` at the start, after `reset()`, and whenever the followed search
     finds too little). Its state is `depth_range` (`get_state` / `set_state`: checkpoint it with
-    the Track3D's so that a restored loop matches as the uninterrupted one would)."""
+    the Track3D's so that a restored loop matches as the uninterrupted one would).
+
+    With `max_match_cost` set, the cap is each update's budget, the full-range retry's included
+    (`StereoMatcher.rows_for`); `last_cost` is what an update matched, `last_dropped` whether its
+    followed search was not trusted and the budget left too little to search again (no cloud)."""
 
     def __init__(self, camera: Camera, params: StereoParams | None = None, **overrides):
         self.matcher = StereoMatcher(camera, params, **overrides)
         self.depth_range: tuple[float, float] | None = None   # the last window's body depths (m)
         self.density: float | None = None    # the last window's returns per pixel
         self.last_disparities: int = self.matcher.num_disparities   # [0, n) searched by the last call
-        self.last_cost: int = 0   # what the last call matched: its windows' pixels (of the grid matched
-                                  # on) x (disparities + MATCH_PX_DISPARITIES), a retry's included
+        self.last_cost: int = 0   # what the last call matched: its windows' `binned_cost`,
+                                  # a retry's included
+        self.last_dropped: bool = False   # the last call's retry did not fit the budget: no cloud
 
     def reset(self) -> None:
         """Forget the body's depth: the next window searches the full range (a new body)."""
@@ -423,24 +488,33 @@ class StereoCloud:
             return self.matcher.num_disparities
         return self.matcher.disparities_to(self.depth_range[0] / k)
 
-    def _points(self, gl: np.ndarray, gr: np.ndarray, box2d, n: int) -> tuple[np.ndarray, float]:
-        """(the window's cloud, its returns per pixel of the grid it was matched on)."""
-        pts, area = self.matcher._cloud(gl, gr, box2d, n)
-        self.last_cost += _match_cost(area, n)
-        return pts, (len(pts) / area if area else 0.0)
+    def _points(self, gl: np.ndarray, gr: np.ndarray, box2d, n: int, budget: int | None = None,
+                strict: bool = False) -> tuple[np.ndarray, float, bool]:
+        """(the window's cloud, its returns per pixel of the grid it was matched on, whether it was
+        matched: False when `strict` and the window does not fit `budget`)."""
+        pts, area, cost = self.matcher._cloud(gl, gr, box2d, n, budget, strict)
+        if area < 0:
+            return pts, 0.0, False
+        self.last_cost += cost
+        return pts, (len(pts) / area if area else 0.0), True
 
     def bind(self, left: np.ndarray, right: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
         """A callable box2d -> (N, 3) float32 cloud of this pair around the box."""
         gl, gr = self.matcher._check(left, right)
 
         def points(box2d) -> np.ndarray:
-            self.last_cost = 0
+            self.last_cost, self.last_dropped = 0, False
+            budget = self.matcher.params.max_match_cost or None
             n = self._search()
-            pts, density = self._points(gl, gr, box2d, n)
+            pts, density, _ = self._points(gl, gr, box2d, n, budget)
             if n < self.matcher.num_disparities and (len(pts) < FOLLOW_MIN_POINTS or self.density is None
                                                      or density < FOLLOW_MIN_SHARE * self.density):
                 n = self.matcher.num_disparities
-                pts, density = self._points(gl, gr, box2d, n)
+                left = None if budget is None else budget - self.last_cost
+                # the followed cloud is not trusted (a nearer body's texture matched at wrong
+                # depths): no cloud rather than it when the retry does not fit what is left
+                pts, density, matched = self._points(gl, gr, box2d, n, left, strict=True)
+                self.last_dropped = not matched
             self.last_disparities = n
             if self.matcher.params.follow_depth > 0.0:
                 if len(pts) >= FOLLOW_MIN_POINTS:
