@@ -112,6 +112,34 @@ def test_bench_times_a_stereo_camera_s_loop_from_the_package_alone(capsys):
     assert rep["track3d"]["options"]["outline_contain"] is True          # stereo's loop options
     assert rep["results"][0]["statuses"] == {"tracking": 4}
     assert rep["source"]["stereo"]["max_match_px"] == 0                 # the matcher's settings, recorded
+    m = rep["results"][0]["matching"]          # the matching inside the frustum stage, and its price here
+    assert 0 < m["ms"]["median_ms"] <= rep["results"][0]["stages"]["frustum"]["max_ms"]
+    assert m["cost_median"] > 0 and m["dropped"] == 0 and m["price"]["updates"] == 4
+    assert m["price"]["ns_per_unit"] > 0 and set(m["price"]["budget_for_ms"]) == {"5", "10", "20"}
+    assert main(["bench", "--depth", "stereo", "--frames", "4", "--threads", "1", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "stereo matching" in out and "ns per unit of cost" in out and "max_match_cost=" in out
+
+
+def test_the_price_of_a_unit_of_matching_cost_by_hand():
+    """bench.matching_price: ms = price x cost by least squares; the budget for a deadline leaves
+    room for the p99 of the times above that price."""
+    p = bench.matching_price([1e6, 2e6, 3e6, 4e6], [2.0, 4.0, 6.0, 8.0])    # 2 ns a unit, exactly
+    assert p["updates"] == 4 and p["ns_per_unit"] == pytest.approx(2.0) and p["above_p99_ms"] == pytest.approx(0.0)
+    assert p["budget_for_ms"] == {"5": 2_500_000, "10": 5_000_000, "20": 10_000_000}
+    p = bench.matching_price([1e6, 2e6, 3e6, 4e6], [2.0, 4.0, 6.0, 9.0])
+    b = 64e6 / 30e12                                          # sum(c t) / sum(c c), ms a unit
+    assert p["ns_per_unit"] == pytest.approx(b * 1e6)
+    r = np.array([2.0, 4.0, 6.0, 9.0]) - b * np.array([1e6, 2e6, 3e6, 4e6])
+    assert p["above_p99_ms"] == pytest.approx(np.percentile(r, 99)) and 0.4 < p["above_p99_ms"] < 0.47
+    assert p["budget_for_ms"]["10"] == int((10 - p["above_p99_ms"]) / b)
+    for costs, ms in (([], []), ([5e6], [6.0]), ([0, 0, 0], [0.1, 0.1, 0.2])):   # nothing to price
+        q = bench.matching_price(costs, ms)
+        assert q["ns_per_unit"] is None and q["budget_for_ms"] == {"5": None, "10": None, "20": None}
+    q = bench.matching_price([1e6, 2e6], [30.0, 30.0])   # 1.8e-5 ms a unit, 12 ms above it once
+    assert q["ns_per_unit"] == pytest.approx(18.0) and q["above_p99_ms"] == pytest.approx(12 - 0.01 * 18)
+    assert q["budget_for_ms"]["5"] is None and q["budget_for_ms"]["10"] is None    # the margin alone is more
+    assert q["budget_for_ms"]["20"] == int((20 - q["above_p99_ms"]) / 1.8e-5)
 
 
 def test_bench_takes_the_stereo_matcher_s_settings(capsys):

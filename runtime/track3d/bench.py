@@ -72,6 +72,29 @@ def percentiles(ms) -> dict:
             "p99_9_ms": float(np.percentile(a, 99.9)), "max_ms": float(a.max()), "mean_ms": float(a.mean())}
 
 
+MATCH_DEADLINES_MS = (5.0, 10.0, 20.0)   # the matching times a stereo bench prices a budget for
+
+
+def matching_price(costs, ms) -> dict:
+    """What stereo matching costs on this CPU, from the updates of a run (costs: `StereoCloud.last_cost`
+    of each update, ms: its matching's time): the least-squares price, ms = ns_per_unit * 1e-6 *
+    cost (the cost counts the matcher's per-pixel work too: no fixed term), the p99 of the times
+    above it (ms) and the budget (`StereoParams.max_match_cost`) that keeps an update's matching
+    within each of MATCH_DEADLINES_MS at that p99 (None where none would). The cost is a count of
+    work, the same on every machine: this is its price here."""
+    c, t = np.asarray(costs, dtype=np.float64), np.asarray(ms, dtype=np.float64)
+    out = {"updates": int(c.size), "ns_per_unit": None, "above_p99_ms": None,
+           "budget_for_ms": {f"{d:g}": None for d in MATCH_DEADLINES_MS}}
+    if c.size < 2 or not np.any(c > 0):
+        return out
+    b = float(np.dot(c, t) / np.dot(c, c))
+    r99 = float(np.percentile(t - b * c, 99))
+    out.update(ns_per_unit=b * 1e6, above_p99_ms=r99)
+    if b > 0:
+        out["budget_for_ms"] = {f"{d:g}": (int((d - r99) / b) if d > r99 else None) for d in MATCH_DEADLINES_MS}
+    return out
+
+
 # --- frames -----------------------------------------------------------------------------------
 
 def _texture(h: int, w: int, seed: int = 0) -> np.ndarray:
@@ -215,13 +238,27 @@ NETWORK_TRACKERS = ("siamfc", "siamfc-edge", "edgetrack")
 STAGE_NAMES = ("track2d", "net2d", "frustum", "box3d", "net3d", "fusion", "end_to_end")
 
 
-def _time_loop(t3d, passes, frames: int, stereo=None) -> tuple[dict, dict, dict]:
+def _timed_points(cloud, bound, acc: list):
+    """`bound` (a StereoCloud's callable) with each call's time (ms), cost and drop added to acc."""
+    def points(box2d):
+        t = time.perf_counter()
+        out = bound(box2d)
+        acc[0] += (time.perf_counter() - t) * 1e3
+        acc[1] += cloud.last_cost
+        acc[2] += int(cloud.last_dropped)
+        return out
+    return points
+
+
+def _time_loop(t3d, passes, frames: int, stereo=None) -> tuple[dict, dict, dict, dict | None]:
     """stereo: a track3d.stereo.StereoCloud; the frames then hold right images, matched inside
-    each update (their time in the frustum stage)."""
+    each update (their time in the frustum stage, and in the fourth value: the matching's time,
+    cost and price per update)."""
     net2d = _NetTimer(t3d.tracker2d)
     net3d = _NetTimer(t3d.estimator)
     rows: dict[str, list] = {k: [] for k in STAGE_NAMES}
     statuses: dict[str, int] = {}
+    match_ms, match_cost, dropped = [], [], 0
     done = 0
     while done < frames + WARMUP:
         for category, fr in passes:
@@ -232,8 +269,9 @@ def _time_loop(t3d, passes, frames: int, stereo=None) -> tuple[dict, dict, dict]
             t3d.init(img, box, category, points=pts)
             net2d.take(), net3d.take()
             for img, pts, _ in fr[1:]:
+                acc = [0.0, 0, 0]
                 if stereo is not None:
-                    pts = stereo.bind(img, pts)
+                    pts = _timed_points(stereo, stereo.bind(img, pts), acc)
                 t = time.perf_counter()
                 res = t3d.update(img, pts)
                 e2e = (time.perf_counter() - t) * 1e3
@@ -245,12 +283,23 @@ def _time_loop(t3d, passes, frames: int, stereo=None) -> tuple[dict, dict, dict]
                                  ("box3d", res.ms["box3d"]), ("net3d", n3), ("fusion", res.ms["fusion"]),
                                  ("end_to_end", e2e)):
                         rows[k].append(v)
+                    if stereo is not None:
+                        match_ms.append(acc[0])
+                        match_cost.append(acc[1])
+                        dropped += acc[2]
                 if done >= frames + WARMUP:
                     break
             if done >= frames + WARMUP:
                 break
     stages = {k: percentiles(v) for k, v in rows.items()}
-    return stages, statuses, {**net2d.feeds, **net3d.feeds}
+    matching = None
+    if stereo is not None:
+        costs = np.asarray(match_cost, dtype=np.float64)
+        matching = {"ms": percentiles(match_ms),
+                    "cost_median": float(np.median(costs)) if costs.size else None,
+                    "cost_max": float(costs.max()) if costs.size else None,
+                    "dropped": dropped, "price": matching_price(costs, match_ms)}
+    return stages, statuses, {**net2d.feeds, **net3d.feeds}, matching
 
 
 def _time_models(t3d, feeds: dict, frames: int) -> dict:
@@ -319,7 +368,7 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
                                  f"(time the loop without --models-only)")
             say(f"{t3d.tracker_name}+{t3d.estimator_name} at {threads} thread(s) on CPU(s) {cpus} ...")
             wall0, cpu0 = time.perf_counter(), time.process_time()
-            stages, statuses, feeds = _time_loop(t3d, passes, min(cfg.frames, 200) if cfg.models_only else cfg.frames,
+            stages, statuses, feeds, matching = _time_loop(t3d, passes, min(cfg.frames, 200) if cfg.models_only else cfg.frames,
                                                  StereoCloud(camera, stereo_params) if stereo else None)
             wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
             row = {"threads": threads, "cpus": cpus, "pinned": pinned,
@@ -330,6 +379,8 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
             else:
                 e2e = stages["end_to_end"]["median_ms"]
                 row.update(frames=cfg.frames, fps=1e3 / e2e if e2e else None, stages=stages, statuses=statuses)
+                if matching is not None:
+                    row["matching"] = matching
             results.append(row)
             del t3d
             gc.collect()
@@ -363,6 +414,21 @@ def _f(v) -> str:
     return cell(v, "{:.2f}")
 
 
+def _matching_lines(m: dict) -> list[str]:
+    v, p = m["ms"], m["price"]
+    lines = [f"{'stereo matching':18s} {_f(v['median_ms']):>8s} {_f(v['p99_ms']):>8s} {_f(v['p99_9_ms']):>8s} "
+             f"{_f(v['max_ms']):>8s}  (in frustum; cost median {cell(m['cost_median'], '{:,.0f}')}, max "
+             f"{cell(m['cost_max'], '{:,.0f}')}; {m['dropped']} update(s) without a cloud)"]
+    if p["ns_per_unit"] is None:
+        lines.append("  its price here: n/a (too few updates with a match)")
+        return lines
+    fits = ", ".join(f"{d} ms: max_match_cost={c}" if c else f"{d} ms: none fits"
+                     for d, c in p["budget_for_ms"].items())
+    lines.append(f"  its price here: {p['ns_per_unit']:.2f} ns per unit of cost (p99 {p['above_p99_ms']:.2f} ms above "
+                 f"that); a budget per update for {fits}")
+    return lines
+
+
 def format_table(report: dict) -> str:
     """The report as a text table (one block per thread count), machine line first."""
     m = report["machine"]
@@ -388,6 +454,8 @@ def format_table(report: dict) -> str:
         for k, v in r["stages"].items():
             lines.append(f"{k:18s} {_f(v['median_ms']):>8s} {_f(v['p99_ms']):>8s} {_f(v['p99_9_ms']):>8s} "
                          f"{_f(v['max_ms']):>8s}")
+        if r.get("matching"):
+            lines.extend(_matching_lines(r["matching"]))
     ld = report["load"]
     lines.append("")
     lines.append(f"load: other processes {_pct(ld['busy_before'])} before, {_pct(ld['busy_after'])} after; "

@@ -289,7 +289,8 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--depth", choices=("map", "stereo"), default="map",
                    help="map: the clouds are given (a depth sensor); stereo: a stereo camera's loop, the cloud "
                         "matched from the left/right pair around the 2D box inside each update, with the stereo "
-                        "loop options and A3BoxNet model")
+                        "loop options and A3BoxNet model; the matching's time and its price on this CPU (ns per "
+                        "unit of cost, the max_match_cost for 5 / 10 / 20 ms) are reported")
     b.add_argument("--stereo-option", action="append", metavar="KEY=VALUE",
                    help="with --depth stereo, a setting of the matcher (track3d.stereo.StereoParams, e.g. "
                         "max_match_px=16384: a large window's rows averaged in bands, faster; max_match_cost=12000000: "
