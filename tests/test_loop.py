@@ -605,6 +605,31 @@ def test_a_body_cut_by_the_border_keeps_the_size_of_its_last_whole_view():
             Track3D(CAM, OracleTracker(b2), _Enclosing(), hold_cut_size=bad)
 
 
+def test_a_stereo_box_cut_by_the_border_keeps_the_size_of_its_last_whole_view():
+    """Without measured faces (stereo's loop) the cross-section comes from the 2D box (weight_2d),
+    and a 2D box cut by the image border spans the part of the body in view: the reported box
+    keeps the last whole view's width from the face it sees instead of shrinking to the part."""
+    z, r = 8.0, 1.0
+    left = -CAM.cx / CAM.fx * z
+    views = [render_sphere(CAM, c, r) for c in ((0.0, 0.0, z), (left - r + 0.4, 0.0, z))]
+    pts = [CAM.backproject_depth(v[1]) for v in views]
+    b2 = np.array([views[0][2], views[0][2], views[1][2]])
+
+    def run(**kw):
+        t = Track3D(CAM, OracleTracker(b2), _Enclosing(), depth_smoothing=0.0, fusion=False, measured_faces=False,
+                    weight_2d=0.75, **kw)
+        t.init(views[0][0], b2[0], points=pts[0])
+        first = t.update(views[0][0], pts[0]).box3d                   # a whole view
+        return first, t.update(views[1][0], pts[1]).box3d
+
+    first, held = run()
+    _, part = run(hold_cut_size=0.0)
+    assert part[3] < 0.5 * first[3]                                  # the cut section: a part
+    assert held[3] == pytest.approx(first[3]) and held[4] == pytest.approx(first[4], rel=0.05)
+    assert held[0] + held[3] / 2 == pytest.approx(part[0] + part[3] / 2)   # the face it sees stays
+    assert iou_3d(held, views[1][3]) > iou_3d(part, views[1][3]) + 0.2
+
+
 class _Offset:
     """The points' enclosing box pushed 0.5 m back and 10% wide: an amodal estimator whose faces are off."""
 

@@ -144,7 +144,8 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--hold-cut-size", type=bounded(float, 0, high=1), default=None,
                    help="a body cut by the image border keeps, on the cut axis, its extent from the last whole view "
                         "when the returns span less than this fraction of it (0: off; default "
-                        "track3d.tracker.HOLD_CUT_SIZE, 0.8; with measured faces)")
+                        "track3d.tracker.HOLD_CUT_SIZE, 0.8; the returns' extent with measured faces, the 2D "
+                        "box's cross-section without: stereo)")
     t.add_argument("--edge-pad", type=bounded(float, 0, high=10), default=None, metavar="PX",
                    help="pixels added to the returns' extent across the line of sight (half on each side: the "
                         "outline lies beyond the outermost pixel centres; 0: off; default "
