@@ -113,7 +113,7 @@ def test_bench_times_a_stereo_camera_s_loop_from_the_package_alone(capsys):
     assert rep["results"][0]["statuses"] == {"tracking": 4}
     assert rep["source"]["stereo"]["max_match_px"] == 0                 # the matcher's settings, recorded
     m = rep["results"][0]["matching"]          # the matching inside the frustum stage, and its price here
-    assert 0 < m["ms"]["median_ms"] <= rep["results"][0]["stages"]["frustum"]["max_ms"]
+    assert set(m["ms"]) == set(rep["results"][0]["stages"]["frustum"])       # timed like a stage
     assert m["cost_median"] > 0 and m["dropped"] == 0 and m["price"]["updates"] == 4
     assert m["price"]["ns_per_unit"] > 0 and set(m["price"]["budget_for_ms"]) == {"5", "10", "20"}
     assert main(["bench", "--depth", "stereo", "--frames", "4", "--threads", "1", "--quiet"]) == 0
