@@ -410,3 +410,62 @@ def test_the_views_stay_bounded_over_a_long_watch():
                              if g is not None for v in g.values()) + st["body"].nbytes)
     assert bv.restarts == 0 and bv.views > p.max_points // p.view_points   # the cap was reached, not avoided
     assert max(sizes[-240:]) <= max(sizes[:240])
+
+
+def test_past_points_are_the_views_in_this_frame():
+    """The turning ellipsoid (every frame a key frame): once two views are registered, the views'
+    points put in this frame's camera frame lie on the ellipsoid as it is now (within 5 cm
+    of its surface on average, the turn since the last registered key frame left out: 3 degrees),
+    and they hold points deeper than any return of this frame (the side turned out of view).
+    Before that, None."""
+    bv = BodyViews(CAM, BodyViewsParams(every=1))
+    for k in range(40):
+        R = _rot_y(3.0 * k)
+        pts, box = _ellipsoid_view(R)
+        bv.update(pts, box)
+        past = bv.past_points(pts)
+        if k < 2:
+            assert past is None
+            continue
+        assert past.dtype == np.float32 and past.ndim == 2 and past.shape[1] == 3
+        # the ellipsoid's implicit radius: 1 on its surface
+        body = (past - CENTRE) @ R          # camera -> body frame
+        rho = np.sqrt(((body / AXES) ** 2).sum(axis=1))
+        assert np.abs(rho - 1.0).mean() < 0.05
+    assert past[:, 2].max() > pts[:, 2].max() + 0.3
+    assert bv.past_points(np.zeros((0, 3), np.float32)) is None
+
+
+def test_the_loop_gives_a_past_views_model_the_views_before_its_estimate():
+    """A stand-in estimator that takes past=: the loop updates the views first and passes their
+    points in this frame (None until two views are registered); estimators without takes_past
+    never get the keyword."""
+    from track3d.tracker import Track3D
+
+    class Recorder:
+        takes_past = True
+        amodal = True
+
+        def __init__(self):
+            self.past = []
+
+        def estimate(self, points, category, past=None):
+            self.past.append(None if past is None else len(past))
+            return np.array([*points.mean(axis=0), 1.0, 1.0, 1.0])
+
+    frames = [_ellipsoid_view(_rot_y(3.0 * k)) for k in range(8)]
+    gt = np.array([b for _, b in frames])
+    image = np.zeros((CAM.height, CAM.width, 3), np.uint8)
+    rec = Recorder()
+    t = Track3D(CAM, _oracle(gt), rec, body_views=BodyViewsParams(every=1))
+    t.init(image, gt[0], points=frames[0][0])
+    for pts, _ in frames[1:]:
+        t.update(image, pts)
+    # init's estimate and the first update: no registered pair yet; then the views of every frame
+    assert rec.past[:2] == [None, None] and all(n is not None and n > 100 for n in rec.past[3:])
+
+
+def _oracle(gt):
+    from track3d.trackers2d import create_tracker
+
+    return create_tracker("oracle", gt=gt, absent=np.zeros(len(gt), bool))

@@ -623,3 +623,53 @@ def test_distillation_loss_hand_case_and_a_run_with_a_teacher(exported, trained,
     bad = TrainConfig(**{**run.__dict__, "out": str(tmp_path / "bad"), "size_norm": "extent"})
     with pytest.raises(ValueError, match="cannot teach"):
         train(bad, progress=False, log=lambda *_: None)
+
+
+def test_a_past_views_model_trains_exports_and_takes_the_views(tiny_dataset, tmp_path):
+    """--past-views: a frustum whose sequence has two registered views holds PAST_VIEWS' counts of
+    points (the frustum's sample beside the views'), the cache records the counts, the exported
+    model carries them, its estimator takes past= and its answer moves with the views; a model
+    without them ignores past=. The cache needs every frame."""
+    from track3d.boxnet import PAST_VIEWS, A3BoxNetEstimator, with_past_views
+    from track3d_train.boxnet.data import PointCache, prepare_split
+    from track3d_train.boxnet.export import export_checkpoint
+    from track3d_train.boxnet.train import TrainConfig, train
+
+    with pytest.raises(ValueError, match="every frame"):
+        prepare_split(tiny_dataset, "train", tmp_path, jitters=0, past_views=True, frame_step=2, progress=False)
+    path = prepare_split(tiny_dataset, "train", tmp_path, jitters=1, min_points=8, past_views=True, progress=False)
+    cache = PointCache(path)
+    assert cache.info["past_views"] == PAST_VIEWS
+    sizes = {len(cache.points(i)) for i in range(len(cache))}
+    joined = PAST_VIEWS["current"] + PAST_VIEWS["past"]
+    assert any(PAST_VIEWS["current"] < n <= joined for n in sizes)   # frames with views ...
+    assert any(n <= 4096 and cache.frame[i] == 0 for i, n in enumerate(map(len, map(cache.points, range(len(cache))))))
+    cfg = TrainConfig(train_cache=str(path), out=str(tmp_path / "run"), num_points=64, width=0.25, epochs=1,
+                      batch=8, val_every=2, size_norm="extent", use_category=False, max_steps=3)
+    train(cfg, progress=False, log=lambda *_: None)
+    meta = export_checkpoint(tmp_path / "run" / "last.pt", tmp_path / "pv.onnx", log=lambda *_: None)
+    assert meta["past_views"] == PAST_VIEWS
+    est = A3BoxNetEstimator(tmp_path / "pv.onnx")
+    assert est.takes_past and est.past_views == PAST_VIEWS
+    rng = np.random.default_rng(0)
+    pts = rng.uniform([-1, -1, 9], [1, 1, 9.5], size=(300, 3)).astype(np.float32)
+    past = rng.uniform([-1, -1, 9], [1, 1, 12], size=(700, 3)).astype(np.float32)
+    alone = est.estimate(pts, -1)
+    assert np.array_equal(est.estimate(pts, -1, past=None), alone)
+    assert not np.array_equal(est.estimate(pts, -1, past=past), alone)
+    # the joined cloud: the frustum sampled to "current", the views to at most "past"
+    j = with_past_views(pts, past, 0)
+    assert j.shape == (joined, 3) and j.dtype == np.float32
+    assert len(with_past_views(pts, past[:10], 0)) == PAST_VIEWS["current"] + 10
+    assert with_past_views(pts, None, 0) is not None and len(with_past_views(pts, None, 0)) == len(pts)
+    with pytest.raises(ValueError):
+        est.estimate(pts, -1, past=np.full((700, 3), np.nan, np.float32))   # checked on the sample it sees
+
+
+def test_a_model_without_past_views_ignores_them(exported):
+    from track3d.boxnet import A3BoxNetEstimator
+
+    est = A3BoxNetEstimator(exported[0])
+    assert not est.takes_past and est.past_views is None
+    pts = np.random.default_rng(1).uniform([-1, -1, 9], [1, 1, 9.5], size=(300, 3)).astype(np.float32)
+    assert np.array_equal(est.estimate(pts, 0, past=pts + [0, 0, 2]), est.estimate(pts, 0))

@@ -359,6 +359,20 @@ class BodyViews:
             self.extent = self._extent.copy()
         return front + self._offset if np.isfinite(self._offset) else None
 
+    def past_points(self, points: np.ndarray) -> np.ndarray | None:
+        """The views' points (m, 3) float32 in this frame's camera frame, or None (fewer than two
+        registered views): the body frame seen from the last registered key frame, moved by the
+        shift of the returns' mean since then (this frame's `points` (n, 3) against that key
+        frame's grid; the turn since it, at most `every` frames, is left out). Call after this
+        frame's `update`. Points the body turned out of view are among them: a box network given
+        them sees part of the side hidden now (track3d.boxnet, models with ``past_views``)."""
+        pts = np.asarray(points).reshape(-1, 3)
+        if self.views < 2 or len(self._body) == 0 or len(pts) == 0:
+            return None
+        inv = np.linalg.inv(self._G)
+        shift = inv[:3, 3] + (pts.mean(axis=0, dtype=np.float64) - self._centroid)
+        return (self._body @ inv[:3, :3].T + shift).astype(np.float32)
+
     def _carve(self, grid: SurfaceGrid, G: np.ndarray, front: float) -> None:
         """The carved limit of a registered key frame (`carved_back` against the kept views from
         other directions); the frame joins the kept views when none is within carve_angle_deg of

@@ -26,7 +26,7 @@ __all__ = [
     "KIND", "DEFAULT_MODEL", "NARROW_MODEL", "FULL_WIDTH_MODEL", "STEREO_FULL_WIDTH_MODEL", "SENSOR_MODELS", "model_for_sensor", "SIZE_NORMS",
     "BACKLIT_MODELS", "BACKLIT_PHASE_DEG", "backlit_model_for",
     "MAX_EXTENT_M", "INPUT_POINTS", "INPUT_CATEGORY", "OUTPUTS", "VIEWS", "SENSOR_VIEWS", "views_for", "MIRRORS",
-    "one_hot", "average_boxes", "A3BoxNetEstimator", "create",
+    "PAST_VIEWS", "with_past_views", "one_hot", "average_boxes", "A3BoxNetEstimator", "create",
 ]
 
 KIND = "a3boxnet"
@@ -102,6 +102,31 @@ def average_boxes(boxes: np.ndarray) -> np.ndarray:
     return np.concatenate([b[:, :3].mean(axis=0), np.exp(np.log(b[:, 3:]).mean(axis=0))])
 
 
+# The past views in the network's input (models whose metadata has ``past_views``): the frustum
+# sampled to PAST_VIEWS["current"] points beside at most PAST_VIEWS["past"] of the body's past
+# views in this frame (track3d.body_views.BodyViews.past_points), the network's N points then
+# sampled from both. The body turns while the loop watches it, so the side hidden now was in view
+# before; a single-frame net guesses it, a net given the past views sees part of it. A fixed
+# share (3 : 1), not the clouds' own sizes: a near body's 40,000 returns would drown the views.
+PAST_VIEWS = {"current": 1536, "past": 512}
+
+
+def with_past_views(points: np.ndarray, past: np.ndarray | None, seed: int,
+                    counts: dict | None = None) -> np.ndarray:
+    """The input cloud of a past-views model: points (n, 3), n >= 1, sampled to counts["current"]
+    and past (m, 3) sampled to min(m, counts["past"]), stacked (float32); `points` as they are
+    when `past` is None or empty."""
+    from .frustum import sample_points
+
+    c = PAST_VIEWS if counts is None else counts
+    pts = np.ascontiguousarray(points, dtype=np.float32)
+    if past is None or len(past) == 0:
+        return pts
+    cur = sample_points(pts, int(c["current"]), seed)
+    old = sample_points(np.ascontiguousarray(past, dtype=np.float32), min(len(past), int(c["past"])), seed + 1)
+    return np.concatenate([cur, old])
+
+
 SIZE_NORMS = tuple(SIZE_CODINGS)   # the box codings a model's metadata may name (track3d.size_coding)
 # ONNX interface: inputs and outputs by name (batch dimension dynamic).
 INPUT_POINTS = "points"        # (B, N, 3) float32, minus the coding's reference point
@@ -173,6 +198,8 @@ class A3BoxNetEstimator:
     takes_phase = False
     # a guess of the whole body: the loop keeps its hidden back face and measures the rest
     amodal = True
+    # estimate() reads the body's past views (past=) only with a model trained with them; per instance
+    takes_past = False
 
     def __init__(self, model: str | Path | None = None, threads: int = 1, num_points: int | None = None,
                  seed: int = 0, precision: str = "fp32", engine: str = "onnxruntime",
@@ -210,6 +237,15 @@ class A3BoxNetEstimator:
         if INPUT_POINTS not in names or (self.use_category and INPUT_CATEGORY not in names):
             raise ModelError(f"{self.model.path}: inputs {sorted(names)} are not an A3BoxNet's")
         self._with_category = INPUT_CATEGORY in names
+        # a model trained beside the body's past views (PAST_VIEWS) takes them: the loop passes past=
+        self.past_views: dict | None = None
+        if meta.get("past_views"):
+            pv = meta["past_views"]
+            try:
+                self.past_views = {"current": int(pv["current"]), "past": int(pv["past"])}
+            except (KeyError, TypeError, ValueError):
+                raise ModelError(f"{self.model.path}: its past_views metadata is not {{current, past}} counts") from None
+            self.takes_past = True
         # An explicit model keeps the sensor's back-lit model only when it is itself that sensor's
         # model (its metadata says so): the full-width stereo model chosen by hand lost the gate.
         if (backlit_model is None and self.backlit_phase < 180.0
@@ -246,13 +282,15 @@ class A3BoxNetEstimator:
         return self.model.run(feeds, list(OUTPUTS))
 
     def estimate(self, points: np.ndarray, category: int, bounds: np.ndarray | None = None,
-                 phase_deg: float | None = None) -> np.ndarray:
+                 phase_deg: float | None = None, past: np.ndarray | None = None) -> np.ndarray:
         """Frustum points (n, 3) float32, n >= 1, and the coarse category -> box (6,) float64.
 
         bounds: (2, 3) [min; max] of the points, if the caller has them (the loop's frustum pass
         does); computed here otherwise, and only by codings that read them (``coding.needs_bounds``).
         phase_deg: the phase angle at the 2D box (track3d.dark_side.phase_deg) when the sun is
         known, else None; past `backlit_phase` the back-lit model answers (``.backlit``).
+        past: the body's past views in this frame (m, 3) (track3d.body_views.BodyViews.past_points)
+        or None; read by models trained with them (``past_views``, `with_past_views`), ignored by others.
         Raises ValueError on points, bounds or a category outside the contract (track3d.frames).
         The values are checked on the sample the network sees (N points) and on the bounds, not
         point by point over the whole frustum."""
@@ -260,6 +298,9 @@ class A3BoxNetEstimator:
             return self.backlit.estimate(points, category, bounds)
         category = check_category(category, self.num_categories)
         pts = check_estimator_points(points, finite=False)
+        if self.past_views is not None and past is not None and len(past):
+            pts = with_past_views(pts, check_estimator_points(past, finite=False), self.seed, self.past_views)
+            bounds = None   # those of the frustum alone do not enclose the views
         sample = self.sample(pts) if self.views == 1 else np.stack([self.sample(pts, k) for k in range(self.views)])
         lo, hi = point_bounds(sample.reshape(-1, 3))
         check_point_bounds(lo, hi)

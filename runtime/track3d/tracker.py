@@ -859,6 +859,9 @@ class Track3D:
         self._estimator_takes_bounds = bool(getattr(estimator, "takes_bounds", False))
         # ... and phase_deg= (the phase angle at the 2D box, with the sun known)
         self._estimator_takes_phase = bool(getattr(estimator, "takes_phase", False))
+        # ... and past= (the body's past views in this frame, BodyViews.past_points: a model trained
+        # with them, track3d.boxnet.PAST_VIEWS); the views are then updated before the estimate
+        self._estimator_takes_past = bool(getattr(estimator, "takes_past", False))
         self.category = -1
         self.box2d = np.full(4, np.nan)
         self.box3d = np.full(6, np.nan)
@@ -934,8 +937,20 @@ class Track3D:
         out[0, 2] = np.partition(pts[:, 2], k)[k]
         return out
 
-    def _estimate(self, pts: np.ndarray, bounds: np.ndarray, box2d: np.ndarray) -> np.ndarray | None:
-        """The estimator's box for the frustum `pts` (its [min; max] `bounds`) cut with `box2d`."""
+    def _update_views(self, pts: np.ndarray, bounds: np.ndarray, seen: np.ndarray
+                      ) -> tuple[float | None, float | None]:
+        """This frame's returns into the past views (`bounds` as measured, `_measured`) -> the
+        back face's bounds (far, limit) they give (track3d.body_views)."""
+        # returns that stop at the sensor's range outline a cap, not the body: no carving
+        cut_by_range = reaches_range(bounds, seen, self.camera, self.depth_range_m)
+        whole = not cut_by_range and not any(self._border_sides(seen))
+        far = self._views.update(pts, self._cut_box(seen), float(bounds[0][2]), carve=not cut_by_range, whole=whole)
+        return far, self._views.limit
+
+    def _estimate(self, pts: np.ndarray, bounds: np.ndarray, box2d: np.ndarray,
+                  past: np.ndarray | None = None) -> np.ndarray | None:
+        """The estimator's box for the frustum `pts` (its [min; max] `bounds`) cut with `box2d`;
+        `past`: the body's past views in this frame, for an estimator that takes them."""
         # The checks use the frustum pass's bounds: no second pass over a large frustum.
         if len(pts) < self.min_points:
             return None
@@ -948,6 +963,8 @@ class Track3D:
         if self._estimator_takes_phase and self.sun is not None:
             # a model of its own for bodies lit from behind (track3d.boxnet.BACKLIT_MODELS)
             extra["phase_deg"] = phase_deg(box2d, self.sun, self.camera)
+        if self._estimator_takes_past:
+            extra["past"] = past
         try:
             b = self.estimator.estimate(pts, self.category, **extra)
             b = np.asarray(b, dtype=np.float64).reshape(-1)
@@ -1301,7 +1318,12 @@ class Track3D:
             start = self.outline_share * lit + (1.0 - self.outline_share) * seen
         t2 = time.perf_counter()
         ms["frustum"] = (t2 - t1) * 1e3
-        est = self._estimate(pts, bounds, seen)
+        views = past = None
+        if self._estimator_takes_past and self._views is not None and len(pts) >= self.min_points:
+            # the views first: the estimator sees them beside this frame's returns
+            views = self._update_views(pts, self._measured(pts, bounds), seen)
+            past = self._views.past_points(pts)
+        est = self._estimate(pts, bounds, seen, past)
         status = TRACKING
         if est is None:
             status = NO_POINTS
@@ -1315,13 +1337,10 @@ class Track3D:
         else:
             bounds = self._measured(pts, bounds)
             far = limit = None
-            if self._views is not None:
-                # returns that stop at the sensor's range outline a cap, not the body: no carving
-                cut_by_range = reaches_range(bounds, seen, self.camera, self.depth_range_m)
-                whole = not cut_by_range and not any(self._border_sides(seen))
-                far = self._views.update(pts, self._cut_box(seen), float(bounds[0][2]), carve=not cut_by_range,
-                                         whole=whole)
-                limit = self._views.limit
+            if views is not None:
+                far, limit = views
+            elif self._views is not None:
+                far, limit = self._update_views(pts, bounds, seen)
             self.box3d = self._report(est, bounds, seen, far, limit)
         t3 = time.perf_counter()
         ms["box3d"] = (t3 - t2) * 1e3

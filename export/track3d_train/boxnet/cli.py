@@ -31,7 +31,8 @@ def _prepare(a) -> int:
     t = time.time()
     p = prepare_split(a.data, a.split, a.out, jitters=a.jitters, oracle=not a.no_oracle, max_points=a.max_points,
                       min_points=a.min_points, spec=spec, seed=a.seed, max_sequences=a.max_sequences,
-                      frame_step=a.frame_step, progress=not a.quiet, stereo_match=a.stereo_match)
+                      frame_step=a.frame_step, progress=not a.quiet, stereo_match=a.stereo_match,
+                      past_views=a.past_views)
     from .data import PointCache
     c = PointCache(p)
     _log(f"wrote {p}: {len(c)} frustums from {len(set(c.seq.tolist()))} sequences in {time.time() - t:.0f} s")
@@ -122,6 +123,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="clouds matched from the stereo pair around each box as the loop's StereoCloud does "
                         "(`track3d track --depth stereo`), with --stereo-option max_match_px=MAX_PX (0: every row "
                         "matched); default: the dataset's depth maps")
+    q.add_argument("--past-views", action="store_true",
+                   help="each frustum also holds the body's past views in its frame, as the loop gives them to "
+                        "a model trained with them (track3d.boxnet.PAST_VIEWS; every frame is read in order)")
     q.add_argument("--max-sequences", type=bounded(int, 1), default=None, help="only the first k sequences")
     q.add_argument("--seed", type=bounded(int, 0), default=0, help="jitter / subsampling seed")
     q.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from track3d.boxes import box3d_from_points, clip_box2d
-from track3d.boxnet import one_hot
+from track3d.boxnet import PAST_VIEWS, one_hot, with_past_views
 from track3d.size_coding import size_coding
 from track3d.dataset import GT2D, GT3D, META, RIGHT_DIR, Dataset
 
@@ -82,13 +82,18 @@ def split_hash(ds: Dataset, split: str) -> str:
 def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 3, oracle: bool = True,
                   max_points: int = 4096, min_points: int = 16, spec: JitterSpec = JitterSpec(),
                   seed: int = 0, max_sequences: int | None = None, frame_step: int = 1,
-                  progress: bool = True, stereo_match: int | None = None) -> Path:
+                  progress: bool = True, stereo_match: int | None = None, past_views: bool = False) -> Path:
     """Build the frustum cache of one split; returns the .npz path (``out`` is a file or a folder).
 
     stereo_match: None, the frames' clouds (their depth maps); else each box's cloud is matched
     from the stereo pair around it as the loop's `track3d.stereo.StereoCloud` does, with
     ``max_match_px=stereo_match`` (0: every row), searching the disparities the loop's followed
-    search would (down to the ground-truth box's near face / follow_depth)."""
+    search would (down to the ground-truth box's near face / follow_depth).
+
+    past_views: each proposal also holds the body's past views in that frame, as the loop gives
+    them to a model trained with them (`track3d.body_views.BodyViews` fed each frame's
+    ground-truth frustum in order, as the loop does with its own; `track3d.boxnet.with_past_views`
+    joins them to the proposal); needs every frame (frame_step 1)."""
     from track3d.frustum import extract_frustum
     from track3d.stereo import StereoMatcher
 
@@ -110,8 +115,12 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
     if progress:
         from tqdm import tqdm
         it = tqdm(frames, desc=f"frustums {split}", unit="frame")
+    if past_views and frame_step != 1:
+        raise ValueError("past_views needs every frame (frame_step 1): the views are registered frame by frame")
+    views = _PastViews(cam) if past_views else None
     for si, seq, i in it:
         cloud = seq.points(i) if matcher is None else _StereoFrame(matcher, seq, i)
+        past = None if views is None else views(seq, si, i, cloud)
         boxes = ([(seq.gt2d[i], 0)] if oracle else []) + \
                 [(jitter_box(seq.gt2d[i], rng, spec, cam.width, cam.height), 1) for _ in range(jitters)]
         for box, jit in boxes:
@@ -121,6 +130,8 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
             if len(fr) < min_points:
                 continue
             keep = fr if len(fr) <= max_points else fr[rng.choice(len(fr), max_points, replace=False)]
+            if past is not None:
+                keep = with_past_views(fr, past, int(rng.integers(2 ** 31)))
             pts.append(np.ascontiguousarray(keep, dtype=np.float32))
             offs.append(offs[-1] + len(keep))
             rec["gt3d"].append(seq.gt3d[i])
@@ -135,6 +146,7 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
         raise ValueError(f"no frustum with >= {min_points} points in split {split!r} of {root}")
     info = {"version": CACHE_VERSION, "root": str(ds.root), "split": split, "data_hash": h, "jitters": jitters,
             "oracle": oracle, "stereo_match": stereo_match, "max_points": max_points, "min_points": min_points,
+            "past_views": dict(PAST_VIEWS) if past_views else None,
             "seed": seed,
             "jitter": spec.__dict__, "sequences": [s.name for s in seqs], "frame_step": frame_step,
             "categories": list(ds.categories.get("shape_families", [])),
@@ -151,6 +163,39 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
                  info=np.frombuffer(json.dumps(info).encode(), dtype=np.uint8))
     part.replace(out)
     return out
+
+
+class _PastViews:
+    """(seq, index, i, cloud) -> the past views (m, 3) in frame i, or None: one BodyViews per
+    sequence, fed the ground-truth frustum of every present frame in order (prepare_split)."""
+
+    def __init__(self, camera):
+        self.camera, self.seq, self.views = camera, None, None
+
+    def __call__(self, seq, si: int, i: int, cloud) -> np.ndarray | None:
+        from track3d.body_views import BodyViews
+        from track3d.frustum import extract_frustum_bounds
+        from track3d.range_cut import reaches_range
+        from track3d.tracker import frustum_margin_for, front_quantile_for
+
+        if self.seq != si:
+            self.seq, self.views = si, BodyViews(self.camera)
+        if seq.absent[i]:
+            return None
+        box = np.asarray(seq.gt2d[i], np.float64)
+        grow = box[2:] * frustum_margin_for(seq.depth_sensor)      # cut as the loop cuts (Track3D._cut_box)
+        cut = np.concatenate([box[:2] - grow / 2.0, box[2:] + grow])
+        pts, bounds = extract_frustum_bounds(cloud, cut.astype(np.float32), self.camera.M)
+        if len(pts) == 0:
+            return None
+        q = front_quantile_for(seq.depth_sensor)
+        front = float(np.partition(pts[:, 2], int(q * (len(pts) - 1)))[int(q * (len(pts) - 1))]) if q > 0 \
+            else float(bounds[0][2])
+        by_range = reaches_range(bounds, box, self.camera, seq.depth_range_m)
+        W, H = self.camera.width, self.camera.height
+        border = box[0] <= 0.5 or box[1] <= 0.5 or box[0] + box[2] >= W - 0.5 or box[1] + box[3] >= H - 0.5
+        self.views.update(pts, cut, front, carve=not by_range, whole=not by_range and not border)
+        return self.views.past_points(pts)
 
 
 class _StereoFrame:
