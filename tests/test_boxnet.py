@@ -657,6 +657,11 @@ def test_a_past_views_model_trains_exports_and_takes_the_views(tiny_dataset, tmp
     alone = est.estimate(pts, -1)
     assert np.array_equal(est.estimate(pts, -1, past=None), alone)
     assert not np.array_equal(est.estimate(pts, -1, past=past), alone)
+    # past_views=False: the same model on the frustum alone
+    off = A3BoxNetEstimator(tmp_path / "pv.onnx", past_views=False)
+    assert not off.takes_past and np.array_equal(off.estimate(pts, -1, past=past), alone)
+    with pytest.raises(ValueError, match="past_views must be True or False"):
+        A3BoxNetEstimator(tmp_path / "pv.onnx", past_views="no")
     # the joined cloud: the frustum sampled to "current", the views to at most "past"
     j = with_past_views(pts, past, 0)
     assert j.shape == (joined, 3) and j.dtype == np.float32

@@ -14,6 +14,7 @@ SHIPPED = {
     "a3boxnet_stereo.onnx": "a3boxnet",
     "a3boxnet_stereo_narrow.onnx": "a3boxnet",
     "a3boxnet_stereo_backlit.onnx": "a3boxnet",
+    "a3boxnet_views.onnx": "a3boxnet",
     "siamfc_edge_exemplar.onnx": "siamfc-exemplar",
     "siamfc_edge_search.onnx": "siamfc-search",
     "siamfc_faithful_exemplar.onnx": "siamfc-exemplar",
@@ -35,6 +36,13 @@ def test_shipped_model_is_present_and_carries_its_metadata(name):
         if name == "a3boxnet_stereo_narrow.onnx":   # what the loop runs for stereo: the stereo model at half width
             assert m.meta["width"] == 0.5 and m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet_stereo.onnx"
             assert m.meta["trained"]["distilled_from"] == {"file": "a3boxnet_stereo.onnx", "weight": 1.0}
+        if name == "a3boxnet_views.onnx":   # the default, fine-tuned beside the body's past views
+            from track3d.boxnet import PAST_VIEWS
+
+            assert m.meta["past_views"] == PAST_VIEWS and m.meta["width"] == 0.5
+            assert m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet_narrow.onnx"
+        else:
+            assert "past_views" not in m.meta
         if name == "a3boxnet_stereo_backlit.onnx":   # the stereo model, shown crescents
             assert m.meta["trained"]["fine_tuned_from"]["file"] == "a3boxnet_stereo.onnx"
         # the default is the full-width model cut to half width and distilled from it
@@ -54,7 +62,7 @@ def _score(root, spec, tmp_path):
     return float(np.mean([s.ao_3d for s in scores])), scores
 
 
-@pytest.mark.parametrize("model", ["a3boxnet_narrow.onnx", "a3boxnet.onnx"])
+@pytest.mark.parametrize("model", ["a3boxnet_narrow.onnx", "a3boxnet.onnx", "a3boxnet_views.onnx"])
 def test_shipped_a3boxnet_beats_the_baseline_on_oracle_boxes(model, tiny_dataset, tmp_path):
     from track3d.evaluation import TrackerSpec
 

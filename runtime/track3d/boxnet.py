@@ -187,7 +187,9 @@ class A3BoxNetEstimator:
     `backlit_phase` degrees (default: the sensor's, BACKLIT_MODELS, unless `model` is given and
     its metadata names another sensor or none; it runs with this estimator's other options, in
     ``.backlit``); backlit_phase: that gate,
-    0..180 (180: never).
+    0..180 (180: never); past_views: False runs a model trained beside the body's past views
+    (metadata ``past_views``, PAST_VIEWS) on the frustum alone (``takes_past`` then False; a model
+    without them never takes them).
     """
 
     name = KIND
@@ -204,7 +206,8 @@ class A3BoxNetEstimator:
     def __init__(self, model: str | Path | None = None, threads: int = 1, num_points: int | None = None,
                  seed: int = 0, precision: str = "fp32", engine: str = "onnxruntime",
                  depth_sensor: str | None = None, views: int | None = None,
-                 backlit_model: str | Path | None = None, backlit_phase: float = BACKLIT_PHASE_DEG):
+                 backlit_model: str | Path | None = None, backlit_phase: float = BACKLIT_PHASE_DEG,
+                 past_views: bool = True):
         self.backlit_phase = _check_phase(backlit_phase, "backlit_phase must be degrees in 0..180")
         explicit = model is not None
         if views is None:
@@ -238,8 +241,10 @@ class A3BoxNetEstimator:
             raise ModelError(f"{self.model.path}: inputs {sorted(names)} are not an A3BoxNet's")
         self._with_category = INPUT_CATEGORY in names
         # a model trained beside the body's past views (PAST_VIEWS) takes them: the loop passes past=
+        if not isinstance(past_views, (bool, np.bool_)):
+            raise ValueError(f"past_views must be True or False, got {past_views!r:.80}")
         self.past_views: dict | None = None
-        if meta.get("past_views"):
+        if meta.get("past_views") and past_views:
             pv = meta["past_views"]
             try:
                 self.past_views = {"current": int(pv["current"]), "past": int(pv["past"])}
