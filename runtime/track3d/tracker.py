@@ -61,7 +61,7 @@ from .range_cut import (CAP_FUSION_COVERAGE, DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_C
 from .trackers2d import Tracker2D, create_tracker
 from .unmatched_texture import trim_unmatched
 
-__all__ = ["Track3D", "TrackResult", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES", "MIN_POINTS",
+__all__ = ["Track3D", "TrackResult", "cut_box", "measured_bounds", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES", "MIN_POINTS",
            "FRUSTUM_MARGIN", "frustum_margin_for", "fusion_weight_for", "section_weight_for", "measured_faces_for",
            "sensor_options", "DEPTH_SENSORS", "check_depth_sensor"]
 
@@ -606,6 +606,26 @@ BODY_VIEWS = True
 SENSOR_BODY_VIEWS = {"stereo": False}
 
 
+def cut_box(box2d: np.ndarray, margin: float) -> np.ndarray:
+    """The box [x, y, w, h] a frustum is cut with: `box2d` widened by `margin` of its size (half on
+    each side); `box2d` itself at margin 0 (FRUSTUM_MARGIN, frustum_margin_for)."""
+    if margin > 0.0:
+        grow = box2d[2:] * margin
+        return np.concatenate([box2d[:2] - grow / 2.0, box2d[2:] + grow])
+    return box2d
+
+
+def measured_bounds(pts: np.ndarray, bounds: np.ndarray, front_quantile: float) -> np.ndarray:
+    """The frustum's bounds (2, 3) as the loop measures the body with them: the least depth is the
+    `front_quantile` quantile of the returns' (FRONT_QUANTILE, front_quantile_for; 0: the nearest)."""
+    if front_quantile <= 0.0 or len(pts) < 2:
+        return bounds
+    k = int(front_quantile * (len(pts) - 1))
+    out = np.array(bounds, dtype=np.float64)
+    out[0, 2] = np.partition(pts[:, 2], k)[k]
+    return out
+
+
 def body_views_for(depth_sensor: str | None) -> bool:
     """Whether the loop keeps the body's past views (track3d.body_views), for this sensor."""
     return SENSOR_BODY_VIEWS.get(_sensor_key(depth_sensor), BODY_VIEWS)
@@ -911,10 +931,7 @@ class Track3D:
     # --- the loop --------------------------------------------------------------------------------
     def _cut_box(self, box2d: np.ndarray) -> np.ndarray:
         """The box a frustum is cut with: `box2d` widened by ``frustum_margin`` of its size."""
-        if self.frustum_margin > 0.0:
-            grow = box2d[2:] * self.frustum_margin
-            return np.concatenate([box2d[:2] - grow / 2.0, box2d[2:] + grow])
-        return box2d
+        return cut_box(box2d, self.frustum_margin)
 
     def _frustum(self, points, box2d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(frustum points, their (2, 3) [min; max]) from one C++ pass; the points are finite.
@@ -930,12 +947,7 @@ class Track3D:
         """The frustum's bounds (2, 3) as the loop measures the body with them: the least depth is
         the `front_quantile` quantile of the returns' (FRONT_QUANTILE). The estimator gets the true
         bounds (they enclose its points)."""
-        if self.front_quantile <= 0.0 or len(pts) < 2:
-            return bounds
-        k = int(self.front_quantile * (len(pts) - 1))
-        out = np.array(bounds, dtype=np.float64)
-        out[0, 2] = np.partition(pts[:, 2], k)[k]
-        return out
+        return measured_bounds(pts, bounds, self.front_quantile)
 
     def _update_views(self, pts: np.ndarray, bounds: np.ndarray, seen: np.ndarray
                       ) -> tuple[float | None, float | None]:

@@ -176,21 +176,18 @@ class _PastViews:
         from track3d.body_views import BodyViews
         from track3d.frustum import extract_frustum_bounds
         from track3d.range_cut import reaches_range
-        from track3d.tracker import frustum_margin_for, front_quantile_for
+        from track3d.tracker import cut_box, frustum_margin_for, front_quantile_for, measured_bounds
 
         if self.seq != si:
             self.seq, self.views = si, BodyViews(self.camera)
         if seq.absent[i]:
             return None
         box = np.asarray(seq.gt2d[i], np.float64)
-        grow = box[2:] * frustum_margin_for(seq.depth_sensor)      # cut as the loop cuts (Track3D._cut_box)
-        cut = np.concatenate([box[:2] - grow / 2.0, box[2:] + grow])
+        cut = cut_box(box, frustum_margin_for(seq.depth_sensor))      # cut and measured as the loop does
         pts, bounds = extract_frustum_bounds(cloud, cut.astype(np.float32), self.camera.M)
         if len(pts) == 0:
             return None
-        q = front_quantile_for(seq.depth_sensor)
-        front = float(np.partition(pts[:, 2], int(q * (len(pts) - 1)))[int(q * (len(pts) - 1))]) if q > 0 \
-            else float(bounds[0][2])
+        front = float(measured_bounds(pts, bounds, front_quantile_for(seq.depth_sensor))[0][2])
         by_range = reaches_range(bounds, box, self.camera, seq.depth_range_m)
         W, H = self.camera.width, self.camera.height
         border = box[0] <= 0.5 or box[1] <= 0.5 or box[0] + box[2] >= W - 0.5 or box[1] + box[3] >= H - 0.5
