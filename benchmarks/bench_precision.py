@@ -227,7 +227,12 @@ def write_verdicts(accs: list[dict], models_dir: Path = MODELS_DIR) -> Path:
     merged: dict[tuple[str, str], dict] = {}
     files_of = dict(TRACKER_FILES)
     for acc in accs:
-        files_of["a3boxnet"] = [acc.get("boxnet", DEFAULT_MODEL)]   # runs before the option: the default
+        if "boxnet" not in acc:
+            # a run from before --boxnet-model measured the default of its day, which need not be
+            # today's: its verdict would land on another model
+            raise ValueError(f"the accuracy run of split {acc.get('split')!r} does not name its A3BoxNet file "
+                             "(made before --boxnet-model): re-measure it")
+        files_of["a3boxnet"] = [acc["boxnet"]]
         for lab, row in acc["rows"].items():
             if "passes" not in row or not lab.endswith(" only"):
                 continue
@@ -268,7 +273,7 @@ def markdown(res: dict) -> str:
         for lab, why in res["loop"]["skipped"].items():
             lines.append(f"- skipped {lab}: {why}")
     for acc in res.get("accuracy") or []:
-        lines += ["", f"Track3D ({acc['tracker']} + {acc.get('boxnet', DEFAULT_MODEL)}) accuracy on {acc['sequences']} sequences / {acc['frames']} frames of "
+        lines += ["", f"Track3D ({acc['tracker']} + {acc.get('boxnet', 'the A3BoxNet default of its day')}) accuracy on {acc['sequences']} sequences / {acc['frames']} frames of "
                       f"'{acc['split']}'; rule: {acc['rule']}", "",
                   "| variant | AO_3d restart | ACE_3d restart (m) | AO_3d one-pass | ACE_3d one-pass (m) | passes |",
                   "|---|---|---|---|---|---|"]

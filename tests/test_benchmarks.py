@@ -111,7 +111,9 @@ def test_bench_fps_puts_auto_beside_fp32_and_records_the_picks(tiny_dataset, tmp
     rows = {r["config"]: r for r in json.loads((out / "fps_p.json").read_text())["results"]}
     assert set(rows) == {"edgetrack:a3boxnet", "edgetrack:a3boxnet auto"}
     fp32 = rows["edgetrack:a3boxnet"]["networks"]
-    assert {n["file"] for n in fp32} >= {"edgetrack_search.onnx", "a3boxnet_narrow.onnx"}
+    from track3d.boxnet import DEFAULT_MODEL
+
+    assert {n["file"] for n in fp32} >= {"edgetrack_search.onnx", DEFAULT_MODEL}
     assert all((n["engine"], n["precision"]) == ("onnxruntime", "fp32") for n in fp32)
     assert rows["edgetrack:a3boxnet auto"]["precision"] == "auto"
     assert all(n["precision"] in ("fp32", "int8", "bf16") for n in rows["edgetrack:a3boxnet auto"]["networks"])
@@ -368,6 +370,12 @@ def test_precision_verdicts_pass_only_on_every_split(tmp_path):
     for f in ("edgetrack_search.onnx", "edgetrack_template.onnx"):
         assert models[f]["onnxruntime/int8"]["passes"] is True
         assert set(models[f]["onnxruntime/int8"]["splits"]) == {"test", "test_unseen"}
+    # a run that does not name its box network (before --boxnet-model) measured the default of its
+    # day: its verdict is refused, not put on today's default
+    old = acc("test", True, True)
+    del old["boxnet"]
+    with pytest.raises(ValueError, match="does not name its A3BoxNet"):
+        bench_precision.write_verdicts([old], tmp_path)
 
 
 def test_precision_loop_rows_are_labelled_by_variant_with_any_box_network():

@@ -246,11 +246,15 @@ def test_state_continues_bit_identically():
 
 def test_the_loop_holds_the_back_face_at_the_views():
     """Track3D with the views on, oracle 2D boxes, the turning ellipsoid. While its long axis
-    points along the line of sight (frames 22-38, the back 2-3 m behind the front) A3BoxNet's
-    guess falls short of the back face by 0.1-0.35 m; the views put it within 0.1 m on average.
-    Elsewhere the box stays within 0.25 m of the truth (the views push the back face out, the
-    carving pulls it in no nearer than the views' farthest point; the running average of the
-    depth extent and the key frame registered a frame late lag)."""
+    points along the line of sight (frames 22-38, the back 2-3 m behind the front) the
+    single-frame A3BoxNet's guess (NARROW_MODEL) falls short of the back face by 0.1-0.35 m; the
+    views put it within 0.1 m on average. Elsewhere the box stays within 0.25 m of the truth (the
+    views push the back face out, the carving pulls it in no nearer than the views' farthest
+    point; the running average of the depth extent and the key frame registered a frame late
+    lag). The loop's rule, so the network that does not read the views: the default one reads them
+    too (VIEWS_MODEL) and on this smooth ellipsoid, whose back its views reach, puts the back face
+    0.3-0.45 m past them (docs/results.md, "The views model past the views' reach")."""
+    from track3d.boxnet import NARROW_MODEL
     from track3d.tracker import Track3D
 
     frames = [_ellipsoid_view(_rot_y(3.0 * k)) for k in range(61)]
@@ -258,19 +262,19 @@ def test_the_loop_holds_the_back_face_at_the_views():
     image = np.zeros((CAM.height, CAM.width, 3), np.uint8)
     err = {}
     true = np.array([_true_back(_rot_y(3.0 * k)) for k in range(1, 61)])
-    for views in (False, BodyViewsParams(every=1)):
+    for model, views in ((NARROW_MODEL, False), (NARROW_MODEL, BodyViewsParams(every=1))):
         try:
             t = Track3D.create(CAM, "oracle", "a3boxnet", tracker_options={"gt": gt, "absent": np.zeros(len(gt), bool)},
-                               body_views=views)
+                               estimator_options={"model": model}, body_views=views)
         except Exception as e:   # a build without the shipped models
             pytest.skip(str(e))
         t.init(image, gt[0], points=frames[0][0])
         out = [t.update(image, pts).box3d for pts, _ in frames[1:]]
-        err[bool(views)] = np.array([b[2] + b[5] / 2.0 for b in out]) - true
+        err[model, bool(views)] = np.array([b[2] + b[5] / 2.0 for b in out]) - true
     along = slice(21, 38)    # frames 22-38
-    assert np.abs(err[False][along]).mean() > 0.15   # the net's shortfall: the check below can fail
-    assert np.abs(err[True][along]).mean() < 0.1
-    assert np.abs(err[True]).max() < 0.25
+    assert np.abs(err[NARROW_MODEL, False][along]).mean() > 0.15   # the net's shortfall: the checks below can fail
+    assert np.abs(err[NARROW_MODEL, True][along]).mean() < 0.1
+    assert np.abs(err[NARROW_MODEL, True]).max() < 0.25
 
 
 def test_the_views_extent_needs_a_whole_view():
@@ -463,6 +467,33 @@ def test_the_loop_gives_a_past_views_model_the_views_before_its_estimate():
         t.update(image, pts)
     # init's estimate and the first update: no registered pair yet; then the views of every frame
     assert rec.past[:2] == [None, None] and all(n is not None and n > 100 for n in rec.past[3:])
+
+
+def test_a_past_views_model_costs_one_measure_of_the_front_a_frame(monkeypatch):
+    """The measured front (a partition of a ToF frustum's depths) is taken once per update when
+    the views come before the estimate, and the report gets that same one."""
+    import track3d.tracker as tracker_module
+    from track3d.tracker import Track3D
+
+    class Recorder:
+        takes_past = True
+        amodal = True
+
+        def estimate(self, points, category, past=None):
+            return np.array([*points.mean(axis=0), 1.0, 1.0, 1.0])
+
+    calls = []
+    real = tracker_module.measured_bounds
+    monkeypatch.setattr(tracker_module, "measured_bounds", lambda *a: calls.append(1) or real(*a))
+    frames = [_ellipsoid_view(_rot_y(3.0 * k)) for k in range(6)]
+    gt = np.array([b for _, b in frames])
+    image = np.zeros((CAM.height, CAM.width, 3), np.uint8)
+    t = Track3D(CAM, _oracle(gt), Recorder(), body_views=BodyViewsParams(every=1), front_quantile=0.005)
+    t.init(image, gt[0], points=frames[0][0])
+    for pts, _ in frames[1:]:
+        before = len(calls)
+        t.update(image, pts)
+        assert len(calls) - before == 1
 
 
 def _oracle(gt):

@@ -1330,10 +1330,11 @@ class Track3D:
             start = self.outline_share * lit + (1.0 - self.outline_share) * seen
         t2 = time.perf_counter()
         ms["frustum"] = (t2 - t1) * 1e3
-        views = past = None
+        views = past = measured = None
         if self._estimator_takes_past and self._views is not None and len(pts) >= self.min_points:
             # the views first: the estimator sees them beside this frame's returns
-            views = self._update_views(pts, self._measured(pts, bounds), seen)
+            measured = self._measured(pts, bounds)   # kept for the report: a partition of the returns' depths
+            views = self._update_views(pts, measured, seen)
             past = self._views.past_points(pts)
         est = self._estimate(pts, bounds, seen, past)
         status = TRACKING
@@ -1347,7 +1348,7 @@ class Track3D:
                 self._carry_from, self._carry_box = np.array(seen, dtype=np.float64), self.box3d.copy()
                 self._carry_area = float(seen[2] * seen[3])
         else:
-            bounds = self._measured(pts, bounds)
+            bounds = self._measured(pts, bounds) if measured is None else measured
             far = limit = None
             if views is not None:
                 far, limit = views
