@@ -25,18 +25,19 @@ from track3d.table_text import cell, markdown_table
 REPO = Path(__file__).resolve().parents[1]
 RESULTS = Path("benchmarks") / "results"     # relative to the repository
 
+# the speed table's run, one thread and two (bench_fps.py, the README's "Reproduce" block)
+FPS_1T, FPS_2T = "engine/fps_epyc_no_avxvnni_views_engine_1t.json", "engine/fps_epyc_no_avxvnni_views_engine_2t.json"
 # (label, result file, configuration, bold)
 SPEED_ROWS = (
-    ("Track3D default: EdgeTrack + A3BoxNet", "engine/fps_epyc_no_avxvnni_views_engine_1t.json", "edgetrack:a3boxnet", True),
-    ("SiamFC-edge (the paper's tracker) + A3BoxNet", "engine/fps_epyc_no_avxvnni_views_engine_1t.json", "siamfc-edge:a3boxnet", False),
-    ("NanoTrack v2 (peer) + A3BoxNet", "engine/fps_epyc_no_avxvnni_views_engine_1t.json", "nano:a3boxnet", False),
+    ("Track3D default: EdgeTrack + A3BoxNet", FPS_1T, "edgetrack:a3boxnet", True),
+    ("SiamFC-edge (the paper's tracker) + A3BoxNet", FPS_1T, "siamfc-edge:a3boxnet", False),
+    ("NanoTrack v2 (peer) + A3BoxNet", FPS_1T, "nano:a3boxnet", False),
     ("EdgeTrack + single-frame A3BoxNet (`a3boxnet_narrow.onnx`, the default before: no past views)",
-     "engine/fps_epyc_no_avxvnni_views_engine_1t.json", "edgetrack:a3boxnet@a3boxnet_narrow.onnx", False),
-    ("EdgeTrack + full-width A3BoxNet (`a3boxnet.onnx`)", "engine/fps_epyc_no_avxvnni_views_engine_1t.json",
-     "edgetrack:a3boxnet@a3boxnet.onnx", False),
-    ("EdgeTrack + baseline box", "engine/fps_epyc_no_avxvnni_views_engine_1t.json", "edgetrack:baseline", False),
-    ("EdgeTrack + A3BoxNet, 2 threads (both cores)", "engine/fps_epyc_no_avxvnni_views_engine_2t.json", "edgetrack:a3boxnet", False),
-    ("SiamFC-edge + A3BoxNet, 2 threads", "engine/fps_epyc_no_avxvnni_views_engine_2t.json", "siamfc-edge:a3boxnet", False),
+     FPS_1T, "edgetrack:a3boxnet@a3boxnet_narrow.onnx", False),
+    ("EdgeTrack + full-width A3BoxNet (`a3boxnet.onnx`)", FPS_1T, "edgetrack:a3boxnet@a3boxnet.onnx", False),
+    ("EdgeTrack + baseline box", FPS_1T, "edgetrack:baseline", False),
+    ("EdgeTrack + A3BoxNet, 2 threads (both cores)", FPS_2T, "edgetrack:a3boxnet", False),
+    ("SiamFC-edge + A3BoxNet, 2 threads", FPS_2T, "siamfc-edge:a3boxnet", False),
 )
 ENGINE_SPLITS = tuple((s, sp) for s in ("ideal", "flash-lidar", "tof", "stereo") for sp in ("test", "test_unseen"))
 # (label, source, row, kind, bold): source "table2*" -> <source>/table2.json's row; "bench_2d" -> its tracker
