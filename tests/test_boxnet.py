@@ -678,3 +678,49 @@ def test_a_model_without_past_views_ignores_them(exported):
     assert not est.takes_past and est.past_views is None
     pts = np.random.default_rng(1).uniform([-1, -1, 9], [1, 1, 9.5], size=(300, 3)).astype(np.float32)
     assert np.array_equal(est.estimate(pts, 0, past=pts + [0, 0, 2]), est.estimate(pts, 0))
+
+
+def _mixed_sensor_set(tmp_path):
+    """A points-only tiny set of 3 train sequences whose sensors cycle ideal, ToF; and a copy of it
+    holding only its ToF sequences (symlinked), as a set made of them alone would list them."""
+    from track3d_sim.cli import main
+
+    root = tmp_path / "mixed"
+    assert main(["generate", "--preset", "tiny", "--seed", "4", "--train", "3", "--test", "0", "--frames", "4",
+                 "--points-only", "--sensors", "ideal,tof", "--out", str(root), "--quiet"]) in (0, None)
+    d = json.loads((root / "dataset.json").read_text())
+    tof = [s for s in d["splits"]["train"]
+           if json.loads((root / "train" / s / "meta.json").read_text())["depth_sensor"]["name"] == "tof"]
+    only = tmp_path / "only-tof"
+    (only / "train").mkdir(parents=True)
+    for s in tof:
+        (only / "train" / s).symlink_to(root / "train" / s)
+    d["splits"] = {**{k: [] for k in d["splits"]}, "train": tof}
+    (only / "dataset.json").write_text(json.dumps(d))
+    return root, only, tof
+
+
+def test_prepare_keeps_the_sequences_of_the_sensors_asked_for(tmp_path):
+    """--sensors tof: a sensor's own model from a mixed set. The cache holds the ToF sequences
+    only, cut exactly as a set holding only them is (the same jitter draws); no such sequence is
+    a one-line error."""
+    from track3d_train.boxnet.data import PointCache, prepare_split
+    from track3d_train.cli import main as train_main
+
+    root, only, tof = _mixed_sensor_set(tmp_path)
+    assert 0 < len(tof) < 3
+    a = PointCache(prepare_split(root, "train", tmp_path / "a.npz", jitters=2, min_points=4, progress=False,
+                                 sensors=("ToF",)))
+    b = PointCache(prepare_split(only, "train", tmp_path / "b.npz", jitters=2, min_points=4, progress=False))
+    assert a.info["sequences"] == tof and a.info["sensors"] == ["tof"] and len(a) > 0
+    with np.load(tmp_path / "a.npz") as fa, np.load(tmp_path / "b.npz") as fb:
+        for k in ("points", "offsets", "gt3d", "box2d", "seq", "frame", "jittered"):
+            np.testing.assert_array_equal(fa[k], fb[k])
+    every = PointCache(prepare_split(root, "train", tmp_path / "c.npz", jitters=2, min_points=4, progress=False))
+    assert len(every.info["sequences"]) == 3 and every.info["sensors"] is None
+    with pytest.raises(ValueError, match="no sequence of split 'train'.*depth sensor flash-lidar"):
+        prepare_split(root, "train", tmp_path / "d.npz", jitters=0, progress=False, sensors=("flash-lidar",))
+    assert train_main(["boxnet", "prepare", "--data", str(root), "--sensors", "flash-lidar",
+                       "--out", str(tmp_path / "e.npz"), "--quiet"]) != 0
+    with pytest.raises(SystemExit):
+        train_main(["boxnet", "prepare", "--data", str(root), "--sensors", "lidar", "--out", str(tmp_path / "f.npz")])

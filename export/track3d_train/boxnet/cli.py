@@ -24,6 +24,17 @@ def _log(msg: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
 
 
+def _sensor_list(text: str) -> tuple[str, ...]:
+    """--sensors A,B -> ("a", "b"): names of track3d.tracker.DEPTH_SENSORS."""
+    from track3d.tracker import DEPTH_SENSORS
+
+    names = tuple(dict.fromkeys(n.strip().lower() for n in text.split(",") if n.strip()))
+    bad = [n for n in names if n not in DEPTH_SENSORS]
+    if not names or bad:
+        raise argparse.ArgumentTypeError(f"depth sensors from {', '.join(DEPTH_SENSORS)}, got {text!r}")
+    return names
+
+
 def _prepare(a) -> int:
     from .data import JitterSpec, prepare_split
 
@@ -32,7 +43,7 @@ def _prepare(a) -> int:
     p = prepare_split(a.data, a.split, a.out, jitters=a.jitters, oracle=not a.no_oracle, max_points=a.max_points,
                       min_points=a.min_points, spec=spec, seed=a.seed, max_sequences=a.max_sequences,
                       frame_step=a.frame_step, progress=not a.quiet, stereo_match=a.stereo_match,
-                      past_views=a.past_views)
+                      past_views=a.past_views, sensors=a.sensors)
     from .data import PointCache
     c = PointCache(p)
     _log(f"wrote {p}: {len(c)} frustums from {len(set(c.seq.tolist()))} sequences in {time.time() - t:.0f} s")
@@ -126,6 +137,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--past-views", action="store_true",
                    help="each frustum also holds the body's past views in its frame, as the loop gives them to "
                         "a model trained with them (track3d.boxnet.PAST_VIEWS; every frame is read in order)")
+    q.add_argument("--sensors", type=_sensor_list, default=None, metavar="A,B",
+                   help="only the sequences of these depth sensors (from ideal, tof, flash-lidar, stereo; default: "
+                        "every sequence): a sensor's own model from a mixed set")
     q.add_argument("--max-sequences", type=bounded(int, 1), default=None, help="only the first k sequences")
     q.add_argument("--seed", type=bounded(int, 0), default=0, help="jitter / subsampling seed")
     q.add_argument("--quiet", action="store_true", help="no progress bar")

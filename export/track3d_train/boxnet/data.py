@@ -82,7 +82,8 @@ def split_hash(ds: Dataset, split: str) -> str:
 def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 3, oracle: bool = True,
                   max_points: int = 4096, min_points: int = 16, spec: JitterSpec = JitterSpec(),
                   seed: int = 0, max_sequences: int | None = None, frame_step: int = 1,
-                  progress: bool = True, stereo_match: int | None = None, past_views: bool = False) -> Path:
+                  progress: bool = True, stereo_match: int | None = None, past_views: bool = False,
+                  sensors: tuple[str, ...] | None = None) -> Path:
     """Build the frustum cache of one split; returns the .npz path (``out`` is a file or a folder).
 
     stereo_match: None, the frames' clouds (their depth maps); else each box's cloud is matched
@@ -93,12 +94,22 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
     past_views: each proposal also holds the body's past views in that frame, as the loop gives
     them to a model trained with them (`track3d.body_views.BodyViews` fed each frame's
     ground-truth frustum in order, as the loop does with its own; `track3d.boxnet.with_past_views`
-    joins them to the proposal); needs every frame (frame_step 1)."""
+    joins them to the proposal); needs every frame (frame_step 1).
+
+    sensors: only the sequences whose depth sensor (meta.json) is one of these (None: every
+    one): a sensor's own model trained on its sequences of a mixed set. The kept sequences are
+    cut as a set of only them would be (the same jitter draws, in the same order)."""
     from track3d.frustum import extract_frustum
     from track3d.stereo import StereoMatcher
 
     ds = Dataset(root)
-    seqs = ds.sequences(split)[:max_sequences]
+    seqs = ds.sequences(split)
+    if sensors is not None:
+        wanted = {str(x).strip().lower() for x in sensors}
+        seqs = [q for q in seqs if str(q.depth_sensor or "").lower() in wanted]
+        if not seqs:
+            raise ValueError(f"no sequence of split {split!r} of {root} has depth sensor {', '.join(sorted(wanted))}")
+    seqs = seqs[:max_sequences]
     h = split_hash(ds, split)
     out = Path(out)
     if out.suffix != ".npz":
@@ -147,7 +158,7 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
     info = {"version": CACHE_VERSION, "root": str(ds.root), "split": split, "data_hash": h, "jitters": jitters,
             "oracle": oracle, "stereo_match": stereo_match, "max_points": max_points, "min_points": min_points,
             "past_views": dict(PAST_VIEWS) if past_views else None,
-            "seed": seed,
+            "seed": seed, "sensors": sorted({str(x).strip().lower() for x in sensors}) if sensors is not None else None,
             "jitter": spec.__dict__, "sequences": [s.name for s in seqs], "frame_step": frame_step,
             "categories": list(ds.categories.get("shape_families", [])),
             "num_categories": len(ds.categories.get("shape_families", [])) or 3}
