@@ -9,8 +9,8 @@ import pytest
 from track3d.boxes import box3d_from_points, iou_3d
 from track3d.camera import Camera
 from track3d.fusion import fuse
-from track3d.range_cut import (CAP_FUSION_COVERAGE, CARRY_DEPTH_EXPONENT, DEPTH_RATIO, MIN_COVERAGE, box_from_view,
-                               carry_box, deepen_to_view, is_range_cut, lateral_coverage, reaches_range)
+from track3d.range_cut import (CAP_FUSION_COVERAGE, CARRY_DEPTH_EXPONENT, DEPTH_RATIO, MIN_COVERAGE, box_at_range,
+                               box_from_view, carry_box, deepen_to_view, is_range_cut, lateral_coverage, reaches_range)
 from track3d.synthetic import CAM, render_sphere
 from track3d.tracker import CARRY_SLIVER, NO_POINTS, TRACKING, Track3D
 from track3d.trackers2d import OracleTracker
@@ -323,3 +323,52 @@ def test_track_cli_uses_the_recorded_range_and_the_measured_faces_unless_told_no
     assert rec["track3d"]["options"]["depth_range_m"] == 30.0 and rec["track3d"]["options"]["measured_faces"] is True
     assert read_run_record(res, "test", "norange")["track3d"]["options"]["depth_range_m"] is None
     assert read_run_record(res, "test", "nofront")["track3d"]["options"]["measured_faces"] is False
+
+
+def test_box_at_range_hand_cases():
+    # a centred 20 x 20 px box: the centre ray is the optical axis, the front face at the range
+    zc = 30.0 / 0.9
+    np.testing.assert_allclose(box_at_range(np.array([40.0, 40.0, 20.0, 20.0]), CAM100, 30.0),
+                               [0.0, 0.0, zc, 0.2 * zc, 0.2 * zc, 0.2 * zc])
+    # 50 px right of the centre (ray x / z = 0.5): the front face's centre 30 m away along the ray
+    b = box_at_range(np.array([90.0, 40.0, 20.0, 20.0]), CAM100, 30.0)
+    front = 30.0 / np.sqrt(1.25)
+    np.testing.assert_allclose(b, box_from_view(np.array([90.0, 40.0, 20.0, 20.0]), CAM100, front))
+    assert np.linalg.norm([b[0] / b[2] * front, 0.0, front]) == pytest.approx(30.0)
+    assert box_at_range(np.array([0.0, 0.0, 300.0, 300.0]), CAM100, 30.0) is None
+
+
+def test_a_body_past_the_range_from_the_first_frame_is_boxed_at_the_range_and_carried():
+    """A sphere of radius 3 m at 34 m behind a 30 m range: no return in the first frame's box, nor
+    after. It had no 3D box at all (NaN every frame); now the first box is box_at_range, then
+    carried by the 2D box (status "no_points"); a checkpoint continues bit-identically. Without a
+    range nothing is guessed; the first returns replace the guess."""
+    img1, pts1, b2_1, b3_1 = _cut_sphere(30.0, centre=(0.0, 0.0, 34.0))
+    img2, pts2, b2_2, b3_2 = _cut_sphere(30.0, centre=(1.0, 0.0, 33.5))
+    assert len(pts1) == 0 and len(pts2) == 0
+    gt2d = np.array([b2_1, b2_2])
+
+    def run(rng, restore=False, frames=((None, None),)):
+        t = Track3D(CAM, OracleTracker(gt2d), _CapBox(), depth_range_m=rng, fusion=False)
+        t.init(img1, b2_1, points=pts1)
+        first = t.box3d.copy()
+        if restore:
+            state = t.get_state()
+            t = Track3D(CAM, OracleTracker(gt2d), _CapBox(), depth_range_m=rng, fusion=False)
+            t.set_state(state)
+        return first, [t.update(img, pts) for img, pts in ((img2, pts2),) + tuple(f for f in frames if f[0] is not None)]
+
+    first, (r2,) = run(30.0)
+    np.testing.assert_allclose(first, box_at_range(b2_1, CAM, 30.0))
+    assert iou_3d(first, b3_1) > 0.3
+    assert r2.status == NO_POINTS
+    np.testing.assert_allclose(r2.box3d, carry_box(first, b2_1, b2_2, CAM))
+    np.testing.assert_array_equal(run(30.0, restore=True)[1][0].box3d, r2.box3d)
+    none_first, (none2,) = run(None)
+    assert np.all(np.isnan(none_first)) and np.all(np.isnan(none2.box3d))
+    # the body comes within the range: its returns' estimate replaces the guess
+    img3, pts3, b2_3, _ = _cut_sphere(30.0, centre=(1.0, 0.0, 31.0))
+    assert len(pts3) > 100
+    gt2d = np.array([b2_1, b2_2, b2_3])
+    _, (_, r3) = run(30.0, frames=((img3, pts3),))
+    assert r3.status == TRACKING and r3.box3d[2] - r3.box3d[5] / 2 == pytest.approx(pts3[:, 2].min(), abs=0.3)

@@ -19,11 +19,15 @@ as shallow as the cloud.
     box = box_from_view(box2d, camera, front_z)           # (6,) [cx, cy, cz, sx, sy, sz]
     box = deepen_to_view(box, box2d, camera, front_z)     # reaches_range but not cut
     box = carry_box(last_box, last_box2d, box2d, camera)  # no return at all: past the range
+    box = box_at_range(box2d, camera, range_m)            # no return from the first frame on
 
 All use only the frustum pass's bounds or boxes: no pass over the points. When a body whose
 returns had reached the range gives none (wholly past it; the 2D tracker still has it, clear of
 the image border), its last box is carried by the image: across the line of sight with the 2D
-box's centre, along it by the 2D box's change of scale, damped (`carry_box`).
+box's centre, along it by the 2D box's change of scale, damped (`carry_box`). A body that
+gives no return from the first frame on (the caller's 2D box on it) is past the range from the
+start: boxed from the image with its front face at the range, the nearest it can be
+(`box_at_range`), then carried the same way.
 """
 from __future__ import annotations
 
@@ -32,7 +36,8 @@ import numpy as np
 from .camera import Camera
 from .fusion import box2d_section
 
-__all__ = ["reaches_range", "is_range_cut", "box_from_view", "deepen_to_view", "lateral_coverage", "RANGE_REACH",
+__all__ = ["reaches_range", "is_range_cut", "box_from_view", "box_at_range", "deepen_to_view", "lateral_coverage",
+           "RANGE_REACH",
            "MIN_COVERAGE", "CAP_FUSION_COVERAGE", "DEPTH_RATIO", "MAX_DEPTH_RATIO", "carry_box", "CARRY_DEPTH_EXPONENT"]
 
 # The returns reach the range when the farthest frustum point lies within this fraction of the
@@ -107,6 +112,15 @@ def box_from_view(box2d: np.ndarray, camera: Camera, front_z: float,
     zc = front_z / (1.0 - a / 2.0)
     cx, cy, sx, sy = box2d_section(box2d, camera, zc)
     return np.array([cx, cy, zc, sx, sy, a * zc])
+
+
+def box_at_range(box2d: np.ndarray, camera: Camera, range_m: float,
+                 ratio: float = DEPTH_RATIO) -> np.ndarray | None:
+    """``box_from_view`` with the front face at the range `range_m` (metres, along the 2D box's
+    centre ray): the box of a body the camera sees and the depth sensor does not, as near as it can
+    be (no return in its 2D box: past the range). None where box_from_view has none."""
+    cx, cy = box2d_section(box2d, camera, 1.0)[:2]          # the centre ray at z = 1
+    return box_from_view(box2d, camera, float(range_m) / float(np.sqrt(cx * cx + cy * cy + 1.0)), ratio)
 
 
 def deepen_to_view(box: np.ndarray, box2d: np.ndarray, camera: Camera, front_z: float,

@@ -56,8 +56,8 @@ from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
 from .silhouette import contain, find_body, past_border, silhouette_box
 from .fusion import WEIGHT_2D, WEIGHT_3D, fuse, fuse_section
-from .range_cut import (CAP_FUSION_COVERAGE, DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_from_view, carry_box,
-                        deepen_to_view, lateral_coverage, reaches_range)
+from .range_cut import (CAP_FUSION_COVERAGE, DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_at_range, box_from_view,
+                        carry_box, deepen_to_view, lateral_coverage, reaches_range)
 from .trackers2d import Tracker2D, create_tracker
 from .unmatched_texture import trim_unmatched
 
@@ -155,6 +155,12 @@ EMPTY_RANGE_SHARE = 0.8
 # area of the last such box clear of the border is a sliver of the body, not its size in the
 # image, and is not carried from (the clear one is kept).
 CARRY_SLIVER = 0.5
+# A body that gives no return in the caller's first 2D box, with a depth range known (a ToF
+# camera's 30 m), is past the range from the start: it had no 3D box at all (every frame empty,
+# AO_3d 0 over the sequence; ToF calibration seed 9, test 0005, a body 16 m long centred at 32 m).
+# It is boxed at the range (range_cut.box_at_range: the nearest it can be) and carried by the 2D
+# box as a body gone past it is; its first returns replace that box. Status stays "no_points".
+BOX_AT_RANGE = True
 # Inside the loop a lost 2D tracker that judges its own loss takes a candidate only at this
 # score or above (its `reacquire_threshold`, raised to this, never lowered; None: the tracker's
 # own). Right after an exit its wide search is mostly pad and empty sky, whose edge scored
@@ -1154,6 +1160,15 @@ class Track3D:
             est = self._estimate(pts, bounds, b)
             if est is not None:
                 self.box3d = self._report(est, self._measured(pts, bounds), b)
+            elif len(pts) == 0 and self.depth_range_m is not None and not any(self._border_sides(b)):
+                # the caller's box is on the body and the sensor returns nothing there: the body is
+                # past the range. Boxed at the range and carried by the 2D box as a body gone past it
+                # (BOX_AT_RANGE)
+                at = box_at_range(b, self.camera, self.depth_range_m) if BOX_AT_RANGE else None
+                if at is not None:
+                    self.box3d = at
+                    self._carry_from, self._carry_box = b.copy(), at.copy()
+                    self._carry_area = float(b[2] * b[3])
         if first is not None:
             self.box3d = first.copy()
 
