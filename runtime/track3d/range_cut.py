@@ -87,9 +87,13 @@ def reaches_range(bounds: np.ndarray, box2d: np.ndarray, camera: Camera, range_m
     along the 2D box's centre ray; within the fraction `reach`); None: an unlimited sensor."""
     if range_m is None:
         return False
+    return float(np.asarray(bounds)[1, 2]) >= _z_at_range(box2d, camera, range_m) * (1.0 - reach)
+
+
+def _z_at_range(box2d: np.ndarray, camera: Camera, range_m: float) -> float:
+    """The depth z at which the 2D box's centre ray lies `range_m` metres from the camera."""
     cx, cy = box2d_section(box2d, camera, 1.0)[:2]          # the centre ray at z = 1
-    z_range = float(range_m) / float(np.sqrt(cx * cx + cy * cy + 1.0))
-    return float(np.asarray(bounds)[1, 2]) >= z_range * (1.0 - reach)
+    return float(range_m) / float(np.sqrt(cx * cx + cy * cy + 1.0))
 
 
 def is_range_cut(bounds: np.ndarray, box2d: np.ndarray, camera: Camera, range_m: float | None,
@@ -119,8 +123,7 @@ def box_at_range(box2d: np.ndarray, camera: Camera, range_m: float,
     """``box_from_view`` with the front face at the range `range_m` (metres, along the 2D box's
     centre ray): the box of a body the camera sees and the depth sensor does not, as near as it can
     be (no return in its 2D box: past the range). None where box_from_view has none."""
-    cx, cy = box2d_section(box2d, camera, 1.0)[:2]          # the centre ray at z = 1
-    return box_from_view(box2d, camera, float(range_m) / float(np.sqrt(cx * cx + cy * cy + 1.0)), ratio)
+    return box_from_view(box2d, camera, _z_at_range(box2d, camera, range_m), ratio)
 
 
 def deepen_to_view(box: np.ndarray, box2d: np.ndarray, camera: Camera, front_z: float,
