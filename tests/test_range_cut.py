@@ -366,6 +366,10 @@ def test_a_body_past_the_range_from_the_first_frame_is_boxed_at_the_range_and_ca
     np.testing.assert_array_equal(run(30.0, restore=True)[1][0].box3d, r2.box3d)
     none_first, (none2,) = run(None)
     assert np.all(np.isnan(none_first)) and np.all(np.isnan(none2.box3d))
+    # a known first 3D box (--init-3d) is what is carried, not the guess at the range
+    t = Track3D(CAM, OracleTracker(gt2d), _CapBox(), depth_range_m=30.0, fusion=False)
+    t.init(img1, b2_1, points=pts1, box3d=b3_1)
+    np.testing.assert_allclose(t.update(img2, pts2).box3d, carry_box(b3_1, b2_1, b2_2, CAM))
     # the body comes within the range: its returns' estimate replaces the guess
     img3, pts3, b2_3, _ = _cut_sphere(30.0, centre=(1.0, 0.0, 31.0))
     assert len(pts3) > 100

@@ -1171,6 +1171,8 @@ class Track3D:
                     self._carry_area = float(b[2] * b[3])
         if first is not None:
             self.box3d = first.copy()
+            if self._carry_box is not None:   # past the range: carried from the known box, not the guess
+                self._carry_box = first.copy()
 
     def _judge(self, r: TrackResult, estimated: bool, seen: bool = False, empty: bool = False) -> TrackResult:
         """Count held and bad frames; after `lost_after` bad frames in a row the target is lost.
