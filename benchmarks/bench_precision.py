@@ -5,7 +5,9 @@
 Per network (A3BoxNet at its N points, SiamFC-edge search at its instance size with one scale,
 SiamFC-edge exemplar): each available variant (onnxruntime fp32 / int8, OpenVINO fp32 / bf16;
 OpenVINO does not run the int8 files, see track3d.onnxmodel) on the same fixed random inputs, all variants run ROUND-ROBIN for --net-seconds (so that
-other load on the machine hits them alike), median ms; max relative difference to onnxruntime
+other load on the machine hits them alike), each call after track3d.variant_choice.GAP_S of other
+work as in the loop (what precision="auto" measures; files from before that timed calls back to
+back), median ms; max relative difference to onnxruntime
 fp32 (max |diff| / max |fp32| over the outputs).
 
 Whole loop (--tracker, default the default loop's edgetrack, + a3boxnet, fusion on, bench_fps's loop and stage timers on preloaded
