@@ -71,16 +71,19 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--results", required=True, type=Path, help="folder holding engine-<sensor>/ result folders")
     ap.add_argument("--out", required=True, type=Path, help="folder for engine_baseline.json / .md")
     ap.add_argument("--update", action="store_true",
-                    help="replace only the rows of the sensors found under --results and keep the other "
-                         "sensors' rows of the existing --out/engine_baseline.json (re-running one sensor's sets "
-                         "without the others'; default: write the rows found, nothing else)")
+                    help="replace only the rows of the (sensor, split, protocol) report folders found under "
+                         "--results and keep the others of the existing --out/engine_baseline.json (re-running "
+                         "one sensor's sets, or one protocol, without the others'; default: write the rows "
+                         "found, nothing else)")
     return ap
 
 
 def merge(old: list[dict], new: list[dict]) -> list[dict]:
-    """`new` with the rows of `old` whose sensor is not in `new`, in the table's order."""
-    sensors = {r["sensor"] for r in new}
-    return ordered([r for r in old if r["sensor"] not in sensors] + list(new))
+    """`new` with the rows of `old` whose (sensor, split, protocol) report is not in `new`, in the
+    table's order: a report folder re-run replaces all its rows, one not re-run keeps its own."""
+    group = lambda r: (r["sensor"], r["split"], r["protocol"])   # noqa: E731
+    found = {group(r) for r in new}
+    return ordered([r for r in old if group(r) not in found] + list(new))
 
 
 def main(argv=None) -> int:

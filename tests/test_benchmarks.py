@@ -552,3 +552,18 @@ def test_engine_baseline_update_replaces_only_the_sensors_it_found(tmp_path, cap
     rows = json.loads((out / "engine_baseline.json").read_text())["rows"]
     assert [(r["sensor"], r["tracker"]) for r in rows] == [("ideal", "a"), ("tof", "a"), ("stereo", "a")]
     assert rows[-1]["ao_3d"] == 0.6
+
+
+def test_engine_baseline_update_replaces_only_the_report_folders_it_finds():
+    """--update: a (sensor, split, protocol) report re-run replaces all its rows (a tracker gone
+    from it goes); one not re-run keeps its rows (re-running one protocol of a sensor)."""
+    import engine_baseline
+
+    def row(sensor, split, protocol, tracker, ao):
+        return {"sensor": sensor, "split": split, "protocol": protocol, "tracker": tracker, "ao_3d": ao}
+
+    old = [row("ideal", "test", "onepass", "a", 0.1), row("ideal", "test", "onepass", "b", 0.2),
+           row("ideal", "test", "restart", "oracle", 0.3), row("tof", "test", "onepass", "a", 0.4)]
+    new = [row("ideal", "test", "onepass", "a", 0.9)]
+    got = {(r["sensor"], r["protocol"], r["tracker"]): r["ao_3d"] for r in engine_baseline.merge(old, new)}
+    assert got == {("ideal", "onepass", "a"): 0.9, ("ideal", "restart", "oracle"): 0.3, ("tof", "onepass", "a"): 0.4}

@@ -500,3 +500,50 @@ def _oracle(gt):
     from track3d.trackers2d import create_tracker
 
     return create_tracker("oracle", gt=gt, absent=np.zeros(len(gt), bool))
+
+
+def test_a_held_frame_gives_a_views_model_its_views_and_feeds_them():
+    """A frame the 2D tracker calls lost while the depth holds the body (held, measured from the
+    outline) is measured as a tracked frame is: the views model is given the past views and the
+    frame's returns go into them. It ran without them before, so a tracker that judges its loss
+    (EdgeTrack) and one that does not left the same outline with different 3D boxes."""
+    from track3d.tracker import NO_POINTS, Track3D
+
+    given = []
+
+    class Recorder:
+        takes_past = True
+        amodal = True
+
+        def estimate(self, points, category, past=None):
+            given.append(past is not None and len(past) > 0)
+            return np.array([*points.mean(axis=0), 1.0, 1.0, 1.0])
+
+    class LosesOnce:
+        """The ground-truth box each frame; frame `at` it says it has lost the target."""
+        lost = False
+
+        def __init__(self, gt, at):
+            self.gt, self.at, self.k = gt, at, 0
+
+        def init(self, image, box):
+            self.k = 0
+
+        def update(self, image):
+            self.k += 1
+            self.lost = self.k == self.at
+            return not self.lost, self.gt[self.k]
+
+    frames = [_ellipsoid_view(_rot_y(3.0 * k)) for k in range(6)]
+    gt = np.array([b for _, b in frames])
+    image = np.zeros((CAM.height, CAM.width, 3), np.uint8)
+    t = Track3D(CAM, LosesOnce(gt, at=4), Recorder(), body_views=BodyViewsParams(every=1), front_quantile=0.005)
+    t.init(image, gt[0], points=frames[0][0])
+    for k, (pts, _) in enumerate(frames[1:], start=1):
+        before = len(given)
+        views_before = t._views.views
+        r = t.update(image, pts)
+        if k == 4:
+            assert r.status == NO_POINTS and np.all(np.isfinite(r.box3d))   # held, measured from the outline
+            assert len(given) - before == 1 and given[-1]                   # the views model got its views
+            assert t._views.views > views_before                            # and the frame went into them

@@ -155,6 +155,13 @@ EMPTY_RANGE_SHARE = 0.8
 # area of the last such box clear of the border is a sliver of the body, not its size in the
 # image, and is not carried from (the clear one is kept).
 CARRY_SLIVER = 0.5
+# A held frame measured from the outline (the 2D tracker calls the body lost, the depth holds it
+# there: a sliver at the image border) is measured as a tracked frame is: its returns go into the
+# past views and a views model is given them. Before, a views model ran there without its views
+# and the views missed the frame, so a tracker that judges its loss (EdgeTrack) and one that does
+# not (NanoTrack v2, tracking on) left the same outline with different 3D boxes (README flash-LiDAR
+# test 0003 at the top border: 12.93 vs 12.74 m wide, then apart for the rest of the sequence).
+HELD_VIEWS = True
 # A body that gives no return in the caller's first 2D box, with a depth range known (a ToF
 # camera's 30 m), is past the range from the start: it had no 3D box at all (every frame empty,
 # AO_3d 0 over the sequence; ToF calibration seed 9, test 0005, a body 16 m long centred at 32 m).
@@ -1520,10 +1527,18 @@ class Track3D:
         pts, bounds = self._frustum(cloud, box)
         if reaches_range(bounds, box, self.camera, self.depth_range_m):
             return False
-        est = self._estimate(pts, bounds, box)
+        far = limit = past = None
+        measured = self._measured(pts, bounds)
+        if self._views is not None and len(pts) >= self.min_points:
+            # as a tracked frame: the returns into the past views, and a views model given them
+            # (HELD_VIEWS)
+            far, limit = self._update_views(pts, measured, box) if HELD_VIEWS else (None, None)
+            if self._estimator_takes_past and HELD_VIEWS:
+                past = self._views.past_points(pts)
+        est = self._estimate(pts, bounds, box, past)
         if est is None:
             return False
-        self.box3d = self._report(est, self._measured(pts, bounds), box)
+        self.box3d = self._report(est, measured, box, far, limit)
         return True
 
     # --- checkpoints and self-description ------------------------------------------------------
