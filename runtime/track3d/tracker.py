@@ -1167,11 +1167,11 @@ class Track3D:
             est = self._estimate(pts, bounds, b)
             if est is not None:
                 self.box3d = self._report(est, self._measured(pts, bounds), b)
-            elif len(pts) == 0 and self.depth_range_m is not None and not any(self._border_sides(b)):
+            elif (BOX_AT_RANGE and len(pts) == 0 and self.depth_range_m is not None
+                  and not any(self._border_sides(b))):
                 # the caller's box is on the body and the sensor returns nothing there: the body is
                 # past the range. Boxed at the range and carried by the 2D box as a body gone past it
-                # (BOX_AT_RANGE)
-                at = box_at_range(b, self.camera, self.depth_range_m) if BOX_AT_RANGE else None
+                at = box_at_range(b, self.camera, self.depth_range_m)
                 if at is not None:
                     self.box3d = at
                     self._carry_from, self._carry_box = b.copy(), at.copy()

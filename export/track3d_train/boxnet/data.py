@@ -104,8 +104,8 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
 
     ds = Dataset(root)
     seqs = ds.sequences(split)
-    if sensors is not None:
-        wanted = {str(x).strip().lower() for x in sensors}
+    wanted = None if sensors is None else {str(x).strip().lower() for x in sensors}
+    if wanted is not None:
         seqs = [q for q in seqs if str(q.depth_sensor or "").lower() in wanted]
         if not seqs:
             raise ValueError(f"no sequence of split {split!r} of {root} has depth sensor {', '.join(sorted(wanted))}")
@@ -158,7 +158,7 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
     info = {"version": CACHE_VERSION, "root": str(ds.root), "split": split, "data_hash": h, "jitters": jitters,
             "oracle": oracle, "stereo_match": stereo_match, "max_points": max_points, "min_points": min_points,
             "past_views": dict(PAST_VIEWS) if past_views else None,
-            "seed": seed, "sensors": sorted({str(x).strip().lower() for x in sensors}) if sensors is not None else None,
+            "seed": seed, "sensors": None if wanted is None else sorted(wanted),
             "jitter": spec.__dict__, "sequences": [s.name for s in seqs], "frame_step": frame_step,
             "categories": list(ds.categories.get("shape_families", [])),
             "num_categories": len(ds.categories.get("shape_families", [])) or 3}
