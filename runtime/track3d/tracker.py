@@ -597,6 +597,9 @@ def texture_trim_for(depth_sensor: str | None) -> bool:
 # flash-LiDAR 0.887 / 0.828 -> 0.886 / 0.828, ToF unchanged (seeds 3 / 9; at ~30 m its noise
 # leaves registrations near the fit test's limit); stereo 0.7395 -> 0.7322 (four sets; the
 # matcher's smeared surfaces register into wrong poses that pass the fit test): off for stereo.
+# Against the simulator's pose (docs/results.md, "Stereo, the body's past views"): on the eroded
+# depth 2-5% of stereo registrations pass the fit test, and the ICP's turn is off by 5-6 degrees,
+# more than the 2-3 degrees the body turns between key frames (ideal depth: 0.1-0.2 degrees).
 # Over 300 frames (6 + 6 sequences each): flash-LiDAR (seed 19) test 0.882 -> 0.894, held-out
 # shapes 0.867 -> 0.869, 3 sequences up, none down; ToF (seed 23) 0.778 -> 0.788, 0.805 -> 0.812,
 # 7 up, none down: on for both. Cost: +0.45 ms a frame on average on one core (a key frame's
