@@ -271,14 +271,15 @@ def _aim_cell(rows: dict, kind: str, sensor: str, split: str, tracker: str, ao: 
     return f"{text}: {'met' if met else '**not met**'}"
 
 
-def _peer_cell(rows: dict, protocol: str) -> str:
-    """EdgeTrack's loop against NanoTrack v2's in the same loop, AO_3d per (sensor, split): how
-    many ahead, level (within 0.0005: the same at the table's 3 decimals) and behind; when every
-    pair was compared sequence by sequence (NanoTrack's row "paired" against EdgeTrack's, from
-    one report), how many of the leads and of the losses lie beyond the paired 95% interval."""
-    pairs = [(rows[(s, sp, protocol, "edgetrack+a3boxnet")], rows[(s, sp, protocol, "nano+a3boxnet")])
-             for s, sp in ENGINE_SPLITS
-             if (s, sp, protocol, "edgetrack+a3boxnet") in rows and (s, sp, protocol, "nano+a3boxnet") in rows]
+def _peer_cell(rows: dict, protocol: str, peers: tuple[str, ...] = ("nano+a3boxnet",)) -> str:
+    """EdgeTrack's loop against each peer's in the same loop (NanoTrack v2 by default), AO_3d per
+    (sensor, split, peer): how many ahead, level (within 0.0005: the same at the table's 3
+    decimals) and behind; when every pair was compared sequence by sequence (the peer's row
+    "paired" against EdgeTrack's, from one report), how many of the leads and of the losses lie
+    beyond the paired 95% interval."""
+    pairs = [(rows[(s, sp, protocol, "edgetrack+a3boxnet")], rows[(s, sp, protocol, peer)])
+             for s, sp in ENGINE_SPLITS for peer in peers
+             if (s, sp, protocol, "edgetrack+a3boxnet") in rows and (s, sp, protocol, peer) in rows]
     if not pairs:
         return "-"
     d = [e["ao_3d"] - n["ao_3d"] for e, n in pairs]
@@ -294,6 +295,54 @@ def _peer_cell(rows: dict, protocol: str) -> str:
             f"{n(behind, sure_behind)} of {len(d)}: {'met' if behind == 0 else '**not met**'}")
 
 
+# OpenCV's trackers inside the same loop on the engine's 60-frame sets (engine_baseline.py of
+# `track3d track --tracker T` runs beside EdgeTrack's, one report per sensor, split and protocol)
+OPENCV_PEERS = "opencv_peers/engine_baseline.json"
+OPENCV_TRACKERS = ("kcf", "csrt", "mosse", "mil")
+OPENCV_NAMES = ("KCF", "CSRT", "MOSSE", "MIL")
+
+
+# the 2D trackers alone on the engine's images, one pass (`track3d-train edgetrack eval --compare`)
+PEERS_2D = "edgetrack/engine_eval_{split}_peers.json"
+
+
+def _cell_2d(root: Path) -> str:
+    """EdgeTrack's AO_2d alone against every other tracker of the same run, per split: on how
+    many splits it is ahead of each (by 0.0005 or more), with its AO_2d and the best other's."""
+    got = []
+    for split in ("test", "test_unseen"):
+        f = root / RESULTS / PEERS_2D.format(split=split)
+        if f.exists():
+            t = json.loads(f.read_text())["trackers"]
+            ours = t.pop("edgetrack", None) or t.pop("model edgetrack", None)
+            if ours is not None and t:
+                got.append((ours["ao_2d"], max(v["ao_2d"] for v in t.values()), len(t)))
+    if not got:
+        return "-"
+    ahead = sum(e - b >= 0.0005 for e, b, _ in got)
+    vals = " / ".join(f"{e:.3f}" for e, _, _ in got) + " vs the best other " + " / ".join(f"{b:.3f}" for _, b, _ in got)
+    return (f"ahead of all {got[0][2]} on {ahead} of {len(got)} splits (AO_2d {vals}): "
+            f"{'met' if ahead == len(got) else '**not met**'}")
+
+
+def peers_table(root: Path) -> str:
+    """AO_3d of the loop under each 2D tracker, one pass, per sensor and split: EdgeTrack (the
+    default) and NanoTrack v2 from the engine table's run, OpenCV's trackers from theirs (the
+    same sequences; EdgeTrack's row of that run, the same loop, is the one they are paired with)."""
+    now, opencv = _runs(root, "engine_current/engine_baseline.json"), _runs(root, OPENCV_PEERS)
+
+    def ao(by, key, bold=False):
+        r = by.get(key)
+        return "-" if r is None else (f"**{r['ao_3d']:.3f}**" if bold else f"{r['ao_3d']:.3f}")
+
+    rows = []
+    for s, sp in ENGINE_SPLITS:
+        rows.append([s, sp, ao(now, (s, sp, "onepass", "edgetrack+a3boxnet"), True),
+                     ao(now, (s, sp, "onepass", "nano+a3boxnet"))]
+                    + [ao(opencv, (s, sp, "onepass", f"{t}+a3boxnet")) for t in OPENCV_TRACKERS])
+    return markdown_table(["sensor", "split", "EdgeTrack (default)", "NanoTrack v2"] + list(OPENCV_NAMES), rows)
+
+
 def aims_table(root: Path) -> str:
     """Where the shipped loop stands against its aims, from the committed result JSON: every
     accuracy aim on the 60-frame sets and on the long watches, and the speed aim (>= 150 FPS on
@@ -303,6 +352,12 @@ def aims_table(root: Path) -> str:
     rows += [[f"Track3D default vs NanoTrack v2 + A3BoxNet (peer), {name}: at or ahead on every sensor and split",
               _peer_cell(short, protocol), _peer_cell(long_, protocol) if protocol == "onepass" else "-"]
              for protocol, name in (("onepass", "one pass"), ("restart", "with restarts"))]
+    opencv = _runs(root, OPENCV_PEERS) if (root / RESULTS / OPENCV_PEERS).exists() else {}
+    rows += [[f"Track3D default vs OpenCV's {', '.join(OPENCV_NAMES)} + A3BoxNet, {name}: at or ahead of each on "
+              "every sensor and split", _peer_cell(opencv, protocol, tuple(f"{t}+a3boxnet" for t in OPENCV_TRACKERS)),
+              "-"] for protocol, name in (("onepass", "one pass"), ("restart", "with restarts"))]
+    rows.append([f"EdgeTrack vs NanoTrack v2 and OpenCV's {', '.join(OPENCV_NAMES)} in 2D alone, one pass: ahead of "
+                 "each on both splits", _cell_2d(root), "-"])
     label, rel, config, _ = SPEED_ROWS[0]
     r = next(x for x in _load(root, rel)["results"] if x["config"] == config and x["backend"] == "onnxruntime"
              and x["precision"] == "fp32")
@@ -313,7 +368,8 @@ def aims_table(root: Path) -> str:
 
 
 TABLES = {"speed": speed_table, "engine": engine_table, "long": long_table, "table2": table2_table,
-          "table2_engine": table2_engine_table, "first_box": first_box_table, "aims": aims_table}
+          "table2_engine": table2_engine_table, "first_box": first_box_table, "aims": aims_table,
+          "peers": peers_table}
 
 
 def render(readme: str, root: Path) -> str:
