@@ -86,8 +86,11 @@ def _load(root: Path, rel: str) -> dict:
     return json.loads((root / RESULTS / rel).read_text())
 
 
-def _runs(root: Path, rel: str) -> dict:
-    """The rows of an engine_baseline.py result file by (sensor, split, protocol, tracker)."""
+def _runs(root: Path, rel: str, optional: bool = False) -> dict:
+    """The rows of an engine_baseline.py result file by (sensor, split, protocol, tracker); with
+    `optional`, none when the file is not there (a run not made yet shows as '-')."""
+    if optional and not (root / RESULTS / rel).exists():
+        return {}
     return {(r["sensor"], r["split"], r["protocol"], r["tracker"]): r for r in _load(root, rel)["rows"]}
 
 
@@ -329,7 +332,7 @@ def peers_table(root: Path) -> str:
     """AO_3d of the loop under each 2D tracker, one pass, per sensor and split: EdgeTrack (the
     default) and NanoTrack v2 from the engine table's run, OpenCV's trackers from theirs (the
     same sequences; EdgeTrack's row of that run, the same loop, is the one they are paired with)."""
-    now, opencv = _runs(root, "engine_current/engine_baseline.json"), _runs(root, OPENCV_PEERS)
+    now, opencv = _runs(root, "engine_current/engine_baseline.json"), _runs(root, OPENCV_PEERS, optional=True)
 
     def ao(by, key, bold=False):
         r = by.get(key)
@@ -352,7 +355,7 @@ def aims_table(root: Path) -> str:
     rows += [[f"Track3D default vs NanoTrack v2 + A3BoxNet (peer), {name}: at or ahead on every sensor and split",
               _peer_cell(short, protocol), _peer_cell(long_, protocol) if protocol == "onepass" else "-"]
              for protocol, name in (("onepass", "one pass"), ("restart", "with restarts"))]
-    opencv = _runs(root, OPENCV_PEERS) if (root / RESULTS / OPENCV_PEERS).exists() else {}
+    opencv = _runs(root, OPENCV_PEERS, optional=True)
     rows += [[f"Track3D default vs OpenCV's {', '.join(OPENCV_NAMES)} + A3BoxNet, {name}: at or ahead of each on "
               "every sensor and split", _peer_cell(opencv, protocol, tuple(f"{t}+a3boxnet" for t in OPENCV_TRACKERS)),
               "-"] for protocol, name in (("onepass", "one pass"), ("restart", "with restarts"))]

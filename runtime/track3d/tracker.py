@@ -598,7 +598,7 @@ def texture_trim_for(depth_sensor: str | None) -> bool:
 # leaves registrations near the fit test's limit); stereo 0.7395 -> 0.7322 (four sets; the
 # matcher's smeared surfaces register into wrong poses that pass the fit test): off for stereo.
 # Against the simulator's pose (docs/results.md, "Stereo, the body's past views"): on the eroded
-# depth 2-5% of stereo registrations pass the fit test, and the ICP's turn is off by 5-6 degrees,
+# depth 2-5% of stereo registrations pass the fit test, and the ICP's turn is off by 4.6-5.9 degrees,
 # more than the 2-3 degrees the body turns between key frames (ideal depth: 0.1-0.2 degrees).
 # Over 300 frames (6 + 6 sequences each): flash-LiDAR (seed 19) test 0.882 -> 0.894, held-out
 # shapes 0.867 -> 0.869, 3 sequences up, none down; ToF (seed 23) 0.778 -> 0.788, 0.805 -> 0.812,
