@@ -12,7 +12,9 @@ Each labelled frame of a `track3d track` run is put in one bin by the returns in
 
 Per bin: frames, their share, mean IoU_3d, the mean signed error of the box's front face, back
 face and centre along the line of sight (z, metres; + = too far), and the bin's share of the
-run's loss (sum of 1 - IoU_3d). A frame with no box counts as IoU 0 and no error.
+run's loss (sum of 1 - IoU_3d). A frame with no box counts as IoU 0 and no error. Per sequence
+(in the JSON; printed with --per-sequence): its frames per bin, mean IoU_3d and loss, which
+names the sequences a bin's loss comes from.
 
     python benchmarks/bench_range_loss.py --data data/calib-tof3 --split test \\
         --results R/test --tracker oracle+a3boxnet
@@ -82,8 +84,14 @@ def summarize(rows: list[tuple[str, float, tuple[float, float, float] | None]]) 
 
 def run_rows(data: Path, split: str, results: Path, tracker: str) -> list:
     """(kind, iou, errors) of every labelled frame of one run (module doc)."""
-    rows = []
+    return [row for rows in sequence_rows(data, split, results, tracker).values() for row in rows]
+
+
+def sequence_rows(data: Path, split: str, results: Path, tracker: str) -> dict[str, list]:
+    """{sequence name: its labelled frames' (kind, iou, errors)}, in the split's order."""
+    out = {}
     for seq in progress(Dataset(data).sequences(split), desc="sequences"):
+        rows = out[seq.name] = []
         res = read_result(result_folder(results, split, tracker, seq.name))
         if len(res.box3d) != len(seq):
             raise ValueError(f"{seq.name}: {len(res.box3d)} result boxes for {len(seq)} frames")
@@ -97,7 +105,24 @@ def run_rows(data: Path, split: str, results: Path, tracker: str) -> list:
                 rows.append((kind, float(iou_3d(est[None], seq.gt3d[i][None])[0]), face_errors(est, seq.gt3d[i])))
             else:
                 rows.append((kind, 0.0, None))
-    return rows
+    return out
+
+
+def sequence_summary(rows: list) -> dict:
+    """One sequence's frames: their mean IoU_3d, loss (sum of 1 - IoU_3d) and frames per bin."""
+    return {"frames": len(rows), "mean_iou_3d": float(np.mean([iou for _, iou, _ in rows])) if rows else None,
+            "loss": float(sum(1.0 - iou for _, iou, _ in rows)),
+            "bins": {kind: sum(1 for k, _, _ in rows if k == kind) for kind in KINDS}}
+
+
+def sequence_table(sequences: dict) -> str:
+    """Per-sequence summaries as a plain-text table, the largest loss first."""
+    lines = ["sequence frames IoU_3d   loss  " + "  ".join(f"{k:>7s}" for k in KINDS)]
+    for name, s in sorted(sequences.items(), key=lambda kv: -kv[1]["loss"]):
+        iou = "-" if s["mean_iou_3d"] is None else f"{s['mean_iou_3d']:.3f}"
+        lines.append(f"{name:8s} {s['frames']:6d} {iou:>6s} {s['loss']:6.1f}  "
+                     + "  ".join(f"{s['bins'][k]:7d}" for k in KINDS))
+    return "\n".join(lines)
 
 
 def table(summary: dict) -> str:
@@ -119,18 +144,27 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--results", type=Path, required=True, help="the run's --results folder (track3d track)")
     ap.add_argument("--tracker", default="edgetrack+a3boxnet",
                     help="the run's name in that folder (default: edgetrack+a3boxnet)")
+    ap.add_argument("--per-sequence", action="store_true",
+                    help="also print each sequence's frames per bin, mean IoU_3d and loss, the largest loss first "
+                         "(the JSON holds them always)")
     add_out_argument(ap, "range_loss")
     return ap
 
 
 def main(argv=None) -> int:
     a = build_parser().parse_args(argv)
-    summary = summarize(run_rows(a.data, a.split, a.results, a.tracker))
+    by_seq = sequence_rows(a.data, a.split, a.results, a.tracker)
+    summary = summarize([row for rows in by_seq.values() for row in rows])
+    sequences = {name: sequence_summary(rows) for name, rows in by_seq.items()}
     a.out.mkdir(parents=True, exist_ok=True)
     rec = start_record("range_loss", data=relative_to(a.data, a.out), split=a.split, tracker=a.tracker)
     rec["bins"] = summary
+    rec["sequences"] = sequences
     write_json(a.out / f"range_loss_{a.split}_{a.tracker}.json", finish_record(rec))
     print(table(summary))
+    if a.per_sequence:
+        print()
+        print(sequence_table(sequences))
     return 0
 
 

@@ -43,7 +43,19 @@ def test_face_errors_and_summary_hand_cases():
     assert bench.summarize([])["within"]["share"] == 0.0
 
 
-def test_a_run_of_the_true_boxes_has_no_loss(tiny_dataset, tmp_path):
+def test_sequence_summary_and_table_hand_case():
+    rows = [("within", 1.0, (0.0, 0.0, 0.0)), ("cut", 0.25, None), ("cut", 0.75, (1.0, 1.0, 1.0))]
+    s = bench.sequence_summary(rows)
+    assert s == {"frames": 3, "mean_iou_3d": pytest.approx(2 / 3), "loss": pytest.approx(1.0),
+                 "bins": {"none": 0, "cut": 2, "reaches": 0, "within": 1}}
+    assert bench.sequence_summary([])["mean_iou_3d"] is None
+    text = bench.sequence_table({"0001": bench.sequence_summary(rows[:1]), "0002": s})
+    lines = text.splitlines()
+    assert lines[1].startswith("0002") and lines[2].startswith("0001")   # the largest loss first
+    assert lines[1].split() == ["0002", "3", "0.667", "1.0", "0", "2", "0", "1"]
+
+
+def test_a_run_of_the_true_boxes_has_no_loss(tiny_dataset, tmp_path, capsys):
     ds = Dataset(tiny_dataset)
     seqs = ds.sequences("test")
     for seq in seqs:
@@ -53,11 +65,18 @@ def test_a_run_of_the_true_boxes_has_no_loss(tiny_dataset, tmp_path):
                                     np.zeros(n), np.zeros(n), np.zeros((n, len(STAGES)))))
     out = tmp_path / "out"
     assert bench.main(["--data", str(tiny_dataset), "--split", "test", "--results", str(tmp_path / "R"),
-                       "--tracker", "truth", "--out", str(out)]) == 0
+                       "--tracker", "truth", "--out", str(out), "--per-sequence"]) == 0
     rec = json.loads((out / "range_loss_test_truth.json").read_text())
     bins = rec["bins"]
     labelled = sum(int((~seq.absent).sum()) for seq in seqs)
     assert sum(b["frames"] for b in bins.values()) == labelled
+    assert list(rec["sequences"]) == [seq.name for seq in seqs]
+    for seq in seqs:
+        per = rec["sequences"][seq.name]
+        assert per["frames"] == int((~seq.absent).sum()) == sum(per["bins"].values())
+        assert per["loss"] == pytest.approx(0.0, abs=1e-9)
+    printed = capsys.readouterr().out
+    assert all(seq.name in printed for seq in seqs)
     for b in bins.values():
         if b["frames"]:
             assert b["mean_iou_3d"] == pytest.approx(1.0) and b["back_z_error_m"] == pytest.approx(0.0, abs=1e-9)
