@@ -82,11 +82,9 @@ def fit_power_rule(extents: np.ndarray) -> tuple[float, float, float]:
 
 def uniform_rotations(rng: np.random.Generator, n: int) -> np.ndarray:
     """(n, 3, 3) rotations uniform over SO(3) (from normalised Gaussian quaternions)."""
+    from track3d_sim.shapes import quat_to_matrix
     q = rng.normal(size=(n, 4))
-    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
-    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-                     np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-                     np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], 1)
+    return quat_to_matrix(q / np.linalg.norm(q, axis=1, keepdims=True))
 
 
 def sample_extents(generator: str, bodies: int, attitudes: int, seed: int, mode: str,
@@ -115,20 +113,17 @@ def sample_extents(generator: str, bodies: int, attitudes: int, seed: int, mode:
     return np.concatenate(out)
 
 
-def measure(bodies: int, attitudes: int, seed: int, detail: int = 4, generators=None) -> dict:
+def measure(bodies: int, attitudes: int, seed: int, detail: int = 4) -> dict:
     """Per attitude mode: the rule fitted on the training world and every rule's score, pooled
     over the training world, over the held-out generators, and per generator."""
-    train, held = (training_world(), held_out()) if generators is None else generators
+    train, held = training_world(), held_out()
     out = {}
     for mode in ATTITUDES:
         ext = {g: sample_extents(g, bodies, attitudes, seed, mode, detail)
                for g in progress([*train, *held], desc=f"bodies ({mode})")}
         pooled_train = np.concatenate([ext[g] for g in train])
         k, a, _ = fit_power_rule(pooled_train)
-        groups = {"training world": pooled_train}
-        if held:
-            groups["held-out"] = np.concatenate([ext[g] for g in held])
-        groups.update(ext)
+        groups = {"training world": pooled_train, "held-out": np.concatenate([ext[g] for g in held]), **ext}
         out[mode] = {"fitted": {"k": k, "a": a},
                      "scores": {name: {r: depth_score(e[:, 2], guess) for r, guess in rules(e, k, a).items()}
                                 for name, e in groups.items()},

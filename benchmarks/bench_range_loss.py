@@ -82,13 +82,9 @@ def summarize(rows: list[tuple[str, float, tuple[float, float, float] | None]]) 
     return out
 
 
-def run_rows(data: Path, split: str, results: Path, tracker: str) -> list:
-    """(kind, iou, errors) of every labelled frame of one run (module doc)."""
-    return [row for rows in sequence_rows(data, split, results, tracker).values() for row in rows]
-
-
 def sequence_rows(data: Path, split: str, results: Path, tracker: str) -> dict[str, list]:
-    """{sequence name: its labelled frames' (kind, iou, errors)}, in the split's order."""
+    """{sequence name: its labelled frames' (kind, iou, errors)} of one run (module doc), in the
+    split's order."""
     out = {}
     for seq in progress(Dataset(data).sequences(split), desc="sequences"):
         rows = out[seq.name] = []
