@@ -7,7 +7,7 @@ Two ONNX graphs (written by `track3d-train edgetrack export`):
     <name>_search.onnx    uint8 (1, N, N, 3) RGB search crop + kernel -> logit (1, n, n), ltrb (1, 4, n, n)
 
 Per frame: one search crop around the last centre (`track3d.siamfc.crop_square`: one
-cv2.warpAffine, or 2 x 2 box halvings + a bilinear resize when shrinking by more than 2; where it
+bilinear warp of fixed arithmetic, `track3d.resample`, or 2 x 2 box halvings + a bilinear resize when shrinking by more than 2; where it
 reaches past the image it is filled with the model's pad colour, metadata 'pad', else the frame's
 mean colour), one ORT call, then
 numpy: the box of every cell from its (l, t, r, b) distances, a size / aspect change penalty,

@@ -5,8 +5,8 @@ Two ONNX graphs (written by `track3d-train siamfc export`):
     <name>_search.onnx    uint8 (S, N, N, 3) RGB crops + exemplar feature -> responses (S, R, R)
 
 Per frame: S crops of the search region around the last centre (one per scale, mean-colour
-padding, one cv2.warpAffine each), one ORT call, cubic upsampling of the responses, scale
-penalty, cosine window, scale damping (Bertinetto et al. 2016). Every size and
+padding, one bilinear warp each, `track3d.resample`), one ORT call, cubic upsampling of the
+responses, scale penalty, cosine window, scale damping (Bertinetto et al. 2016). Every size and
 hyper-parameter comes from the models' metadata (key 'track3d'), so a new model needs no code
 change; keyword overrides to `create` / `SiamFCTracker` win over the metadata.
 
@@ -23,6 +23,7 @@ import numpy as np
 
 from .frames import MAX_BOX_SCALE, MIN_BOX_SIDE, check_image, check_init_box
 from .onnxmodel import load_model, model_pair, shipped_model
+from .resample import warp_axis_aligned
 
 __all__ = ["SiamFCTracker", "create", "crop_square", "model_paths", "VARIANT_FILES", "TUNABLE"]
 
@@ -35,16 +36,14 @@ def crop_square(image: np.ndarray, center: np.ndarray, size: float, out_size: in
                 border: tuple) -> np.ndarray:
     """Square patch of side `size` image pixels centred at `center` (x, y, continuous pixel
     coordinates: pixel i spans [i, i+1)), resized to out_size x out_size; outside the image the
-    patch is filled with `border` (the mean colour). One bilinear cv2.warpAffine."""
+    patch is filled with `border` (the mean colour). One bilinear warp (`track3d.resample`: the
+    arithmetic of OpenCV 5.0's warpAffine, fixed whatever OpenCV is installed)."""
     s = out_size / max(float(size), 1e-6)
     tx = out_size / 2.0 - 0.5 - s * (center[0] - 0.5)
     ty = out_size / 2.0 - 0.5 - s * (center[1] - 0.5)
-    m = np.array([[s, 0.0, tx], [0.0, s, ty]], dtype=np.float64)
-    interp = cv2.INTER_AREA if s < 0.5 else cv2.INTER_LINEAR
-    if interp == cv2.INTER_AREA:  # warpAffine has no area filter: crop, then resize
+    if s < 0.5:  # shrinking by more than 2: box halvings first, which a bilinear warp lacks
         return _crop_resize(image, center, size, out_size, border)
-    return cv2.warpAffine(image, m, (out_size, out_size), flags=cv2.INTER_LINEAR,
-                          borderMode=cv2.BORDER_CONSTANT, borderValue=border)
+    return warp_axis_aligned(image, (s, s), (tx, ty), (out_size, out_size), border)
 
 
 def _crop_resize(image, center, size, out_size, border):

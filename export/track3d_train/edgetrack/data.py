@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 
 from track3d.edgetrack import pad_colour
+from track3d.resample import warp_axis_aligned
 from track3d.siamfc import crop_square
 
 from ..caches import load_npy, not_a_cache
@@ -214,9 +215,9 @@ class PairSampler:
 
     def _warp(self, crop, out, scale, dx, dy):
         cs, co = (self.src - 1) / 2.0, (out - 1) / 2.0
-        m = np.array([[scale, 0, co - scale * cs + dx], [0, scale, co - scale * cs + dy]])
-        return cv2.warpAffine(np.asarray(crop), m, (out, out), flags=cv2.INTER_LINEAR,
-                              borderMode=cv2.BORDER_REPLICATE)
+        # the runtime's warp (fixed arithmetic, whatever OpenCV is installed), edge pixels replicated
+        return warp_axis_aligned(np.asarray(crop), (scale, scale), (co - scale * cs + dx, co - scale * cs + dy),
+                                 (out, out), border="replicate")
 
     def _photometric(self, im: np.ndarray, search: bool) -> np.ndarray:
         r = self.rng

@@ -15,6 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from track3d.resample import warp_axis_aligned
 from track3d.siamfc import crop_square
 
 from ..caches import load_npy, not_a_cache, read_json
@@ -169,9 +170,9 @@ class PairSampler:
         sx, sy = s * (1 + r.uniform(-self.stretch, self.stretch) / 2), s
         dx, dy = (r.uniform(-shift, shift, 2) if shift > 0 else (0.0, 0.0))
         cs, co = (self.src - 1) / 2.0, (out - 1) / 2.0
-        m = np.array([[sx, 0, co - sx * cs + dx], [0, sy, co - sy * cs + dy]])
-        return cv2.warpAffine(np.asarray(crop), m, (out, out), flags=cv2.INTER_LINEAR,
-                              borderMode=cv2.BORDER_REPLICATE)
+        # the runtime's warp (fixed arithmetic, whatever OpenCV is installed), edge pixels replicated
+        return warp_axis_aligned(np.asarray(crop), (sx, sy), (co - sx * cs + dx, co - sy * cs + dy),
+                                 (out, out), border="replicate")
 
     def sample(self, batch: int) -> tuple[np.ndarray, np.ndarray]:
         r = self.rng
