@@ -18,8 +18,8 @@ Cases run in worker subprocesses (one at a time, niced): a crash or hang of thir
 
 Contracts (the oracles, shared with tests/test_fuzz.py):
 
-- frustum / sampling: the C++ functions equal the numpy references bit for bit, or both raise
-  ValueError; frustum points are finite, inside the depth crop, their bounds are their min / max;
+- frustum / sampling / crop: the C++ functions equal the numpy references bit for bit, or both
+  raise ValueError; frustum points are finite, inside the depth crop, their bounds are their min / max;
 - estimators: a finite (6,) box with sizes > 0; the baseline equals the points' min / max box;
   A3BoxNet's centre lies within 10 L of the points' enclosing box and its sizes are at most 10 L
   (L = the points' largest extent, at least 1 m);
@@ -253,6 +253,36 @@ def t_sampling(rng, env):
         expect(outs[0] is None and outs[1] is None, f"only one implementation raised (num={num!r}, seed={seed!r})")
         return "clean_error"
     expect(np.array_equal(outs[0], outs[1]) and outs[0].shape == (int(num), 3), "C++ and numpy samples differ")
+    return "ok"
+
+
+def t_crop(rng, env):
+    from track3d.resample import warp_axis_aligned, warp_axis_aligned_numpy
+
+    h, w = (int(v) for v in rng.choice([1, 2, 7, int(rng.integers(1, 80))], 2))
+    img = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    if rng.random() < 0.1:
+        bad = [img[..., 0], img.astype(np.float32), img[..., :2], np.zeros((0, 4, 3), np.uint8)]
+        img = bad[int(rng.integers(len(bad)))]
+    odd = [0.0, -1.0, np.nan, np.inf, 1e-30, 1e-45, 1e30, 1e300]
+    scale = [float(rng.choice(odd)) if rng.random() < 0.1 else float(np.exp(rng.uniform(-3, 3))) for _ in range(2)]
+    offset = [float(rng.choice([np.nan, -np.inf, 1e30, 1e9])) if rng.random() < 0.1 else float(rng.uniform(-300, 300))
+              for _ in range(2)]
+    size = [int(rng.choice([0, -1, 1, 16, 17, int(rng.integers(1, 90))])) for _ in range(2)]
+    border_value = [float(rng.choice([np.nan, -5.0, 300.0, 127.5])) if rng.random() < 0.1 else float(rng.uniform(0, 255))
+                    for _ in range(3)]
+    border = str(rng.choice(["constant", "replicate", "reflect"], p=[0.6, 0.35, 0.05]))
+    outs = []
+    for f in (warp_axis_aligned, warp_axis_aligned_numpy):
+        try:
+            outs.append(f(img, scale, offset, size, border_value, border))
+        except ValueError:
+            outs.append(None)
+    if outs[0] is None or outs[1] is None:
+        expect(outs[0] is None and outs[1] is None, f"only one implementation raised (scale {scale}, offset {offset})")
+        return "clean_error"
+    expect(np.array_equal(outs[0], outs[1]), f"C++ and numpy crops differ (scale {scale}, offset {offset}, {border})")
+    expect(outs[0].dtype == np.uint8 and outs[0].shape == (size[1], size[0], 3), "crop of the wrong shape or dtype")
     return "ok"
 
 
@@ -644,7 +674,7 @@ def t_mesh_loader(rng, env):
 
 # name -> (function, weight: share of the cases)
 TARGETS = {
-    "frustum": (t_frustum, 22), "sampling": (t_sampling, 12),
+    "frustum": (t_frustum, 22), "sampling": (t_sampling, 12), "crop": (t_crop, 4),
     "estimate_baseline": (_t_estimator("baseline"), 14), "estimate_a3boxnet": (_t_estimator("a3boxnet"), 12),
     "loop_baseline": (_loop := _t_loop("baseline"), 12), "loop_a3boxnet": (_t_loop("a3boxnet"), 8),
     "loop_views": (t_loop_views, 2),

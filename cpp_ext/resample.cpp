@@ -32,7 +32,7 @@ using U8Array = py::array_t<uint8_t, py::array::c_style | py::array::forcecast>;
 using FloatArray = py::array_t<float, py::array::c_style | py::array::forcecast>;
 
 struct Axis {
-  std::vector<int64_t> i;  // floor of the source coordinate, clipped to +-2^30
+  std::vector<int64_t> i;  // floor of the source coordinate (clipped to +-2^30 first)
   std::vector<float> f;    // its fraction
 };
 
@@ -50,9 +50,11 @@ Axis source(int64_t n, float a, float b, bool blocked) {
       const float p = xf * a;
       s = p + b;
     }
+    // resample._source: clipped at +-2^30, where a float32 has no fraction left (an overflow to
+    // inf included), so the cast below is defined
+    s = std::min(std::max(s, -1073741824.0f), 1073741824.0f);
     const float fl = std::floor(s);
-    const float cl = std::min(std::max(fl, -1073741824.0f), 1073741824.0f);
-    ax.i[x] = static_cast<int64_t>(cl);
+    ax.i[x] = static_cast<int64_t>(fl);
     ax.f[x] = s - fl;
   }
   return ax;

@@ -100,6 +100,8 @@ def test_crop_square_is_the_warp():
     (dict(size=(0, 5)), "at least 1 x 1"),
     (dict(border="reflect"), "border must be"),
     (dict(border_value=(1.0, np.inf, 0.0)), "three finite numbers"),
+    (dict(scale=(1e-45, 1.0)), "degenerate in float32"),          # the inverse overflows float32
+    (dict(offset=(1e39, 0.0)), "degenerate in float32"),
 ])
 def test_bad_input_is_one_clear_error(kwargs, match):
     args = dict(image=np.zeros((4, 4, 3), np.uint8), scale=(1.0, 1.0), offset=(0.0, 0.0), size=(4, 4),
@@ -108,3 +110,26 @@ def test_bad_input_is_one_clear_error(kwargs, match):
     for warp in (R.warp_axis_aligned, R.warp_axis_aligned_numpy):
         with pytest.raises(ValueError, match=match):
             warp(args["image"], args["scale"], args["offset"], args["size"], args["border_value"], args["border"])
+
+
+def test_the_crops_never_call_opencvs_warp(monkeypatch):
+    # the bytes of a crop must not depend on the installed OpenCV's warpAffine
+    import cv2
+
+    def refuse(*a, **k):
+        raise AssertionError("cv2.warpAffine called")
+
+    monkeypatch.setattr(cv2, "warpAffine", refuse)
+    img = np.random.default_rng(1).integers(0, 256, (120, 160, 3), dtype=np.uint8)
+    for size in (40.0, 120.0, 400.0):          # upscaling, mild downscaling, the halving path
+        assert crop_square(img, np.array([80.0, 60.0]), size, 127, (1.0, 2.0, 3.0)).shape == (127, 127, 3)
+
+
+def test_source_coordinates_past_float32_stay_border():
+    # a scale of 1e-30 leaves a finite inverse (1e30): from the second column and row on the
+    # source coordinates lie far past 2^30; clipped there, they stay outside the image (border)
+    img = np.full((5, 5, 3), 200, np.uint8)
+    for warp in (R.warp_axis_aligned, R.warp_axis_aligned_numpy):
+        out = warp(img, (1e-30, 1e-30), (0.0, 0.0), (20, 3), (1.0, 2.0, 3.0))
+        assert np.all(out[:, 1:] == [1, 2, 3]) and np.all(out[1:] == [1, 2, 3])
+        assert out[0, 0].tolist() == [200, 200, 200]          # output (0, 0) still samples source (0, 0)

@@ -14,8 +14,9 @@ so crops are the same bytes whatever OpenCV is installed and on any CPU:
 - source column of output column x: fma(a_x, x, b_x) for the columns in whole blocks of 16 from
   the left, (a_x * x) + b_x with two roundings for the last (width mod 16) columns (the SIMD
   body and the scalar tail of that build); source row of output row y: (a_y * y) + b_y;
-- i = floor(s), w = s - i (float32); each row of the 2 x 2 neighbourhood t = fma(w_x, p1 - p0, p0),
-  then v = fma(w_y, t1 - t0, t0), every operation in float32 (fma rounds once);
+- s clipped to +-2^30 (where float32 has no fraction left), i = floor(s), w = s - i (float32);
+  each row of the 2 x 2 neighbourhood t = fma(w_x, p1 - p0, p0), then v = fma(w_y, t1 - t0, t0),
+  every operation in float32 (fma rounds once);
 - v rounded half to even and clamped to 0..255;
 - a neighbour outside the image is the border colour (each channel rounded half to even and
   clamped) or, for `border="replicate"`, the nearest edge pixel.
@@ -52,7 +53,12 @@ def inverse_map(scale: tuple[float, float], offset: tuple[float, float]) -> np.n
     d = sx * sy
     d = 1.0 / d if d != 0.0 else 0.0
     ax, ay = sy * d, sx * d
-    return np.array([ax, -ax * tx, ay, -ay * ty], np.float64).astype(np.float32)
+    with np.errstate(over="ignore"):
+        m = np.array([ax, -ax * tx, ay, -ay * ty], np.float64).astype(np.float32)
+    if not (np.isfinite(m).all() and m[0] > 0 and m[2] > 0):
+        # a scale so small or large, or an offset so far, that float32 cannot hold the inverse
+        raise ValueError(f"the crop's map is degenerate in float32 (scale {scale}, offset {offset})")
+    return m
 
 
 def _check(image: np.ndarray, out_size: tuple[int, int], border_value, border: str):
@@ -95,10 +101,11 @@ def _source(n: int, a: np.float32, b: np.float32, blocked: bool):
     if blocked:
         body = (n // BLOCK) * BLOCK
         s[:body] = fma32(a, x[:body], b)
+    # beyond 2^30 a float32 has no fraction and the index only needs to stay outside the image:
+    # clipping there changes no crop and keeps an overflow to inf from reaching the int cast
+    s = np.clip(s, np.float32(-(2.0 ** 30)), np.float32(2.0 ** 30))
     f = np.floor(s)
-    # far outside the image the index only needs to stay outside: clip before the int cast
-    i = np.clip(f, -(2.0 ** 30), 2.0 ** 30).astype(np.int64)
-    return i, (s - f).astype(np.float32)
+    return f.astype(np.int64), (s - f).astype(np.float32)
 
 
 def warp_axis_aligned_numpy(image: np.ndarray, scale: tuple[float, float], offset: tuple[float, float],
