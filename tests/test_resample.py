@@ -133,3 +133,31 @@ def test_source_coordinates_past_float32_stay_border():
         out = warp(img, (1e-30, 1e-30), (0.0, 0.0), (20, 3), (1.0, 2.0, 3.0))
         assert np.all(out[:, 1:] == [1, 2, 3]) and np.all(out[1:] == [1, 2, 3])
         assert out[0, 0].tolist() == [200, 200, 200]          # output (0, 0) still samples source (0, 0)
+
+
+def test_the_gray_warp_is_opencv_500_on_rotations():
+    # the training's motion-blur kernel: a line rotated about its centre; OpenCV 5.0.0.93's own
+    # warps of it (all scalar-tail columns) and of a 20 x 18 image (SIMD body and tail columns),
+    # committed in the fixture
+    d = np.load(FIXTURE)
+    for i, (m, size) in enumerate(zip(d["gray_maps"], d["gray_sizes"])):
+        got = R.warp_affine_gray_numpy(d[f"gray_image{i}"], m.reshape(2, 3), tuple(int(v) for v in size))
+        assert got.dtype == np.float32 and np.array_equal(got, d[f"gray_out{i}"]), i
+    one = np.ones((3, 3), np.float32)
+    with pytest.raises(ValueError, match="finite and invertible"):          # its determinant underflows to 0
+        R.warp_affine_gray_numpy(one, np.array([[1e-300, 0, 0], [0, 1e-300, 0]]), (3, 3))
+    with pytest.raises(ValueError, match="no finite float32 inverse"):      # its inverse 1e39 is past float32
+        R.warp_affine_gray_numpy(one, np.array([[1e-39, 0, 0], [0, 1e-39, 0]]), (3, 3))
+
+
+def test_the_training_never_calls_opencvs_warp(monkeypatch):
+    # the training pairs' crops and the motion-blur kernel: the same bytes whatever OpenCV is installed
+    import cv2
+    data = pytest.importorskip("track3d_train.edgetrack.data")
+
+    def refuse(*a, **k):
+        raise AssertionError("cv2.warpAffine called")
+
+    monkeypatch.setattr(cv2, "warpAffine", refuse)
+    k = data._motion_kernel(np.random.default_rng(0), 7)
+    assert k.shape == (7, 7) and k.dtype == np.float32 and abs(float(k.sum()) - 1.0) < 1e-5

@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["warp_axis_aligned", "warp_axis_aligned_numpy", "inverse_map", "HAVE_EXTENSION"]
+__all__ = ["warp_axis_aligned", "warp_axis_aligned_numpy", "warp_affine_gray_numpy", "inverse_map", "fma32",
+           "HAVE_EXTENSION"]
 
 try:  # the compiled kernel; the numpy reference stands in only where it is missing
     from . import _resample as _ext
@@ -94,18 +95,38 @@ def fma32(a, b, c) -> np.ndarray:
     return s.astype(np.float32).reshape(shape)
 
 
-def _source(n: int, a: np.float32, b: np.float32, blocked: bool):
-    """(floor index (n,) int64, fraction (n,) float32) of the source coordinates of n outputs."""
-    x = np.arange(n, dtype=np.float32)
-    s = (x * a + b).astype(np.float32)                   # two float32 roundings
-    if blocked:
-        body = (n // BLOCK) * BLOCK
-        s[:body] = fma32(a, x[:body], b)
-    # beyond 2^30 a float32 has no fraction and the index only needs to stay outside the image:
-    # clipping there changes no crop and keeps an overflow to inf from reaching the int cast
-    s = np.clip(s, np.float32(-(2.0 ** 30)), np.float32(2.0 ** 30))
-    f = np.floor(s)
-    return f.astype(np.int64), (s - f).astype(np.float32)
+def _bilinear(src: np.ndarray, a: np.ndarray, w: int, h: int, fill) -> np.ndarray:
+    """(h, w, C) float32 bilinear samples of an (H, W, C) float32 image at the float32 inverse
+    map a = [a0, a1, a2, a3, a4, a5] (x_src = a0 x + a1 y + a2, y_src = a3 x + a4 y + a5, in the
+    module's arithmetic); outside the image `fill` ((C,) float32) or, for None, the nearest edge
+    pixel. The one implementation behind both references."""
+    H, W = src.shape[:2]
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    body = xs < np.float32((w // BLOCK) * BLOCK)
+
+    def coord(c0, c1, c2):
+        row = (ys * c1).astype(np.float32)
+        s_body = fma32(c0, xs, (row + c2).astype(np.float32))   # the SIMD body: the row term first
+        s_tail = (fma32(xs, c0, row) + c2).astype(np.float32)   # the scalar tail, as compiled
+        # beyond 2^30 a float32 has no fraction and the index only needs to stay outside the
+        # image: clipping there changes no crop and keeps an overflow to inf from the int cast
+        s = np.clip(np.where(body, s_body, s_tail), np.float32(-(2.0 ** 30)), np.float32(2.0 ** 30))
+        f = np.floor(s)
+        return f.astype(np.int64), (s - f).astype(np.float32)[..., None]
+
+    ix, fx = coord(a[0], a[1], a[2])
+    iy, fy = coord(a[3], a[4], a[5])
+
+    def px(r, c):
+        v = src[np.clip(r, 0, H - 1), np.clip(c, 0, W - 1)]
+        if fill is None:
+            return v
+        ok = (r >= 0) & (r < H) & (c >= 0) & (c < W)
+        return np.where(ok[..., None], v, fill).astype(np.float32)
+
+    t0 = fma32(fx, (px(iy, ix + 1) - px(iy, ix)).astype(np.float32), px(iy, ix))
+    t1 = fma32(fx, (px(iy + 1, ix + 1) - px(iy + 1, ix)).astype(np.float32), px(iy + 1, ix))
+    return fma32(fy, (t1 - t0).astype(np.float32), t0)
 
 
 def warp_axis_aligned_numpy(image: np.ndarray, scale: tuple[float, float], offset: tuple[float, float],
@@ -115,26 +136,38 @@ def warp_axis_aligned_numpy(image: np.ndarray, scale: tuple[float, float], offse
     x_out = scale * x_src + offset per axis (pixel centres at integers); the module docstring
     gives the arithmetic. Reference of `warp_axis_aligned`."""
     img, w, h, bval = _check(image, out_size, border_value, border)
-    H, W = img.shape[:2]
     ax, bx, ay, by = inverse_map(scale, offset)
-    ix, fx = _source(w, ax, bx, blocked=True)
-    iy, fy = _source(h, ay, by, blocked=False)
-    src = img.astype(np.float32)
-    bv = bval.astype(np.float32)
-
-    def rows(r: np.ndarray) -> np.ndarray:       # (len(r), w, 3) horizontal lerp of source rows r
-        def px(c):
-            if border == "replicate":
-                return src[np.clip(r, 0, H - 1)][:, np.clip(c, 0, W - 1)]
-            ok = ((r >= 0) & (r < H))[:, None] & ((c >= 0) & (c < W))[None, :]
-            v = src[np.clip(r, 0, H - 1)][:, np.clip(c, 0, W - 1)]
-            return np.where(ok[..., None], v, bv)
-        p0, p1 = px(ix), px(ix + 1)
-        return fma32(fx[None, :, None], (p1 - p0).astype(np.float32), p0)
-
-    t0, t1 = rows(iy), rows(iy + 1)
-    v = fma32(fy[:, None, None], (t1 - t0).astype(np.float32), t0)
+    a = np.array([ax, 0.0, bx, 0.0, ay, by], np.float32)
+    fill = None if border == "replicate" else bval.astype(np.float32)
+    v = _bilinear(img.astype(np.float32), a, w, h, fill)
     return np.clip(np.rint(v), 0, 255).astype(np.uint8)
+
+
+def warp_affine_gray_numpy(image: np.ndarray, m: np.ndarray, out_size: tuple[int, int]) -> np.ndarray:
+    """(out_size[1], out_size[0]) float32 bilinear warp of an (H, W) float32 image under any 2 x 3
+    affine map m (source -> output, as cv2.warpAffine's), zero outside the image, in the module's
+    arithmetic with the rotation terms kept (the row term (a1 * y) + a2; the tail columns
+    fma(x, a0, a1 * y) + a2): that of OpenCV 5.0.0.93's AVX2 variant for one float32 channel. For
+    the training's small kernels (the motion blur's rotated line), which must not change with the
+    installed OpenCV."""
+    img = np.asarray(image, np.float32)
+    if img.ndim != 2 or img.shape[0] < 1 or img.shape[1] < 1:
+        raise ValueError(f"the warp needs an (H, W) float32 image, got {img.shape}")
+    w, h = int(out_size[0]), int(out_size[1])
+    if w < 1 or h < 1:
+        raise ValueError(f"the warp's size must be at least 1 x 1, got {out_size}")
+    M = np.asarray(m, np.float64).reshape(2, 3)
+    d = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
+    if not (np.isfinite(M).all() and d != 0.0):
+        raise ValueError(f"the warp's map must be finite and invertible: {M.tolist()}")
+    d = 1.0 / d
+    a11, a22, a12, a21 = M[1, 1] * d, M[0, 0] * d, -M[0, 1] * d, -M[1, 0] * d
+    inv = np.array([a11, a12, -a11 * M[0, 2] - a12 * M[1, 2], a21, a22, -a21 * M[0, 2] - a22 * M[1, 2]])
+    with np.errstate(over="ignore"):
+        a = inv.astype(np.float32)
+    if not np.isfinite(a).all():
+        raise ValueError(f"the warp's map has no finite float32 inverse: {M.tolist()}")
+    return _bilinear(img[..., None], a, w, h, np.zeros(1, np.float32))[..., 0]
 
 
 def warp_axis_aligned(image: np.ndarray, scale: tuple[float, float], offset: tuple[float, float],

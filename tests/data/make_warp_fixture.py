@@ -6,7 +6,8 @@ with AVX2 (the build and release the shipped models and results were measured wi
 
 Cases: random noise images (1-32 px a side), scales 0.5-6 per axis, offsets that put the crop
 inside, across and outside the image, crop widths 1-40 (whole 16-column blocks and the columns
-after them), constant (border colours outside 0..255 included) and replicated borders."""
+after them), constant (border colours outside 0..255 included) and replicated borders; and one
+float32 channel under rotations (the training's motion-blur kernels among them)."""
 from pathlib import Path
 
 import cv2
@@ -29,5 +30,25 @@ for i in range(48):
     arrays[f"image{i}"], arrays[f"out{i}"] = img, out
     cases.append([sx, sy, tx, ty, ow, oh, *border, float(replicate)])
 arrays["cases"] = np.array(cases, np.float64)
+# one float32 channel under rotations (track3d.resample.warp_affine_gray_numpy): the training's
+# motion-blur line kernels (3-9 px, all scalar-tail columns) and noise images up to 40 px wide
+gray_maps, gray_sizes = [], []
+for i in range(24):
+    if i % 2:
+        n = int(rng.integers(3, 10))
+        img = np.zeros((n, n), np.float32)
+        img[n // 2] = 1.0
+        m = cv2.getRotationMatrix2D(((n - 1) / 2, (n - 1) / 2), float(rng.uniform(0, 180)), 1.0)
+        size = (n, n)
+    else:
+        h, w = int(rng.integers(1, 30)), int(rng.integers(1, 30))
+        img = (rng.standard_normal((h, w)) * 60).astype(np.float32)
+        m = cv2.getRotationMatrix2D((float(rng.uniform(0, w)), float(rng.uniform(0, h))), float(rng.uniform(0, 360)),
+                                    float(np.exp(rng.uniform(-0.7, 0.7))))
+        size = (int(rng.integers(1, 41)), int(rng.integers(1, 25)))
+    arrays[f"gray_image{i}"], arrays[f"gray_out{i}"] = img, cv2.warpAffine(img, m, size)
+    gray_maps.append(m.ravel())
+    gray_sizes.append(size)
+arrays["gray_maps"], arrays["gray_sizes"] = np.array(gray_maps), np.array(gray_sizes)
 arrays["opencv"] = np.array(cv2.__version__)
 np.savez_compressed(Path(__file__).with_name("warp_opencv500.npz"), **arrays)

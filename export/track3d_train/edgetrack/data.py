@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from track3d.edgetrack import pad_colour
-from track3d.resample import warp_axis_aligned
+from track3d.resample import warp_affine_gray_numpy, warp_axis_aligned
 from track3d.siamfc import crop_square
 
 from ..caches import load_npy, not_a_cache
@@ -179,7 +179,8 @@ def _motion_kernel(rng, length):
     k = np.zeros((length, length), np.float32)
     k[length // 2] = 1.0
     rot = cv2.getRotationMatrix2D(((length - 1) / 2, (length - 1) / 2), float(rng.uniform(0, 180)), 1.0)
-    k = cv2.warpAffine(k, rot, (length, length))
+    # OpenCV 5.0's warp in fixed arithmetic: the same kernel whatever OpenCV is installed
+    k = warp_affine_gray_numpy(k, rot, (length, length))
     return k / max(k.sum(), 1e-6)
 
 
