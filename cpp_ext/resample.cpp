@@ -60,28 +60,25 @@ Axis source(int64_t n, float a, float b, bool blocked) {
   return ax;
 }
 
-// One source row r interpolated along x into (w * 3) floats: t = fma(fx, p1 - p0, p0).
+// One source row interpolated along x into (w * 3) floats: t = fma(fx, p1 - p0, p0), where the
+// row's pixels (the columns the crop reads, then the border colour) are `px` and
+// j0 / j1 are each output column's two neighbours' offsets in it (branch-free: an outside
+// neighbour points at the border colour's slot, or at the edge pixel for a replicated border).
 __attribute__((target_clones("arch=x86-64-v3", "default")))
-void lerp_row(const uint8_t* img, int64_t H, int64_t W, int64_t r, const int64_t* c0, const int64_t* c1,
-              const float* fx, int64_t w, const float* bval, bool replicate, float* out) {
-  const bool row_in = r >= 0 && r < H;
-  const int64_t rr = std::min(std::max<int64_t>(r, 0), H - 1);
-  const uint8_t* row = img + rr * W * 3;
-  for (int64_t x = 0; x < w; ++x) {
-    const int64_t a = c0[x], b = c1[x];
-    float p0[3], p1[3];
-    if (replicate) {
-      const uint8_t* q0 = row + std::min(std::max<int64_t>(a, 0), W - 1) * 3;
-      const uint8_t* q1 = row + std::min(std::max<int64_t>(b, 0), W - 1) * 3;
-      for (int k = 0; k < 3; ++k) { p0[k] = q0[k]; p1[k] = q1[k]; }
-    } else {
-      const bool in0 = row_in && a >= 0 && a < W, in1 = row_in && b >= 0 && b < W;
-      for (int k = 0; k < 3; ++k) {
-        p0[k] = in0 ? static_cast<float>(row[a * 3 + k]) : bval[k];
-        p1[k] = in1 ? static_cast<float>(row[b * 3 + k]) : bval[k];
-      }
-    }
-    for (int k = 0; k < 3; ++k) out[x * 3 + k] = std::fma(fx[x], p1[k] - p0[k], p0[k]);
+void lerp_row(const float* px, const int32_t* j0, const int32_t* j1, const float* fx, int64_t x0, int64_t x1,
+              int64_t w, const float* bval, float* out) {
+  // columns [0, x0) and [x1, w) have both neighbours outside the image: fma(f, 0, b) = b
+  for (int64_t x = 0; x < x0; ++x)
+    for (int k = 0; k < 3; ++k) out[x * 3 + k] = bval[k];
+  for (int64_t x = x1; x < w; ++x)
+    for (int k = 0; k < 3; ++k) out[x * 3 + k] = bval[k];
+  for (int64_t x = x0; x < x1; ++x) {
+    const float* p0 = px + j0[x];
+    const float* p1 = px + j1[x];
+    const float f = fx[x];
+    out[x * 3 + 0] = std::fma(f, p1[0] - p0[0], p0[0]);
+    out[x * 3 + 1] = std::fma(f, p1[1] - p0[1], p0[1]);
+    out[x * 3 + 2] = std::fma(f, p1[2] - p0[2], p0[2]);
   }
 }
 
@@ -113,8 +110,35 @@ py::array_t<uint8_t> warp_axis_aligned(const U8Array& image, const FloatArray& m
     py::gil_scoped_release release;
     const Axis cx = source(w, mm[0], mm[1], true);
     const Axis cy = source(h, mm[2], mm[3], false);
-    std::vector<int64_t> c1(static_cast<size_t>(w));
-    for (int64_t x = 0; x < w; ++x) c1[x] = cx.i[x] + 1;
+    // the source columns the crop reads, [lo, hi], and each output column's neighbours in them
+    int64_t lo = W - 1, hi = 0;
+    for (int64_t x = 0; x < w; ++x) {
+      lo = std::min(lo, std::min(std::max<int64_t>(cx.i[x], 0), W - 1));
+      hi = std::max(hi, std::min(std::max<int64_t>(cx.i[x] + 1, 0), W - 1));
+    }
+    lo = std::min(lo, hi);
+    const int64_t n = hi - lo + 1;  // slot n holds the border colour
+    std::vector<int32_t> j0(static_cast<size_t>(w)), j1(static_cast<size_t>(w));
+    for (int64_t x = 0; x < w; ++x) {
+      for (int e = 0; e < 2; ++e) {
+        const int64_t c = cx.i[x] + e;
+        int64_t slot_of;
+        if (replicate) slot_of = std::min(std::max<int64_t>(c, 0), W - 1) - lo;
+        else slot_of = (c >= 0 && c < W) ? c - lo : n;
+        (e == 0 ? j0 : j1)[x] = static_cast<int32_t>(3 * slot_of);
+      }
+    }
+    // constant border: the output columns with a neighbour inside the image form one run [x0, x1)
+    // (the source column grows with the output column)
+    int64_t x0 = 0, x1 = w;
+    if (!replicate) {
+      while (x0 < w && j0[x0] == 3 * n && j1[x0] == 3 * n) ++x0;
+      while (x1 > x0 && j0[x1 - 1] == 3 * n && j1[x1 - 1] == 3 * n) --x1;
+    }
+    // one source row's pixels the crop reads as floats (one vectorised conversion per row: faster
+    // than converting at each gather, measured), then the border colour
+    std::vector<float> px(static_cast<size_t>(3 * (n + 1)));
+    for (int k = 0; k < 3; ++k) px[3 * n + k] = bval[k];
     // two cached source rows: output rows walk the source rows in order (positive scale)
     std::vector<float> buf_a(static_cast<size_t>(w * 3)), buf_b(static_cast<size_t>(w * 3));
     float* slot[2] = {buf_a.data(), buf_b.data()};
@@ -123,9 +147,18 @@ py::array_t<uint8_t> warp_axis_aligned(const U8Array& image, const FloatArray& m
       for (int s = 0; s < 2; ++s)
         if (held[s] == r) return slot[s];
       const int s = held[0] == protect ? 1 : 0;  // never evict the other row this output row needs
-      lerp_row(img, H, W, r, cx.i.data(), c1.data(), cx.f.data(), w, bval, replicate, slot[s]);
+      float* out_row = slot[s];
+      if (!replicate && (r < 0 || r >= H)) {
+        // a row outside the image: every neighbour is the border colour, and fma(f, 0, b) = b
+        for (int64_t x = 0; x < w; ++x)
+          for (int k = 0; k < 3; ++k) out_row[x * 3 + k] = bval[k];
+      } else {
+        const uint8_t* row = img + (std::min(std::max<int64_t>(r, 0), H - 1) * W + lo) * 3;
+        for (int64_t q = 0; q < 3 * n; ++q) px[q] = static_cast<float>(row[q]);
+        lerp_row(px.data(), j0.data(), j1.data(), cx.f.data(), x0, x1, w, bval, out_row);
+      }
       held[s] = r;
-      return slot[s];
+      return out_row;
     };
     for (int64_t y = 0; y < h; ++y) {
       const int64_t r = cy.i[y];

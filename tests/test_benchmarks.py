@@ -595,3 +595,14 @@ def test_engine_baseline_update_replaces_only_the_report_folders_it_finds():
     new = [row("ideal", "test", "onepass", "a", 0.9)]
     got = {(r["sensor"], r["protocol"], r["tracker"]): r["ao_3d"] for r in engine_baseline.merge(old, new)}
     assert got == {("ideal", "onepass", "a"): 0.9, ("ideal", "restart", "oracle"): 0.3, ("tof", "onepass", "a"): 0.4}
+
+
+def test_bench_crop_times_the_loops_crops_and_checks_the_kernel_against_its_reference(tmp_path, capsys):
+    import bench_crop
+
+    assert bench_crop.main(["--repeat", "3", "--out", str(tmp_path)]) == 0
+    rec = json.loads((tmp_path / "crop_cpu.json").read_text())
+    assert rec["benchmark"] == "crop" and len(rec["cases"]) == len(bench_crop.CASES) == 16
+    assert all(c["scale"] >= 0.5 and c["kernel"]["median_ms"] > 0 for c in rec["cases"])
+    if rec["opencv"].startswith("5.0."):                      # the release whose arithmetic the kernel fixes
+        assert all(c["opencv_equal"] for c in rec["cases"])
