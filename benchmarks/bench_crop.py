@@ -38,12 +38,16 @@ def _map(out: int, region: float, center) -> tuple[float, tuple[float, float]]:
     return s, (out / 2.0 - 0.5 - s * (center[0] - 0.5), out / 2.0 - 0.5 - s * (center[1] - 0.5))
 
 
-def main(argv=None) -> int:
+def build_parser() -> ArgumentParser:
     ap = ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeat", type=bounded(int, 3), default=300, help="calls per implementation and case")
     ap.add_argument("--tag", default="cpu", help="results file tag (default cpu)")
     add_out_argument(ap)
-    a = ap.parse_args(argv)
+    return ap
+
+
+def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
     if not HAVE_EXTENSION:
         raise SystemExit("the C++ extension is not built: pip install -e .")
     cv2.setNumThreads(1)
