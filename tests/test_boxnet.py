@@ -78,6 +78,67 @@ def test_huber_gradient_at_zero_is_finite():
     assert torch.all(torch.isfinite(v.grad)) and float(v.grad.abs().sum()) == 0.0
 
 
+def test_iou_3d_hand_case_and_the_runtime_formula():
+    from track3d.boxes import iou_3d as iou_np
+    from track3d_train.boxnet.losses import iou_3d
+
+    # two 2 m cubes, one shifted 1 m in x: overlap 1 x 2 x 2 = 4, union 8 + 8 - 4 = 12
+    c = torch.tensor([[0.0, 0.0, 10.0], [0.0, 0.0, 10.0], [0.0, 0.0, 10.0]])
+    s = torch.full((3, 3), 2.0)
+    c2 = c + torch.tensor([[1.0, 0, 0], [5.0, 0, 0], [0, 0, 0]])
+    got = iou_3d(c, s, c2, s)
+    assert got.tolist() == pytest.approx([1 / 3, 0.0, 1.0])
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(0, 1, (50, 6)), rng.normal(0, 1, (50, 6))
+    a[:, 3:], b[:, 3:] = np.abs(a[:, 3:]) + 0.5, np.abs(b[:, 3:]) + 0.5
+    t = [torch.from_numpy(x) for x in (a[:, :3], a[:, 3:], b[:, :3], b[:, 3:])]
+    np.testing.assert_allclose(iou_3d(*t).numpy(), iou_np(a, b), rtol=1e-12, atol=1e-15)
+
+
+def test_decoded_sizes_are_the_runtime_decoding():
+    from track3d.size_coding import size_coding
+    from track3d_train.boxnet.losses import decoded_sizes
+
+    rng = np.random.default_rng(2)
+    cls = rng.integers(0, 14, 20)
+    r = rng.normal(0, 0.3, (20, 3))
+    for name, scale in [("extent", rng.uniform(0.5, 5, (20, 3))), ("frustum", rng.uniform(0.5, 5, (20, 3))),
+                        ("points", rng.uniform(0.5, 5, 20))]:
+        scores = np.full((20, 14), -5.0)
+        scores[np.arange(20), cls] = 5.0
+        res = np.zeros((20, 14, 3))
+        res[np.arange(20), cls] = r
+        want = size_coding(name).decode(np.zeros((20, 3)), scale, np.zeros((20, 3)), np.zeros((20, 3)), scores, res)
+        got = decoded_sizes(torch.from_numpy(cls), torch.from_numpy(r), torch.from_numpy(scale))
+        np.testing.assert_allclose(got.numpy(), want[:, 3:], rtol=1e-12)
+
+
+def test_loss_iou_term_hand_case_and_off_by_default():
+    center1, center2 = torch.zeros(1, 3), torch.zeros(1, 3)
+    scores = torch.zeros(1, 14)
+    scores[0, 0] = 1.0                                   # predicted class 0
+    residuals = torch.zeros(1, 14, 3, requires_grad=True)
+    scale = torch.tensor([[2.0, 2.0, 2.0]])              # "extent": size = E * (1 + r)
+    crel = torch.tensor([[1.0, 0.0, 0.0]])               # the truth 1 m off in x, same 2 m cube (r = 0)
+    args = ((center1, center2, scores, residuals), crel, torch.tensor([0]), torch.zeros(1, 3), scale)
+    base, terms0 = boxnet_loss(*args)
+    assert "iou" not in terms0
+    total, terms = boxnet_loss(*args, iou_weight=3.0)
+    assert terms["iou"] == pytest.approx(1 - 1 / 3)
+    assert total.item() == pytest.approx(base.item() + 3.0 * (2 / 3), rel=1e-6)
+    total.backward()                                     # the gradient reaches the predicted class's residual
+    assert float(residuals.grad[0, 0].abs().sum()) > 0 and float(residuals.grad[0, 1:].abs().sum()) == 0
+
+
+def test_iou_weight_refuses_the_paper_coding(tiny_cache, tmp_path):
+    from track3d_train.boxnet.train import TrainConfig, train
+
+    cfg = TrainConfig(train_cache=str(tiny_cache[0]), out=str(tmp_path / "run"), num_points=64, width=0.25,
+                      epochs=1, batch=8, size_norm="paper", iou_weight=1.0, max_steps=1)
+    with pytest.raises(ValueError, match="not 'paper'"):
+        train(cfg, progress=False, log=lambda *_: None)
+
+
 def test_training_steps_reduce_loss_on_a_fixed_batch():
     torch.manual_seed(0)
     rng = np.random.default_rng(0)
@@ -436,8 +497,9 @@ def test_per_axis_model_trains_exports_and_decodes(size_norm, tiny_cache, tmp_pa
     from track3d_train.boxnet.train import TrainConfig, train
 
     cfg = TrainConfig(train_cache=str(tiny_cache[0]), out=str(tmp_path / "run"), num_points=64, width=0.25,
-                      epochs=1, batch=8, val_every=2, size_norm=size_norm, max_steps=3)
+                      epochs=1, batch=8, val_every=2, size_norm=size_norm, max_steps=3, iou_weight=1.0)
     hist = train(cfg, progress=False, log=lambda *_: None)
+    assert hist["config"]["iou_weight"] == 1.0          # the IoU term on: training still runs and decodes
     assert np.isfinite(hist["epochs"][-1]["val"]["AO_3d"])
     export_checkpoint(tmp_path / "run" / "last.pt", tmp_path / "ext.onnx", log=lambda *_: None)
     est = A3BoxNetEstimator(tmp_path / "ext.onnx")

@@ -63,7 +63,8 @@ def _train(a) -> int:
                       epoch_samples=a.epoch_samples, batch=a.batch, lr=a.lr, flip=not a.no_flip,
                       cat_dropout=a.cat_dropout, flip_y=a.flip_y, scale_aug=a.scale_aug, stretch_aug=stretch,
                       val_every=a.val_every, seed=a.seed, threads=a.threads, max_minutes=a.max_minutes,
-                      max_steps=a.max_steps, distill_from=a.distill_from or "", distill_weight=a.distill_weight)
+                      max_steps=a.max_steps, distill_from=a.distill_from or "", distill_weight=a.distill_weight,
+                      iou_weight=a.iou_weight)
     _log(f"training A3BoxNet into {a.out}: {cfg}")
     h = train(cfg, resume=not a.no_resume, progress=not a.quiet, log=_log, init_from=a.init_from)
     _log(f"done: {len(h['epochs'])} epochs, {h['seconds'] / 60:.1f} min; curve in {Path(a.out) / 'loss_curve.png'}")
@@ -180,6 +181,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "whose outputs the net also learns, on the same augmented inputs (default: none)")
     t.add_argument("--distill-weight", type=bounded(float, 0), default=1.0,
                    help="weight of the teacher term (losses.distill_loss) when --distill-from is given")
+    t.add_argument("--iou-weight", type=bounded(float, 0), default=0.0,
+                   help="add this weight times 1 - IoU_3d of the decoded box to the paper's joint loss "
+                        "(default 0: the paper's loss alone); not with --size-norm paper")
     t.add_argument("--val-every", type=bounded(int, 0), default=8, help="every k-th train sequence is validation (0: none)")
     t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
     t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")

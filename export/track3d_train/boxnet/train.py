@@ -45,6 +45,7 @@ class TrainConfig:
     num_categories: int = 3
     distill_from: str = ""          # a teacher A3BoxNet (.onnx or .pt) whose outputs the student also fits
     distill_weight: float = 0.0     # weight of losses.distill_loss in the objective (0: none)
+    iou_weight: float = 0.0         # weight of the decoded box's 1 - IoU_3d in the objective (0: the paper's loss)
     extra: dict = field(default_factory=dict)
 
 
@@ -210,6 +211,9 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
     from .losses import boxnet_loss, distill_loss
     from .model import A3BoxNet, BoxNetConfig
 
+    if cfg.iou_weight > 0 and cfg.size_norm == "paper":
+        # the paper's labels are scaled by max(size), its decoding by L: the label's box cannot be decoded
+        raise ValueError("iou_weight needs a box coding whose labels decode as its outputs do: not 'paper'")
     torch.set_num_threads(int(cfg.threads))
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -307,7 +311,7 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
             for g in opt.param_groups:
                 g["lr"] = lr_at(frac)
             out_s = model(pts, cat)
-            loss, terms = boxnet_loss(out_s, crel, cls, res, scale)
+            loss, terms = boxnet_loss(out_s, crel, cls, res, scale, cfg.iou_weight)
             if teacher is not None:
                 with torch.no_grad():
                     out_t = teacher(pts, cat)
