@@ -451,31 +451,53 @@ def test_a_lost_search_sweeps_the_image_and_finds_a_body_that_moved_far(trained,
     assert first_found(3) is not None
 
 
-def test_the_frame_after_a_reacquisition_searches_the_wide_region(trained):
+def test_the_frame_after_a_reacquisition_searches_the_wide_region(trained, monkeypatch):
     """A re-acquisition's jump is not motion, so the frame after it has no prediction: a body that
     came back and crossed the normal search region in one frame was lost again there (a held-out
     sequence forked that way between arithmetic variants). That frame now searches the wide lost
-    region; the old behaviour is reproduced by clearing `settling` after every update."""
-    from track3d.edgetrack import create
+    region; the old behaviour is reproduced by clearing `settling` after every update.
+
+    The tiny model is trained in the test, and its weights differ between CPUs (torch's kernels):
+    on one host it re-acquired the jumped body at 0.76 IoU, on another its score there (0.33)
+    fell just under its own calibrated threshold. So the test checks the search itself (the crop
+    size of each frame) and that it sees the body the normal search misses (a higher score),
+    not where one tiny model's threshold falls."""
+    import track3d.edgetrack as E
 
     path = [100.0] * 3 + [None] * 2 + [100.0, JUMP_X, JUMP_X + 20, JUMP_X + 40]
     frames, boxes = _sprite_path(path, seed=11)
+    sizes = []
+    real_crop = E.crop_square
+    monkeypatch.setattr(E, "crop_square", lambda img, c, side, size, colour: sizes.append(size)
+                        or real_crop(img, c, side, size, colour))
 
-    def iou_after_the_jump(settle):
-        tr = create(model=trained["root"] / "model" / "et")
+    def run(settle):
+        tr = E.create(model=trained["root"] / "model" / "et")
         tr.init(frames[0], np.array(boxes[0], float))
-        ious = []
+        sizes.clear()
+        scores, ious = [], []
         for i in range(1, len(frames)):
             ok, box = tr.update(frames[i])
             if i == 5:
                 assert ok and tr.settling                  # re-acquired where it left
             if not settle:
                 tr.settling = False
+            scores.append(tr.score)
             ious.append(float(iou_2d(box[None], np.array(boxes[i], float)[None])[0]) if ok and boxes[i] else 0.0)
-        return float(np.mean(ious[5:]))                    # from frame 6, JUMP_X - 100 px further
+        return tr, list(sizes), scores, ious
 
-    assert iou_after_the_jump(False) < 0.2            # lost at the jump, not found again
-    assert iou_after_the_jump(True) > 0.6             # measured 0.76
+    tr, sizes_settle, score_settle, iou_settle = run(True)
+    _, sizes_old, score_old, iou_old = run(False)
+    wide, normal = tr.lost_instance_size, tr.instance_size
+    assert wide > normal
+    # frames 1-3 searched as tracked (normal; 3 is where the body is first missing), 4 lost (wide),
+    # 5 re-acquires (wide); then frame 6, the one after the re-acquisition:
+    assert sizes_settle[:5] == [normal, normal, normal, wide, wide] == sizes_old[:5]
+    assert sizes_settle[5] == wide and sizes_old[5] == normal
+    assert np.mean(iou_old[5:]) < 0.2                      # the old search: lost at the jump, not found again
+    # the wide search sees the body 90 px off (measured 0.33 / 0.76 IoU against 0.18 on two hosts)
+    assert score_settle[5] > score_old[5] + 0.05
+    assert np.mean(iou_settle[5:]) > 0.6 or score_settle[5] < tr.score_threshold
 
 
 def test_a_lost_tracker_reacquires_only_at_the_reacquisition_threshold():
