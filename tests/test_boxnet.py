@@ -130,6 +130,14 @@ def test_loss_iou_term_hand_case_and_off_by_default():
     assert float(residuals.grad[0, 0].abs().sum()) > 0 and float(residuals.grad[0, 1:].abs().sum()) == 0
 
 
+def test_the_train_curve_is_the_joint_loss_without_the_extra_terms():
+    from track3d_train.boxnet.train import joint_loss_of
+
+    terms = {"center1": 0.5, "center2": 0.25, "size_cls": 1.0, "size_res": 0.125, "iou": 0.3, "total": 2.475}
+    assert joint_loss_of(terms) == 1.875                 # the four terms, not the IoU term in "total"
+    assert joint_loss_of({"total": 3.0}) == 3.0          # an older record without its terms
+
+
 def test_iou_weight_refuses_the_paper_coding(tiny_cache, tmp_path):
     from track3d_train.boxnet.train import TrainConfig, train
 

@@ -84,6 +84,18 @@ def _batches(ds, order, batch):
         yield _collate([ds[int(i)] for i in order[s:s + batch]])
 
 
+JOINT_TERMS = ("center1", "center2", "size_cls", "size_res")
+
+
+def joint_loss_of(terms: dict) -> float:
+    """The paper's joint loss out of a logged step or epoch (its four terms), without the extra
+    terms of the objective (iou, distill), so that the train curve is the validation loss's kind;
+    a record without the four terms gives its "total"."""
+    if all(k in terms for k in JOINT_TERMS):
+        return float(sum(terms[k] for k in JOINT_TERMS))
+    return float(terms["total"])
+
+
 def plot_history(history: dict, path: str | Path, title: str = "A3BoxNet training") -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -93,7 +105,7 @@ def plot_history(history: dict, path: str | Path, title: str = "A3BoxNet trainin
     steps = history.get("steps", [])
     if steps:
         s = np.array([x["step"] for x in steps])
-        l = np.array([x["total"] for x in steps])
+        l = np.array([joint_loss_of(x) for x in steps])
         ax[0].plot(s, l, lw=0.5, alpha=0.4, label="train (per logged step)")
         k = max(1, len(l) // 50)
         if len(l) > k:
@@ -101,7 +113,7 @@ def plot_history(history: dict, path: str | Path, title: str = "A3BoxNet trainin
     ep = history.get("epochs", [])
     if ep:
         es = [e["step"] for e in ep]
-        ax[0].plot(es, [e["train"]["total"] for e in ep], "o-", label="train (epoch mean)")
+        ax[0].plot(es, [joint_loss_of(e["train"]) for e in ep], "o-", label="train (epoch mean)")
         if ep[0].get("val"):
             ax[0].plot(es, [e["val"]["loss"] for e in ep], "s-", label="val (held-out train seqs)")
             ax[1].plot([e["epoch"] for e in ep], [e["val"]["AO_3d"] for e in ep], "o-", label="val AO_3d")
