@@ -495,7 +495,8 @@ def test_the_frame_after_a_reacquisition_searches_the_wide_region(trained, monke
     assert sizes_settle[:5] == [normal, normal, normal, wide, wide] == sizes_old[:5]
     assert sizes_settle[5] == wide and sizes_old[5] == normal
     assert np.mean(iou_old[5:]) < 0.2                      # the old search: lost at the jump, not found again
-    # the wide search sees the body 90 px off (measured 0.33 / 0.76 IoU against 0.18 on two hosts)
+    # the wide search sees the body 90 px off (score 0.33 against the normal search's 0.18 on the Intel
+    # AVX-512 host; on the AMD hosts it scored above the threshold and tracked on at 0.76 IoU)
     assert score_settle[5] > score_old[5] + 0.05
     assert np.mean(iou_settle[5:]) > 0.6 or score_settle[5] < tr.score_threshold
 
