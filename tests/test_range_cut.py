@@ -9,8 +9,9 @@ import pytest
 from track3d.boxes import box3d_from_points, iou_3d
 from track3d.camera import Camera
 from track3d.fusion import fuse
-from track3d.range_cut import (CAP_FUSION_COVERAGE, CARRY_DEPTH_EXPONENT, DEPTH_RATIO, MIN_COVERAGE, box_at_range,
-                               box_from_view, carry_box, deepen_to_view, is_range_cut, lateral_coverage, reaches_range)
+from track3d.range_cut import (CAP_FUSION_COVERAGE, CARRY_DEPTH_EXPONENT, CUT_RATIO_WEIGHT, DEPTH_RATIO, MIN_COVERAGE,
+                               box_at_range, box_from_view, carry_box, cut_ratio, deepen_to_view, is_range_cut,
+                               lateral_coverage, reaches_range)
 from track3d.synthetic import CAM, render_sphere
 from track3d.tracker import CARRY_SLIVER, NO_POINTS, TRACKING, Track3D
 from track3d.trackers2d import OracleTracker
@@ -186,6 +187,53 @@ def test_the_deepened_box_is_as_deep_for_its_width_as_the_bodys_last_box_within_
     view = box_from_view(b2_f, CAM, float(pts_f[:, 2].min()), ratio=ratio)
     assert far[2] + far[5] / 2 == pytest.approx(view[2] + view[5] / 2)
     assert far[5] < box_from_view(b2_f, CAM, float(pts_f[:, 2].min()))[5]
+
+
+def test_cut_ratio_hand_cases():
+    assert CUT_RATIO_WEIGHT == 0.5
+    assert cut_ratio(0.25) == pytest.approx(0.5)                  # sqrt(1 x 0.25)
+    assert cut_ratio(1.69) == pytest.approx(1.3)
+    assert cut_ratio(1.0) == DEPTH_RATIO
+    assert cut_ratio(0.25, weight=0.0) == DEPTH_RATIO            # the old rule: ratio 1 always
+    assert cut_ratio(0.25, weight=1.0) == pytest.approx(0.25)    # the body's own
+    for none in (float("nan"), float("inf"), 0.0, -0.5):          # never seen within the range
+        assert cut_ratio(none) == DEPTH_RATIO
+
+
+def test_a_body_cut_by_the_range_keeps_between_ratio_1_and_its_own_last_ratio():
+    """The sphere at 25 m (every return within the 30 m range: the estimator's box of the cap
+    sets the body's depth-to-width ratio r, about 0.5), then at 32.5 m (cut: boxed from the
+    image): the box is as deep for its width as sqrt(r), shallower than at ratio 1; a loop that
+    never saw the body within the range boxes it at ratio 1 (the first test above)."""
+    img_n, pts_n, b2_n, _ = _cut_sphere(30.0, centre=(0.0, 0.0, 25.0))
+    img_f, pts_f, b2_f, _ = _cut_sphere(30.0)
+    t = Track3D(CAM, OracleTracker(np.array([b2_n, b2_n, b2_f])), _CapBox(), depth_range_m=30.0, fusion=False,
+                silhouette=0.0, depth_smoothing=0.0)
+    t.init(img_n, b2_n)
+    near = t.update(img_n, pts_n).box3d
+    r = near[5] / ((near[3] + near[4]) / 2)
+    assert 0.3 < r < 0.7
+    far = t.update(img_f, pts_f).box3d
+    front = float(pts_f[:, 2].min())
+    np.testing.assert_allclose(far, box_from_view(b2_f, CAM, front, ratio=np.sqrt(r)))
+    assert far[5] < box_from_view(b2_f, CAM, front)[5]
+    assert far[2] - far[5] / 2 == pytest.approx(front)
+
+
+def test_a_view_cut_by_the_image_border_lends_no_depth_ratio():
+    """The sphere at 25 m, half off the image's left border (the returns within the range, the
+    box's width the part in view), then at 32.5 m (cut by the range): the border view sets no
+    ratio, so the box from the image is at ratio 1, as for a body never seen whole."""
+    img_b, pts_b, b2_b, _ = _cut_sphere(30.0, centre=(-14.0, 0.0, 25.0))
+    img_f, pts_f, b2_f, _ = _cut_sphere(30.0)
+    assert b2_b[0] <= 0.5 and len(pts_b) > 0 and np.linalg.norm(pts_b, axis=1).max() < 29.0
+    t = Track3D(CAM, OracleTracker(np.array([b2_b, b2_b, b2_f])), _CapBox(), depth_range_m=30.0, fusion=False,
+                silhouette=0.0, depth_smoothing=0.0)
+    t.init(img_b, b2_b)
+    assert t.update(img_b, pts_b).status == TRACKING
+    assert t.get_state()["depth_ratio"] is None
+    far = t.update(img_f, pts_f).box3d
+    np.testing.assert_allclose(far, box_from_view(b2_f, CAM, float(pts_f[:, 2].min())))
 
 
 def test_carry_box_hand_cases():

@@ -57,7 +57,7 @@ from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
 from .silhouette import contain, find_body, past_border, silhouette_box
 from .fusion import WEIGHT_2D, WEIGHT_3D, fuse, fuse_section
 from .range_cut import (CAP_FUSION_COVERAGE, DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_at_range, box_from_view,
-                        carry_box, deepen_to_view, lateral_coverage, reaches_range)
+                        carry_box, cut_ratio, deepen_to_view, lateral_coverage, reaches_range)
 from .trackers2d import Tracker2D, create_tracker
 from .unmatched_texture import trim_unmatched
 
@@ -848,7 +848,7 @@ class Track3D:
                        if self.body_views and amodal else None)
         self._pad = (self.edge_pad / camera.fx, self.edge_pad / camera.fy)
         self._whole_box: np.ndarray | None = None   # the reported box of the last whole view (6,)
-        self._depth_ratio = float("nan")   # size z / mean(size x, y) of the last box within the depth range
+        self._depth_ratio = float("nan")   # size z / mean(size x, y) of the last whole view's box within the depth range
         self._small_cap = False   # this frame's returns: a cap past the range smaller than CAP_FUSION_COVERAGE
         # the 2D box of the last estimate whose returns reached the range (not a sliver of the body at
         # the image border: CARRY_SLIVER) and its 3D box (6,): what a body gone wholly past the range
@@ -1005,7 +1005,8 @@ class Track3D:
     def _reported_box(self, est: np.ndarray, bounds: np.ndarray,
                       box2d: np.ndarray) -> tuple[np.ndarray, bool, bool]:
         """The reported 3D box: `est`, or the box from the image when the body reaches past the
-        depth sensor's range and its returns cover less than the outline (track3d.range_cut), else `est` with the faces the sensor sees taken
+        depth sensor's range and its returns cover less than the outline (track3d.range_cut; as deep
+        for its width as range_cut.cut_ratio makes of the body's last box within the range), else `est` with the faces the sensor sees taken
         from the returns (`measured_faces`, boxes.fit_measured_faces) and its cross-section fused
         with the 2D box by `weight_2d` (fusion.fuse_section). The 2D fusion keeps `est`: the
         returns' cap, inside the body's outline, holds a 2D box that would otherwise grow with nothing to check it
@@ -1016,13 +1017,13 @@ class Track3D:
         (the 2D box off every image border, the body not cut by the depth range) and whether the
         returns reached the range. When the returns reach the range but cover the outline, the
         box's back face goes at least as far as the image's box's (range_cut.deepen_to_view)
-        with the depth-to-width ratio of the last box from returns within the range (1 before
-        one)."""
+        with the depth-to-width ratio of the last whole view's box (off the image border, returns
+        within the range; 1 before one)."""
         reach = reaches_range(bounds, box2d, self.camera, self.depth_range_m)
         coverage = lateral_coverage(bounds, box2d, self.camera) if reach else 1.0
         self._small_cap = coverage < CAP_FUSION_COVERAGE
         if coverage < MIN_COVERAGE:
-            b = box_from_view(box2d, self.camera, float(bounds[0][2]))
+            b = box_from_view(box2d, self.camera, float(bounds[0][2]), cut_ratio(self._depth_ratio))
             if b is not None:
                 return b, False, True
         sides = self._border_sides(box2d)
@@ -1074,7 +1075,10 @@ class Track3D:
         # held-out: seed 23 300 frames 0.8037 -> 0.8121 / 0.8224 -> 0.8226, seed 3 60 frames
         # 0.7603 -> 0.7653 / 0.7787 -> 0.7787)
         box = hold_back_face(box, far, None if reached else limit)
-        if not reached:   # a box from returns within the range: the body's own depth-to-width ratio
+        if whole:   # a box from a whole view within the range: the body's own depth-to-width ratio
+            # (not from a view cut by the image border, whose width is the part in view: a held-out
+            # ToF calibration body cut at the top border lent its cut box's 1.3 to the box from
+            # the image and lost 0.033 AO_3d; track3d.range_cut.CUT_RATIO_WEIGHT)
             self._depth_ratio = float(min(box[5] / max((box[3] + box[4]) / 2.0, 1e-6), MAX_DEPTH_RATIO))
         if self._smooth_depth:
             s = self.depth_smoothing
