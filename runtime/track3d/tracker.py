@@ -1006,7 +1006,7 @@ class Track3D:
                       box2d: np.ndarray) -> tuple[np.ndarray, bool, bool]:
         """The reported 3D box: `est`, or the box from the image when the body reaches past the
         depth sensor's range and its returns cover less than the outline (track3d.range_cut; as deep
-        for its width as range_cut.cut_ratio makes of the body's last box within the range), else `est` with the faces the sensor sees taken
+        for its width as range_cut.cut_ratio makes of the body's last whole view's box), else `est` with the faces the sensor sees taken
         from the returns (`measured_faces`, boxes.fit_measured_faces) and its cross-section fused
         with the 2D box by `weight_2d` (fusion.fuse_section). The 2D fusion keeps `est`: the
         returns' cap, inside the body's outline, holds a 2D box that would otherwise grow with nothing to check it
