@@ -199,6 +199,39 @@ def test_lost_is_scored_from_the_results(synth, tmp_path):
                                                  reacquired=1)
 
 
+def test_the_report_pools_frames_by_condition(tmp_path):
+    from track3d.evaluation.tables import condition_table
+    from track3d.jsonable import jsonable
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"s0001": 8, "s0002": 6}, absent={"s0001": [3]})
+    exp = Experiment(root, "test", tmp_path / "r", tmp_path / "p")
+    exp.run(TrackerSpec("oracle", "baseline"), quiet=True)
+    report = exp.report(["oracle+baseline"], plots=False)
+    cond = report["trackers"]["oracle+baseline"]["conditions"]
+    # the synthetic data has no depth range and no body at the border: every frame whole
+    assert cond["whole"]["frames"] == report["trackers"]["oracle+baseline"]["overall"]["frames"] == 11
+    assert condition_table(report) == ""
+    # s0001's sensor made a range of 5 m (its sphere lies 12 m away) and its frame 5 a body cut by the border
+    meta = root / "test" / "s0001" / "meta.json"
+    meta.write_text(json.dumps({**json.loads(meta.read_text()), "depth_sensor": {"name": "tof", "max_range_m": 5.0}}))
+    cut = root / "test" / "s0001" / "cut_by_image.label"
+    flags = cut.read_text().split()
+    flags[5] = "1"
+    cut.write_text("\n".join(flags) + "\n")
+    exp = Experiment(root, "test", tmp_path / "r", tmp_path / "p")
+    report = exp.report(["oracle+baseline"], plots=False)
+    cond = report["trackers"]["oracle+baseline"]["conditions"]
+    # s0001: 8 frames - init - absent = 6 scored, one of them cut; s0002: 5 whole
+    assert [cond[k]["frames"] for k in ("whole", "past_range", "cut_by_image", "cut_and_past_range")] == [5, 5, 0, 1]
+    seqs = report["trackers"]["oracle+baseline"]["sequences"]
+    by_hand = (seqs["s0001"]["ao_3d"] * 6 + seqs["s0002"]["ao_3d"] * 5) / 11   # pooled over the frames
+    assert sum(cond[k]["ao_3d_lost"] for k in cond) == pytest.approx(1.0 - by_hand)
+    lines = condition_table(report).splitlines()
+    assert len(lines) == 4 and lines[2].split()[:3] == ["oracle+baseline", "past_range", "5"]
+    written = json.loads((tmp_path / "p" / "report.json").read_text())["trackers"]["oracle+baseline"]["conditions"]
+    assert written == jsonable(cond) and written["cut_by_image"]["ao_3d"] is None   # no frame: null, not 0
+
+
 def test_raw_scores_are_the_2d_trackers_own_boxes(synth, tmp_path):
     exp = Experiment(synth, "test", tmp_path / "r", tmp_path / "p")
     exp.run(TrackerSpec("oracle", "baseline", fusion=True), quiet=True)

@@ -4,9 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from track3d.evaluation.metrics import (CE2D_THRESHOLDS, IOU_THRESHOLDS, LostScore, average_scores,
-                                        axis_errors_3d, bootstrap_interval, compare_paired, latency_ms,
-                                        precision_curve, score_lost, score_sequence, success_curve)
+from track3d.evaluation.metrics import (CE2D_THRESHOLDS, CONDITIONS, IOU_THRESHOLDS, ConditionScore, LostScore,
+                                        average_scores, axis_errors_3d, bootstrap_interval, compare_paired,
+                                        frame_conditions, latency_ms, past_range, precision_curve,
+                                        score_conditions, score_lost, score_sequence, success_curve)
 
 
 def test_success_curve_hand_case():
@@ -209,3 +210,55 @@ def test_compare_paired_hand_cases():
     r = compare_paired("ao_3d", {"a": 0.5}, {"b": 0.5})
     assert r.sequences == 0 and np.isnan(r.mean) and np.isnan(r.lo) and (r.better, r.worse) == (0, 0)
     assert set(p.summary()) == {"metric", "sequences", "mean", "lo", "hi", "better", "worse", "level", "margin"}
+
+
+def test_past_range_hand_cases():
+    boxes = np.array([[0, 0, 10, 2, 2, 2],      # far face at 11 m, on the optical axis
+                      [3, 4, 10, 2, 2, 2],      # off axis: 11 m of depth, 11 x sqrt(1.25) = 12.30 m away
+                      [0, 0, np.nan, 2, 2, 2],  # not finite
+                      [0, 0, -5, 2, 2, 2]], float)   # behind the camera
+    np.testing.assert_array_equal(past_range(boxes, 10.5), [True, True, False, False])
+    np.testing.assert_array_equal(past_range(boxes, 12.0), [False, True, False, False])
+    np.testing.assert_array_equal(past_range(boxes, 12.5), [False, False, False, False])
+    np.testing.assert_array_equal(past_range(boxes, None), [False] * 4)   # an unlimited sensor
+
+
+def test_frame_conditions_index_the_conditions():
+    boxes = np.array([[0, 0, 10, 2, 2, 2], [0, 0, 20, 2, 2, 2]] * 2, float)
+    got = frame_conditions(boxes, np.array([False, False, True, True]), 15.0)
+    assert [CONDITIONS[k] for k in got] == ["whole", "past_range", "cut_by_image", "cut_and_past_range"]
+    assert list(frame_conditions(boxes, np.ones(4, bool), None)) == [2, 2, 2, 2]
+    with pytest.raises(ValueError):
+        frame_conditions(boxes, np.ones(3, bool), 15.0)
+
+
+def test_score_conditions_hand_case():
+    pred2d, pred3d, gt2d, gt3d, scored = _seq()
+    # frame 0 (init) and frame 3 (absent) are not scored: their conditions count nothing
+    cond = np.array([0, 1, 2, 0])
+    got = score_conditions(pred2d, pred3d, gt2d, gt3d, scored, cond)
+    assert list(got) == list(CONDITIONS)
+    assert got["whole"] == ConditionScore() and got["cut_and_past_range"] == ConditionScore()
+    # frame 1: 2D IoU 1/3, 3D IoU 1/3, centre error 1 m; frame 2: 2D IoU 1, 3D IoU 0, 10 m
+    assert got["past_range"] == ConditionScore(frames=1, iou_2d=pytest.approx(1 / 3), iou_3d=pytest.approx(1 / 3),
+                                               ce_3d=pytest.approx(1.0), ce_3d_frames=1)
+    cut = got["cut_by_image"].summary(total_frames=2)
+    assert cut == {"frames": 1, "share": 0.5, "ao_2d": 1.0, "ao_3d": 0.0, "ace_3d": pytest.approx(10.0),
+                   "ao_3d_lost": 0.5}
+    past = got["past_range"].summary(total_frames=2)
+    # the AO_3d lost by the conditions adds up to 1 - AO_3d pooled over the frames (here 1/6)
+    assert past["ao_3d_lost"] + cut["ao_3d_lost"] == pytest.approx(1.0 - 1 / 6)
+    none = got["whole"].summary(2)   # no frame: no mean, and nothing lost there
+    assert all(np.isnan(none[k]) for k in ("ao_2d", "ao_3d", "ace_3d")) and none["ao_3d_lost"] == 0.0
+    # sums add up over sequences
+    both = got["past_range"] + got["cut_by_image"]
+    assert both.frames == 2 and both.ce_3d == pytest.approx(11.0) and both.ce_3d_frames == 2
+    # a frame without a prediction: IoU 0, no centre error; 2D only: no 3D values in the summary
+    blank = pred3d.copy()
+    blank[1] = np.nan
+    got = score_conditions(pred2d, blank, gt2d, gt3d, scored, cond)
+    assert got["past_range"].iou_3d == 0.0 and got["past_range"].ce_3d_frames == 0
+    two_d = score_conditions(pred2d, None, gt2d, gt3d, scored, cond)["past_range"].summary(2, two_d_only=True)
+    assert set(two_d) == {"frames", "share", "ao_2d"} and two_d["ao_2d"] == pytest.approx(1 / 3)
+    with pytest.raises(ValueError):
+        score_conditions(pred2d, pred3d, gt2d, gt3d, scored, cond[:3])

@@ -16,7 +16,7 @@ from .argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias, 
 
 __all__ = ["main"]
 
-from .evaluation.tables import axis_table, paired_table, summary_table  # noqa: E402  (the tables of a report)
+from .evaluation.tables import axis_table, condition_table, paired_table, summary_table  # noqa: E402  (the tables of a report)
 from .threads import set_threads  # noqa: E402
 
 def _stereo_params(opts: dict, depth: str):
@@ -491,6 +491,9 @@ def _cmd_eval(a) -> int:
     sure = paired_table(report)
     if sure:
         print(sure)
+    where = condition_table(report)
+    if where:
+        print(where)
     for w in report.get("warnings", []):
         print(f"track3d eval: WARNING: {w}", file=sys.stderr)
     print(f"report: {Path(a.out) / 'report.json'}")

@@ -42,9 +42,9 @@ from ..progress import Progress
 from ..stereo import StereoCloud, StereoParams
 from ..tracker import LOST, STAGES, Track3D, sensor_options
 from .draw import OverlayWriter, draw_overlay
-from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, CI_LEVEL, INTERVAL_METRICS, IOU_THRESHOLDS, MOVED, LostScore,
-                      SequenceScore, average_scores, bootstrap_interval, compare_paired, latency_ms, score_lost,
-                      score_sequence)
+from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, CI_LEVEL, CONDITIONS, INTERVAL_METRICS, IOU_THRESHOLDS, MOVED,
+                      ConditionScore, LostScore, OverallScore, SequenceScore, average_scores, bootstrap_interval,
+                      compare_paired, frame_conditions, latency_ms, score_conditions, score_lost, score_sequence)
 from .results import (INIT, SKIPPED, SequenceResult, read_result, read_run_record, result_folder, run_config_key,
                       write_result, write_run_record)
 
@@ -508,6 +508,21 @@ class Experiment:
                 timed_frames=int(timed.sum())))
         return scores
 
+    def score_conditions(self, name: str) -> dict[str, ConditionScore]:
+        """One tracker's scored frames of every sequence pooled by their condition (metrics.CONDITIONS:
+        from the ground truth's cut_by_image.label and the depth sensor's range; a sequence whose
+        sensor has no range is never past it)."""
+        total = {k: ConditionScore() for k in CONDITIONS}
+        for seq in self.sequences:
+            res = self._read(name, seq)
+            n = len(res)
+            scored = ~seq.absent[:n] & (res.status != INIT)
+            pred3d = None if np.isnan(res.box3d).all() else res.box3d
+            cond = frame_conditions(seq.gt3d[:n], seq.cut[:n], seq.depth_range_m)
+            got = score_conditions(res.box2d, pred3d, seq.gt2d[:n], seq.gt3d[:n], scored, cond)
+            total = {k: total[k] + got[k] for k in CONDITIONS}
+        return total
+
     def score_lost(self, name: str, reacquire_frames: int = 10) -> LostScore:
         """Lost detection (metrics.score_lost) over every sequence, summed: the frames after each
         sequence's first initialisation (meant for one-pass runs, restart=False)."""
@@ -571,6 +586,7 @@ class Experiment:
                 "lost": lost,
                 "curves": ov.curves,
                 "sequences": {s.name: s.summary() for s in scores},
+                "conditions": self._condition_summary(name, ov),
                 "stage_ms_mean": self._stage_means(name),
                 "run": rec or None,
                 "restart": rec.get("restart"), "restart_skip": rec.get("restart_skip"),
@@ -604,6 +620,12 @@ class Experiment:
             report["plots"] = [str(f) for f in files]
         write_json(self.report_dir / "report.json", report)
         return report
+
+    def _condition_summary(self, name: str, ov: OverallScore) -> dict:
+        """report.json's "conditions" of one tracker: metrics.ConditionScore.summary of each."""
+        cond = self.score_conditions(name)
+        total = sum(c.frames for c in cond.values())
+        return {k: c.summary(total, ov.two_d_only) for k, c in cond.items()}
 
     def _remove_old_plots(self) -> None:
         """The plots a previous report in report_dir listed: a report of fewer sequences or without

@@ -24,6 +24,11 @@ camera frame: z along the line of sight), the mean and the mean absolute of pred
 ground truth over the scored frames that have a prediction (:func:`axis_errors_3d`). A box
 estimator that guesses the hidden depth of a body shows it in cz and sz.
 
+Where the loss is (:func:`score_conditions`): the scored frames of every sequence pooled by the
+condition the ground truth puts them in (CONDITIONS: the body whole in view and within the depth
+sensor's range, past the range, cut by the image border, both), each condition's AO_2d, AO_3d and
+ACE_3d over its frames and the share of the pooled AO_3d lost there.
+
 Over sequences: the mean of the per-sequence values (paper eq. for AO^3d and ACE^3d: every
 sequence weighs the same), curves averaged likewise; restarts are summed; FPS is frames over
 time summed over all sequences. IoU and centre error come from track3d.boxes (one formula).
@@ -52,7 +57,8 @@ __all__ = [
     "SequenceScore", "OverallScore", "score_sequence", "average_scores", "KINDS", "SCALARS", "SCALARS_2D",
     "LostScore", "score_lost", "REACQUIRE_IOU", "AXES_3D", "axis_errors_3d",
     "CI_LEVEL", "BOOTSTRAP_RESAMPLES", "MOVED", "LOWER_IS_BETTER", "INTERVAL_METRICS", "bootstrap_interval", "PairedComparison",
-    "compare_paired", "latency_ms",
+    "compare_paired", "latency_ms", "CONDITIONS", "past_range", "frame_conditions", "ConditionScore",
+    "score_conditions",
 ]
 
 IOU_THRESHOLDS = np.linspace(0.0, 1.0, 101)
@@ -300,6 +306,99 @@ def score_lost(lost: np.ndarray, absent: np.ndarray, pred2d: np.ndarray, gt2d: n
                 reacquired += 1
     return LostScore(lost_true=int(np.sum(lost & absent)), lost_reported=int(lost.sum()),
                      absent_frames=int(absent.sum()), returns=returns, reacquired=reacquired)
+
+
+# Where the frames are (:func:`frame_conditions`, :func:`score_conditions`): each scored frame in
+# one of these, from the ground truth alone. A range-limited depth sensor (ToF) sees only the near
+# part of a body that reaches past its range, and the image border cuts a body that fills the
+# view: the two conditions where the hidden extent is a guess.
+CONDITIONS = ("whole", "past_range", "cut_by_image", "cut_and_past_range")
+
+
+def past_range(gt3d: np.ndarray, range_m: float | None) -> np.ndarray:
+    """(T,) bool: the box's far face lies beyond `range_m` metres (None: an unlimited sensor, all
+    False) along the line of sight through the box's centre. gt3d (T, 6) [cx, cy, cz, sx, sy, sz],
+    the camera frame; a box that is not finite or not in front of the camera is not past."""
+    b = np.asarray(gt3d, np.float64).reshape(-1, 6)
+    if range_m is None:
+        return np.zeros(len(b), bool)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        far_z = b[:, 2] + b[:, 5] / 2.0
+        stretch = np.sqrt((b[:, 0] / b[:, 2]) ** 2 + (b[:, 1] / b[:, 2]) ** 2 + 1.0)   # metres per metre of z
+        out = (b[:, 2] > 0.0) & (far_z * stretch > float(range_m))
+    return np.asarray(out & np.all(np.isfinite(b), axis=1), bool)
+
+
+def frame_conditions(gt3d: np.ndarray, cut: np.ndarray, range_m: float | None) -> np.ndarray:
+    """(T,) int, each frame's index into CONDITIONS: cut (T,) bool, the body reaches past the image
+    border (the dataset's cut_by_image.label); past the depth range by :func:`past_range`."""
+    c = np.asarray(cut, bool).reshape(-1)
+    p = past_range(gt3d, range_m)
+    if len(p) != len(c):
+        raise ValueError(f"{len(p)} 3D boxes and {len(c)} cut flags")
+    return (p.astype(np.int64) + 2 * c.astype(np.int64)).astype(np.int64)
+
+
+@dataclass
+class ConditionScore:
+    """Sums over the scored frames of one condition, of one or more sequences (add them up with
+    ``+``). The means pool the frames (each frame weighs the same, unlike the scores over
+    sequences): a condition found in a few frames of some sequences has no per-sequence mean."""
+
+    frames: int = 0
+    iou_2d: float = 0.0       # sum over the frames
+    iou_3d: float = 0.0
+    ce_3d: float = 0.0        # sum over the frames with a 3D prediction
+    ce_3d_frames: int = 0
+
+    def __add__(self, other: "ConditionScore") -> "ConditionScore":
+        return ConditionScore(*(a + b for a, b in zip(astuple(self), astuple(other))))
+
+    def summary(self, total_frames: int, two_d_only: bool = False) -> dict:
+        """frames, their share of `total_frames`, AO_2d, AO_3d, ACE_3d and the AO_3d lost there:
+        the sum of (1 - IoU_3d) over these frames / total_frames (the shares of the conditions add
+        up to 1 - AO_3d pooled over all frames); nan where there is nothing to divide by, the 3D
+        values left out of a 2D-only score."""
+        nan = float("nan")
+        d = {"frames": self.frames, "share": self.frames / total_frames if total_frames else nan,
+             "ao_2d": self.iou_2d / self.frames if self.frames else nan}
+        if not two_d_only:
+            d["ao_3d"] = self.iou_3d / self.frames if self.frames else nan
+            d["ace_3d"] = self.ce_3d / self.ce_3d_frames if self.ce_3d_frames else nan
+            d["ao_3d_lost"] = (self.frames - self.iou_3d) / total_frames if total_frames else nan
+        return d
+
+
+def score_conditions(pred2d: np.ndarray, pred3d: np.ndarray | None, gt2d: np.ndarray, gt3d: np.ndarray,
+                     scored: np.ndarray, conditions: np.ndarray) -> dict[str, ConditionScore]:
+    """One sequence's sums per condition (CONDITIONS order; every key present), over the scored
+    frames: pred2d / gt2d (T, 4), pred3d / gt3d (T, 6) (pred3d None: 2D only, the 3D sums stay 0),
+    scored (T,) bool as for :func:`score_sequence`, conditions (T,) int from :func:`frame_conditions`.
+    A frame without a prediction counts IoU 0 and no centre error, as there."""
+    pred2d = np.asarray(pred2d, np.float64).reshape(-1, 4)
+    gt2d = np.asarray(gt2d, np.float64).reshape(-1, 4)
+    gt3d = np.asarray(gt3d, np.float64).reshape(-1, 6)
+    scored = np.asarray(scored, bool).reshape(-1)
+    cond = np.asarray(conditions, np.int64).reshape(-1)
+    n = len(scored)
+    if not (len(pred2d) == len(gt2d) == len(gt3d) == len(cond) == n) or (
+            pred3d is not None and len(np.asarray(pred3d).reshape(-1, 6)) != n):
+        raise ValueError("predictions, ground truth, flags and conditions differ in length")
+    i2 = np.zeros(n)
+    i2[scored] = iou_2d(pred2d[scored], gt2d[scored])
+    i3, ce = np.zeros(n), np.full(n, np.nan)
+    if pred3d is not None:
+        p3 = np.asarray(pred3d, np.float64).reshape(-1, 6)
+        i3[scored] = iou_3d(p3[scored], gt3d[scored])
+        with np.errstate(invalid="ignore"):
+            ce[scored] = center_error_3d(p3[scored], gt3d[scored])
+    out = {}
+    for k, name in enumerate(CONDITIONS):
+        m = scored & (cond == k)
+        has = m & np.isfinite(ce)
+        out[name] = ConditionScore(frames=int(m.sum()), iou_2d=float(i2[m].sum()), iou_3d=float(i3[m].sum()),
+                                   ce_3d=float(ce[has].sum()), ce_3d_frames=int(has.sum()))
+    return out
 
 
 CI_LEVEL = 0.95              # the intervals' coverage

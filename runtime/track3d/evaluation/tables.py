@@ -2,9 +2,9 @@
 from __future__ import annotations
 
 from ..table_text import cell
-from .metrics import AXES_3D
+from .metrics import AXES_3D, CONDITIONS
 
-__all__ = ["TABLE_COLUMNS", "columns", "summary_table", "axis_table", "paired_table"]
+__all__ = ["TABLE_COLUMNS", "columns", "summary_table", "axis_table", "paired_table", "condition_table"]
 
 TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
                  ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
@@ -71,6 +71,27 @@ def paired_table(report: dict) -> str:
     head = (f"over {n} sequences, bootstrap intervals; better / worse: sequences whose {label} moved by more "
             f"than {paired['margin']:g}")
     return head + "\n" + _aligned(rows)
+
+
+def condition_table(report: dict) -> str:
+    """Where the loss is: per tracker, the scored frames pooled by their condition (metrics.CONDITIONS;
+    the conditions no tracker has a frame in left out) with their share of the frames, AO_2d,
+    AO_3d, ACE_3d and the AO_3d lost there (the shares of (1 - IoU_3d) over all frames); "" for
+    a report without conditions (one written before them) or with every frame "whole"."""
+    trackers = report["trackers"]
+    if not trackers or any("conditions" not in t for t in trackers.values()):
+        return ""
+    used = [k for k in CONDITIONS if any(t["conditions"].get(k, {}).get("frames", 0) for t in trackers.values())]
+    if used in ([], ["whole"]):
+        return ""
+    rows = [["frames by condition", "condition", "frames", "share", "AO_2d", "AO_3d", "ACE_3d(m)", "AO_3d lost"]]
+    for name, t in trackers.items():
+        for k in used:
+            c = t["conditions"][k]
+            rows.append([name, k, str(c["frames"]), cell(c["share"], "{:.2f}"), cell(c["ao_2d"], "{:.3f}"),
+                         cell(c.get("ao_3d"), "{:.3f}"), cell(c.get("ace_3d"), "{:.3f}"),
+                         cell(c.get("ao_3d_lost"), "{:.3f}")])
+    return _aligned(rows)
 
 
 def _aligned(rows: list[list[str]]) -> str:
