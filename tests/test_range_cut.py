@@ -256,6 +256,63 @@ def test_carry_box_hand_cases():
     np.testing.assert_array_equal(carry_box(b3, last, [60.0, 40.0, 0.0, 10.0], CAM100), b3)
 
 
+def test_carry_box_at_the_image_border_hand_cases():
+    """CAM100 (fx = fy = 100, 100 x 100 px). A box at 20 m with a 20 x 20 px box at (40, 40); the
+    new box is cut by the right border, [70, 30, 30, 20]: its left side moved 30 px (0.3 m per m
+    of depth: 6 m at 20 m), its centre in y 10 px up (-2 m); the depth and size stay."""
+    b3 = np.array([0.0, 0.0, 20.0, 2.0, 3.0, 4.0])
+    last, cut = np.array([40.0, 40.0, 20.0, 20.0]), np.array([70.0, 30.0, 30.0, 20.0])
+    right = (False, False, True, False)
+    np.testing.assert_allclose(carry_box(b3, last, cut, CAM100, 1.0, (False,) * 4, right), [6.0, -2.0, 20.0, 2.0, 3.0, 4.0])
+    # from a box cut on the right to one cut on the right: the left sides (70 -> 80: +2 m)
+    np.testing.assert_allclose(carry_box(b3, cut, [80.0, 30.0, 20.0, 20.0], CAM100, 1.0, right, right),
+                               [2.0, 0.0, 20.0, 2.0, 3.0, 4.0])
+    # cut on the left (x = 0): its right side; both sides at the border in y: no move in y
+    tall = (True, True, False, True)
+    np.testing.assert_allclose(carry_box(b3, [0.0, 0.0, 30.0, 100.0], [0.0, 0.0, 20.0, 100.0], CAM100, 1.0, tall, tall),
+                               [-2.0, 0.0, 20.0, 2.0, 3.0, 4.0])
+    # no side at the border: the clear rule, as without sides
+    np.testing.assert_array_equal(carry_box(b3, last, cut, CAM100, 1.0, (False,) * 4, (False,) * 4),
+                                  carry_box(b3, last, cut, CAM100, 1.0))
+
+
+def test_a_body_past_the_range_at_the_image_border_follows_the_side_in_view():
+    """A sphere of radius 3 m at 31 m (its returns reach the 30 m range), then wholly past the
+    range at 34 m sliding off the right border (18 m, then 19.5 m to the side: 2D boxes cut by the
+    border, no return), then back in view at 2 m. At the border the 3D box follows the 2D box's
+    left side at the same depth (before: held at the first frame's, 18 m behind the body); back in
+    view it is carried from the last clear pair, as a body that had never been at the border. A
+    checkpoint at the border continues bit-identically."""
+    frames = [_cut_sphere(30.0, centre=c) for c in ((0.0, 0.0, 31.0), (18.0, 0.0, 34.0), (19.5, 0.0, 34.0),
+                                                   (2.0, 0.0, 34.0))]
+    (img1, pts1, b2_1, _), (img2, pts2, b2_2, b3_2), (img3, pts3, b2_3, b3_3), (img4, pts4, b2_4, b3_4) = frames
+    assert len(pts1) > 100 and len(pts2) == len(pts3) == len(pts4) == 0
+    assert b2_2[0] + b2_2[2] >= CAM.width - 0.5 and b2_3[0] + b2_3[2] >= CAM.width - 0.5
+    gt2d = np.array([b2_1, b2_1, b2_2, b2_3, b2_4])
+
+    def run(restore: bool):
+        t = Track3D(CAM, OracleTracker(gt2d), _CapBox(), depth_range_m=30.0, fusion=False)
+        t.init(img1, b2_1)
+        out = [t.update(img1, pts1), t.update(img2, pts2)]
+        if restore:
+            t2 = Track3D(CAM, OracleTracker(gt2d), _CapBox(), depth_range_m=30.0, fusion=False)
+            t2.set_state(json.loads(json.dumps(t.get_state())))
+            t = t2
+        return out + [t.update(img3, pts3), t.update(img4, pts4)]
+
+    r1, r2, r3, r4 = run(False)
+    assert (r1.status, r2.status, r3.status, r4.status) == (TRACKING, NO_POINTS, NO_POINTS, NO_POINTS)
+    right, clear = (False, False, True, False), (False,) * 4
+    np.testing.assert_allclose(r2.box3d, carry_box(r1.box3d, b2_1, b2_2, CAM, last_sides=clear, sides=right))
+    np.testing.assert_allclose(r3.box3d, carry_box(r2.box3d, b2_2, b2_3, CAM, last_sides=right, sides=right))
+    # within the carried box's depth error (its cap-made box lies 3 m near: 0.9 of the shift)
+    assert r2.box3d[2] == r1.box3d[2] and abs(r2.box3d[0] - b3_2[0]) < 2.0 and abs(r1.box3d[0] - b3_2[0]) > 15.0
+    assert abs(r3.box3d[0] - b3_3[0]) < 2.5
+    np.testing.assert_allclose(r4.box3d, carry_box(r1.box3d, b2_1, b2_4, CAM))
+    for a, b in zip(run(True), (r1, r2, r3, r4)):
+        np.testing.assert_array_equal(a.box3d, b.box3d)
+
+
 def test_a_body_past_the_range_is_carried_by_the_image_box():
     """A sphere of radius 3 m at 31 m (its returns reach the 30 m range), then at 34 m and 1.5 m
     to the side (no return at all): the frame is "no_points" and the 3D box follows the 2D box, by

@@ -24,7 +24,10 @@ as shallow as the cloud.
 All use only the frustum pass's bounds or boxes: no pass over the points. When a body whose
 returns had reached the range gives none (wholly past it; the 2D tracker still has it, clear of
 the image border), its last box is carried by the image: across the line of sight with the 2D
-box's centre, along it by the 2D box's change of scale, damped (`carry_box`). A body that
+box's centre, along it by the 2D box's change of scale, damped (`carry_box`). At the image
+border the 2D box spans only the part in view: there the box follows the side of the 2D box
+that is not at the border, at the same depth (and the next clear view is carried from the last
+clear one again). A body that
 gives no return from the first frame on (the caller's 2D box on it) is past the range from the
 start: boxed from the image with its front face at the range, the nearest it can be
 (`box_at_range`), then carried the same way.
@@ -181,19 +184,50 @@ def deepen_to_view(box: np.ndarray, box2d: np.ndarray, camera: Camera, front_z: 
     return out
 
 
+def _carry_ref(box2d: np.ndarray, low: bool, high: bool, k: int) -> float:
+    """The coordinate along axis k (0: x, 1: y) of the 2D box [x, y, w, h] that follows the body:
+    its centre, or the side not at the image border (`low` / `high`: that side is at it); nan when
+    both are."""
+    if low and high:
+        return float("nan")
+    if low:
+        return float(box2d[k] + box2d[k + 2])
+    if high:
+        return float(box2d[k])
+    return float(box2d[k] + box2d[k + 2] / 2.0)
+
+
 def carry_box(box3d: np.ndarray, last_box2d: np.ndarray, box2d: np.ndarray, camera: Camera,
-              exponent: float = CARRY_DEPTH_EXPONENT) -> np.ndarray:
+              exponent: float = CARRY_DEPTH_EXPONENT,
+              last_sides: tuple[bool, bool, bool, bool] | None = None,
+              sides: tuple[bool, bool, bool, bool] | None = None) -> np.ndarray:
     """`box3d` (6,), the 3D box that went with the 2D box `last_box2d` (4,) [x, y, w, h], moved
     to go with `box2d` (4,): its centre depth scaled by (s_last / s) ** exponent (s = sqrt(w h)
     of each 2D box), its centre kept on the same offset from the 2D box's centre ray, its size
-    kept; a new float64 array. `box3d` unchanged (a copy) when a box is not finite or of no size."""
+    kept; a new float64 array. `box3d` unchanged (a copy) when a box is not finite or of no size.
+
+    `last_sides` / `sides`: which sides (left, top, right, bottom) of `last_box2d` / `box2d` lie at
+    the image border (None: none). A box at the border spans the part of the body in view, so when
+    either does, the box moves across the line of sight with the 2D boxes' side not at the border
+    (per axis; with their centres where neither side is, not at all where both are) and keeps its
+    depth: the size of a cut box says nothing of the range."""
     b = np.array(box3d, dtype=np.float64).reshape(6)
     p, q = np.asarray(last_box2d, np.float64).reshape(4), np.asarray(box2d, np.float64).reshape(4)
     if not (np.all(np.isfinite(b)) and np.all(np.isfinite(p)) and np.all(np.isfinite(q))
             and b[2] > 0.0 and min(p[2], p[3], q[2], q[3]) > 0.0):
         return b
-    z = b[2] * float(np.sqrt((p[2] * p[3]) / (q[2] * q[3]))) ** exponent
-    ray_p, ray_q = box2d_section(p, camera, 1.0)[:2], box2d_section(q, camera, 1.0)[:2]
-    b[:2] = (b[:2] / b[2] - ray_p + ray_q) * z
-    b[2] = z
+    ls = (False,) * 4 if last_sides is None else tuple(bool(v) for v in last_sides)
+    cs = (False,) * 4 if sides is None else tuple(bool(v) for v in sides)
+    if not (any(ls) or any(cs)):   # both clear: the centre rays
+        z = b[2] * float(np.sqrt((p[2] * p[3]) / (q[2] * q[3]))) ** exponent
+        ray_p, ray_q = box2d_section(p, camera, 1.0)[:2], box2d_section(q, camera, 1.0)[:2]
+        b[:2] = (b[:2] / b[2] - ray_p + ray_q) * z
+        b[2] = z
+        return b
+    shift = np.zeros(2)
+    for k, fk in ((0, camera.fx), (1, camera.fy)):
+        lo, hi = ls[k] or cs[k], ls[k + 2] or cs[k + 2]
+        d = _carry_ref(q, lo, hi, k) - _carry_ref(p, lo, hi, k)
+        shift[k] = d / fk if np.isfinite(d) else 0.0
+    b[:2] = b[:2] + shift * b[2]
     return b
