@@ -218,8 +218,13 @@ def test_the_report_pools_frames_by_condition(tmp_path):
     flags = cut.read_text().split()
     flags[5] = "1"
     cut.write_text("\n".join(flags) + "\n")
+    from track3d.evaluation.plots import condition_plot
+
+    assert condition_plot({"oracle+baseline": cond}, tmp_path / "none") is None   # every frame whole: no plot
     exp = Experiment(root, "test", tmp_path / "r", tmp_path / "p")
-    report = exp.report(["oracle+baseline"], plots=False)
+    report = exp.report(["oracle+baseline"], trajectories=0)
+    assert (tmp_path / "p" / "conditions.png").stat().st_size > 1000
+    assert str(tmp_path / "p" / "conditions.png") in report["plots"]
     cond = report["trackers"]["oracle+baseline"]["conditions"]
     # s0001: 8 frames - init - absent = 6 scored, one of them cut; s0002: 5 whole
     assert [cond[k]["frames"] for k in ("whole", "past_range", "cut_by_image", "cut_and_past_range")] == [5, 5, 0, 1]

@@ -614,6 +614,9 @@ class Experiment:
             axes = P.axis_error_plot(overall, self.report_dir)
             if axes is not None:
                 files.append(axes)
+            where = P.condition_plot({n: report["trackers"][n]["conditions"] for n in names}, self.report_dir)
+            if where is not None:
+                files.append(where)
             seq_names = P.worst_sequences(per_sequence, trajectories) if worst_first else \
                 [s.name for s in self.sequences[:trajectories]]
             files += P.trajectory_plots(self, names, seq_names, self.report_dir)

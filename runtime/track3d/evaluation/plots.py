@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .metrics import AXES_3D, CE2D_THRESHOLDS, CE3D_THRESHOLDS, IOU_THRESHOLDS, OverallScore
+from .metrics import AXES_3D, CE2D_THRESHOLDS, CE3D_THRESHOLDS, CONDITIONS, IOU_THRESHOLDS, OverallScore
 from .results import INIT, read_result
 
 __all__ = ["pyplot", "curve_plots", "trajectory_plot", "trajectory_plots", "line_of_sight_plot", "sequence_plot",
-           "worst_sequences", "axis_error_plot"]
+           "worst_sequences", "axis_error_plot", "condition_plot"]
 
 
 def pyplot():
@@ -224,6 +224,14 @@ def sequence_plot(scores: dict[str, list], out_dir: str | Path) -> Path:
     return _save(fig, Path(out_dir) / "sequences.png")
 
 
+def _grouped(groups: int, runs: list[str]) -> tuple[np.ndarray, float, dict[str, np.ndarray]]:
+    """Bars of `runs` side by side in each of `groups` groups: (the groups' centres, a bar's
+    width, {run: its bars' x})."""
+    x = np.arange(groups)
+    w = 0.8 / max(len(runs), 1)
+    return x, w, {name: x + (k - (len(runs) - 1) / 2) * w for k, name in enumerate(runs)}
+
+
 def axis_error_plot(overall: dict[str, OverallScore], out_dir: str | Path) -> Path | None:
     """errors_3d.png: each run's mean |error| per 3D box coordinate (bars) and its bias (prediction -
     truth, black ticks), camera frame: where the 3D error lies (a hidden depth guessed wrong shows in
@@ -233,16 +241,15 @@ def axis_error_plot(overall: dict[str, OverallScore], out_dir: str | Path) -> Pa
         return None
     plt = pyplot()
     colour = _colours(runs)
-    w = 0.8 / len(runs)
-    x = np.arange(len(AXES_3D))
+    x, w, at = _grouped(len(AXES_3D), runs)
     fig, ax = plt.subplots(figsize=(6.5, 3.6), dpi=100)
-    for k, name in enumerate(runs):
-        xs = x + (k - (len(runs) - 1) / 2) * w
+    for name in runs:
+        xs = at[name]
         mae = np.asarray(overall[name].values["mae_3d"], np.float64)
         bias = np.asarray(overall[name].values["bias_3d"], np.float64)
         ax.bar(xs, np.nan_to_num(mae), width=w, color=colour[name], label=name)
         ax.scatter(xs, bias, marker="_", s=200 * w, color="black", zorder=3,
-                   label="bias (prediction - truth)" if k == 0 else None)
+                   label="bias (prediction - truth)" if name == runs[0] else None)
     ax.axhline(0.0, color="grey", lw=0.8)
     labels = {"cx": "centre x", "cy": "centre y", "cz": "centre z\n(line of sight)", "sx": "size x",
               "sy": "size y", "sz": "size z\n(line of sight)"}
@@ -252,3 +259,34 @@ def axis_error_plot(overall: dict[str, OverallScore], out_dir: str | Path) -> Pa
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=7)
     return _save(fig, Path(out_dir) / "errors_3d.png")
+
+
+def condition_plot(conditions: dict[str, dict], out_dir: str | Path) -> Path | None:
+    """conditions.png: where the loss is. Per frame condition (metrics.CONDITIONS, those some run
+    has frames in) each run's AO_3d lost there (bars: the shares of 1 - IoU_3d over all frames,
+    adding up to 1 - the pooled AO_3d) and its AO_3d over those frames (black ticks, right
+    axis); the condition's share of the frames under its name. `conditions`: {run: report.json's
+    "conditions"}. None when every frame is whole or no run has 3D boxes."""
+    runs = sorted(n for n, c in conditions.items() if all("ao_3d_lost" in v for v in c.values()))
+    used = [k for k in CONDITIONS if any(conditions[n].get(k, {}).get("frames", 0) for n in runs)]
+    if not runs or used in ([], ["whole"]):
+        return None
+    plt = pyplot()
+    colour = _colours(runs)
+    x, w, at = _grouped(len(used), runs)
+    fig, ax = plt.subplots(figsize=(6.5, 4.2), dpi=100)
+    ao = ax.twinx()
+    for name in runs:
+        xs = at[name]
+        c = conditions[name]
+        lost = np.array([c[u]["ao_3d_lost"] for u in used], np.float64)
+        mean = np.array([np.nan if c[u]["ao_3d"] is None else c[u]["ao_3d"] for u in used], np.float64)
+        ax.bar(xs, np.nan_to_num(lost), width=w, color=colour[name], label=name)
+        ao.scatter(xs, mean, marker="_", s=200, color="black")
+    share = [max(float(conditions[n][u]["share"] or 0.0) for n in runs) for u in used]
+    ax.set_xticks(x, [f"{u.replace('_', ' ')}\n{100 * sh:.0f}% of frames" for u, sh in zip(used, share)], fontsize=7)
+    ax.set(ylabel="AO_3d lost (share of all frames)", title="Where the loss is: frames by condition")
+    ao.set(ylim=(0, 1), ylabel="AO_3d over the condition's frames (ticks)")
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2)
+    return _save(fig, Path(out_dir) / "conditions.png")
