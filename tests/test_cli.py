@@ -132,6 +132,7 @@ def test_runtime_never_imports_the_simulator_or_torch():
     ("--dark-side", "0.3", '"dark_side": 0.3', "-1"),
     ("--fusion-cover", "0.2", '"fusion_cover": 0.2', "1.5"),
     ("--front-filter", "0.5,0.1", '"front_filter": [0.5, 0.1]', "0,0.1"),
+    ("--section-limbs", "3,0.1,0.8", '"section_limbs": [3.0, 0.1, 0.8]', "1,2"),
     ("--silhouette", "0.25", '"silhouette": 0.25', "-1"),
 ])
 def test_track_passes_a_loop_option_to_the_loop_and_records_it(synth, tmp_path, flag, value, recorded, bad):

@@ -419,6 +419,99 @@ def test_the_section_weight_follows_the_depth_sensor(tmp_path):
     assert TrackerSpec("oracle", "baseline", weight_2d=0.0).build(b).weight_2d == 0.0
 
 
+def _two_plates(cam, u0=30.0, u1=70.0, v0=40.0, v1=60.0, z_left=8.0, z_right=12.0, n=40):
+    """A body whose left half (u0..mid) faces the camera at z_left and right half at z_right: its
+    left limb is 2 m nearer than its centre, its right one 2 m farther. (M, 3) float32 returns."""
+    u = np.linspace(u0 + 0.1, u1 - 0.1, n)
+    v = np.linspace(v0 + 0.1, v1 - 0.1, n // 2)
+    uu, vv = np.meshgrid(u, v)
+    z = np.where(uu < (u0 + u1) / 2.0, z_left, z_right)
+    return np.stack([(uu - cam.cx) / cam.fx * z, (vv - cam.cy) / cam.fy * z, z], -1).reshape(-1, 3).astype(np.float32)
+
+
+def test_limb_depths_and_the_section_at_the_limbs_hand_cases():
+    """Each side of the 2D box at its own depth: the returns within the side's band, their depth
+    quantile; a side without enough returns is nan; the section's sides at those depths, clipped
+    to the box's depth, a nan side at cz."""
+    from track3d.camera import Camera
+    from track3d.fusion import box2d_section, fuse_section, limb_depths
+
+    cam = Camera.from_intrinsics(100, 100, 100.0, 100.0, 50.0, 50.0)
+    pts = _two_plates(cam)
+    b2 = np.array([30.0, 40.0, 40.0, 20.0])
+    z = limb_depths(pts, b2, cam, (2.0, 0.05), 0.9)
+    # left band u < 32: all at 8 m; right band u > 68: all at 12 m; top and bottom bands hold both
+    # plates half and half, their 0.9 quantile the far one
+    np.testing.assert_allclose(z, [8.0, 12.0, 12.0, 12.0])
+    np.testing.assert_allclose(limb_depths(pts, b2, cam, (2.0, 0.05), 0.0), [8.0, 8.0, 12.0, 8.0])
+    # the true extent: x from (30 - 50) / 100 * 8 = -1.6 to (70 - 50) / 100 * 12 = 2.4
+    np.testing.assert_allclose(box2d_section(b2, cam, [8.0, 10.0, 12.0, 10.0]), [0.4, 0.0, 4.0, 2.0])
+    # at one depth it is the rectangle at that depth: centre (0, 0), 4 m x 2 m at 10 m
+    np.testing.assert_allclose(box2d_section(b2, cam, 10.0), [0.0, 0.0, 4.0, 2.0])
+    few = pts[pts[:, 0] / pts[:, 2] * 100.0 + 50.0 > 40.0]          # nothing left of u = 40
+    assert np.isnan(limb_depths(few, b2, cam, (2.0, 0.05), 0.9)[0])
+    assert np.isnan(limb_depths(pts[:4], b2, cam, (2.0, 0.05), 0.9)).all()
+    assert np.isnan(limb_depths(np.zeros((0, 3), np.float32), b2, cam, (2.0, 0.05), 0.9)).all()
+    b3 = np.array([0.0, 0.0, 10.0, 1.0, 1.0, 4.0])                  # depth 8..12
+    np.testing.assert_allclose(fuse_section(b3, b2, cam, 1.0, np.array([8.0, 10.0, 12.0, 10.0])),
+                               [0.4, 0.0, 10.0, 4.0, 2.0, 4.0])
+    # a limb past the box's depth is taken at its face; a nan one at cz (the single-depth section)
+    np.testing.assert_allclose(fuse_section(b3, b2, cam, 1.0, np.array([2.0, np.nan, 30.0, np.nan])),
+                               [0.4, 0.0, 10.0, 4.0, 2.0, 4.0])
+    np.testing.assert_allclose(fuse_section(b3, b2, cam, 1.0, np.full(4, np.nan)), fuse_section(b3, b2, cam, 1.0))
+    np.testing.assert_allclose(fuse_section(b3, b2, cam, 0.5, np.array([8.0, 10.0, 12.0, 10.0])),
+                               [0.2, 0.0, 10.0, 2.5, 1.5, 4.0])
+
+
+def test_the_loop_puts_the_sections_sides_at_the_limbs_not_at_the_border():
+    """With section_limbs the reported cross-section is the body's (the baseline estimator's box
+    is the returns' own); without, the 2D box at cz is off by 0.4 m; a side at the image border
+    keeps cz (the body may go on past the view)."""
+    from track3d.camera import Camera
+
+    cam = Camera.from_intrinsics(100, 100, 100.0, 100.0, 50.0, 50.0)
+    img = np.zeros((100, 100, 3), np.uint8)
+    pts = _two_plates(cam)
+    b2 = np.array([30.0, 40.0, 40.0, 20.0])
+    boxes = {}
+    for limbs in (None, (2.0, 0.05, 0.9)):
+        t = Track3D(cam, OracleTracker(np.stack([b2, b2])), create_estimator("baseline"), weight_2d=1.0,
+                    measured_faces=False, section_limbs=limbs, silhouette=0.0, frustum_margin=0.0)
+        t.init(img, b2, points=pts)
+        boxes[limbs] = t.update(img, pts).box3d
+        assert ("section_limbs" in t.describe()["options"]) == (limbs is not None)
+    est = box3d_from_points(pts)
+    np.testing.assert_allclose(boxes[(2.0, 0.05, 0.9)][[0, 3]], est[[0, 3]], atol=0.02)   # x 0.4, 4.0 m
+    assert abs(boxes[None][0] - est[0]) > 0.35
+    # the body cut by the left image border: that side at cz, the right one at its limb
+    cut = _two_plates(cam, u0=0.0, u1=40.0)
+    b2c = np.array([0.0, 40.0, 40.0, 20.0])
+    t = Track3D(cam, OracleTracker(np.stack([b2c, b2c])), create_estimator("baseline"), weight_2d=1.0,
+                measured_faces=False, section_limbs=(2.0, 0.05, 0.9), silhouette=0.0, frustum_margin=0.0)
+    t.init(img, b2c, points=cut)
+    box = t.update(img, cut).box3d
+    left, right = box[0] - box[3] / 2.0, box[0] + box[3] / 2.0
+    # left at the border, at cz = 10 m: (0 - 50) / 100 * 10; right at its limb: (40 - 50) / 100 * 12
+    np.testing.assert_allclose([box[2], left, right], [10.0, -5.0, -1.2], atol=1e-6)
+
+
+def test_the_section_limbs_follow_the_depth_sensor_and_are_checked(tmp_path):
+    from track3d.evaluation import TrackerSpec
+    from track3d.tracker import section_limbs_for, sensor_options
+
+    assert section_limbs_for("stereo") == sensor_options("stereo")["section_limbs"] == (4.0, 0.05, 0.9)
+    assert section_limbs_for("ideal") is section_limbs_for("tof") is section_limbs_for(None) is None
+    a, b = _plain_and_stereo(tmp_path)
+    spec = TrackerSpec("oracle", "baseline")
+    assert spec.build(a).section_limbs is None and spec.build(b).section_limbs == (4.0, 0.05, 0.9)
+    assert TrackerSpec("oracle", "baseline", section_limbs=False).build(b).section_limbs is None
+    assert TrackerSpec("oracle", "baseline", section_limbs=(2, 0.1, 0.5)).build(a).section_limbs == (2.0, 0.1, 0.5)
+    gt2d = np.zeros((2, 4))
+    for bad in ((0, 0, 0.9), (4, 0.5, 0.9), (4, 0.05, 1.5), (-1, 0.05, 0.9), (4, 0.05), "x", 3):
+        with pytest.raises(ValueError, match="section_limbs"):
+            Track3D(CAM, OracleTracker(gt2d), create_estimator("baseline"), section_limbs=bad)
+
+
 def test_fit_measured_faces_hand_cases():
     from track3d.boxes import fit_measured_faces
 

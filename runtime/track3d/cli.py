@@ -71,6 +71,20 @@ def _front_filter(text: str) -> tuple[float, float] | bool:
     return a, b
 
 
+def _section_limbs(text: str) -> tuple[float, float, float] | bool:
+    """argparse type of --section-limbs: "PX,SHARE,Q" -> (px, share, q); "off" -> False (none)."""
+    if text.strip().lower() == "off":
+        return False
+    try:
+        px, share, q = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected PX,SHARE,Q (e.g. 4,0.05,0.9) or off, got {text!r}") from None
+    if not (0.0 <= px <= 100.0 and 0.0 <= share < 0.5 and max(px, share) > 0.0 and 0.0 <= q <= 1.0):
+        raise argparse.ArgumentTypeError(f"expected 0 <= PX <= 100, 0 <= SHARE < 0.5 (not both 0) and 0 <= Q <= 1, "
+                                         f"got {text!r}")
+    return px, share, q
+
+
 def _result_name(text: str) -> str:
     """argparse type: a result name is one folder under <results>/<split>/; "a/b" or "../x"
     would write beside or outside the results, where `track3d eval` never looks."""
@@ -127,6 +141,11 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--weight-2d", type=bounded(float, 0, high=1), default=None,
                    help="weight of the 2D box in the 3D box's cross-section (the reverse fusion; default: by the "
                         "depth sensor, 0, 0.75 for stereo; track3d.tracker.section_weight_for)")
+    t.add_argument("--section-limbs", type=_section_limbs, default=None, metavar="PX,SHARE,Q|off",
+                   help="in that cross-section, put each side of the 2D box at its limb's depth: the Q quantile of "
+                        "the depth of the returns within max(PX pixels, SHARE of the box) of the side (off: every "
+                        "side at the box's centre depth; default by the depth sensor, track3d.tracker."
+                        "section_limbs_for: stereo 4,0.05,0.9, others off)")
     t.add_argument("--no-measured-faces", action="store_true",
                    help="report the estimator's box as it is (default: the faces the depth sensor sees, x / y extent "
                         "and front, from the returns, except for stereo depth; track3d.tracker.measured_faces_for)")
@@ -349,6 +368,7 @@ def _cmd_track(a) -> int:
     weight = a.weight_3d if a.weight_3d is not None else stereo.get("weight_3d")
     weight_2d = a.weight_2d if a.weight_2d is not None else stereo.get("weight_2d")
     faces = False if a.no_measured_faces else stereo.get("measured_faces")
+    limbs = a.section_limbs if a.section_limbs is not None else stereo.get("section_limbs")
     if a.depth == "stereo" and a.silhouette is None:
         a.silhouette = stereo.get("silhouette")
     if a.depth == "stereo" and a.outline_share is None:
@@ -379,7 +399,7 @@ def _cmd_track(a) -> int:
     if a.depth == "stereo" and a.estimator == "a3boxnet" and "model" not in eopts:
         eopts.setdefault("depth_sensor", "stereo")   # the stereo model (track3d.boxnet.SENSOR_MODELS)
     spec = TrackerSpec(a.tracker, a.estimator, fusion=not a.no_fusion, weight_3d=weight, threads=a.threads,
-                       weight_2d=weight_2d, measured_faces=faces, depth_smoothing=a.depth_smoothing,
+                       weight_2d=weight_2d, section_limbs=limbs, measured_faces=faces, depth_smoothing=a.depth_smoothing,
                        evidence_points=a.evidence_points, reacquire_threshold=a.reacquire_threshold,
                        hold_cut_size=a.hold_cut_size, edge_pad=a.edge_pad,
                        first_box_fade=a.first_box_fade if a.first_box_fade is not None else stereo.get("first_box_fade"),

@@ -66,6 +66,7 @@ class TrackerSpec:
     fusion: bool = True
     weight_3d: float | None = None           # None: by the sequence's depth sensor (fusion_weight_for)
     weight_2d: float | None = None           # None: by the sequence's depth sensor (section_weight_for)
+    section_limbs: tuple[float, float, float] | bool | None = None   # None: by the sensor (section_limbs_for); False: off
     measured_faces: bool | None = None         # None: by the sequence's depth sensor (measured_faces_for)
     frustum_margin: float | None = None      # None: by the sequence's depth sensor (frustum_margin_for)
     depth_range: bool = True                 # the sequence's depth sensor range (Sequence.depth_range_m) to Track3D
@@ -134,8 +135,9 @@ class TrackerSpec:
         """The sensor's defaults (track3d.tracker.sensor_options) with this spec's explicit values."""
         opts = sensor_options(depth_sensor)
         opts.update({k: getattr(self, k) for k in opts if getattr(self, k) is not None})
-        if opts.get("front_filter") is False:   # asked off (None means the sensor's)
-            opts["front_filter"] = None
+        for key in ("front_filter", "section_limbs"):
+            if opts.get(key) is False:   # asked off (None means the sensor's)
+                opts[key] = None
         return opts
 
     def unavailable(self, seq: Sequence) -> str | None:
