@@ -292,7 +292,8 @@ def section_weight_for(depth_sensor: str | None) -> float:
 # EdgeTrack one pass, test then held-out shapes, off -> (4, 0.05, 0.9): seed 3 0.7326 / 0.6868 /
 # 0.7475 / 0.7303 -> 0.7463 / 0.6960 / 0.7575 / 0.7306, seed 9 0.7683 / 0.7404 / 0.7682 / 0.7449 ->
 # 0.7832 / 0.7457 / 0.7803 / 0.7523 (mean 0.7399 -> 0.7490; the median 0.7412, the 0.75 quantile 0.7467,
-# a band of (6, 0.08) 0.7489; the section weight 1 with it 0.7477, oracle boxes up, EdgeTrack's down;
+# a band of (6, 0.08) 0.7489; the section weight 0.65 / 0.85 / 1 with it 0.7449 / 0.7511 / 0.7477, at 0.85
+# and 1 oracle boxes up and EdgeTrack's four rows down, so the weight stays 0.75;
 # without the border rule seed 9's held-out 0010, cut by the border throughout, 0.70 -> 0.49).
 # Then, after the choice: seed 21 0.7298 / 0.6766 / 0.7461 / 0.7019 -> 0.7563 / 0.6962 / 0.7639 /
 # 0.7125, the README's stereo set 0.7825 / 0.7550 / 0.7370 / 0.7103 -> 0.8091 / 0.7808 / 0.7520 /
