@@ -75,14 +75,6 @@ def limb_depths(points: np.ndarray, box2d: np.ndarray, camera: Camera, band: tup
         if np.count_nonzero(sel) >= min_points:
             out[k] = float(np.quantile(z[sel].astype(np.float64), quantile))
     return out
-    x, y, w, h = (float(v) for v in np.asarray(box2d, dtype=np.float64).reshape(4))
-    u = camera.fx * p[:, 0] / p[:, 2] + camera.cx
-    v = camera.fy * p[:, 1] / p[:, 2] + camera.cy
-    bx, by = max(band[0], band[1] * w), max(band[0], band[1] * h)
-    for k, sel in enumerate((u < x + bx, v < y + by, u > x + w - bx, v > y + h - by)):
-        if np.count_nonzero(sel) >= min_points:
-            out[k] = float(np.quantile(p[sel, 2], quantile))
-    return out
 
 
 def fuse_section(box3d: np.ndarray, box2d: np.ndarray, camera: Camera, weight_2d: float,
