@@ -62,14 +62,14 @@ def limb_depths(points: np.ndarray, box2d: np.ndarray, camera: Camera, band: tup
     out = np.full(4, np.nan)
     p = np.asarray(points).reshape(-1, 3)
     z = p[:, 2]
-    if np.count_nonzero(z > 0.0) < min_points:
+    front = z > 0.0
+    if np.count_nonzero(front) < min_points:
         return out
     x, y, w, h = (float(v) for v in np.asarray(box2d, dtype=np.float64).reshape(4))
     bx, by = max(band[0], band[1] * w), max(band[0], band[1] * h)
     # a pixel column u bounds X / z: u < c  <=>  X < z (c - cx) / fx for z > 0 (no division per point)
     ax0, ax1 = (x + bx - camera.cx) / camera.fx, (x + w - bx - camera.cx) / camera.fx
     ay0, ay1 = (y + by - camera.cy) / camera.fy, (y + h - by - camera.cy) / camera.fy
-    front = z > 0.0
     for k, sel in enumerate((p[:, 0] < ax0 * z, p[:, 1] < ay0 * z, p[:, 0] > ax1 * z, p[:, 1] > ay1 * z)):
         sel &= front
         if np.count_nonzero(sel) >= min_points:
