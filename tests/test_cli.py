@@ -38,6 +38,14 @@ def test_track_then_eval(synth, tmp_path, capsys):
     assert pair["sequences"] == 1 and pair["mean"] == pytest.approx(seqs["oracle+a3boxnet"] - seqs["mosse+a3boxnet-nofusion"])
     assert report["trackers"]["oracle+a3boxnet"]["intervals"]["ao_3d"] == [seqs["oracle+a3boxnet"]] * 2
     assert "better" in out and "dAO_3d vs mosse+a3boxnet-nofusion" in out
+    # each sequence's scores are written beside the report, printed only when asked
+    per_seq = (rep / "sequences.txt").read_text().splitlines()
+    assert [r.split()[:2] for r in per_seq[1:]] == [["a", "mosse+a3boxnet-nofusion"], ["a", "oracle+a3boxnet"]]
+    assert per_seq[0] not in out and f"per sequence: {rep / 'sequences.txt'}" in out
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--quiet", "--no-plots",
+                 "--per-sequence"]) == 0
+    out = capsys.readouterr().out
+    assert per_seq[0] in out and per_seq[2] in out
     # --baseline chooses the run the others are compared with
     assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--quiet", "--no-plots",
                  "--baseline", "oracle+a3boxnet"]) == 0

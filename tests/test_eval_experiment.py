@@ -237,6 +237,38 @@ def test_the_report_pools_frames_by_condition(tmp_path):
     assert written == jsonable(cond) and written["cut_by_image"]["ao_3d"] is None   # no frame: null, not 0
 
 
+def test_sequence_table_hand_case():
+    """Two runs on two sequences, the second run missing one; the change against the baseline by hand
+    (0.70 - 0.80 = -0.10), the line-of-sight biases from bias_3d's cz and sz, a 2D-only run's 3D cells missing."""
+    from track3d.evaluation.tables import sequence_table
+
+    def seq(frames, ao_2d, ao_3d=None, ace_3d=None, bias=None):
+        s = {"frames": frames, "ao_2d": ao_2d}
+        if ao_3d is not None:
+            s.update(ao_3d=ao_3d, ace_3d=ace_3d, bias_3d=bias)
+        return s
+
+    report = {"sequences": ["s1", "s2"], "paired": {"baseline": "a"}, "trackers": {
+        "a": {"overall": {"bias_3d": [0] * 6}, "sequences": {
+            "s1": seq(5, 0.9, 0.8, 0.25, [0.0, 0.0, 0.5, 0.0, 0.0, 1.0]),
+            "s2": seq(4, 0.95, 0.6, 0.5, [0.0, 0.0, -0.25, 0.0, 0.0, -0.5])}},
+        "b": {"overall": {"bias_3d": [0] * 6}, "sequences": {
+            "s1": seq(5, 0.85, 0.7, 0.3, [0.0, 0.0, 0.125, 0.0, 0.0, 0.25])}},
+        "c": {"overall": {}, "sequences": {"s2": seq(4, 0.5)}}}}
+    rows = [r.split() for r in sequence_table(report).splitlines()]
+    assert rows[0][-3:] == ["dAO_3d", "vs", "a"]
+    assert rows[1:] == [["s1", "a", "5", "0.900", "0.800", "0.250", "+0.500", "+1.000", "-"],
+                        ["s1", "b", "5", "0.850", "0.700", "0.300", "+0.125", "+0.250", "-0.1000"],
+                        ["s2", "a", "4", "0.950", "0.600", "0.500", "-0.250", "-0.500", "-"],
+                        ["s2", "c", "4", "0.500", "-", "-", "-", "-", "-"]]
+    # only 2D runs: the change is in AO_2d; no runs: no table
+    two_d = {"sequences": ["s2"], "paired": {"baseline": "c"},
+             "trackers": {"c": report["trackers"]["c"], "d": {"overall": {}, "sequences": {"s2": seq(4, 0.75)}}}}
+    rows = [r.split() for r in sequence_table(two_d).splitlines()]
+    assert rows[0][-3:] == ["dAO_2d", "vs", "c"] and rows[2][-1] == "+0.2500"
+    assert sequence_table({"sequences": [], "trackers": {}}) == ""
+
+
 def test_raw_scores_are_the_2d_trackers_own_boxes(synth, tmp_path):
     exp = Experiment(synth, "test", tmp_path / "r", tmp_path / "p")
     exp.run(TrackerSpec("oracle", "baseline", fusion=True), quiet=True)

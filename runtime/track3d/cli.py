@@ -16,7 +16,8 @@ from .argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias, 
 
 __all__ = ["main"]
 
-from .evaluation.tables import axis_table, condition_table, paired_table, summary_table  # noqa: E402  (the tables of a report)
+from .evaluation.tables import (axis_table, condition_table, paired_table, sequence_table,  # noqa: E402  (the tables of a report)
+                                summary_table)
 from .threads import set_threads  # noqa: E402
 
 def _stereo_params(opts: dict, depth: str):
@@ -280,6 +281,9 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--trajectories-of", choices=("worst", "first"), default="worst",
                    help="which sequences get trajectory and line-of-sight plots: the worst (default) or the "
                         "split's first")
+    e.add_argument("--per-sequence", action="store_true",
+                   help="also print each sequence's scores, the runs side by side (AO, ACE_3d, the line-of-sight "
+                        "biases and the change against --baseline); always written to sequences.txt in --out")
 
     # The demo simulates its data, so it lives with the simulator (`track3d-sim demo`): the
     # runtime never imports the simulator. This entry only says where it went.
@@ -514,9 +518,16 @@ def _cmd_eval(a) -> int:
     where = condition_table(report)
     if where:
         print(where)
+    per_seq = sequence_table(report)
+    if per_seq:
+        (Path(a.out) / "sequences.txt").write_text(per_seq + "\n")
+        if a.per_sequence:
+            print(per_seq)
     for w in report.get("warnings", []):
         print(f"track3d eval: WARNING: {w}", file=sys.stderr)
     print(f"report: {Path(a.out) / 'report.json'}")
+    if per_seq:
+        print(f"per sequence: {Path(a.out) / 'sequences.txt'}")
     for f in report.get("plots", []):
         print(f"plot: {f}")
     return 0

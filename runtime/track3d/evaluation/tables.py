@@ -4,7 +4,8 @@ from __future__ import annotations
 from ..table_text import cell
 from .metrics import AXES_3D, CONDITIONS
 
-__all__ = ["TABLE_COLUMNS", "columns", "summary_table", "axis_table", "paired_table", "condition_table"]
+__all__ = ["TABLE_COLUMNS", "columns", "summary_table", "axis_table", "paired_table", "condition_table",
+           "sequence_table"]
 
 TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
                  ("AO_3d", "ao_3d", "{:.3f}"), ("ACE_3d(m)", "ace_3d", "{:.3f}"), ("SR50_3d", "sr50_3d", "{:.3f}"),
@@ -92,6 +93,42 @@ def condition_table(report: dict) -> str:
                          cell(c.get("ao_3d"), "{:.3f}"), cell(c.get("ace_3d"), "{:.3f}"),
                          cell(c.get("ao_3d_lost"), "{:.3f}")])
     return _aligned(rows)
+
+
+def sequence_table(report: dict) -> str:
+    """Each sequence's scores, the runs side by side (a row per sequence and run, in the report's
+    sequence order): frames, AO_2d, AO_3d, ACE_3d, the bias of the centre depth and of the depth
+    extent (cz, sz: the line of sight, where the hidden depth shows) and AO_3d (AO_2d when no run
+    has 3D boxes) against the report's baseline run on the same sequence; "" for a report without
+    runs. The per-sequence numbers behind the summary's means (`track3d eval --per-sequence`,
+    sequences.txt in the report folder)."""
+    trackers = report["trackers"]
+    if not trackers:
+        return ""
+    has_3d = any("bias_3d" in t["overall"] for t in trackers.values())
+    key, label = ("ao_3d", "AO_3d") if has_3d else ("ao_2d", "AO_2d")
+    base = (report.get("paired") or {}).get("baseline")
+    iz, isz = AXES_3D.index("cz"), AXES_3D.index("sz")
+    rows = [["sequence", "run", "frames", "AO_2d", "AO_3d", "ACE_3d(m)", "bias cz(m)", "bias sz(m)",
+             f"d{label} vs {base}" if base else f"d{label}"]]
+    order = list(report.get("sequences") or [])
+    for t in trackers.values():   # a sequence some run has and the report's list lacks goes last
+        order += [s for s in t["sequences"] if s not in order]
+    for seq in order:
+        ref = trackers.get(base, {}).get("sequences", {}).get(seq) if base else None
+        for name, t in trackers.items():
+            s = t["sequences"].get(seq)
+            if s is None:
+                continue
+            bias = s.get("bias_3d")
+            d = (None if ref is None or name == base or s.get(key) is None or ref.get(key) is None
+                 else s[key] - ref[key])
+            rows.append([seq, name, str(s.get("frames", 0)), cell(s.get("ao_2d"), "{:.3f}"),
+                         cell(s.get("ao_3d"), "{:.3f}"), cell(s.get("ace_3d"), "{:.3f}"),
+                         cell(None if bias is None else bias[iz], "{:+.3f}"),
+                         cell(None if bias is None else bias[isz], "{:+.3f}"),
+                         "-" if name == base else cell(d, "{:+.4f}")])
+    return _aligned(rows) if len(rows) > 1 else ""
 
 
 def _aligned(rows: list[list[str]]) -> str:
