@@ -463,6 +463,32 @@ def test_limb_depths_and_the_section_at_the_limbs_hand_cases():
                                [0.2, 0.0, 10.0, 2.5, 1.5, 4.0])
 
 
+def test_the_section_at_the_limbs_never_turns_inside_out():
+    """Both sides of an image axis on one side of the optical axis, the nearer one farther out: at
+    their limbs' depths they cross (found by benchmarks/fuzz.py, seed 83: the stereo loop reported a
+    box of height -3.0 m). That axis falls back to the single depth cz, the other keeps its limbs.
+    By hand (fx = fy = 100, cx = cy = 50): the box's rows 10..30 lie above the centre; the top at
+    8 m is at (10 - 50) / 100 * 8 = -3.2 m, the bottom at 20 m at (30 - 50) / 100 * 20 = -4.0 m,
+    below the top: height -0.8 m. At cz = 14 m: -5.6 .. -2.8 m, centre -4.2 m, height 2.8 m."""
+    from track3d.camera import Camera
+    from track3d.fusion import fuse_section
+
+    cam = Camera.from_intrinsics(100, 100, 100.0, 100.0, 50.0, 50.0)
+    b2 = np.array([30.0, 10.0, 40.0, 20.0])
+    b3 = np.array([0.0, -2.0, 14.0, 1.0, 1.0, 12.0])                 # depth 8..20
+    limbs = np.array([10.0, 8.0, 18.0, 20.0])
+    # x keeps its limbs: (30 - 50) / 100 * 10 = -2.0 .. (70 - 50) / 100 * 18 = 3.6
+    np.testing.assert_allclose(fuse_section(b3, b2, cam, 1.0, limbs), [0.8, -4.2, 14.0, 5.6, 2.8, 12.0])
+    half = fuse_section(b3, b2, cam, 0.5, limbs)
+    np.testing.assert_allclose(half, [0.4, -3.1, 14.0, 3.3, 1.9, 12.0])
+    # and x crossing as well: both axes at cz, the section at one depth
+    both = np.array([20.0, 8.0, 8.0, 20.0])
+    b2r = np.array([60.0, 10.0, 10.0, 20.0])                          # columns 60..70: right of the centre,
+    # the left side at 20 m at 2.0 m, the right at 8 m at 1.6 m
+    np.testing.assert_allclose(fuse_section(b3, b2r, cam, 1.0, both), fuse_section(b3, b2r, cam, 1.0))
+    assert np.all(fuse_section(b3, b2r, cam, 1.0, both)[3:] > 0)
+
+
 def test_the_loop_puts_the_sections_sides_at_the_limbs_not_at_the_border():
     """With section_limbs the reported cross-section is the body's (the baseline estimator's box
     is the returns' own); without, the 2D box at cz is off by 0.4 m; a side at the image border

@@ -81,8 +81,9 @@ def fuse_section(box3d: np.ndarray, box2d: np.ndarray, camera: Camera, weight_2d
                  limbs: np.ndarray | None = None) -> np.ndarray:
     """The 3D box (6,) float64 with its centre cross-section [cx, cy, sx, sy] moved toward the
     2D box's rectangle by `weight_2d` (0: box3d unchanged, 1: the 2D box's), the rectangle's sides
-    at depth cz or at `limbs` (4,) (`limb_depths`; a nan side at cz); a box that is not finite or
-    has cz <= 0 is returned unchanged."""
+    at depth cz or at `limbs` (4,) (`limb_depths`; a nan side at cz; an image axis whose two sides
+    cross at their limbs' depths at cz); a box that is not finite or has cz <= 0 is returned
+    unchanged."""
     if not 0.0 <= float(weight_2d) <= 1.0:
         raise ValueError(f"weight_2d must be in [0, 1], got {weight_2d}")
     b = np.array(box3d, dtype=np.float64).reshape(6)
@@ -93,6 +94,13 @@ def fuse_section(box3d: np.ndarray, box2d: np.ndarray, camera: Camera, weight_2d
     else:   # a limb lies on the body: within the box's depth
         z = np.where(np.isfinite(limbs), np.clip(limbs, b[2] - b[5] / 2.0, b[2] + b[5] / 2.0), b[2])
     s2 = box2d_section(box2d, camera, z)
+    # Two sides on one side of the optical axis, the nearer one farther out, cross at their
+    # limbs' depths (a box in an image corner, limbs metres apart): no body has a negative
+    # extent, so those limbs are not both its outline; that axis goes back to cz.
+    for axis in (0, 1):
+        if not s2[2 + axis] > 0.0:
+            flat = box2d_section(box2d, camera, b[2])
+            s2[[axis, 2 + axis]] = flat[[axis, 2 + axis]]
     if not np.all(np.isfinite(s2)):
         return b
     k = [0, 1, 3, 4]
