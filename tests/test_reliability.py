@@ -156,6 +156,33 @@ def test_malformed_dataset_json_is_a_dataset_error(tmp_path, info, message):
 
 # --- 3. silent wrong answers --------------------------------------------------------------------
 
+def test_a3boxnet_checks_every_point_not_only_the_sampled_ones():
+    """A cloud whose few nan / out-of-range values the network's sample misses had been boxed as if
+    they were not there (benchmarks/fuzz.py seed 83, case 16097, a silent wrong answer): without
+    bounds from the caller the estimator checks the points' own, as with the past views."""
+    from track3d.frustum import sample_indices_numpy
+
+    est = create_estimator("a3boxnet")   # the default, a views model: a frustum and past views
+    rng = np.random.default_rng(5)
+    pts = rng.normal([0.0, 0.0, 12.0], [1.5, 1.0, 1.0], (1029, 3)).astype(np.float32)
+    box = est.estimate(pts, -1)
+    seen = set(sample_indices_numpy(len(pts), est.num_points, est.seed).tolist())
+    row = next(i for i in range(len(pts)) if i not in seen)   # a point the network never sees
+    for bad in (np.nan, np.inf, 1e9):
+        p = pts.copy()
+        p[row, 1] = bad
+        assert np.isfinite(est.sample(p)).all() and np.abs(est.sample(p)).max() < 100   # the sample is clean
+        with pytest.raises(ValueError, match="finite|within"):
+            est.estimate(p, -1)
+    # the caller's bounds are the frustum pass's (the loop's): the same box as without them
+    np.testing.assert_array_equal(est.estimate(pts, -1, bounds=np.stack([pts.min(0), pts.max(0)])), box)
+    past = rng.normal([0.0, 0.0, 13.0], 1.0, (3000, 3)).astype(np.float32)
+    assert np.all(np.isfinite(est.estimate(pts, -1, past=past)))
+    past[2999] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        est.estimate(pts, -1, past=past)
+
+
 def test_siamfc_init_box_off_the_image_is_a_value_error_and_size_stays_bounded():
     t = Track3D.create(CAM, tracker="siamfc-edge", estimator="baseline")
     img = np.random.default_rng(1).integers(0, 255, (CAM.height, CAM.width, 3), dtype=np.uint8)
