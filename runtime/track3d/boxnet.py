@@ -319,10 +319,10 @@ class A3BoxNetEstimator:
             bounds = np.stack(point_bounds(pts)).astype(np.float64)
             check_point_bounds(bounds[0], bounds[1])
         if self.past_views is not None and past is not None and len(past):
-            old = check_estimator_points(past, finite=False)
+            views = check_estimator_points(past, finite=False)
             if own:
-                check_point_bounds(*point_bounds(old))
-            pts = with_past_views(pts, old, self.seed, self.past_views)
+                check_point_bounds(*point_bounds(views))
+            pts = with_past_views(pts, views, self.seed, self.past_views)
             bounds = None   # those of the frustum alone do not enclose the views
         sample = self.sample(pts) if self.views == 1 else np.stack([self.sample(pts, k) for k in range(self.views)])
         lo, hi = point_bounds(sample.reshape(-1, 3))

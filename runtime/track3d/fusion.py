@@ -97,10 +97,9 @@ def fuse_section(box3d: np.ndarray, box2d: np.ndarray, camera: Camera, weight_2d
     # Two sides on one side of the optical axis, the nearer one farther out, cross at their
     # limbs' depths (a box in an image corner, limbs metres apart): no body has a negative
     # extent, so those limbs are not both its outline; that axis goes back to cz.
-    for axis in (0, 1):
-        if not s2[2 + axis] > 0.0:
-            flat = box2d_section(box2d, camera, b[2])
-            s2[[axis, 2 + axis]] = flat[[axis, 2 + axis]]
+    crossed = ~(s2[2:] > 0.0)
+    if crossed.any():
+        s2 = np.where(np.tile(crossed, 2), box2d_section(box2d, camera, b[2]), s2)
     if not np.all(np.isfinite(s2)):
         return b
     k = [0, 1, 3, 4]
