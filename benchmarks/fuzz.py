@@ -28,6 +28,8 @@ Contracts (the oracles, shared with tests/test_fuzz.py):
 - the loop with the body's past views over a turning, moving ellipsoid (often cut by the image
   border, its returns sometimes damaged or replaced): as above every frame, and a tracker
   restored from a state taken mid-run gives the same results bit for bit;
+- a checkpoint read back damaged: Track3D.set_state refuses it (ValueError, one line) and the
+  tracker is as it was (its state the same), or restores it and the loop meets its contract above;
 - 2D trackers: update returns (bool, finite (4,) float64 box when ok);
 - dataset reader: a dataset that reads has as many label rows as images, finite labels and 0/1
   flags for every frame;
@@ -205,6 +207,41 @@ class Env:
             self._est[name] = create_estimator(name, depth_sensor="stereo") if name == "a3boxnet" else \
                 create_estimator(name)
         return self._est[name]
+
+    def checkpoint(self, tracker: str, sensor, views: bool):
+        """(a builder of the loop, its state after five frames of a turning ellipsoid as JSON would
+        give it back, the next three frames (image, returns)), made once per configuration."""
+        key = ("checkpoint", tracker, sensor, views)
+        if key not in self._est:
+            from track3d.synthetic import ellipsoid_returns
+            from track3d.tracker import Track3D, sensor_options
+
+            frames = []
+            for k in range(8):
+                a = 0.06 * k
+                R = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+                frames.append(ellipsoid_returns(self.cam, R, np.array([0.2 + 0.02 * k, 0.1, 12.0 - 0.1 * k]),
+                                                np.array([1.5, 1.0, 0.8])))
+            gt = np.array([b for _, b in frames])
+            images = []
+            for _, b in frames:   # a grey body on black where its box is: something to follow
+                im = np.zeros((self.cam.height, self.cam.width, 3), np.uint8)
+                x, y, w, h = (int(round(v)) for v in b)
+                im[max(y, 0):y + h, max(x, 0):x + w] = 140
+                images.append(im)
+            opts = {"tracker_options": {"gt": gt}} if tracker == "oracle" else {}
+
+            def build():
+                return Track3D.create(self.cam, tracker=tracker, estimator="a3boxnet",
+                                      **opts, **{**sensor_options(sensor), "body_views": views})
+
+            t = build()
+            t.init(images[0], gt[0], points=frames[0][0])
+            for k in range(1, 5):
+                t.update(images[k], frames[k][0])
+            state = json.loads(json.dumps(t.get_state()))
+            self._est[key] = (build, state, [(images[k], frames[k][0]) for k in range(5, 8)])
+        return self._est[key]
 
     def dataset(self) -> Path:
         if self._data is None:
@@ -434,6 +471,76 @@ def t_loop_views(rng, env):
         expect(a.status == b.status and np.array_equal(a.box2d, b.box2d, equal_nan=True)
                and np.array_equal(a.box3d, b.box3d, equal_nan=True),
                f"restored state diverged: {a.status} {a.box3d} vs {b.status} {b.box3d}")
+    return "ok"
+
+
+SPECIAL_LEAVES = (float("nan"), float("inf"), -float("inf"), 1e300, -1e300, 0.0, -1.0, 1e-300, 2 ** 63, -(2 ** 31),
+                  7, None, True, "x", [], {}, [1.0, 2.0], {"__ndarray__": "AAAA", "dtype": "<f8", "shape": [3]})
+
+
+def damage_plain(rng, x):
+    """One damage to plain data (a checkpoint as JSON would hold it): a key or an item dropped or
+    doubled, a value replaced (a special number, another type, a broken array record), a string
+    (base64, a dtype) with a character changed or cut short, a number scaled."""
+    if isinstance(x, dict) and x and rng.random() < 0.75:
+        x = dict(x)
+        k = list(x)[int(rng.integers(0, len(x)))]
+        r = rng.random()
+        if r < 0.15:
+            del x[k]
+        else:
+            x[k] = damage_plain(rng, x[k]) if r < 0.6 else _damaged_leaf(rng, x[k])
+        return x
+    if isinstance(x, list) and x and rng.random() < 0.75:
+        x = list(x)
+        i = int(rng.integers(0, len(x)))
+        r = rng.random()
+        if r < 0.2:
+            del x[i]
+        elif r < 0.3:
+            x.append(x[i])
+        else:
+            x[i] = damage_plain(rng, x[i]) if r < 0.7 else _damaged_leaf(rng, x[i])
+        return x
+    return _damaged_leaf(rng, x)
+
+
+def _damaged_leaf(rng, old):
+    r = rng.random()
+    if isinstance(old, str) and old and r < 0.5:
+        s = list(old)
+        s[int(rng.integers(0, len(s)))] = chr(int(rng.integers(33, 127)))
+        return "".join(s[: int(rng.integers(0, len(s) + 1))] if rng.random() < 0.3 else s)
+    if isinstance(old, (int, float)) and not isinstance(old, bool) and r < 0.6:
+        return float(old) * float(rng.choice([-1.0, 0.5, 2.0, 1e6])) if rng.random() < 0.3 else \
+            SPECIAL_LEAVES[int(rng.integers(0, 11))]
+    return SPECIAL_LEAVES[int(rng.integers(0, len(SPECIAL_LEAVES)))]
+
+
+def t_state(rng, env):
+    """A checkpoint read back damaged (`damage_plain`, one to three times): Track3D.set_state
+    refuses it with one line and leaves the tracker as it was, or restores it and the loop then
+    meets its contract."""
+    from track3d.tracker import DEPTH_SENSORS, STATUSES
+
+    tracker = ("oracle", "edgetrack", "kcf")[int(rng.integers(0, 3))]
+    sensor = [None, *DEPTH_SENSORS][int(rng.integers(0, len(DEPTH_SENSORS) + 1))]
+    views = bool(rng.random() < 0.5)
+    build, state, frames = env.checkpoint(tracker, sensor, views)
+    t = build()
+    t.set_state(state)
+    before = json.dumps(t.get_state(), sort_keys=True)
+    bad = state
+    for _ in range(int(rng.integers(1, 4))):
+        bad = damage_plain(rng, bad)
+    try:
+        t.set_state(bad)
+    except ValueError as e:
+        expect("\n" not in str(e) and str(e), f"a refused state's error is not one line: {str(e)[:200]!r}")
+        expect(json.dumps(t.get_state(), sort_keys=True) == before, f"a refused state changed the tracker: {e}")
+        return "clean_error"
+    for image, pts in frames:
+        check_track_result(t.update(image, pts), STATUSES, t.min_points)
     return "ok"
 
 
@@ -677,7 +784,7 @@ TARGETS = {
     "frustum": (t_frustum, 22), "sampling": (t_sampling, 12), "crop": (t_crop, 4),
     "estimate_baseline": (_t_estimator("baseline"), 14), "estimate_a3boxnet": (_t_estimator("a3boxnet"), 12),
     "loop_baseline": (_loop := _t_loop("baseline"), 12), "loop_a3boxnet": (_t_loop("a3boxnet"), 8),
-    "loop_views": (t_loop_views, 2),
+    "loop_views": (t_loop_views, 2), "state": (t_state, 2),
     "track3d_siamfc": (_t_track3d("siamfc-edge"), 4), "track3d_edgetrack": (_t_track3d("edgetrack"), 4),
     "stereo": (t_stereo, 3),
     **{f"tracker_{n}": (_t_tracker(n), w) for n, w in

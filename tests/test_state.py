@@ -476,3 +476,105 @@ def test_a_lost_tracker_goes_on_from_the_outline_of_a_body_in_view():
     assert "resume_outline" not in Track3D(CAM, Judge(), create_estimator("baseline")).describe()["options"]
     with pytest.raises(ValueError, match="resume_outline must be True or False"):
         Track3D(CAM, Judge(), create_estimator("baseline"), resume_outline=1)
+
+
+# --- a checkpoint read back damaged ---------------------------------------------------------------
+# Each of these had escaped set_state as a traceback (TypeError, KeyError, AttributeError, ...),
+# broken the loop on the next frame, or been restored into a wrong answer (a box3d of negative
+# depth was reported as it was); found by benchmarks/fuzz.py's "state" target.
+
+def _corrupt_b64(rec):
+    return {**rec, "__ndarray__": "!!" + rec["__ndarray__"][2:]}
+
+
+DAMAGES = {
+    "box3d of negative depth": lambda s: s.update(box3d=[0.1, 0.0, 20.0, 3.0, 3.0, -1.3]),
+    "box2d half nan": lambda s: s.update(box2d=[10.0, float("nan"), 30.0, 30.0]),
+    "box2d of two numbers": lambda s: s.update(box2d=[10.0, 20.0]),
+    "bad_frames negative": lambda s: s.update(bad_frames=-1),
+    "held_frames a bool": lambda s: s.update(held_frames=True),
+    "category a list": lambda s: s.update(category=[1.0, 2.0]),
+    "whole_box infinite": lambda s: s.update(whole_box=[0.0, 0.0, float("inf"), 1.0, 1.0, 1.0]),
+    "depth_avg infinite": lambda s: s.update(depth_avg=float("inf")),
+    "front a word": lambda s: s.update(front="x"),
+    "no tracker2d": lambda s: s.pop("tracker2d"),
+    "tracker2d a bool": lambda s: s.update(tracker2d=True),
+    "estimator state for a stateless estimator": lambda s: s.update(estimator_state={"a": 1}),
+    "EdgeTrack's kernel not base64": lambda s: s["tracker2d"].update(kernel=_corrupt_b64(s["tracker2d"]["kernel"])),
+    "EdgeTrack's kernel of a dtype that is none": lambda s: s["tracker2d"]["kernel"].update(dtype="inf"),
+    "EdgeTrack's kernel shape cut": lambda s: s["tracker2d"]["kernel"].update(shape=[3]),
+    "EdgeTrack's colour two numbers": lambda s: s["tracker2d"].update(avg_color=[1.0, 2.0]),
+    "EdgeTrack's size negative": lambda s: s["tracker2d"].update(target_sz=[-4.0, 10.0]),
+    "EdgeTrack's lost flag missing": lambda s: s["tracker2d"].pop("lost"),
+    "the views' transform nan": lambda s: s["body_views"].update(G=[[float("nan")] * 4] * 4),
+    "the views' grid step 0": lambda s: s["body_views"]["grid"].update(step=0.0),
+    "the views' frames a float": lambda s: s["body_views"].update(frames=2.5),
+}
+
+
+@pytest.fixture(scope="module")
+def checkpoint():
+    """A started EdgeTrack + A3BoxNet loop with its body's past views, and its state as JSON."""
+    t = _make("edgetrack", "a3boxnet", body_views=True)
+    img, pts, box = _frame(0)
+    t.init(img, box, 0, points=pts)
+    for k in range(1, 7):
+        t.update(*_frame(k)[:2])
+    state = json.loads(json.dumps(t.get_state()))
+    assert state["body_views"]["grid"] is not None   # the views' damages below reach a grid
+    return state
+
+
+@pytest.mark.parametrize("damage", sorted(DAMAGES))
+def test_a_damaged_state_is_refused_on_one_line_and_changes_nothing(checkpoint, damage):
+    t = _make("edgetrack", "a3boxnet", body_views=True)
+    t.set_state(checkpoint)
+    before = json.dumps(t.get_state(), sort_keys=True)
+    bad = json.loads(json.dumps(checkpoint))
+    DAMAGES[damage](bad)
+    with pytest.raises(ValueError) as e:
+        t.set_state(bad)
+    assert "\n" not in str(e.value) and ("damaged" in str(e.value) or "state" in str(e.value))
+    assert json.dumps(t.get_state(), sort_keys=True) == before
+    img, pts, _ = _frame(7)                          # and it tracks on as the good state does
+    ref = _make("edgetrack", "a3boxnet", body_views=True)
+    ref.set_state(checkpoint)
+    _same(t.update(img, pts), ref.update(img, pts))
+
+
+def test_a_refused_2d_state_puts_the_estimators_state_back():
+    """The estimator's state is restored first; when the 2D tracker's then proves damaged, the
+    estimator is put back as it was (a stateful plug-in estimator, here a counter)."""
+    from track3d.estimators import create_estimator
+
+    class Counting:
+        num_categories = None
+
+        def __init__(self):
+            self.inner, self.calls = create_estimator("baseline"), 0
+
+        def estimate(self, points, category=None, **kw):
+            self.calls += 1
+            return self.inner.estimate(points, category)
+
+        def get_state(self):
+            return {"calls": self.calls}
+
+        def set_state(self, st):
+            self.calls = int(st["calls"])
+
+    from track3d.trackers2d import create_tracker
+
+    gt = np.array([_frame(k)[2] for k in range(6)], dtype=np.float64)
+    t = Track3D(CAM, create_tracker("oracle", gt=gt), Counting())
+    img, pts, box = _frame(0)
+    t.init(img, box, 0, points=pts)
+    for k in range(1, 4):
+        t.update(*_frame(k)[:2])
+    state = t.get_state()
+    t2 = Track3D(CAM, create_tracker("oracle", gt=gt), Counting())
+    t2.estimator.calls = 99
+    bad = {**state, "estimator_state": {"calls": 5}, "tracker2d": {"frame": "x"}}
+    with pytest.raises(ValueError, match="damaged oracle state"):
+        t2.set_state(bad)
+    assert t2.estimator.calls == 99 and t2.tracker2d.frame == -1

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import Camera
+from .state import damaged, read_array, read_flag, read_float, read_int
 
 # a registration stops at a step below 0.006 degrees and 0.1 mm: far below what the back face
 # needs (cm)
@@ -467,33 +468,58 @@ class BodyViews:
                 "carved": [{"grid": grid_state(g), "G": Gk.copy()} for g, Gk in self._carved]}
 
     def set_state(self, st: dict) -> None:
+        """Restore a `get_state()`; a damaged one raises ValueError (one line) and changes nothing."""
         def grid_of(g):
-            return None if g is None else SurfaceGrid(
-                np.asarray(g["points"], np.float64), np.asarray(g["normals"], np.float64),
-                np.asarray(g["valid"], bool), np.asarray(g["normal_ok"], bool), float(g["x0"]), float(g["y0"]),
-                float(g["step"]), None if g.get("near") is None else np.asarray(g["near"], np.float64))
+            if g is None:
+                return None
+            points = read_array(g["points"], "grid points", (-1, -1, 3))
+            rows, cols = points.shape[:2]
+            if rows < 1 or cols < 1:
+                raise ValueError(f"a grid of {rows} x {cols} cells")
+            near = g.get("near")
+            return SurfaceGrid(points, read_array(g["normals"], "grid normals", (rows, cols, 3)),
+                               read_array(g["valid"], "grid cells", (rows, cols), bool),
+                               read_array(g["normal_ok"], "grid normals' cells", (rows, cols), bool),
+                               read_float(g["x0"], "grid x0"), read_float(g["y0"], "grid y0"),
+                               read_float(g["step"], "grid step", lo=1.0),
+                               None if near is None else _read_near(near, rows, cols))
 
-        grid = grid_of(st["grid"])
-        pend = st.get("pending")
-        pending = None if pend is None else (grid_of(pend["grid"]), np.asarray(pend["keep"], np.float64).reshape(-1, 3),
-                                             float(pend["front"]), bool(pend.get("carve", True)),
-                                             bool(pend.get("whole", False)))
-        G = np.asarray(st["G"], np.float64).reshape(4, 4)
-        motion = np.asarray(st["motion"], np.float64).reshape(4, 4)
-        body = np.asarray(st["body"], np.float64).reshape(-1, 3)
-        centroid = np.asarray(st["centroid"], np.float64).reshape(3)
-        self._frames, self._G, self._motion, self._body = int(st["frames"]), G, motion, body
-        self._offset, self.restarts, self.views = float(st["offset"]), int(st["restarts"]), int(st["views"])
+        def transform(x, what):
+            return read_array(x, what, (4, 4))
+
+        with damaged("body views"):
+            grid = grid_of(st["grid"])
+            pend = st.get("pending")
+            pending = None if pend is None else (
+                grid_of(pend["grid"]), read_array(pend["keep"], "kept returns", (-1, 3)),
+                read_float(pend["front"], "pending front"), read_flag(pend.get("carve", True), "carve"),
+                read_flag(pend.get("whole", False), "whole"))
+            G, motion = transform(st["G"], "G"), transform(st["motion"], "motion")
+            body = read_array(st["body"], "body", (-1, 3))
+            centroid = read_array(st["centroid"], "centroid", (3,))
+            frames, restarts = read_int(st["frames"], "frames"), read_int(st["restarts"], "restarts")
+            views, offset = read_int(st["views"], "views"), read_float(st["offset"], "offset", nan_ok=True)
+            # a state from before the carving has none: the limit starts with the next key frame
+            job = st.get("carve_job")
+            limit = read_float(st.get("limit", float("inf")), "limit", nan_ok=True, inf_ok=True)
+            carve_job = None if job is None else (grid_of(job["grid"]), transform(job["G"], "carving G"),
+                                                  read_float(job["front"], "carving front"))
+            carved = [(grid_of(c["grid"]), transform(c["G"], "carved G")) for c in st.get("carved", [])]
+            # a state from before the views' extent has none: it starts with the next whole key frame
+            whole = read_flag(st.get("whole", False), "whole")
+            ext = st.get("extent")
+            extent = np.full(3, np.nan) if ext is None else read_array(ext, "extent", (3,))
+        self._frames, self._G, self._motion, self._body = frames, G, motion, body
+        self._offset, self.restarts, self.views = offset, restarts, views
         self._grid, self._centroid, self._pending = grid, centroid, pending
-        # a state from before the carving has none: the limit starts with the next key frame
-        job = st.get("carve_job")
-        self._limit = float(st.get("limit", float("inf")))
-        self._carve_job = None if job is None else (grid_of(job["grid"]), np.asarray(job["G"], np.float64).reshape(4, 4),
-                                                    float(job["front"]))
-        self._carved = [(grid_of(c["grid"]), np.asarray(c["G"], np.float64).reshape(4, 4))
-                        for c in st.get("carved", [])]
+        self._limit, self._carve_job, self._carved = limit, carve_job, carved
         self.limit = self.extent = None
-        # a state from before the views' extent has none: it starts with the next whole key frame
-        self._whole = bool(st.get("whole", False))
-        ext = st.get("extent")
-        self._extent = np.full(3, np.nan) if ext is None else np.asarray(ext, np.float64).reshape(3).copy()
+        self._whole, self._extent = whole, extent
+
+
+def _read_near(x, rows: int, cols: int) -> np.ndarray:
+    """A grid's least depths: finite, or inf where a cell is empty."""
+    near = read_array(x, "grid depths", (rows, cols), finite=False)
+    if np.isnan(near).any() or (near == -np.inf).any():
+        raise ValueError("grid depths are nan or -inf")
+    return near

@@ -37,6 +37,7 @@ import numpy as np
 from .frames import MAX_BOX_SCALE, MIN_BOX_SIDE, check_image
 from .onnxmodel import load_model, model_pair, shipped_model
 from .siamfc import crop_square
+from .state import damaged, read_array, read_flag, read_float, read_int, read_kernel
 
 __all__ = ["EdgeTracker", "create", "model_paths", "pad_colour", "TUNABLE", "SHIPPED_NAME"]
 
@@ -220,24 +221,24 @@ class EdgeTracker:
         return self._kshape
 
     def set_state(self, state: dict) -> None:
-        """Restore a `get_state()` of a tracker with the same models and hyper-parameters."""
-        if not state.get("initialised"):
-            self._kernel = None
-            return
-        kernel = np.asarray(state["kernel"], dtype=np.float32)
-        want = tuple(-1 if d is None else int(d) for d in self._kernel_shape())
-        if kernel.ndim != len(want) or any(w > 0 and w != k for w, k in zip(want, kernel.shape)):
-            raise ValueError(f"EdgeTrack state: template kernel of shape {kernel.shape} does not fit this model")
-        center = np.asarray(state["center"], dtype=np.float64).reshape(2).copy()
-        target_sz = np.asarray(state["target_sz"], dtype=np.float64).reshape(2).copy()
-        avg_color = tuple(float(c) for c in state["avg_color"])
-        score, lost, min_sz = float(state["score"]), bool(state["lost"]), float(state["_min_sz"])
-        # states written before the motion prediction carry no velocity: at rest
-        velocity = np.asarray(state.get("velocity", (0.0, 0.0)), dtype=np.float64).reshape(2).copy()
-        lost_frames = int(state.get("lost_frames", 0))
-        settling = bool(state.get("settling", False))
+        """Restore a `get_state()` of a tracker with the same models and hyper-parameters; a
+        damaged one raises ValueError (one line) and leaves the tracker as it was."""
+        with damaged("EdgeTrack"):
+            if not read_flag(state.get("initialised"), "initialised"):
+                self._kernel = None
+                return
+            kernel = read_kernel(state["kernel"], "template kernel", self._kernel_shape())
+            center = read_array(state["center"], "center", (2,))
+            target_sz = read_array(state["target_sz"], "target_sz", (2,), positive=True)
+            avg_color = tuple(read_array(state["avg_color"], "avg_color", (3,)).tolist())
+            score = read_float(state["score"], "score", nan_ok=True, inf_ok=True)
+            lost, settling = read_flag(state["lost"], "lost"), read_flag(state.get("settling", False), "settling")
+            min_sz = read_float(state["_min_sz"], "_min_sz", lo=0.0)
+            # states written before the motion prediction carry no velocity: at rest
+            velocity = read_array(state.get("velocity", (0.0, 0.0)), "velocity", (2,))
+            lost_frames = read_int(state.get("lost_frames", 0), "lost_frames")
         # assigned only once everything parsed: a damaged state leaves the tracker as it was
-        self._kernel, self.center, self.target_sz, self.avg_color = kernel.copy(), center, target_sz, avg_color
+        self._kernel, self.center, self.target_sz, self.avg_color = kernel, center, target_sz, avg_color
         self.score, self.lost, self._min_sz, self.velocity = score, lost, min_sz, velocity
         self.lost_frames, self.settling = lost_frames, settling
 

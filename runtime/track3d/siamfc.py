@@ -24,6 +24,7 @@ import numpy as np
 from .frames import MAX_BOX_SCALE, MIN_BOX_SIDE, check_image, check_init_box
 from .onnxmodel import load_model, model_pair, shipped_model
 from .resample import warp_axis_aligned
+from .state import damaged, read_array, read_flag, read_float, read_int, read_kernel
 
 __all__ = ["SiamFCTracker", "create", "crop_square", "model_paths", "VARIANT_FILES", "TUNABLE"]
 
@@ -258,23 +259,28 @@ class SiamFCTracker:
         return st
 
     def set_state(self, state: dict) -> None:
-        """Restore a `get_state()` of a tracker with the same models and hyper-parameters."""
-        if not state.get("initialised"):
-            self._kernel = None
-            return
-        kernel = np.asarray(state["kernel"], dtype=np.float32)
-        shape = next(i.shape for i in self.search.session.get_inputs() if i.name == "exemplar_feature")
-        want = tuple(d if isinstance(d, int) else -1 for d in shape)
-        if kernel.ndim != len(want) or any(w > 0 and w != k for w, k in zip(want, kernel.shape)):
-            raise ValueError(f"SiamFC state: exemplar feature of shape {kernel.shape} does not fit this model")
-        self._kernel = kernel.copy()
-        for k in ("center", "target_sz", "base_target_sz"):
-            setattr(self, k, np.asarray(state[k], dtype=np.float64).reshape(2).copy())
-        for k in ("z_sz", "x_sz", "_min_sz", "peak", "ref_peak"):
-            setattr(self, k, float(state[k]))
-        self.score = None if state.get("score") is None else float(state["score"])
-        self.avg_color = tuple(float(c) for c in state["avg_color"])
-        self._image_hw = tuple(int(v) for v in state["_image_hw"])
+        """Restore a `get_state()` of a tracker with the same models and hyper-parameters; a
+        damaged one raises ValueError (one line) and leaves the tracker as it was."""
+        with damaged("SiamFC"):
+            if not read_flag(state.get("initialised"), "initialised"):
+                self._kernel = None
+                return
+            shape = next(i.shape for i in self.search.session.get_inputs() if i.name == "exemplar_feature")
+            kernel = read_kernel(state["kernel"], "exemplar feature", shape)
+            center = read_array(state["center"], "center", (2,))
+            sizes = {k: read_array(state[k], k, (2,), positive=True) for k in ("target_sz", "base_target_sz")}
+            scalars = {k: read_float(state[k], k, lo=0.0) for k in ("z_sz", "x_sz", "_min_sz")}
+            peaks = {k: read_float(state[k], k, nan_ok=True, inf_ok=True) for k in ("peak", "ref_peak")}
+            score = None if state.get("score") is None else read_float(state["score"], "score", nan_ok=True)
+            avg_color = tuple(read_array(state["avg_color"], "avg_color", (3,)).tolist())
+            image_hw = tuple(read_int(v, "_image_hw", lo=1) for v in state["_image_hw"])
+            if len(image_hw) != 2:
+                raise ValueError(f"_image_hw must be two sizes, got {image_hw}")
+        # assigned only once everything parsed: a damaged state leaves the tracker as it was
+        self._kernel, self.center = kernel, center
+        for k, v in {**sizes, **scalars, **peaks}.items():
+            setattr(self, k, v)
+        self.score, self.avg_color, self._image_hw = score, avg_color, image_hw
 
 
 def _sigmoid(x: float) -> float:

@@ -1664,66 +1664,93 @@ class Track3D:
         })
 
     def set_state(self, state: dict) -> None:
-        """Restore a :meth:`get_state` (of a Track3D built with the same names and models)."""
-        from .state import from_plain
+        """Restore a :meth:`get_state` (of a Track3D built with the same names and models).
+
+        A damaged state (a field missing, of the wrong type, not finite, a box of no size, a
+        part's state its own ``set_state`` refuses) raises ValueError with one line and leaves
+        the tracker as it was."""
+        from .state import damaged, from_plain, read_box, read_float, read_int
 
         st = from_plain(state)
         if not isinstance(st, dict) or st.get("version") != STATE_VERSION:
             raise ValueError(f"not a Track3D state of version {STATE_VERSION}")
         mine = (self.tracker_name or type(self.tracker2d).__name__, self.estimator_name or type(self.estimator).__name__)
         if (st.get("tracker"), st.get("estimator")) != mine:
-            raise ValueError(f"state of {st.get('tracker')}+{st.get('estimator')} cannot restore a "
+            raise ValueError(f"state of {st.get('tracker')!r:.40}+{st.get('estimator')!r:.40} cannot restore a "
                              f"{mine[0]}+{mine[1]} tracker")
-        # Boxes are in the state's image: another camera's would land in the wrong place. (States
-        # written before the camera was recorded have none and are taken as they are.)
-        if "camera" in st and Camera.from_dict(st["camera"]) != self.camera:
-            raise ValueError(f"state of a {st['camera'].get('width')}x{st['camera'].get('height')} camera cannot "
-                             f"restore a tracker of another camera ({self.camera.width}x{self.camera.height} "
-                             f"or other intrinsics)")
         set2d = getattr(self.tracker2d, "set_state", None)
         if set2d is None:
             raise ValueError(f"the 2D tracker {self.tracker2d!r} has no set_state()")
+
+        def box_or_none(key: str, n: int):
+            v = st.get(key)
+            return None if v is None else read_box(v, key, n)
+
+        def number_or_nan(key: str, lo: float):
+            v = st.get(key)
+            return float("nan") if v is None else read_float(v, key, lo=lo)
+
         # Read every field before changing anything: a damaged state leaves the tracker as it was.
-        try:
-            category = int(st["category"])
-            box2d = np.asarray(st["box2d"], dtype=np.float64).reshape(4).copy()
-            box3d = np.asarray(st["box3d"], dtype=np.float64).reshape(6).copy()
-            bad, held = int(st["bad_frames"]), int(st["held_frames"])
-            empty = int(st.get("empty_frames", 0))   # 0: an older state
-            depth_avg = st.get("depth_avg")   # None: no box yet, or a state from before the average
-            depth_avg = float("nan") if depth_avg is None else float(depth_avg)
-            whole_box = st.get("whole_box")   # None: no whole view yet, or a state from before it
-            whole_box = None if whole_box is None else np.asarray(whole_box, dtype=np.float64).reshape(6).copy()
-            depth_ratio = st.get("depth_ratio")   # None: no box within the range yet, or an older state
-            depth_ratio = float("nan") if depth_ratio is None else float(depth_ratio)
-            carry_from = st.get("carry_from")   # None: the last box's returns were within the range, or an older state
-            carry_from = None if carry_from is None else np.asarray(carry_from, dtype=np.float64).reshape(4).copy()
+        # Boxes are in the state's image: another camera's would land in the wrong place.
+        # (States written before the camera was recorded have none and are taken as they are.)
+        if "camera" in st:
+            with damaged("Track3D"):
+                cam = Camera.from_dict(st["camera"])
+            if cam != self.camera:
+                raise ValueError(f"state of a {cam.width}x{cam.height} camera cannot restore a tracker of another "
+                                 f"camera ({self.camera.width}x{self.camera.height} or other intrinsics)")
+        with damaged("Track3D"):
+            category = check_category(st["category"], getattr(self.estimator, "num_categories", None))
+            box2d = read_box(st["box2d"], "box2d", 4, unset_ok=True, empty_ok=True)
+            box3d = read_box(st["box3d"], "box3d", 6, unset_ok=True)
+            bad, held = read_int(st["bad_frames"], "bad_frames"), read_int(st["held_frames"], "held_frames")
+            empty = read_int(st.get("empty_frames", 0), "empty_frames")   # 0: an older state
+            depth_avg = number_or_nan("depth_avg", 0.0)   # None: no box yet, or a state from before the average
+            whole_box = box_or_none("whole_box", 6)   # None: no whole view yet, or a state from before it
+            depth_ratio = number_or_nan("depth_ratio", 0.0)   # None: no box within the range yet, or an older state
+            carry_from = box_or_none("carry_from", 4)   # None: the last box's returns were within the range, or older
             carry_box = st.get("carry_box", st["box3d"])   # an older state carried its last box
-            carry_area = st.get("carry_area")   # None: no clear box reached the range yet, or an older state
-            carry_area = float("nan") if carry_area is None else float(carry_area)
-            carry_box = (None if carry_from is None or carry_box is None
-                         else np.asarray(carry_box, dtype=np.float64).reshape(6).copy())
+            carry_area = number_or_nan("carry_area", 0.0)   # None: no clear box reached the range yet, or older
+            carry_box = None if carry_from is None or carry_box is None else read_box(carry_box, "carry_box", 6)
             border_from, border_box = st.get("border_from"), st.get("border_box")   # None: not at the border
             if border_from is None or border_box is None:
                 border_from = border_box = None
             else:
-                border_from = np.asarray(border_from, dtype=np.float64).reshape(4).copy()
-                border_box = np.asarray(border_box, dtype=np.float64).reshape(6).copy()
+                border_from, border_box = read_box(border_from, "border_from", 4), read_box(border_box, "border_box", 6)
             tracker2d, estimator_state = st["tracker2d"], st.get("estimator_state")
+            if not isinstance(tracker2d, dict):
+                raise ValueError(f"tracker2d must be a dict, got {type(tracker2d).__name__}")
+            set3d = getattr(self.estimator, "set_state", None)
+            if estimator_state is not None and set3d is None:
+                raise ValueError(f"the estimator {self.estimator_name or type(self.estimator).__name__} keeps no "
+                                 f"state, but the state holds one")
             sun = check_sun(st.get("sun"))   # None: unknown, or a state from before the sun
             front = st.get("front")   # None: no filtered front face yet, or an older state
-            front = (float("nan"), 0.0) if front is None else (float(front[0]), float(front[1]))
+            if front is None:
+                front = (float("nan"), 0.0)
+            else:
+                if not isinstance(front, list) or len(front) != 2:
+                    raise ValueError(f"front must be two numbers, got {front!r:.40}")
+                front = (read_float(front[0], "front"), read_float(front[1], "front rate"))
             first = st.get("first_box")   # None: started without a 3D box, or an older state
             first = None if first is None else check_init_box3d(first)
             views = None
             if self._views is not None and st.get("body_views") is not None:
                 views = BodyViews(self.camera, self._views.params)
                 views.set_state(st["body_views"])
-        except (KeyError, TypeError, ValueError) as e:
-            raise ValueError(f"damaged Track3D state: {type(e).__name__}: {e}") from None
-        set2d(tracker2d)
+        # The parts last, each refusing a damaged state of its own without a change; the
+        # estimator's is put back if the 2D tracker then refuses.
+        before3d = self.estimator.get_state() if estimator_state is not None else None
         if estimator_state is not None:
-            self.estimator.set_state(estimator_state)
+            with damaged(f"{self.estimator_name or type(self.estimator).__name__} estimator"):
+                set3d(estimator_state)
+        try:
+            with damaged(f"{mine[0]} 2D tracker"):
+                set2d(tracker2d)
+        except ValueError:
+            if before3d is not None:
+                set3d(before3d)
+            raise
         self.category, self.box2d, self.box3d = category, box2d, box3d
         self.bad_frames, self.held_frames, self._depth_avg = bad, held, depth_avg
         self._empty_frames = empty

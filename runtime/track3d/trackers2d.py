@@ -43,6 +43,7 @@ import cv2
 import numpy as np
 
 from .frames import check_image
+from .state import damaged, read_array, read_flag, read_int
 
 __all__ = [
     "Tracker2D", "OpenCVTracker", "OracleTracker", "TrackerUnavailable", "MIN_SIDE",
@@ -130,7 +131,9 @@ class OracleTracker:
         return {"frame": int(self.frame)}
 
     def set_state(self, state: dict) -> None:
-        self.frame, self._next_init = int(state["frame"]), None
+        with damaged("oracle"):
+            frame = read_int(state["frame"], "frame", lo=-1)
+        self.frame, self._next_init = frame, None
 
 
 # --- OpenCV adapters ----------------------------------------------------------------------------
@@ -240,13 +243,20 @@ class OpenCVTracker:
                 "box": self._box.copy(), "running": self._tracker is not None}
 
     def set_state(self, state: dict) -> None:
+        """Restore a `get_state()`: a re-initialisation on its frame and box; a damaged one raises
+        ValueError (one line) and leaves the tracker as it was."""
+        with damaged(f"OpenCV {self.name}"):
+            if read_flag(state.get("initialised"), "initialised"):
+                bgr = read_array(state["image_bgr"], "image_bgr", (-1, -1, 3), np.uint8)
+                if bgr.shape[0] < 1 or bgr.shape[1] < 1:
+                    raise ValueError(f"image_bgr of shape {bgr.shape}")
+                box = read_array(state["box"], "box", (4,), finite=False)   # as init() took it
+                running = read_flag(state.get("running", True), "running")
         self._tracker, self._last_bgr = None, None
-        if not state.get("initialised"):
+        if not state["initialised"]:
             return
-        bgr = np.ascontiguousarray(state["image_bgr"], dtype=np.uint8)
-        box = _as_box(state["box"])
         self._last_bgr = bgr
-        if state.get("running", True):
+        if running:
             self._start(bgr, box)
         self._box = box.copy()
 
