@@ -578,3 +578,30 @@ def test_a_refused_2d_state_puts_the_estimators_state_back():
     with pytest.raises(ValueError, match="damaged oracle state"):
         t2.set_state(bad)
     assert t2.estimator.calls == 99 and t2.tracker2d.frame == -1
+
+
+def test_state_readers_refuse_what_the_writer_never_wrote():
+    from track3d.state import from_plain, read_box, read_float, read_int, read_kernel, to_plain
+
+    rec = to_plain(np.arange(6, dtype=np.float32))
+    assert np.array_equal(from_plain(rec), np.arange(6, dtype=np.float32))
+    for bad in ({**rec, "dtype": "O"}, {**rec, "dtype": "x"}, {**rec, "shape": [5]}, {**rec, "shape": [2.0, 3]},
+                {**rec, "shape": [-6]}, {**rec, "__ndarray__": "***"}, {k: v for k, v in rec.items() if k != "dtype"}):
+        with pytest.raises(ValueError, match="damaged array"):
+            from_plain(bad)
+    assert read_int(3, "n") == 3
+    for bad in (True, 3.0, "3", -1, None):
+        with pytest.raises(ValueError):
+            read_int(bad, "n")
+    assert np.isnan(read_float(float("nan"), "x", nan_ok=True))
+    for bad, kw in ((float("nan"), {}), (float("inf"), {}), (-0.5, {"lo": 0.0}), (False, {}), ("1", {})):
+        with pytest.raises(ValueError):
+            read_float(bad, "x", **kw)
+    assert np.isnan(read_box([np.nan] * 4, "b", 4, unset_ok=True)).all()
+    assert read_box([1, 2, 0, 3], "b", 4, empty_ok=True).tolist() == [1, 2, 0, 3]
+    for bad in ([1, 2, 0, 3], [1, 2, 3], [1, np.nan, 3, 3], [0, 0, 1, 1, 1, -1]):
+        with pytest.raises(ValueError):
+            read_box(bad, "b", len(bad) if len(bad) in (4, 6) else 4)
+    assert read_kernel(np.zeros((1, 8, 4, 4)), "k", [1, "c", 4, None]).shape == (1, 8, 4, 4)
+    with pytest.raises(ValueError, match="does not fit"):
+        read_kernel(np.zeros((1, 8, 5, 4)), "k", [1, "c", 4, None])
