@@ -304,3 +304,28 @@ def test_line_of_sight_plot_draws_each_boxs_near_and_far_faces(tmp_path, monkeyp
     np.testing.assert_allclose(lines["ground truth: far face"], [11, np.nan, 15])
     np.testing.assert_allclose(lines["t: near"], [8.5, 11, 12])
     np.testing.assert_allclose(lines["t: far"], [11.5, 13, 14])
+
+
+def test_a_damaged_result_file_is_named_in_one_line(synth, tmp_path):
+    """A misspelt status word had been read as a frame of its own kind (a "lozt" frame scored as
+    tracked, the loss missed); a row of another width or bytes that are not text raised numpy's
+    or Python's words without the file's name."""
+    exp = Experiment(synth, "test", tmp_path / "res", tmp_path / "rep")
+    folder = exp.run(TrackerSpec("oracle", "baseline"), quiet=True)[0]
+    status = folder / "s0001_status.txt"
+    words = status.read_text().split()
+    status.write_text("\n".join([*words[:-1], "lozt"]) + "\n")
+    with pytest.raises(ValueError, match=r"s0001_status.txt: unknown status 'lozt'"):
+        read_result(folder)
+    status.write_bytes(b"init\n\xff\xfe\n" * 4)
+    with pytest.raises(ValueError, match="s0001_status.txt: not text"):
+        read_result(folder)
+    status.write_text("\n".join(words) + "\n")
+    boxes = folder / "s0001_001.txt"
+    rows = boxes.read_text().splitlines()
+    boxes.write_text("\n".join([*rows[:-1], "1.0,2.0"]) + "\n")
+    with pytest.raises(ValueError, match=r"malformed result file .*s0001_001.txt: the number of columns") as e:
+        read_result(folder)
+    assert "usecols" not in str(e.value)
+    boxes.write_text("\n".join(rows) + "\n")
+    assert len(read_result(folder)) == len(words)

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..tracker import STAGES
+from ..tracker import STAGES, STATUSES
 
 __all__ = ["SequenceResult", "INIT", "SKIPPED", "RUN_FILE", "write_result", "read_result", "result_folder",
            "write_run_record", "read_run_record", "run_config_key"]
@@ -35,6 +35,7 @@ __all__ = ["SequenceResult", "INIT", "SKIPPED", "RUN_FILE", "write_result", "rea
 RUN_FILE = "run.json"
 
 INIT, SKIPPED = "init", "skipped"
+STATUS_WORDS = (INIT, *STATUSES, SKIPPED)   # what a status file may hold
 
 
 @dataclass
@@ -94,7 +95,10 @@ def write_result(folder: str | Path, r: SequenceResult) -> None:
 def _load(path: Path, cols: int) -> np.ndarray:
     if not path.is_file():
         raise FileNotFoundError(f"missing result file {path}")
-    a = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
+    try:
+        a = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
+    except ValueError as e:   # numpy's words name neither the file nor what to do about it
+        raise ValueError(f"malformed result file {path}: {str(e).split(';')[0]}") from None
     if a.size == 0:
         return a.reshape(0, cols)
     if a.shape[1] != cols:
@@ -109,7 +113,15 @@ def read_result(folder: str | Path, name: str | None = None) -> SequenceResult:
     status_file = folder / f"{n}_status.txt"
     if not status_file.is_file():
         raise FileNotFoundError(f"no results for sequence {n} in {folder}")
-    status = np.array(status_file.read_text().split(), dtype=object)
+    try:
+        words = status_file.read_text().split()
+    except UnicodeDecodeError:
+        raise ValueError(f"malformed result file {status_file}: not text") from None
+    unknown = sorted(set(words) - set(STATUS_WORDS))
+    if unknown:   # a misspelt word would be scored as a tracked frame, or a loss missed
+        raise ValueError(f"malformed result file {status_file}: unknown status {unknown[0]!r:.40} "
+                         f"(one of {', '.join(STATUS_WORDS)} a line)")
+    status = np.array(words, dtype=object)
     r = SequenceResult(
         n, _load(folder / f"{n}_001.txt", 4), _load(folder / f"{n}_raw_001.txt", 4),
         _load(folder / f"{n}_3d_001.txt", 6), status,
