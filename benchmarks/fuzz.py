@@ -31,6 +31,8 @@ Contracts (the oracles, shared with tests/test_fuzz.py):
 - a checkpoint read back damaged: Track3D.set_state refuses it (ValueError, one line) and the
   tracker is as it was (its state the same), or restores it and the loop meets its contract above;
 - 2D trackers: update returns (bool, finite (4,) float64 box when ok);
+- result folders read back damaged: one-line ValueError / FileNotFoundError, or arrays of one
+  length per frame and known status words;
 - dataset reader: a dataset that reads has as many label rows as images, finite labels and 0/1
   flags for every frame;
 - CLIs: exit 0, or exit 2 with one error line on stderr (argparse prints its usage above it);
@@ -241,6 +243,16 @@ class Env:
                 t.update(images[k], frames[k][0])
             state = json.loads(json.dumps(t.get_state()))
             self._est[key] = (build, state, [(images[k], frames[k][0]) for k in range(5, 8)])
+        return self._est[key]
+
+    def results(self) -> Path:
+        """One sequence's result folder of the oracle + baseline loop on the synthetic dataset."""
+        key = ("results",)
+        if key not in self._est:
+            from track3d.evaluation import Experiment, TrackerSpec
+
+            exp = Experiment(self.dataset(), "test", self.tmp / "results", self.tmp / "reports")
+            self._est[key] = exp.run(TrackerSpec("oracle", "baseline"), quiet=True)[0]
         return self._est[key]
 
     def dataset(self) -> Path:
@@ -645,6 +657,53 @@ def t_stereo(rng, env):
     return "ok"
 
 
+def t_results(rng, env):
+    """A result folder of `track3d track` damaged (a file dropped, cut short, its bytes flipped, a
+    line replaced or doubled): read_result gives one-line ValueError / FileNotFoundError, or
+    arrays of one length per frame with known status words."""
+    from track3d.evaluation.results import STATUS_WORDS, read_result
+
+    src = env.results()
+    folder = env.tmp / "damaged-results" / src.name
+    shutil.rmtree(folder.parent, ignore_errors=True)
+    shutil.copytree(src, folder)
+    files = sorted(p for p in folder.iterdir() if p.suffix == ".txt")
+    for _ in range(int(rng.integers(1, 4))):
+        f = files[int(rng.integers(0, len(files)))]
+        if not f.exists():
+            continue
+        data, kind = f.read_bytes(), int(rng.integers(0, 5))
+        if kind == 0:
+            f.unlink()
+        elif kind == 1:
+            f.write_bytes(data[:int(rng.integers(0, max(len(data), 1)))])
+        elif kind == 2 and data:
+            b = bytearray(data)
+            for i in rng.integers(0, len(b), int(rng.integers(1, 4))):
+                b[i] = int(rng.integers(0, 256))
+            f.write_bytes(bytes(b))
+        elif kind == 3:
+            lines = data.decode(errors="replace").splitlines()
+            i = int(rng.integers(0, max(len(lines), 1)))
+            lines[i:i + 1] = [str(rng.choice(["nan,nan,nan,nan", "1,2", "", "lozt", "tracking lost", "1e400,1,1,1",
+                                              "-5,-5,-5,-5,-5,-5", "1,2,3,4,5,6,7,8", "INIT"]))]
+            f.write_text("\n".join(lines) + "\n")
+        else:
+            lines = data.splitlines()
+            f.write_bytes(b"\n".join(lines + lines[:int(rng.integers(1, 4))]) + b"\n")
+    try:
+        r = read_result(folder)
+    except (ValueError, FileNotFoundError) as e:
+        expect("\n" not in str(e), f"a multi-line error: {str(e)[:200]!r}")
+        return "clean_error"
+    n = len(r.status)
+    expect(r.box2d.shape == (n, 4) and r.box2d_raw.shape == (n, 4) and r.box3d.shape == (n, 6)
+           and r.seconds.shape == (n,) and r.e2e_seconds.shape == (n,) and r.stage_ms.shape[0] == n,
+           "result arrays of other lengths or widths read")
+    expect(set(r.status) <= set(STATUS_WORDS), f"unknown status words read: {set(r.status) - set(STATUS_WORDS)}")
+    return "ok"
+
+
 DATA_FILES = ("dataset.json", "test/a/groundtruth_2d.txt", "test/a/groundtruth_3d.txt", "test/a/absence.label",
               "test/a/cut_by_image.label", "test/a/meta.json", "test/a/left/000002.png", "test/a/depth/000001.png",
               "test/b/groundtruth_2d.txt")
@@ -789,7 +848,7 @@ TARGETS = {
     "stereo": (t_stereo, 3),
     **{f"tracker_{n}": (_t_tracker(n), w) for n, w in
        (("kcf", 2), ("csrt", 1), ("mosse", 2), ("medianflow", 2), ("mil", 1), ("boosting", 1))},
-    "dataset": (t_dataset, 3), "cli": (t_cli, 1), "sim_cli": (t_sim_cli, 0.3), "mesh_loader": (t_mesh_loader, 1.7),
+    "dataset": (t_dataset, 3), "results": (t_results, 1), "cli": (t_cli, 1), "sim_cli": (t_sim_cli, 0.3), "mesh_loader": (t_mesh_loader, 1.7),
 }
 
 

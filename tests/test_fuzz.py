@@ -184,11 +184,12 @@ def env():
 
 @pytest.mark.parametrize("target, examples", [("dataset", 30), ("cli", 12), ("mesh_loader", 30), ("sim_cli", 4),
                                               ("stereo", 40), ("loop_views", 20), ("crop", 300),
-                                              ("state", 60)])
+                                              ("state", 60), ("results", 40)])
 def test_seeded_targets(env, target, examples):
     """Damaged datasets, CLI argument soups, the simulator's mesh loader, stereo pairs, the loop
     with the body's past views over damaged returns of a turning body, the trackers' crop (C++
-    against its numpy reference on any map), damaged checkpoints: hypothesis picks seeds."""
+    against its numpy reference on any map), damaged checkpoints and result folders: hypothesis
+    picks seeds."""
     if target in ("mesh_loader", "sim_cli"):
         pytest.importorskip("track3d_sim")
 
