@@ -274,6 +274,27 @@ def test_carry_box_at_the_image_border_hand_cases():
     # no side at the border: the clear rule, as without sides
     np.testing.assert_array_equal(carry_box(b3, last, cut, CAM100, 1.0, (False,) * 4, (False,) * 4),
                                   carry_box(b3, last, cut, CAM100, 1.0))
+    # from the cut box to a clear 10 x 10 px box at (40, 40): across the line of sight by the
+    # left sides (-30 px: -6 m) and the centres in y (+5 px: +1 m) at 20 m, the depth kept...
+    clear = np.array([40.0, 40.0, 10.0, 10.0])
+    np.testing.assert_allclose(carry_box(b3, cut, clear, CAM100, 1.0, right, (False,) * 4),
+                               [-6.0, 1.0, 20.0, 2.0, 3.0, 4.0])
+    # ... unless the body's last clear 2D box is known. To a clear 30 x 30 px box at (40, 40): -6 m
+    # and +3 m across at 20 m; 3600 px^2 at 10 m is 30 x 30 px at the cut box's 20 m, the new box's
+    # size: the depth stays; 900 px^2 at 40 m is 60 x 60 px at 20 m, twice the new box's side: the
+    # depth doubles (exponent 1) along the moved centre's ray
+    big = np.array([40.0, 40.0, 30.0, 30.0])
+    np.testing.assert_allclose(carry_box(b3, cut, big, CAM100, 1.0, right, (False,) * 4, last_whole=(3600.0, 10.0)),
+                               [-6.0, 3.0, 20.0, 2.0, 3.0, 4.0])
+    np.testing.assert_allclose(carry_box(b3, cut, big, CAM100, 1.0, right, (False,) * 4, last_whole=(900.0, 40.0)),
+                               [-12.0, 6.0, 40.0, 2.0, 3.0, 4.0])
+    # a cut box larger than the clear one's size there (100 px^2 at 20 m: 10 px; the cut box's
+    # sqrt(30 x 20) = 24.5 px) is the body's size: the depth goes as 24.5 / 30
+    np.testing.assert_allclose(carry_box(b3, cut, big, CAM100, 1.0, right, (False,) * 4, last_whole=(100.0, 20.0))[2],
+                               20.0 * np.sqrt(600.0) / 30.0)
+    # a box at the border now, or no clear box known (nan): the depth kept
+    for sides, whole in ((right, (900.0, 40.0)), ((False,) * 4, (float("nan"), float("nan")))):
+        assert carry_box(b3, cut, big, CAM100, 1.0, right, sides, last_whole=whole)[2] == 20.0
 
 
 def test_a_body_past_the_range_at_the_image_border_follows_the_side_in_view():
@@ -356,7 +377,10 @@ def test_a_body_past_the_range_is_carried_from_its_last_clear_view_not_from_a_sl
     carried from the clear view's pair (carried from the sliver it came out 8.5 m too near; a
     README ToF long watch's held-out 0008 lost 8 m the same way). A border box about the body's
     size (16 x 32 px, as SiamFC's keeps its size at the border) is the latest pair and carried
-    from. A checkpoint at the border frame keeps the choice."""
+    from, across the line of sight by its side in view and in depth as from a clear box of the size
+    the body would have had there (the clear box's, by its depth over the pair's; the cut box's own
+    size had put it 6.6 m too near, now 4.3 m, CARRY_CUT_FROM_CLEAR). A checkpoint at the border frame keeps
+    the choice."""
     img1, pts1, b2_1, _ = _cut_sphere(30.0, centre=(0.0, 0.0, 31.0))
     img2, pts2, b2_2, _ = _cut_sphere(30.0, centre=(x, 0.0, 26.5))
     img3, pts3, b2_3, b3_3 = _cut_sphere(30.0, centre=(-1.5, 0.0, 34.0))
@@ -377,10 +401,15 @@ def test_a_body_past_the_range_is_carried_from_its_last_clear_view_not_from_a_sl
     r1, r2, r3 = run(False)
     assert (r1.status, r2.status, r3.status) == (TRACKING, TRACKING, NO_POINTS)
     assert reaches_range(np.array([pts2.min(0), pts2.max(0)]), b2_2, CAM, 30.0)   # the border view reached it too
-    from_clear, from_border = carry_box(r1.box3d, b2_1, b2_3, CAM), carry_box(r2.box3d, b2_2, b2_3, CAM)
+    right = (False, False, True, False)
+    from_clear = carry_box(r1.box3d, b2_1, b2_3, CAM)
+    from_border = carry_box(r2.box3d, b2_2, b2_3, CAM, last_sides=right, last_whole=(b2_1[2] * b2_1[3], r1.box3d[2]))
     np.testing.assert_allclose(r3.box3d, from_clear if sliver else from_border)
+    by_cut_size = carry_box(r2.box3d, b2_2, b2_3, CAM)   # the cut box's size taken for the body's
     if sliver:
-        assert abs(r3.box3d[2] - b3_3[2]) < 2.0 < abs(from_border[2] - b3_3[2])
+        assert abs(r3.box3d[2] - b3_3[2]) < 2.0 < abs(by_cut_size[2] - b3_3[2])
+    else:   # 4.3 m near (the pair's cap-made box is 3 m near and the depth's change damped) for 6.6
+        assert abs(r3.box3d[2] - b3_3[2]) + 2.0 < abs(by_cut_size[2] - b3_3[2])
     np.testing.assert_array_equal(run(True)[2].box3d, r3.box3d)
 
 

@@ -200,7 +200,8 @@ def _carry_ref(box2d: np.ndarray, low: bool, high: bool, k: int) -> float:
 def carry_box(box3d: np.ndarray, last_box2d: np.ndarray, box2d: np.ndarray, camera: Camera,
               exponent: float = CARRY_DEPTH_EXPONENT,
               last_sides: tuple[bool, bool, bool, bool] | None = None,
-              sides: tuple[bool, bool, bool, bool] | None = None) -> np.ndarray:
+              sides: tuple[bool, bool, bool, bool] | None = None,
+              last_whole: tuple[float, float] | None = None) -> np.ndarray:
     """`box3d` (6,), the 3D box that went with the 2D box `last_box2d` (4,) [x, y, w, h], moved
     to go with `box2d` (4,): its centre depth scaled by (s_last / s) ** exponent (s = sqrt(w h)
     of each 2D box), its centre kept on the same offset from the 2D box's centre ray, its size
@@ -210,7 +211,12 @@ def carry_box(box3d: np.ndarray, last_box2d: np.ndarray, box2d: np.ndarray, came
     the image border (None: none). A box at the border spans the part of the body in view, so when
     either does, the box moves across the line of sight with the 2D boxes' side not at the border
     (per axis; with their centres where neither side is, not at all where both are) and keeps its
-    depth: the size of a cut box says nothing of the range."""
+    depth: the size of a cut box says nothing of the range. `last_whole`: (area px^2, centre depth m)
+    of the body's last 2D box clear of the border and its 3D box; with `last_box2d` at the border
+    and `box2d` clear, the depth then scales, along the moved centre's ray, as from a clear box of
+    the size the body would have had at `box3d`'s depth (sqrt(area) x that depth / `box3d`'s), or of
+    `last_box2d`'s own size where that is larger (the part in view is at most the body; a 2D tracker
+    that keeps its box's size at the border, as SiamFC does, had the body's)."""
     b = np.array(box3d, dtype=np.float64).reshape(6)
     p, q = np.asarray(last_box2d, np.float64).reshape(4), np.asarray(box2d, np.float64).reshape(4)
     if not (np.all(np.isfinite(b)) and np.all(np.isfinite(p)) and np.all(np.isfinite(q))
@@ -230,4 +236,9 @@ def carry_box(box3d: np.ndarray, last_box2d: np.ndarray, box2d: np.ndarray, came
         d = _carry_ref(q, lo, hi, k) - _carry_ref(p, lo, hi, k)
         shift[k] = d / fk if np.isfinite(d) else 0.0
     b[:2] = b[:2] + shift * b[2]
+    if any(ls) and not any(cs) and last_whole is not None:
+        area, z = (float(v) for v in last_whole)
+        if np.isfinite(area) and np.isfinite(z) and area > 0.0 and z > 0.0:
+            whole = max(np.sqrt(area) * z / b[2], float(np.sqrt(p[2] * p[3])))   # the body's 2D size there
+            b[:3] = b[:3] * (whole / float(np.sqrt(q[2] * q[3]))) ** exponent
     return b

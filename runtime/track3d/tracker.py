@@ -169,6 +169,14 @@ CARRY_AT_BORDER = True
 # area of the last such box clear of the border is a sliver of the body, not its size in the
 # image, and is not carried from (the clear one is kept).
 CARRY_SLIVER = 0.5
+# A body carried from a pair at the image border (its 2D box there larger than a sliver) to a clear
+# 2D box had its depth scaled by the cut box's size, as if that were the body's in the image: a
+# held-out body of the README's ToF long watch (0008), wholly past the range when it came back
+# into view, was carried 28.1 m away for 35.0 m. The pair's box now moves across the line of sight
+# with the side not at the border, and its depth scales from the size the body's 2D box would have
+# had there: the last clear one's, by its depth over the pair's (`_carry_area`, `_carry_area_z`;
+# none known: the depth is kept; range_cut.carry_box's `last_whole`).
+CARRY_CUT_FROM_CLEAR = True
 # A held frame measured from the outline (the 2D tracker calls the body lost, the depth holds it
 # there: a sliver at the image border) is measured as a tracked frame is: its returns go into the
 # past views and a views model is given them. Before, a views model ran there without its views
@@ -916,6 +924,7 @@ class Track3D:
         self._border_box: np.ndarray | None = None
         self._carry_box: np.ndarray | None = None
         self._carry_area = float("nan")   # area (px^2) of the last such 2D box clear of the image border
+        self._carry_area_z = float("nan")   # the centre depth (m) of the 3D box that went with it
         if depth_range_m is not None and not (np.isfinite(float(depth_range_m)) and float(depth_range_m) > 0.0):
             raise ValueError(f"depth_range_m must be a positive number of metres or None (unlimited), got {depth_range_m}")
         # the depth sensor's maximum range: a body reaching past it is boxed from the image (range_cut)
@@ -1159,7 +1168,7 @@ class Track3D:
             box = self._filter_front(box)
         if not reached:
             self._carry_from = self._carry_box = None
-            self._carry_area = float("nan")
+            self._carry_area = self._carry_area_z = float("nan")
         else:
             # a 2D box at the image border may be a sliver of the body: a body that left the view
             # beyond the range and came back wholly past it was carried from a sliver's box, 8 m
@@ -1169,7 +1178,7 @@ class Track3D:
             clear = not any(self._border_sides(box2d))
             area = float(box2d[2] * box2d[3])
             if clear:
-                self._carry_area = area
+                self._carry_area, self._carry_area_z = area, float(box[2])
             if clear or not area < CARRY_SLIVER * self._carry_area:   # (nan: no clear box yet)
                 self._carry_from, self._carry_box = np.array(box2d, dtype=np.float64), np.array(box, dtype=np.float64)
         self._border_from = self._border_box = None
@@ -1231,7 +1240,7 @@ class Track3D:
         self._depth_ratio = float("nan")
         self._carry_from = self._carry_box = None
         self._border_from = self._border_box = None
-        self._carry_area = float("nan")
+        self._carry_area = self._carry_area_z = float("nan")
         self._front = (float("nan"), 0.0)
         self._first = first
         if self._views is not None:
@@ -1250,7 +1259,7 @@ class Track3D:
                 if at is not None:
                     self.box3d = at
                     self._carry_from, self._carry_box = b.copy(), at.copy()
-                    self._carry_area = float(b[2] * b[3])
+                    self._carry_area, self._carry_area_z = float(b[2] * b[3]), float(at[2])
         if first is not None:
             self.box3d = first.copy()
             if self._carry_box is not None:   # past the range: carried from the known box, not the guess
@@ -1443,10 +1452,15 @@ class Track3D:
                        and np.all(np.isfinite(self._carry_box)))
             if carried and not any(self._border_sides(seen)):
                 # a body that had reached the range and now returns nothing is past it, still in
-                # view: its box follows the image's (range_cut.carry_box)
-                self.box3d = carry_box(self._carry_box, self._carry_from, seen, self.camera)
+                # view: its box follows the image's (range_cut.carry_box); from a pair at the image
+                # border, whose box is the part in view, the depth goes by the last clear box's area
+                # (CARRY_FROM_CLEAR_AREA)
+                rule = CARRY_CUT_FROM_CLEAR
+                self.box3d = carry_box(self._carry_box, self._carry_from, seen, self.camera,
+                                       last_sides=self._border_sides(self._carry_from) if rule else None,
+                                       last_whole=(self._carry_area, self._carry_area_z) if rule else None)
                 self._carry_from, self._carry_box = np.array(seen, dtype=np.float64), self.box3d.copy()
-                self._carry_area = float(seen[2] * seen[3])
+                self._carry_area, self._carry_area_z = float(seen[2] * seen[3]), float(self.box3d[2])
                 self._border_from = self._border_box = None
             elif carried and CARRY_AT_BORDER:
                 # at the image border: the side in view follows the body (CARRY_AT_BORDER)
@@ -1654,6 +1668,7 @@ class Track3D:
             "carry_from": None if self._carry_from is None else self._carry_from.tolist(),
             "carry_box": None if self._carry_box is None else self._carry_box.tolist(),
             "carry_area": self._carry_area if np.isfinite(self._carry_area) else None,
+            "carry_area_z": self._carry_area_z if np.isfinite(self._carry_area_z) else None,
             "border_from": None if self._border_from is None else self._border_from.tolist(),
             "border_box": None if self._border_box is None else self._border_box.tolist(),
             "tracker2d": get2d(), "estimator_state": get3d() if get3d is not None else None,
@@ -1711,6 +1726,7 @@ class Track3D:
             carry_from = box_or_none("carry_from", 4)   # None: the last box's returns were within the range, or older
             carry_box = st.get("carry_box", st["box3d"])   # an older state carried its last box
             carry_area = number_or_nan("carry_area", 0.0)   # None: no clear box reached the range yet, or older
+            carry_area_z = number_or_nan("carry_area_z", 0.0)   # None: as carry_area, or a state from before it
             carry_box = None if carry_from is None or carry_box is None else read_box(carry_box, "carry_box", 6)
             border_from, border_box = st.get("border_from"), st.get("border_box")   # None: not at the border
             if border_from is None or border_box is None:
@@ -1757,6 +1773,7 @@ class Track3D:
         self._whole_box = whole_box
         self._depth_ratio = depth_ratio
         self._carry_from, self._carry_box, self._carry_area = carry_from, carry_box, carry_area
+        self._carry_area_z = carry_area_z
         self._border_from, self._border_box = border_from, border_box
         self.sun = sun
         self._front = front
