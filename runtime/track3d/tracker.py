@@ -174,8 +174,9 @@ CARRY_SLIVER = 0.5
 # held-out body of the README's ToF long watch (0008), wholly past the range when it came back
 # into view, was carried 28.1 m away for 35.0 m. The pair's box now moves across the line of sight
 # with the side not at the border, and its depth scales from the size the body's 2D box would have
-# had there: the last clear one's, by its depth over the pair's (`_carry_area`, `_carry_area_z`;
-# none known: the depth is kept; range_cut.carry_box's `last_whole`).
+# had there: the last clear one's, by its depth over the pair's, or the cut box's own where larger
+# (a tracker that keeps its box's size at the border; `_carry_area`, `_carry_area_z`; none known:
+# the depth is kept; range_cut.carry_box's `last_whole`). Measured in docs/runtime.md.
 CARRY_CUT_FROM_CLEAR = True
 # A held frame measured from the outline (the 2D tracker calls the body lost, the depth holds it
 # there: a sliver at the image border) is measured as a tracked frame is: its returns go into the
@@ -1453,8 +1454,8 @@ class Track3D:
             if carried and not any(self._border_sides(seen)):
                 # a body that had reached the range and now returns nothing is past it, still in
                 # view: its box follows the image's (range_cut.carry_box); from a pair at the image
-                # border, whose box is the part in view, the depth goes by the last clear box's area
-                # (CARRY_FROM_CLEAR_AREA)
+                # border, whose box may be only the part in view, the depth goes by the body's size
+                # (CARRY_CUT_FROM_CLEAR)
                 rule = CARRY_CUT_FROM_CLEAR
                 self.box3d = carry_box(self._carry_box, self._carry_from, seen, self.camera,
                                        last_sides=self._border_sides(self._carry_from) if rule else None,
