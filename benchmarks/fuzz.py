@@ -216,7 +216,8 @@ class Env:
         key = ("checkpoint", tracker, sensor, views)
         if key not in self._est:
             from track3d.synthetic import ellipsoid_returns
-            from track3d.tracker import Track3D, sensor_options
+            from track3d.tracker import Track3D
+            from track3d.sensor_options import sensor_options
 
             frames = []
             for k in range(8):
@@ -382,7 +383,8 @@ def _rand_sun(rng):
 
 def _t_loop(name):
     def run(rng, env):
-        from track3d.tracker import DEPTH_SENSORS, STATUSES, Track3D, sensor_options
+        from track3d.tracker import STATUSES, Track3D
+        from track3d.sensor_options import DEPTH_SENSORS, sensor_options
 
         # every sensor's loop options (stereo: the outline off, its share and containment on)
         sensor = [None, *DEPTH_SENSORS][int(rng.integers(0, len(DEPTH_SENSORS) + 1))]
@@ -428,7 +430,8 @@ def t_loop_views(rng, env):
     from track3d.body_views import BodyViewsParams
     from track3d.synthetic import ellipsoid_returns
     from track3d.trackers2d import create_tracker
-    from track3d.tracker import DEPTH_SENSORS, STATUSES, Track3D, sensor_options
+    from track3d.tracker import STATUSES, Track3D
+    from track3d.sensor_options import DEPTH_SENSORS, sensor_options
 
     n = int(rng.integers(8, 60))
     axes = rng.uniform(0.2, 4.0, 3)
@@ -533,7 +536,8 @@ def t_state(rng, env):
     """A checkpoint read back damaged (`damage_plain`, one to three times): Track3D.set_state
     refuses it with one line and leaves the tracker as it was, or restores it and the loop then
     meets its contract."""
-    from track3d.tracker import DEPTH_SENSORS, STATUSES
+    from track3d.tracker import STATUSES
+    from track3d.sensor_options import DEPTH_SENSORS
 
     tracker = ("oracle", "edgetrack", "kcf")[int(rng.integers(0, 3))]
     sensor = [None, *DEPTH_SENSORS][int(rng.integers(0, len(DEPTH_SENSORS) + 1))]
@@ -619,7 +623,8 @@ def rand_pair(rng, w=160, h=120):
 def t_stereo(rng, env):
     """Stereo clouds (track3d.stereo) of any pair and box, alone and as the loop's points."""
     from track3d.stereo import StereoCloud
-    from track3d.tracker import STATUSES, Track3D, sensor_options
+    from track3d.tracker import STATUSES, Track3D
+    from track3d.sensor_options import sensor_options
 
     params = {"edge_erode_px": int(rng.integers(0, 3)), "block_size": int(rng.choice([1, 3, 5, 7])),
               "z_min_m": float(rng.choice([0.3, 1.5, 20.0])), "follow_depth": float(rng.choice([0.0, 1.0, 1.5, 4.0])),

@@ -210,7 +210,7 @@ def test_track_passes_resume_outline_to_the_loop_and_records_it_when_on(synth, t
                                             (["--outline-share-phase", "180"], '"outline_share_phase"')])
 def test_track_passes_outline_share_phase_to_the_loop_and_records_it_when_on(synth, tmp_path, flags, recorded):
     from track3d.evaluation.results import read_run_record
-    from track3d.tracker import outline_share_phase_for
+    from track3d.sensor_options import outline_share_phase_for
 
     res = tmp_path / "res"
     assert main(["track", "--data", str(synth), "--tracker", "mosse", "--estimator", "baseline", "--sequence", "a",

@@ -178,7 +178,7 @@ def test_the_sequence_s_sun_reaches_the_loop(tmp_path):
     from track3d.dataset import Dataset
     from track3d.evaluation import TrackerSpec
     from track3d.synthetic import make_synthetic_dataset
-    from track3d.tracker import dark_side_for, sensor_options
+    from track3d.sensor_options import dark_side_for, sensor_options
 
     root = make_synthetic_dataset(tmp_path / "d", {"a": 3, "b": 3})
     for name, sun in (("a", {"direction": [0.0, 2.0, 0.0]}), ("b", {"direction": [0.0, "x", 1.0]})):

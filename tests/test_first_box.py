@@ -192,9 +192,9 @@ def test_cli_errors(synth, tmp_path, capsys, extra, message):
 
 
 def test_the_fades_are_the_measured_ones():
-    from track3d.tracker import first_box_fade_for, sensor_options
+    from track3d.sensor_options import first_box_fade_for, sensor_options
 
-    # chosen on calibration sets (track3d.tracker.SENSOR_FIRST_BOX_FADES)
+    # chosen on calibration sets (track3d.sensor_options.SENSOR_FIRST_BOX_FADES)
     assert FIRST_BOX_FADE == 0.2 == first_box_fade_for("ideal") == first_box_fade_for(None)
     assert first_box_fade_for("Stereo") == sensor_options("stereo")["first_box_fade"] == first_box_fade_for("tof") == 0.5
     spec = TrackerSpec("oracle", "baseline")

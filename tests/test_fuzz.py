@@ -22,7 +22,8 @@ from track3d.estimators import create_estimator
 from track3d.frustum import (extract_frustum_bounds, extract_frustum_bounds_numpy, sample_points,
                              sample_points_numpy)
 from track3d.synthetic import CAM
-from track3d.tracker import DEPTH_SENSORS, STATUSES, Track3D, sensor_options
+from track3d.tracker import STATUSES, Track3D
+from track3d.sensor_options import DEPTH_SENSORS, sensor_options
 from track3d.trackers2d import create_tracker
 
 

@@ -11,7 +11,7 @@ from track3d.boxes import box3d_from_points, iou_3d
 from track3d.estimators import create_estimator
 from track3d.frustum import extract_frustum
 from track3d.fusion import fuse
-from track3d.synthetic import CAM, make_synthetic_dataset, render_sphere, sphere_path
+from track3d.synthetic import CAM, render_sphere, sphere_path
 from track3d.tracker import LOST, NO_POINTS, TRACKING, Track3D
 from track3d.trackers2d import OracleTracker, create_tracker
 
@@ -288,7 +288,7 @@ def test_the_loop_hands_its_frustum_bounds_to_an_estimator_that_takes_them(frame
 def test_frustum_margin_widens_the_cut_and_zero_is_the_box_itself(frames):
     """The frustum is cut with the 2D box widened by `frustum_margin` of its size, half on
     each side (hand case); margin 0 cuts with the box itself; out-of-range margins are refused."""
-    from track3d.tracker import FRUSTUM_MARGIN
+    from track3d.sensor_options import FRUSTUM_MARGIN
 
     gt2d = np.array([f[2] for f in frames])
     seen = []
@@ -314,7 +314,7 @@ def test_the_frustum_margin_follows_the_depth_sensor(tmp_path):
     """Stereo depth smears past the silhouette: no margin there; every other or unknown
     sensor gets the default. The evaluation builds each sequence's tracker by its sensor."""
     from track3d.evaluation import TrackerSpec
-    from track3d.tracker import FRUSTUM_MARGIN, frustum_margin_for
+    from track3d.sensor_options import FRUSTUM_MARGIN, frustum_margin_for
 
     assert frustum_margin_for("stereo") == 0.0
     assert frustum_margin_for("ideal") == frustum_margin_for("tof") == frustum_margin_for(None) == FRUSTUM_MARGIN
@@ -324,7 +324,7 @@ def test_the_frustum_margin_follows_the_depth_sensor(tmp_path):
     assert spec.build(a).frustum_margin == FRUSTUM_MARGIN and spec.build(b).frustum_margin == 0.0
     # the fusion weight likewise: by the sensor (stereo and ToF fuse at 0.15)
     from track3d.fusion import WEIGHT_3D
-    from track3d.tracker import fusion_weight_for
+    from track3d.sensor_options import fusion_weight_for
 
     assert fusion_weight_for("stereo") == 0.15
     assert fusion_weight_for(None) == WEIGHT_3D == 0.3
@@ -395,7 +395,7 @@ def _plain_and_stereo(tmp_path):
 
 def test_the_edge_pad_follows_the_depth_sensor(tmp_path):
     from track3d.evaluation import TrackerSpec
-    from track3d.tracker import edge_pad_for, sensor_options
+    from track3d.sensor_options import edge_pad_for, sensor_options
 
     assert edge_pad_for("tof") == 3.0 and edge_pad_for("ideal") == edge_pad_for(None) == 1.0
     assert sensor_options("tof")["edge_pad"] == 3.0
@@ -409,7 +409,7 @@ def test_the_edge_pad_follows_the_depth_sensor(tmp_path):
 
 def test_the_section_weight_follows_the_depth_sensor(tmp_path):
     from track3d.evaluation import TrackerSpec
-    from track3d.tracker import section_weight_for
+    from track3d.sensor_options import section_weight_for
 
     assert section_weight_for("stereo") == 0.75
     assert section_weight_for("ideal") == section_weight_for("tof") == section_weight_for(None) == 0.0
@@ -523,7 +523,7 @@ def test_the_loop_puts_the_sections_sides_at_the_limbs_not_at_the_border():
 
 def test_the_section_limbs_follow_the_depth_sensor_and_are_checked(tmp_path):
     from track3d.evaluation import TrackerSpec
-    from track3d.tracker import section_limbs_for, sensor_options
+    from track3d.sensor_options import section_limbs_for, sensor_options
 
     assert section_limbs_for("stereo") == sensor_options("stereo")["section_limbs"] == (4.0, 0.05, 0.9)
     assert section_limbs_for("ideal") is section_limbs_for("tof") is section_limbs_for(None) is None
@@ -790,7 +790,7 @@ def test_the_loop_takes_the_faces_it_sees_from_the_returns(frames):
 
 def test_measured_faces_follow_the_depth_sensor(tmp_path):
     from track3d.evaluation import TrackerSpec
-    from track3d.tracker import measured_faces_for
+    from track3d.sensor_options import measured_faces_for
 
     assert measured_faces_for("stereo") is False
     assert measured_faces_for("ideal") is measured_faces_for("tof") is measured_faces_for(None) is True
@@ -908,7 +908,7 @@ def test_a_noisy_sensor_s_front_face_is_a_quantile_of_its_returns():
     (front at 4 m, 7,500 returns) seen with 3 cm depth noise has its front face measured 9-10 cm
     too near from the nearest return, 3 cm from the 0.5% quantile (FRONT_QUANTILE, ToF's). The
     option is checked, recorded and chosen by the sensor."""
-    from track3d.tracker import front_quantile_for, sensor_options
+    from track3d.sensor_options import front_quantile_for, sensor_options
 
     img, depth, b2, b3 = render_sphere(CAM, (0.0, 0.0, 6.0), 2.0)
     noisy = np.where(depth > 0, depth + np.random.default_rng(5).normal(0.0, 0.03, depth.shape), 0.0)
@@ -960,7 +960,7 @@ def test_the_front_filter_follows_the_front_face_by_hand(frames, tmp_path):
     kept, a checkpoint continues the filter, init() starts it over, and the option is checked,
     recorded and chosen by the sensor."""
     from track3d.evaluation import TrackerSpec
-    from track3d.tracker import front_filter_for, sensor_options
+    from track3d.sensor_options import front_filter_for, sensor_options
 
     gt2d = np.array([f[2] for f in frames])
     img, pts = frames[1][0], frames[1][1]

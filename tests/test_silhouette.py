@@ -151,7 +151,8 @@ def test_the_loop_reports_the_outline_not_the_trackers_half():
 def test_the_silhouette_option_is_checked_recorded_and_by_sensor(tmp_path):
     from track3d.estimators import create_estimator
     from track3d.evaluation import TrackerSpec
-    from track3d.tracker import SILHOUETTE, Track3D, sensor_options, silhouette_for
+    from track3d.tracker import Track3D
+    from track3d.sensor_options import SILHOUETTE, sensor_options, silhouette_for
     from track3d.trackers2d import create_tracker
 
     assert (silhouette_for("ideal") == silhouette_for("flash-lidar") == silhouette_for("ToF") == silhouette_for(None)
@@ -202,7 +203,8 @@ def test_the_outline_share_pulls_only_the_2d_fusions_box():
 def test_the_outline_share_option_is_checked_recorded_and_by_sensor(tmp_path):
     from track3d.estimators import create_estimator
     from track3d.evaluation import TrackerSpec
-    from track3d.tracker import Track3D, outline_share_for, sensor_options
+    from track3d.tracker import Track3D
+    from track3d.sensor_options import outline_share_for, sensor_options
     from track3d.trackers2d import create_tracker
 
     assert outline_share_for("stereo") == 0.3 and sensor_options("stereo")["outline_share"] == 0.3
@@ -247,7 +249,8 @@ def test_outline_contain_moves_a_drifted_box_and_its_frustum():
     (a README stereo test sequence: EdgeTrack 9-18 px below a fully lit body's top). With
     outline_contain the frustum, the 3D box and the fusion start from the box moved onto it."""
     from track3d.estimators import create_estimator
-    from track3d.tracker import CONTAIN_SLACK_PX, Track3D
+    from track3d.tracker import Track3D
+    from track3d.sensor_options import CONTAIN_SLACK_PX
 
     Low = _answering([30.0, 55.0, 80.0, 30.0])    # the body's size, 15 px low
     mask = np.zeros((120, 160), bool)
@@ -314,7 +317,8 @@ def test_outline_contain_finds_a_body_the_tracker_left():
     the body went out of view and came back), the loop goes on from the body the whole view's
     depth shows; a blob of fewer than FIND_MIN_RETURNS returns is noise, not a body."""
     from track3d.estimators import create_estimator
-    from track3d.tracker import FIND_MIN_RETURNS, Track3D
+    from track3d.tracker import Track3D
+    from track3d.sensor_options import FIND_MIN_RETURNS
 
     OnSky = _answering([120.0, 5.0, 30.0, 20.0])   # far from any return
     mask = np.zeros((120, 160), bool)
@@ -343,7 +347,8 @@ def test_outline_contain_finds_a_body_the_tracker_left():
 def test_the_outline_contain_option_is_checked_recorded_and_by_sensor(tmp_path):
     from track3d.estimators import create_estimator
     from track3d.evaluation import TrackerSpec
-    from track3d.tracker import Track3D, outline_contain_for, sensor_options
+    from track3d.tracker import Track3D
+    from track3d.sensor_options import outline_contain_for, sensor_options
     from track3d.trackers2d import create_tracker
 
     assert outline_contain_for("stereo") is True and sensor_options("stereo")["outline_contain"] is True
@@ -574,7 +579,8 @@ def test_a_sparse_cloud_moves_no_2d_box(tmp_path):
     before. The option is checked, recorded, and by sensor."""
     from track3d.estimators import create_estimator
     from track3d.evaluation import TrackerSpec
-    from track3d.tracker import Track3D, fusion_cover_for, sensor_options
+    from track3d.tracker import Track3D
+    from track3d.sensor_options import fusion_cover_for, sensor_options
 
     box = [20.0, 20.0, 120.0, 80.0]                # the body's box: 9,600 px
     sliver = np.zeros((120, 160), bool)

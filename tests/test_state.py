@@ -424,7 +424,8 @@ def test_a_lost_tracker_goes_on_from_the_outline_of_a_body_in_view():
     option off (its default; on for the range sensors)."""
     from track3d.estimators import create_estimator
     from track3d.boxes import iou_2d
-    from track3d.tracker import RESUME_SHARE, resume_outline_for, sensor_options
+    from track3d.tracker import RESUME_SHARE
+    from track3d.sensor_options import resume_outline_for, sensor_options
 
     class Judge(_SelfJudging):
         corrected = None

@@ -78,7 +78,8 @@ def test_the_loop_pulls_a_stereo_box_off_a_moon_and_records_the_option(tmp_path)
     keeps the moon. On for stereo by the sensor table, recorded when on, checked."""
     from track3d.estimators import create_estimator
     from track3d.evaluation import TrackerSpec
-    from track3d.tracker import Track3D, sensor_options, texture_trim_for
+    from track3d.tracker import Track3D
+    from track3d.sensor_options import sensor_options, texture_trim_for
     from test_silhouette import _losing
 
     body = np.zeros((120, 160), bool)

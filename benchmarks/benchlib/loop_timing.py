@@ -18,7 +18,8 @@ from track3d.dataset import Dataset
 from track3d.machine import affinity_of_all_threads
 from track3d.onnxmodel import run_ms_of
 from track3d.stereo import StereoCloud
-from track3d.tracker import Track3D, sensor_options
+from track3d.tracker import Track3D
+from track3d.sensor_options import sensor_options
 
 __all__ = ["STAGES", "load_frames", "build", "time_loop"]
 

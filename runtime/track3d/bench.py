@@ -22,7 +22,6 @@ from __future__ import annotations
 import gc
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
@@ -212,7 +211,8 @@ class _NetTimer:
 
 
 def _build(cfg: BenchConfig, camera: Camera, threads: int):
-    from .tracker import Track3D, sensor_options
+    from .tracker import Track3D
+    from .sensor_options import sensor_options
 
     topt: dict = dict(cfg.extra.get("tracker_options", {}))
     eopt: dict = dict(cfg.extra.get("estimator_options", {}))

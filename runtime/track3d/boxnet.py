@@ -72,7 +72,7 @@ def model_for_sensor(depth_sensor: str | None) -> Path:
 # "the hidden depth of crescents"). With the sun's direction known (Track3D.set_sun) and the phase
 # at the 2D box past BACKLIT_PHASE_DEG, the estimator runs the sensor's back-lit model instead:
 # the sensor's model fine-tuned on bodies lit from behind only (recipe a3boxnet-stereo-backlit).
-# 100 rather than the outline share's 90 (tracker.SENSOR_OUTLINE_SHARE_PHASES): a body just past
+# 100 rather than the outline share's 90 (sensor_options.SENSOR_OUTLINE_SHARE_PHASES): a body just past
 # 90 degrees is still half lit, and there the sensor's own model did as well (chosen on the
 # stereo calibration sets, docs/models.md); a body lit from the front never meets the model.
 BACKLIT_MODELS = {"stereo": "a3boxnet_stereo_backlit.onnx"}

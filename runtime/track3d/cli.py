@@ -138,10 +138,10 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--weight-3d", type=bounded(float, 0, high=1), default=None,
                    help="fusion weight of the projected 3D box (default: by the depth sensor: 0 for ideal and "
                         "flash-LiDAR depth, whose outline sets the 2D box, 0.15 for ToF and stereo, the paper's 0.3 "
-                        "for an unknown sensor; track3d.tracker.fusion_weight_for)")
+                        "for an unknown sensor; track3d.sensor_options.fusion_weight_for)")
     t.add_argument("--weight-2d", type=bounded(float, 0, high=1), default=None,
                    help="weight of the 2D box in the 3D box's cross-section (the reverse fusion; default: by the "
-                        "depth sensor, 0, 0.75 for stereo; track3d.tracker.section_weight_for)")
+                        "depth sensor, 0, 0.75 for stereo; track3d.sensor_options.section_weight_for)")
     t.add_argument("--section-limbs", type=_section_limbs, default=None, metavar="PX,SHARE,Q|off",
                    help="in that cross-section, put each side of the 2D box at its limb's depth: the Q quantile of "
                         "the depth of the returns within max(PX pixels, SHARE of the box) of the side (off: every "
@@ -149,7 +149,7 @@ def _parser() -> argparse.ArgumentParser:
                         "section_limbs_for: stereo 4,0.05,0.9, others off)")
     t.add_argument("--no-measured-faces", action="store_true",
                    help="report the estimator's box as it is (default: the faces the depth sensor sees, x / y extent "
-                        "and front, from the returns, except for stereo depth; track3d.tracker.measured_faces_for)")
+                        "and front, from the returns, except for stereo depth; track3d.sensor_options.measured_faces_for)")
     t.add_argument("--depth-smoothing", type=bounded(float, 0, high=0.99), default=None,
                    help="weight of the running average in the box's depth extent, front face kept (0: each "
                         "frame's estimate; default track3d.tracker.DEPTH_SMOOTHING, 0.5)")
@@ -169,56 +169,56 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--edge-pad", type=bounded(float, 0, high=10), default=None, metavar="PX",
                    help="pixels added to the returns' extent across the line of sight (half on each side: the "
                         "outline lies beyond the outermost pixel centres; 0: off; default "
-                        "by the depth sensor, track3d.tracker.edge_pad_for: 1, ToF 3; with measured faces)")
+                        "by the depth sensor, track3d.sensor_options.edge_pad_for: 1, ToF 3; with measured faces)")
     t.add_argument("--front-quantile", type=bounded(float, 0, high=0.1), default=None, metavar="Q",
                    help="the quantile of the returns' depth taken as the body's front face (0: the nearest return; "
                         "a noisy sensor's nearest return lies in front of the surface; default by the depth "
-                        "sensor, track3d.tracker.front_quantile_for: 0, ToF 0.005)")
+                        "sensor, track3d.sensor_options.front_quantile_for: 0, ToF 0.005)")
     t.add_argument("--silhouette", type=bounded(float, 0, high=4), default=None, metavar="GROW",
                    help="start from the body's outline in the depth returns: the connected returns overlapping the "
                         "2D box, searched in the box grown by GROW of its size on each side (0: off; default by the "
-                        "depth sensor, track3d.tracker.silhouette_for: 0.5, stereo 0)")
+                        "depth sensor, track3d.sensor_options.silhouette_for: 0.5, stereo 0)")
     t.add_argument("--outline-share", type=bounded(float, 0, high=1), default=None, metavar="S",
                    help="with the outline off (--silhouette 0), its share in the box the 2D fusion starts from and "
                         "the 2D tracker is corrected with (0: none; default by the depth sensor, "
-                        "track3d.tracker.outline_share_for: stereo 0.3, others 0)")
+                        "track3d.sensor_options.outline_share_for: stereo 0.3, others 0)")
     t.add_argument("--outline-share-phase", type=bounded(float, 0, high=180), default=None, metavar="DEG",
                    help="with the sun's direction known (meta.json sun), the largest phase angle at the 2D box "
                         "(sun - body - camera, degrees) at which the outline keeps its --outline-share: past it the "
                         "lit part is a crescent, not the body's size (180: always; default by the depth sensor, "
-                        "track3d.tracker.outline_share_phase_for)")
+                        "track3d.sensor_options.outline_share_phase_for)")
     t.add_argument("--outline-contain", action=argparse.BooleanOptionalAction, default=None,
                    help="with the outline off (--silhouette 0), move the 2D tracker's box (its size kept) to hold "
                         "the outline before the frustum and the fusion, and with no returns near it go to the body "
                         "the whole view's depth shows (default by the depth sensor, "
-                        "track3d.tracker.outline_contain_for: on for stereo, off for the others)")
+                        "track3d.sensor_options.outline_contain_for: on for stereo, off for the others)")
     t.add_argument("--texture-trim", action=argparse.BooleanOptionalAction, default=None,
                    help="with the box moved to hold the outline (--outline-contain), pull its sides in off image "
                         "texture the depth did not match (stereo: a moon or a star field behind the body; default by "
-                        "the depth sensor, track3d.tracker.texture_trim_for: on for stereo, off for the others)")
+                        "the depth sensor, track3d.sensor_options.texture_trim_for: on for stereo, off for the others)")
     t.add_argument("--resume-outline", action=argparse.BooleanOptionalAction, default=None,
                    help="when a 2D tracker that judges its loss (EdgeTrack) calls a frame lost while the depth's "
                         "outline at its last box holds the body in view, go on from the outline (stereo: from the "
                         "last box moved onto the lit outline; default by the depth sensor, "
-                        "track3d.tracker.resume_outline_for: on for every sensor named, off for an unknown one)")
+                        "track3d.sensor_options.resume_outline_for: on for every sensor named, off for an unknown one)")
     t.add_argument("--front-filter", type=_front_filter, default=None, metavar="ALPHA,BETA|off",
                    help="follow the 3D box's front face over frames with an alpha-beta filter, e.g. 0.8,0.2 "
                         "(0 < ALPHA <= 1, 0 <= BETA <= 1; off: none; default by the depth sensor, "
-                        "track3d.tracker.front_filter_for: stereo 0.8,0.2, others off)")
+                        "track3d.sensor_options.front_filter_for: stereo 0.8,0.2, others off)")
     t.add_argument("--dark-side", type=bounded(float, 0, high=2), default=None, metavar="K",
                    help="with the outline off (--silhouette 0) and the sun's direction known (meta.json sun), the 2D "
                         "box reaches past the lit outline on the side away from the sun by K x a sphere's dark part "
-                        "(0: off, the default for every sensor, track3d.tracker.dark_side_for; 0.1 was measured for stereo, docs/runtime.md)")
+                        "(0: off, the default for every sensor, track3d.sensor_options.dark_side_for; 0.1 was measured for stereo, docs/runtime.md)")
     t.add_argument("--fusion-cover", type=bounded(float, 0, high=1), default=None, metavar="SHARE",
                    help="when fewer than SHARE of the 2D box's pixels hold a return (stereo: a body mostly in "
                         "shadow), neither the depth's outline nor the 3D box moves the 2D box (0: off; default by "
-                        "the depth sensor, track3d.tracker.fusion_cover_for)")
+                        "the depth sensor, track3d.sensor_options.fusion_cover_for)")
     t.add_argument("--no-sun", action="store_true",
                    help="ignore the sun's direction recorded with each sequence (meta.json sun.direction)")
     t.add_argument("--body-views", action=argparse.BooleanOptionalAction, default=None,
                    help="keep the body's past views in a body-fixed frame (registered from the depth alone) and "
                         "hold the 3D box's back face at least at the farthest point they saw (default by the depth "
-                        "sensor, track3d.tracker.body_views_for)")
+                        "sensor, track3d.sensor_options.body_views_for)")
     t.add_argument("--body-views-option", action="append", metavar="KEY=VALUE",
                    help="a setting of the body's past views (track3d.body_views.BodyViewsParams, e.g. every=5, "
                         "carve_views=0: no carving, cut_extent=0: a cut body keeps its last whole view's extent); "
@@ -226,7 +226,7 @@ def _parser() -> argparse.ArgumentParser:
                         "--name is given")
     t.add_argument("--frustum-margin", type=bounded(float, 0, high=1), default=None,
                    help="the frustum is cut with the 2D box widened by this fraction of its size (0: the box "
-                        "itself; default: by the depth sensor, 0.3, 0 for stereo; track3d.tracker.frustum_margin_for)")
+                        "itself; default: by the depth sensor, 0.3, 0 for stereo; track3d.sensor_options.frustum_margin_for)")
     t.add_argument("--no-depth-range", action="store_true",
                    help="ignore the depth sensor's maximum range recorded with each sequence (meta.json "
                         "depth_sensor.max_range_m); by default a body whose returns stop at that range is boxed from "
@@ -253,7 +253,7 @@ def _parser() -> argparse.ArgumentParser:
                         "unless --name is given")
     t.add_argument("--first-box-fade", type=bounded(float, above=0, high=10), default=None, metavar="CHANGE",
                    help="with --init-3d, the relative change of the lateral extents at which the first box's depth "
-                        "no longer counts (default by the depth sensor, track3d.tracker.first_box_fade_for: 0.5 for "
+                        "no longer counts (default by the depth sensor, track3d.sensor_options.first_box_fade_for: 0.5 for "
                         "stereo and ToF, 0.2 for the others)")
     t.add_argument("--depth", choices=("map", "stereo"), default="map",
                    help="point clouds from the dataset's depth maps (map, default) or computed from its "
@@ -363,7 +363,7 @@ def _cmd_track(a) -> int:
         topts = {**arith, **topts}
     if a.estimator == "a3boxnet":
         eopts = {**arith, **eopts}
-    from .tracker import sensor_options
+    from .sensor_options import sensor_options
 
     # stereo computed here from the image pairs: the stereo sensor's options; else the dataset's
     # sensor decides per sequence (None)

@@ -8,7 +8,7 @@
     out = track.update(left, points)               # Track3D computes only the tracked region
 
 Build that Track3D for stereo depth (``depth_sensor="stereo"``): the stereo sensor's loop options
-(``track3d.tracker.sensor_options("stereo")``; e.g. ``frustum_margin=0``: matched depth smears
+(``track3d.sensor_options.sensor_options("stereo")``; e.g. ``frustum_margin=0``: matched depth smears
 past the silhouette, so a frustum cut wider than the 2D box collects background points, AO_3d
 -0.024 with the default margin on held-out stereo sequences) and A3BoxNet's stereo model
 (``track3d.boxnet.SENSOR_MODELS``).

@@ -25,8 +25,8 @@ def _log(msg: str) -> None:
 
 
 def _sensor_list(text: str) -> tuple[str, ...]:
-    """--sensors A,B -> ("a", "b"): names of track3d.tracker.DEPTH_SENSORS."""
-    from track3d.tracker import DEPTH_SENSORS
+    """--sensors A,B -> ("a", "b"): names of track3d.sensor_options.DEPTH_SENSORS."""
+    from track3d.sensor_options import DEPTH_SENSORS
 
     names = tuple(dict.fromkeys(n.strip().lower() for n in text.split(",") if n.strip()))
     bad = [n for n in names if n not in DEPTH_SENSORS]

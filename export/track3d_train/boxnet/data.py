@@ -187,7 +187,8 @@ class _PastViews:
         from track3d.body_views import BodyViews
         from track3d.frustum import extract_frustum_bounds
         from track3d.range_cut import reaches_range
-        from track3d.tracker import cut_box, frustum_margin_for, front_quantile_for, measured_bounds
+        from track3d.tracker import cut_box, measured_bounds
+        from track3d.sensor_options import frustum_margin_for, front_quantile_for
 
         if self.seq != si:
             self.seq, self.views = si, BodyViews(self.camera)

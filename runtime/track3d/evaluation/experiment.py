@@ -40,7 +40,8 @@ from ..dataset import Dataset, DatasetError, Sequence
 from ..machine import cpu_name
 from ..progress import Progress
 from ..stereo import StereoCloud, StereoParams
-from ..tracker import LOST, STAGES, Track3D, sensor_options
+from ..tracker import LOST, STAGES, Track3D
+from ..sensor_options import sensor_options
 from .draw import OverlayWriter, draw_overlay
 from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, CI_LEVEL, CONDITIONS, INTERVAL_METRICS, IOU_THRESHOLDS, MOVED,
                       ConditionScore, LostScore, OverallScore, SequenceScore, average_scores, bootstrap_interval,
@@ -132,7 +133,7 @@ class TrackerSpec:
         return t
 
     def sensor_options(self, depth_sensor: str | None) -> dict:
-        """The sensor's defaults (track3d.tracker.sensor_options) with this spec's explicit values."""
+        """The sensor's defaults (track3d.sensor_options.sensor_options) with this spec's explicit values."""
         opts = sensor_options(depth_sensor)
         opts.update({k: getattr(self, k) for k in opts if getattr(self, k) is not None})
         for key in ("front_filter", "section_limbs"):
