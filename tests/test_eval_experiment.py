@@ -9,7 +9,7 @@ import pytest
 
 from track3d.boxes import iou_3d
 from track3d.dataset import DatasetError
-from track3d.estimators import BaselineEstimator
+from track3d.estimators import BaselineEstimator, create_estimator
 from track3d.evaluation import Experiment, TrackerSpec
 from track3d.evaluation.metrics import LostScore
 from track3d.evaluation.results import read_result
@@ -94,6 +94,39 @@ def test_restart_protocol_counts_and_reinitialises(synth, tmp_path):
     s = exp.score("wrong")[0]
     assert s.frames == 4 and s.restarts == 1            # frames 1, 2, 3, 5
     assert s.sr50_3d <= 0.75
+
+
+class _Oracle2DWrongAt(OracleTracker):
+    """The oracle, except a 2D box far off the target on chosen frames (0-based)."""
+
+    def __init__(self, gt, absent, bad_frames):
+        super().__init__(gt, absent)
+        self.bad = set(bad_frames)
+
+    def update(self, image):
+        ok, b = super().update(image)
+        if self.frame in self.bad:
+            b = b + np.array([300.0, 300.0, 0.0, 0.0])
+        return ok, b
+
+
+def test_a_2d_only_run_restarts_on_2d_overlap(synth, tmp_path):
+    # a 2D-only run has no 3D box: its restarts go by the 2D overlap (they went by a 3D IoU of
+    # nan, so the oracle itself was restarted every other frame and scored on half its frames)
+    exp = Experiment(synth, "test", tmp_path / "res", tmp_path / "rep", sequences=["s0002"])
+    exp.run(TrackerSpec("oracle", "none"), quiet=True)
+    r = read_result(exp.folder("oracle", "s0002"))
+    assert list(r.status) == ["init"] + ["tracking"] * 5
+    s = exp.score("oracle")[0]
+    assert s.restarts == 0 and s.frames == 5 and s.ao_2d == pytest.approx(1.0)
+
+    def factory(seq):
+        return Track3D(seq.camera, _Oracle2DWrongAt(seq.gt2d, seq.absent, {2}), create_estimator("none"))
+
+    exp.run(factory, "wrong2d", quiet=True)
+    r = read_result(exp.folder("wrong2d", "s0002"))
+    assert list(r.status) == ["init", "tracking", "tracking", "init", "tracking", "tracking"]
+    assert exp.score("wrong2d")[0].restarts == 1
 
 
 def test_restart_skip_leaves_frames_without_output(synth, tmp_path):

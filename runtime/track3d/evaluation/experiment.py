@@ -34,7 +34,7 @@ from typing import Callable
 import numpy as np
 
 from ..body_views import BodyViewsParams
-from ..boxes import iou_3d
+from ..boxes import iou_2d, iou_3d
 from ..jsonable import write_json
 from ..dataset import Dataset, DatasetError, Sequence
 from ..machine import cpu_name
@@ -280,7 +280,10 @@ def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, ma
             box2d[i], raw[i], box3d[i], status[i] = out.box2d, out.box2d_raw, out.box3d, out.status
             seconds[i], e2e[i] = out.ms["total"] / 1e3, t2 - t0
             stage_ms[i] = [out.ms[k] for k in STAGES]
-            if restart and not seq.absent[i] and iou_3d(out.box3d, seq.gt3d[i]) <= 0.0:
+            # a 2D-only run has no 3D box: its overlap is the 2D one (a 3D IoU of nan had
+            # restarted every other frame)
+            overlap = iou_3d(out.box3d, seq.gt3d[i]) if needs_points else iou_2d(out.box2d, seq.gt2d[i])
+            if restart and not seq.absent[i] and overlap <= 0.0:
                 pending = i + restart_skip
         if overlay is not None:
             overlay.add(draw_overlay(image, seq.camera, box2d[i], raw[i], box3d[i], seq.gt2d[i], seq.gt3d[i],
