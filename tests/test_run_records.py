@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -218,8 +219,36 @@ def test_eval_says_which_sequences_it_left_out(synth, tmp_path, capsys):
     assert _track(synth, res, "--tracker", "oracle", "--sequence", "a") == 0
     capsys.readouterr()
     assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--no-plots"]) == 0
-    assert "scored 1 of the split's 2 sequences" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "scored 1 of the split's 2 sequences" in err and "missing: oracle+baseline/b" in err
     assert any("scored 1 of" in w for w in json.loads((rep / "report.json").read_text())["warnings"])
+
+
+def test_eval_names_a_sequence_whose_status_file_is_missing(synth, tmp_path, capsys):
+    # the status file is written last and marks a finished sequence: without it (a run killed on
+    # that sequence, or a damaged folder) eval scores the others and names the folder
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert _track(synth, res, "--tracker", "oracle") == 0
+    (res / "test" / "oracle+baseline" / "b" / "b_status.txt").unlink()
+    capsys.readouterr()
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--no-plots"]) == 0
+    assert "missing: oracle+baseline/b (no b_status.txt: unfinished or damaged)" in capsys.readouterr().err
+
+
+def test_the_status_file_is_written_last(tmp_path, monkeypatch):
+    from track3d.evaluation import results as R
+
+    order = []
+    real_save = R._save
+    monkeypatch.setattr(R, "_save", lambda path, *a, **k: order.append(Path(path).name) or real_save(path, *a, **k))
+    real_write = Path.write_text
+    monkeypatch.setattr(Path, "write_text", lambda self, *a, **k: order.append(self.name) or real_write(self, *a, **k))
+    n = 3
+    R.write_result(tmp_path / "s", R.SequenceResult("s", np.zeros((n, 4)), np.zeros((n, 4)), np.zeros((n, 6)),
+                                                     np.array(["init", "tracking", "lost"], dtype=object),
+                                                     np.zeros(n), np.zeros(n), np.zeros((n, 5))))
+    assert order[-1] == "s_status.txt" and len(order) == 7
+    assert len(R.read_result(tmp_path / "s")) == n
 
 
 @pytest.mark.parametrize("what", ["out_is_a_file", "results_is_the_split"])

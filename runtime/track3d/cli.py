@@ -498,8 +498,18 @@ def _cmd_eval(a) -> int:
             raise FileNotFoundError(f"no sequence of {a.data}/{a.split} has results of {', '.join(names)} "
                                     f"in {a.results}")
         if len(have) < len(exp.sequences):
+            # name what is missing: a sequence folder without its status file (written last) is a
+            # run killed on it, or a damaged one
+            gaps = []
+            for n in names:
+                for s in exp.sequences:
+                    if not done(n, s):
+                        folder = result_folder(a.results, a.split, n, s.name)
+                        gaps.append(f"{n}/{s.name}" + (f" (no {s.name}_status.txt: unfinished or damaged)"
+                                                        if folder.is_dir() else ""))
+            shown = "; ".join(gaps[:4]) + (f"; and {len(gaps) - 4} more" if len(gaps) > 4 else "")
             notes.append(f"scored {len(have)} of the split's {len(exp.sequences)} sequences (those every "
-                         f"compared run has; --sequence to choose)")
+                         f"compared run has; --sequence to choose); missing: {shown}")
         exp.sequences = have
     if a.baseline is not None and a.baseline not in names:
         raise ValueError(f"--baseline {a.baseline} is not one of the compared runs: {', '.join(names)}")

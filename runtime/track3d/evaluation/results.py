@@ -9,6 +9,7 @@ One folder per tracker and sequence: ``<result_dir>/<split>/<tracker>/<sequence>
     <seq>_time.txt      tracker seconds per frame (I/O excluded; init frames: the init call)
     <seq>_e2e_time.txt  seconds per frame end to end (reading image + depth, back-projection, tracker)
     <seq>_stages.txt    per-stage milliseconds, a commented header names the columns
+    (the status file is written last: a sequence without it is unfinished)
 
 One file per tracker folder, ``<result_dir>/<split>/<tracker>/run.json``, records the run
 that made the results (:func:`write_run_record`): tracker and estimator names and options,
@@ -86,10 +87,12 @@ def write_result(folder: str | Path, r: SequenceResult) -> None:
     _save(folder / f"{n}_001.txt", r.box2d, "%.4f")
     _save(folder / f"{n}_raw_001.txt", r.box2d_raw, "%.4f")
     _save(folder / f"{n}_3d_001.txt", r.box3d, "%.6f")
-    (folder / f"{n}_status.txt").write_text("".join(f"{s}\n" for s in r.status))
     _save(folder / f"{n}_time.txt", r.seconds.reshape(-1, 1), "%.8f")
     _save(folder / f"{n}_e2e_time.txt", r.e2e_seconds.reshape(-1, 1), "%.8f")
-    _save(folder / f"{n}_stages.txt", r.stage_ms, "%.4f", header=",".join(STAGES))
+    _save(folder / f"{n}_stages.txt", r.stage_ms, "%.4f", header=",".join(STAGES) + " (ms)")
+    # last: the status file says the sequence is finished (`track3d eval` scores the sequences
+    # every run has one of; a run killed while writing leaves the sequence unfinished, not torn)
+    (folder / f"{n}_status.txt").write_text("".join(f"{s}\n" for s in r.status))
 
 
 def _load(path: Path, cols: int) -> np.ndarray:
