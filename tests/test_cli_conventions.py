@@ -113,6 +113,32 @@ OLD_SPELLINGS = {"--ckpt": "--checkpoint", "--steps": "--max-steps", "--no-progr
 
 
 @pytest.mark.parametrize("name,parser", _all_parsers())
+def test_every_name_a_help_text_points_to_exists(name, parser):
+    # help that says where a default lives ("track3d.sensor_options.section_limbs_for") must name
+    # something that is there: the option tables moved out of track3d.tracker and one help text
+    # still named the old place
+    import importlib
+    import re
+
+    for prog, a in _visible_flags(parser):
+        text = a.help or ""
+        for m in re.finditer(r"\btrack3d(?:\.[A-Za-z_][A-Za-z_0-9]*)+", text):
+            ref = m.group(0)
+            if "group" in text[max(0, m.start() - 30):m.start()]:
+                continue   # an entry-point group's name ("the groups track3d.trackers / ..."), not a module
+            parts = ref.split(".")
+            for cut in range(len(parts), 0, -1):   # the longest importable module, then attributes
+                try:
+                    obj = importlib.import_module(".".join(parts[:cut]))
+                    break
+                except ImportError:
+                    continue
+            for attr in parts[cut:]:
+                assert hasattr(obj, attr), f"{prog} {a.option_strings[0]}: {ref} does not exist"
+                obj = getattr(obj, attr)
+
+
+@pytest.mark.parametrize("name,parser", _all_parsers())
 def test_no_command_shows_an_old_flag_spelling(name, parser):
     shown = [(prog, o) for prog, a in _visible_flags(parser) for o in a.option_strings if o in OLD_SPELLINGS]
     assert not shown, f"{name}: {shown} (show {[OLD_SPELLINGS[o] for _, o in shown]}; keep the old as hidden_alias)"
@@ -297,6 +323,24 @@ def test_folder_kinds_are_named(tmp_path, capsys):
     (got / "list.txt").write_text("GOT-10k_Val_000001\n")
     assert main(["track", "--data", str(got)]) == 2
     _one_line(capsys, "GOT-10k")
+
+
+@pytest.mark.parametrize("argv,needles", [
+    # a number the estimator checks itself: named, never blamed on the shipped model
+    (["--estimator", "a3boxnet", "--estimator-option", "num_points=abc"], ["num_points must be an integer"]),
+    (["--estimator", "a3boxnet", "--estimator-option", "threads=abc"], ["threads must be an integer"]),
+    (["--estimator", "a3boxnet", "--estimator-option", "num_points=0"], ["num_points must be an integer >= 1"]),
+    # a value refused in words that do not name it: the options given are named
+    (["--tracker", "siamfc-edge", "--tracker-option", "window_influence=abc"],
+     ["could not convert", "(given: --tracker-option window_influence=abc)"]),
+])
+def test_a_bad_option_value_is_named(tmp_path, capsys, argv, needles):
+    from track3d.synthetic import make_synthetic_dataset
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 3})
+    assert main(["track", "--data", str(root), "--results", str(tmp_path / "r"), "--quiet", *argv]) == 2
+    line = _one_line(capsys, *needles)
+    assert "metadata is incomplete" not in line
 
 
 def test_gif_without_pillow_says_so(tmp_path, capsys, monkeypatch):

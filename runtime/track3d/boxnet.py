@@ -216,6 +216,12 @@ class A3BoxNetEstimator:
                  backlit_model: str | Path | None = None, backlit_phase: float = BACKLIT_PHASE_DEG,
                  past_views: bool = True):
         self.backlit_phase = _check_phase(backlit_phase, "backlit_phase must be degrees in 0..180")
+        # the caller's numbers first: a bad one must not read as a damaged model (it had been
+        # "A3BoxNet metadata is incomplete" for num_points=abc)
+        for key, value, low in (("num_points", num_points, 1), ("threads", threads, 1), ("seed", seed, 0)):
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer))
+                                      or value < low):
+                raise ValueError(f"{key} must be an integer >= {low}, got {value!r}")
         explicit = model is not None
         if views is None:
             views = views_for(depth_sensor)

@@ -145,7 +145,7 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--section-limbs", type=_section_limbs, default=None, metavar="PX,SHARE,Q|off",
                    help="in that cross-section, put each side of the 2D box at its limb's depth: the Q quantile of "
                         "the depth of the returns within max(PX pixels, SHARE of the box) of the side (off: every "
-                        "side at the box's centre depth; default by the depth sensor, track3d.tracker."
+                        "side at the box's centre depth; default by the depth sensor, track3d.sensor_options."
                         "section_limbs_for: stereo 4,0.05,0.9, others off)")
     t.add_argument("--no-measured-faces", action="store_true",
                    help="report the estimator's box as it is (default: the faces the depth sensor sees, x / y extent "
@@ -438,6 +438,14 @@ def _cmd_track(a) -> int:
         spec.build(exp.sequences[0])
     except TypeError as e:  # an option the tracker or estimator does not take
         raise ValueError(f"bad --tracker-option / --estimator-option for {a.tracker} / {a.estimator}: {e}") from None
+    except ValueError as e:
+        # a value the tracker or estimator refused in words that do not name it ("could not
+        # convert string to float: 'abc'"): say which options were given
+        given = [(f"--tracker-option {k}={v}", k) for k, v in topts.items()] + \
+                [(f"--estimator-option {k}={v}", k) for k, v in eopts.items()]
+        if given and not any(k in str(e) for _, k in given):
+            raise ValueError(f"{e} (given: {', '.join(g for g, _ in given)})") from None
+        raise
     folders = exp.run(spec, overlay=video,
                       overlay_sequences=a.video_sequences, quiet=a.quiet, replace=a.replace)
     root = Path(a.results) / a.split / spec.label
