@@ -235,6 +235,21 @@ def test_eval_names_a_sequence_whose_status_file_is_missing(synth, tmp_path, cap
     assert "missing: oracle+baseline/b (no b_status.txt: unfinished or damaged)" in capsys.readouterr().err
 
 
+def test_eval_says_when_a_run_has_no_frame_to_score(synth, tmp_path, capsys):
+    # one frame a sequence is its initialisation: nothing is scored, and the table's dashes
+    # had come with no word of why
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert _track(synth, res, "--tracker", "oracle", "--frames", "1") == 0
+    capsys.readouterr()
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--no-plots"]) == 0
+    assert "oracle+baseline: no frame to score" in capsys.readouterr().err
+    assert _track(synth, res, "--tracker", "oracle", "--frames", "2", "--name", "two") == 0
+    capsys.readouterr()
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--no-plots",
+                 "--trackers", "two"]) == 0
+    assert "no frame to score" not in capsys.readouterr().err
+
+
 def test_the_status_file_is_written_last(tmp_path, monkeypatch):
     from track3d.evaluation import results as R
 

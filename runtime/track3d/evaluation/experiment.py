@@ -606,7 +606,11 @@ class Experiment:
         report["paired"] = {"baseline": base, "level": CI_LEVEL, "margin": MOVED,
                             "trackers": {n: {k: compare_paired(k, values[base][k], values[n][k]).summary()
                                              for k in INTERVAL_METRICS} for n in names if n != base}}
-        report["warnings"] = label_warnings + _comparison_warnings(names, runs, lengths)
+        # a run with nothing scored reads as a row of dashes: say why
+        empty = [f"{n}: no frame to score (a scored frame is a present target's after the initialisation, "
+                 f"and every result frame here is an initialisation or an absent target's)"
+                 for n in names if overall[n].frames == 0]
+        report["warnings"] = label_warnings + _comparison_warnings(names, runs, lengths) + empty
         known = [(r["restart"], r["restart_skip"]) for r in runs.values() if r]
         if known and len(set(known)) == 1 and len(known) == len(names):
             report["restart"], report["restart_skip"] = known[0]
