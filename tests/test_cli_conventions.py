@@ -343,6 +343,26 @@ def test_a_bad_option_value_is_named(tmp_path, capsys, argv, needles):
     assert "metadata is incomplete" not in line
 
 
+def test_what_is_not_a_dataset_is_named(tmp_path, capsys):
+    # each had said "dataset.json is missing (generate one with ...)", which for a file or a
+    # folder of other things is a command that fails, and for a killed generate the wrong advice
+    from track3d.dataset import GENERATE_RUN_FILE
+
+    (tmp_path / "afile.txt").write_text("x")
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "other" / "test").mkdir(parents=True)
+    (tmp_path / "unfinished").mkdir()
+    (tmp_path / "unfinished" / GENERATE_RUN_FILE).write_text("{}")
+    for name, needles in [("afile.txt", ["is a file, not a folder"]),
+                          ("empty", ["the folder is empty", "track3d-sim generate --out"]),
+                          ("other", ["holds other things"]),
+                          ("unfinished", ["did not finish", "run the same command again"])]:
+        assert main(["track", "--data", str(tmp_path / name)]) == 2
+        line = _one_line(capsys, *needles)
+        if name in ("afile.txt", "other", "unfinished"):
+            assert "generate one with" not in line
+
+
 def test_gif_without_pillow_says_so(tmp_path, capsys, monkeypatch):
     import importlib.util
 

@@ -52,7 +52,7 @@ def test_depth_png_is_millimetres(tmp_path):
 
 
 def test_clear_errors(tmp_path):
-    with pytest.raises(D.DatasetError, match="dataset.json is missing"):
+    with pytest.raises(D.DatasetError, match="the folder is empty"):
         D.Dataset(tmp_path)
     _write_fake(tmp_path)
     ds = D.Dataset(tmp_path)

@@ -24,7 +24,7 @@ import numpy as np
 from .camera import Camera
 
 __all__ = [
-    "FORMAT", "FORMAT_VERSION", "DATASET_JSON", "LEFT_DIR", "RIGHT_DIR", "DEPTH_DIR", "GT2D", "GT3D",
+    "FORMAT", "FORMAT_VERSION", "DATASET_JSON", "GENERATE_RUN_FILE", "LEFT_DIR", "RIGHT_DIR", "DEPTH_DIR", "GT2D", "GT3D",
     "ABSENCE", "CUT", "META", "frame_name", "write_meta", "write_depth_png", "read_depth_png", "read_rgb", "write_rgb",
     "write_labels", "write_dataset_json", "COARSE_CATEGORIES",
     "DatasetError", "Dataset", "Sequence", "Frame",
@@ -33,6 +33,8 @@ __all__ = [
 FORMAT = "track3d-dataset"
 FORMAT_VERSION = 1
 DATASET_JSON = "dataset.json"
+# the simulator's settings of a `generate` run, written before anything else (dataset.json last)
+GENERATE_RUN_FILE = ".track3d-sim-run.json"
 LEFT_DIR, RIGHT_DIR, DEPTH_DIR = "left", "right", "depth"
 GT2D, GT3D = "groundtruth_2d.txt", "groundtruth_3d.txt"
 ABSENCE, CUT, META = "absence.label", "cut_by_image.label", "meta.json"
@@ -319,6 +321,12 @@ def _not_a_root(root: Path) -> str:
     if not root.exists():
         return (f"no dataset at {root}: the folder does not exist "
                 f"(generate one with `track3d-sim generate --out {root}`)")
+    if not root.is_dir():
+        return f"no dataset at {root}: it is a file, not a folder (pass the folder holding {DATASET_JSON})"
+    if (root / GENERATE_RUN_FILE).is_file():
+        # the simulator writes its settings first and dataset.json last
+        return (f"no dataset at {root} yet: a `track3d-sim generate` into it did not finish "
+                f"(run the same command again: it goes on where it stopped)")
     if (root / GT2D).is_file() or (root / LEFT_DIR).is_dir():
         up = root.parent.parent
         return (f"{root} is a sequence folder, not a dataset root: pass the folder holding {DATASET_JSON}"
@@ -335,8 +343,15 @@ def _not_a_root(root: Path) -> str:
                 f"a track3d dataset with depth and 3D labels ({DATASET_JSON}; see docs/simulator.md)")
     if any((d / GT2D).is_file() for d in subs[:50]):
         return f"{root} holds sequence folders but no {DATASET_JSON}: it is a split folder, pass the dataset root"
-    return (f"no dataset at {root}: {DATASET_JSON} is missing "
-            f"(generate one with `track3d-sim generate --out {root}`)")
+    try:
+        empty = not any(root.iterdir())
+    except OSError:
+        empty = False
+    if empty:
+        return (f"no dataset at {root}: the folder is empty "
+                f"(generate one with `track3d-sim generate --out {root}`)")
+    return (f"no dataset at {root}: {DATASET_JSON} is missing, and the folder holds other things "
+            f"(a dataset root holds {DATASET_JSON} and its split folders: docs/dataset.md)")
 
 
 class Dataset:

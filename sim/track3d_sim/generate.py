@@ -23,6 +23,8 @@ import time
 from collections import Counter
 from pathlib import Path
 
+from track3d.dataset import GENERATE_RUN_FILE
+
 from . import __version__
 from .errors import SimError
 from .generators import GENERATORS
@@ -33,7 +35,7 @@ from .sensors import DEPTH_SENSORS, SENSORS_NEEDING_IMAGES
 from .shapes import FAMILIES, load_user_mesh
 from .textures import TEXTURES
 
-RUN_FILE = ".track3d-sim-run.json"
+RUN_FILE = GENERATE_RUN_FILE   # stated once, beside the layout it belongs to (track3d.dataset)
 
 PRESETS = {
     "tiny": {"width": 160, "height": 120, "fov_x_deg": 45.0, "train": 4, "test": 2, "test_unseen": 0, "frames": 8,
