@@ -266,15 +266,26 @@ def test_the_status_file_is_written_last(tmp_path, monkeypatch):
     assert len(R.read_result(tmp_path / "s")) == n
 
 
-@pytest.mark.parametrize("what", ["out_is_a_file", "results_is_the_split"])
+@pytest.mark.parametrize("what", ["out_is_a_file", "results_is_the_split", "results_is_a_run",
+                                  "results_is_a_file", "results_do_not_exist", "unknown_split"])
 def test_eval_folder_mistakes_are_one_line(synth, tmp_path, capsys, what):
     res, rep = tmp_path / "res", tmp_path / "rep"
     assert _track(synth, res, "--tracker", "oracle") == 0
     if what == "out_is_a_file":
         rep.write_text("mine")
         argv, expect = ["--results", str(res), "--out", str(rep)], "is a file, not a folder"
-    else:
+    elif what == "results_is_the_split":
         argv, expect = ["--results", str(res / "test"), "--out", str(rep)], "--results is the folder"
+    elif what == "results_is_a_run":
+        argv, expect = (["--results", str(res / "test" / "oracle+baseline"), "--out", str(rep)],
+                        "--trackers oracle+baseline to compare that run alone")
+    elif what == "results_is_a_file":
+        (tmp_path / "f.txt").write_text("x")
+        argv, expect = ["--results", str(tmp_path / "f.txt"), "--out", str(rep)], "is a file, not a folder"
+    elif what == "results_do_not_exist":
+        argv, expect = ["--results", str(tmp_path / "nope"), "--out", str(rep)], "the folder does not exist"
+    else:   # the split is wrong, not the results
+        argv, expect = ["--results", str(res), "--split", "bogus", "--out", str(rep)], "split 'bogus' not in"
     capsys.readouterr()
     assert main(["eval", "--data", str(synth), "--no-plots", *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -478,6 +478,14 @@ def _cmd_eval(a) -> int:
     split_dir = Path(a.results) / a.split
     if Path(a.out).exists() and not Path(a.out).is_dir():
         raise ValueError(f"--out {a.out} is a file, not a folder")
+    results = Path(a.results)
+    if results.exists() and not results.is_dir():
+        raise ValueError(f"--results {results} is a file, not a folder (the folder `track3d track --results` wrote)")
+    if not results.exists():
+        raise FileNotFoundError(f"--results {results}: the folder does not exist (run `track3d track --results "
+                                f"{results}` first)")
+    # the dataset and its split first: a wrong --split is the split's fault, not the results'
+    exp = Experiment(a.data, a.split, a.results, a.out, sequences=_unique(a.sequences), max_frames=a.frames)
     if a.trackers:
         names = _unique(a.trackers)
     elif split_dir.is_dir():
@@ -486,10 +494,12 @@ def _cmd_eval(a) -> int:
         names = []
     if not names:
         hint = ""
-        if Path(a.results).name == a.split:
-            hint = f" (--results is the folder `track3d track --results` wrote: {Path(a.results).parent})"
+        if results.name == a.split:
+            hint = f" (--results is the folder `track3d track --results` wrote: {results.parent})"
+        elif results.parent.name == a.split:
+            hint = (f" (--results is the folder `track3d track --results` wrote, {results.parent.parent}; "
+                    f"--trackers {results.name} to compare that run alone)")
         raise FileNotFoundError(f"no results in {split_dir}{hint or ' (run `track3d track` first)'}")
-    exp = Experiment(a.data, a.split, a.results, a.out, sequences=_unique(a.sequences), max_frames=a.frames)
     notes = []
     if not a.sequences:
         # Default: the sequences every named tracker has results for.
