@@ -67,7 +67,7 @@ def test_track_then_eval(synth, tmp_path, capsys):
     (["track", "--data", "{synth}", "--body-views-option", "every=0"], "BodyViewsParams.every"),
     (["track", "--data", "{synth}", "--body-views-option", "cut_extent=1.5"], "BodyViewsParams.cut_extent"),
     (["track", "--data", "{synth}", "--no-body-views", "--body-views-option", "every=5"], "drop --no-body-views"),
-    (["eval", "--data", "{synth}", "--results", "{missing}"], "no results"),
+    (["eval", "--data", "{synth}", "--results", "{missing}"], "the folder does not exist"),
 ])
 def test_clear_errors(synth, tmp_path, capsys, argv, message):
     argv = [a.format(synth=synth, missing=tmp_path / "missing") for a in argv]
