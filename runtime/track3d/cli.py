@@ -233,8 +233,11 @@ def _parser() -> argparse.ArgumentParser:
                         "the image and its front face (track3d.range_cut)")
     t.add_argument("--threads", type=bounded(int, 1), default=1, help="CPU threads of the ONNX models (default 1)")
     t.add_argument("--precision", choices=("fp32", "int8", "bf16", "auto"), default=None,
-                   help="arithmetic of the networks (EdgeTrack, SiamFC, A3BoxNet); auto: the fastest this CPU allows, "
-                        "measured once and cached (default fp32)")
+                   help="arithmetic of the networks (EdgeTrack, SiamFC, A3BoxNet); int8: every network the run "
+                        "uses needs its int8 file beside it (shipped: a3boxnet_int8.onnx only, for "
+                        "--estimator-option model=a3boxnet.onnx; make others with `track3d-train quantize`); "
+                        "bf16: with --engine openvino; auto: the fastest this CPU allows, measured once and "
+                        "cached (default fp32)")
     t.add_argument("--engine", choices=("onnxruntime", "openvino", "auto"), default=None,
                    help="inference engine of the networks; openvino needs track3d[openvino] (default onnxruntime)")
     t.add_argument("--results", default="results", help="result folder (default ./results)")
