@@ -220,7 +220,8 @@ def sequence_plot(scores: dict[str, list], out_dir: str | Path) -> Path:
     ax.invert_yaxis()
     ax.set(xlim=(0, 1), xlabel=f"AO_{key[3:]} per sequence", title="Sequences, worst first")
     ax.grid(axis="x", alpha=0.3)
-    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.08 - 0.4 / max(rows, 4)), ncol=2)
+    # beside the bars, not under them: below the axes it covered the x label on short plots
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
     return _save(fig, Path(out_dir) / "sequences.png")
 
 
