@@ -63,6 +63,14 @@ def draw_overlay(image: np.ndarray, camera: Camera, box2d: np.ndarray | None = N
         _rect(img, box2d, FUSED, 2)
     if text:
         cv2.putText(img, text, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+    # the colour key, of the boxes drawn: an overlay is often looked at far from these docs
+    key = [(name, colour) for name, colour, box in (("truth", GT, gt2d if gt2d is not None else gt3d),
+                                                     ("2D tracker", RAW, box2d_raw), ("reported", FUSED, box2d),
+                                                     ("3D box", BOX3D, box3d)) if box is not None]
+    x, y = 6, img.shape[0] - 8
+    for name, colour in key:
+        cv2.putText(img, name, (x, y), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour, 1, cv2.LINE_AA)
+        x += cv2.getTextSize(name, cv2.FONT_HERSHEY_SIMPLEX, 0.45, 1)[0][0] + 12
     return img
 
 
