@@ -343,6 +343,18 @@ def test_a_bad_option_value_is_named(tmp_path, capsys, argv, needles):
     assert "metadata is incomplete" not in line
 
 
+def test_an_unknown_flag_points_to_its_sub_commands_help(capsys):
+    # argparse reports it from the top parser: `track3d track --trakcer kcf` had pointed to
+    # `track3d --help`, which does not list track's flags
+    for argv, needles in [(["track", "--data", "x", "--trakcer", "kcf"],
+                           ["unrecognized arguments: --trakcer kcf", "(see track3d track --help)"]),
+                          (["trackers", "--bogus"], ["(see track3d trackers --help)"])]:
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        assert e.value.code == 2
+        _one_line(capsys, *needles)
+
+
 def test_what_is_not_a_dataset_is_named(tmp_path, capsys):
     # each had said "dataset.json is missing (generate one with ...)", which for a file or a
     # folder of other things is a command that fails, and for a killed generate the wrong advice

@@ -45,6 +45,25 @@ class ArgumentParser(argparse.ArgumentParser):
     def error(self, message: str):  # argparse's hook; must not return
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
+    def parse_args(self, args=None, namespace=None):
+        # an unknown flag is the sub-command's mistake: argparse reports it from the top parser,
+        # whose --help does not list the sub-command's flags (`track3d track --trakcer` pointed
+        # to `track3d --help`)
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            self._chosen(ns).error(f"unrecognized arguments: {' '.join(extras)}")
+        return ns
+
+    def _chosen(self, ns) -> argparse.ArgumentParser:
+        """The deepest sub-command parser `ns` went through (self without sub-commands)."""
+        parser = self
+        while True:
+            sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+            name = None if sub is None or sub.dest == argparse.SUPPRESS else getattr(ns, sub.dest, None)
+            if name not in getattr(sub, "choices", {}):
+                return parser
+            parser = sub.choices[name]
+
 
 def bounded(kind: type = int, low: float | None = None, above: float | None = None,
             high: float | None = None) -> Callable[[str], float]:
