@@ -132,8 +132,12 @@ def _parser() -> argparse.ArgumentParser:
                    help="2D tracker name (see `track3d trackers`; default edgetrack, Track3D's default)")
     t.add_argument("--estimator", default="a3boxnet",
                    help="3D box estimator name (see `track3d trackers`; default a3boxnet)")
-    t.add_argument("--tracker-option", action="append", metavar="KEY=VALUE", help="option of the 2D tracker")
-    t.add_argument("--estimator-option", action="append", metavar="KEY=VALUE", help="option of the estimator")
+    t.add_argument("--tracker-option", action="append", metavar="KEY=VALUE",
+                   help="an option of the 2D tracker, repeatable (e.g. model=<dir>/<name>, threads=2; a key the "
+                        "tracker does not take is answered with the keys it takes)")
+    t.add_argument("--estimator-option", action="append", metavar="KEY=VALUE",
+                   help="an option of the 3D box estimator, repeatable (e.g. model=a3boxnet_narrow.onnx, views=4; "
+                        "a key the estimator does not take is answered with the keys it takes)")
     t.add_argument("--no-fusion", action="store_true", help="report the 2D tracker's box, no 2D-3D fusion")
     t.add_argument("--weight-3d", type=bounded(float, 0, high=1), default=None,
                    help="fusion weight of the projected 3D box (default: by the depth sensor: 0 for ideal and "
@@ -186,7 +190,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="with the sun's direction known (meta.json sun), the largest phase angle at the 2D box "
                         "(sun - body - camera, degrees) at which the outline keeps its --outline-share: past it the "
                         "lit part is a crescent, not the body's size (180: always; default by the depth sensor, "
-                        "track3d.sensor_options.outline_share_phase_for)")
+                        "track3d.sensor_options.outline_share_phase_for: stereo 90, others 180)")
     t.add_argument("--outline-contain", action=argparse.BooleanOptionalAction, default=None,
                    help="with the outline off (--silhouette 0), move the 2D tracker's box (its size kept) to hold "
                         "the outline before the frustum and the fusion, and with no returns near it go to the body "
@@ -212,13 +216,13 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--fusion-cover", type=bounded(float, 0, high=1), default=None, metavar="SHARE",
                    help="when fewer than SHARE of the 2D box's pixels hold a return (stereo: a body mostly in "
                         "shadow), neither the depth's outline nor the 3D box moves the 2D box (0: off; default by "
-                        "the depth sensor, track3d.sensor_options.fusion_cover_for)")
+                        "the depth sensor, track3d.sensor_options.fusion_cover_for: 0 for every sensor)")
     t.add_argument("--no-sun", action="store_true",
                    help="ignore the sun's direction recorded with each sequence (meta.json sun.direction)")
     t.add_argument("--body-views", action=argparse.BooleanOptionalAction, default=None,
                    help="keep the body's past views in a body-fixed frame (registered from the depth alone) and "
                         "hold the 3D box's back face at least at the farthest point they saw (default by the depth "
-                        "sensor, track3d.sensor_options.body_views_for)")
+                        "sensor, track3d.sensor_options.body_views_for: on, off for stereo)")
     t.add_argument("--body-views-option", action="append", metavar="KEY=VALUE",
                    help="a setting of the body's past views (track3d.body_views.BodyViewsParams, e.g. every=5, "
                         "carve_views=0: no carving, cut_extent=0: a cut body keeps its last whole view's extent); "
