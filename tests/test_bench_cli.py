@@ -215,3 +215,14 @@ def test_bench_reads_the_models_counters_and_wraps_nothing(monkeypatch):
     assert all(m.run_ms > 0 and m.first_feeds for m in models)
     row = rep["results"][0]["models"]
     assert row["a3boxnet"]["inputs"] == {k: list(v.shape) for k, v in built[0].estimator.model.first_feeds.items()}
+
+
+def test_an_unknown_name_is_refused_before_any_frame_is_made(capsys, monkeypatch):
+    # it had been refused only after "synthesising 60 frames"
+    made = []
+    monkeypatch.setattr(bench, "synthetic_frames", lambda *a, **k: made.append(1) or [])
+    for flag in ("--tracker", "--estimator"):
+        assert main(["bench", flag, "nosuch", "--frames", "2", "--threads", "1"]) == 2
+        err = capsys.readouterr().err
+        assert "unknown" in err and "'nosuch'" in err
+    assert not made

@@ -348,6 +348,14 @@ def _cmd_bench(a) -> int:
     for p in (a.tracker_model and Path(a.tracker_model).parent, a.boxnet_model):
         if p and not Path(p).exists():
             raise FileNotFoundError(f"no such model path: {p}")
+    from .estimators import available_estimators, create_estimator
+    from .trackers2d import available_trackers, create_tracker
+
+    # an unknown name before the frames are made (the registries' own messages)
+    if str(a.tracker).lower() not in available_trackers():
+        create_tracker(a.tracker)
+    if str(a.estimator).lower() not in available_estimators():
+        create_estimator(a.estimator)
     if a.out and Path(a.out).is_dir():  # before the timing, not after minutes of it
         raise ValueError(f"--out {a.out} is a folder: give the JSON file to write")
     report = run_bench(cfg, log=None if a.quiet else (lambda s: print(f"[bench] {s}", file=sys.stderr)))
