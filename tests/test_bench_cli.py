@@ -226,3 +226,21 @@ def test_an_unknown_name_is_refused_before_any_frame_is_made(capsys, monkeypatch
         err = capsys.readouterr().err
         assert "unknown" in err and "'nosuch'" in err
     assert not made
+
+
+def test_the_table_says_what_it_measured(tmp_path, capsys):
+    from track3d.synthetic import make_synthetic_dataset
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 5})
+    assert main(["bench", "--tracker", "kcf", "--estimator", "baseline", "--data", str(root), "--frames", "4",
+                 "--threads", "1", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "split test, its first sequence" in out and "FPS = 1000 / the median end-to-end ms" in out
+    rep = {"mode": "loop", "machine": {"cpu": "c", "arch": "x", "logical_cpus": 2, "isa": [], "versions": {}},
+           "source": {"kind": "synthetic"}, "track3d": {}, "warnings": [],
+           "load": {"busy_before": 0, "busy_after": 0, "loadavg_before": [0], "loadavg_after": [0]},
+           "results": [{"threads": 1, "cpus": [0], "fps": 1.0, "frames": 1,
+                        "stages": {k: {"median_ms": 1.0, "p99_ms": 1.0, "p99_9_ms": 1.0, "max_ms": 1.0}
+                                   for k in ("track2d", "net2d", "box3d", "net3d", "end_to_end")}}]}
+    text = bench.format_table(rep)
+    assert "  net2d (in track2d)" in text and "  net3d (in box3d)" in text   # parts, not addends

@@ -416,7 +416,7 @@ def _f(v) -> str:
 
 def _matching_lines(m: dict) -> list[str]:
     v, p = m["ms"], m["price"]
-    lines = [f"{'stereo matching':18s} {_f(v['median_ms']):>8s} {_f(v['p99_ms']):>8s} {_f(v['p99_9_ms']):>8s} "
+    lines = [f"{'stereo matching':20s} {_f(v['median_ms']):>8s} {_f(v['p99_ms']):>8s} {_f(v['p99_9_ms']):>8s} "
              f"{_f(v['max_ms']):>8s}  (in frustum; cost median {cell(m['cost_median'], '{:,.0f}')}, max "
              f"{cell(m['cost_max'], '{:,.0f}')}; {m['dropped']} update(s) without a cloud)"]
     if p["ns_per_unit"] is None:
@@ -429,6 +429,9 @@ def _matching_lines(m: dict) -> list[str]:
     return lines
 
 
+_PART_OF = {"net2d": "track2d", "net3d": "box3d"}   # stages timed inside another
+
+
 def format_table(report: dict) -> str:
     """The report as a text table (one block per thread count), machine line first."""
     m = report["machine"]
@@ -436,6 +439,9 @@ def format_table(report: dict) -> str:
              "versions: " + ", ".join(f"{k} {v}" for k, v in m["versions"].items() if v),
              f"frames: {report['source']['kind']}"
              + (f" {report['source'].get('data')}" if report["source"].get("data") else "")
+             + (f", split {report['source']['split']}" if report["source"].get("split") else "")
+             + (f", sequences {' '.join(report['source']['sequences'])}" if report["source"].get("sequences")
+                else (", its first sequence" if report["source"].get("data") else ""))
              + (f"; depth: {report['source']['depth']}" if report["source"].get("depth") else "")]
     d = report.get("track3d") or {}
     models = ", ".join(f"{x['file']} ({x['sha256'][:12]})" for x in d.get("models", []))
@@ -450,9 +456,11 @@ def format_table(report: dict) -> str:
                              f"{_f(v['max_ms']):>8s} {v['runs_per_s']:8.1f}")
             continue
         lines.append(f"threads={r['threads']} (CPUs {r['cpus']}): {r['fps']:.1f} FPS over {r['frames']} frames")
-        lines.append(f"{'stage (ms)':18s} {'median':>8s} {'p99':>8s} {'p99.9':>8s} {'max':>8s}")
+        lines.append(f"{'stage (ms)':20s} {'median':>8s} {'p99':>8s} {'p99.9':>8s} {'max':>8s}")
         for k, v in r["stages"].items():
-            lines.append(f"{k:18s} {_f(v['median_ms']):>8s} {_f(v['p99_ms']):>8s} {_f(v['p99_9_ms']):>8s} "
+            # the networks' own time is part of the stage above it, not added to the sum
+            name = f"  {k} (in {_PART_OF[k]})" if k in _PART_OF else k
+            lines.append(f"{name:20s} {_f(v['median_ms']):>8s} {_f(v['p99_ms']):>8s} {_f(v['p99_9_ms']):>8s} "
                          f"{_f(v['max_ms']):>8s}")
         if r.get("matching"):
             lines.extend(_matching_lines(r["matching"]))
@@ -460,6 +468,8 @@ def format_table(report: dict) -> str:
     lines.append("")
     lines.append(f"load: other processes {_pct(ld['busy_before'])} before, {_pct(ld['busy_after'])} after; "
                  f"loadavg {ld['loadavg_before']} -> {ld['loadavg_after']}")
+    if report["mode"] != "models-only":
+        lines.append("FPS = 1000 / the median end-to-end ms; I/O excluded; each thread count pinned to that many CPUs")
     for w in report["warnings"]:
         lines.append(f"WARNING: {w}")
     return "\n".join(lines)
