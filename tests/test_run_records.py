@@ -81,6 +81,9 @@ def test_same_name_other_configuration_is_refused(synth, tmp_path, capsys):
     assert _track(synth, res, "--tracker", "kcf", "--name", "mine") == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "another configuration" in err[0]
+    assert "tracker: 'oracle' -> 'kcf'" in err[0]              # what differs, named
+    assert _track(synth, res, "--tracker", "oracle", "--name", "mine", "--no-restart") == 2
+    assert "(restart: True -> False)" in capsys.readouterr().err
     assert _track(synth, res, "--tracker", "kcf", "--name", "mine", "--replace") == 0
     assert read_run_record(res, "test", "mine")["track3d"]["tracker"] == "kcf"
     # the same configuration again (another subset of sequences) just adds to the record

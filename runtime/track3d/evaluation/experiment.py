@@ -46,7 +46,7 @@ from .draw import OverlayWriter, draw_overlay
 from .metrics import (CE2D_THRESHOLDS, CE3D_THRESHOLDS, CI_LEVEL, CONDITIONS, INTERVAL_METRICS, IOU_THRESHOLDS, MOVED,
                       ConditionScore, LostScore, OverallScore, SequenceScore, average_scores, bootstrap_interval,
                       compare_paired, frame_conditions, latency_ms, score_conditions, score_lost, score_sequence)
-from .results import (INIT, SKIPPED, SequenceResult, read_result, read_run_record, result_folder, run_config_key,
+from .results import (INIT, SKIPPED, SequenceResult, config_differences, read_result, read_run_record, result_folder, run_config_key,
                       write_result, write_run_record)
 
 __all__ = ["TrackerSpec", "Experiment", "run_sequence", "evaluate_2d", "cpu_name", "DEPTH_SOURCES", "labels_digest"]
@@ -380,9 +380,9 @@ class Experiment:
         record = self._run_record(factory, spec)
         old = read_run_record(self.result_dir, self.split, name)
         if old is not None and not replace and run_config_key(old) != run_config_key(record):
+            what = "; ".join(config_differences(run_config_key(old), run_config_key(record)))
             raise ValueError(f"{self.result_dir / self.split / name} holds results of another configuration "
-                             "(tracker, options, models or restart settings differ): pick another --name "
-                             "or pass --replace")
+                             f"({what}): pick another --name or pass --replace")
         todo = [seq for seq in self.sequences
                 if overwrite or not (self.folder(name, seq.name) / f"{seq.name}_status.txt").is_file()]
         if old is not None and not replace:

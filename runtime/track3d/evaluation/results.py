@@ -30,7 +30,7 @@ import numpy as np
 
 from ..tracker import STAGES, STATUSES
 
-__all__ = ["SequenceResult", "INIT", "SKIPPED", "RUN_FILE", "write_result", "read_result", "result_folder",
+__all__ = ["SequenceResult", "INIT", "SKIPPED", "RUN_FILE", "config_differences", "write_result", "read_result", "result_folder",
            "write_run_record", "read_run_record", "run_config_key"]
 
 RUN_FILE = "run.json"
@@ -174,6 +174,24 @@ def run_config_key(rec: dict) -> dict:
             # only when on: the keys of runs without it stay as they were
             **({"init_3d": True, "first_box_fade": rec.get("first_box_fade")} if rec.get("init_3d") else {}),
             **({"stereo": rec["stereo"]} if rec.get("stereo") is not None else {})}
+
+
+def config_differences(old: dict, new: dict, most: int = 4) -> list[str]:
+    """What differs between two run_config_key dicts, as "key: old -> new" lines (a dict's own
+    keys named key.sub; the models as "models: other files"), at most `most` of them."""
+    out = []
+    for k in sorted(set(old) | set(new)):
+        a, b = old.get(k), new.get(k)
+        if a == b:
+            continue
+        if k == "models":
+            out.append("models: other files")
+        elif isinstance(a, dict) and isinstance(b, dict):
+            out += [f"{k}.{j}: {a.get(j)!r:.40} -> {b.get(j)!r:.40}" for j in sorted(set(a) | set(b))
+                    if a.get(j) != b.get(j)]
+        else:
+            out.append(f"{k}: {a!r:.40} -> {b!r:.40}")
+    return out[:most] + ([f"and {len(out) - most} more"] if len(out) > most else [])
 
 
 def write_run_record(result_dir: str | Path, split: str, tracker: str, rec: dict) -> Path:
