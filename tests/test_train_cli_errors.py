@@ -57,6 +57,21 @@ def test_boxnet_eval_and_train_name_a_file_that_is_not_a_frustum_cache(tmp_path,
     _one_line(capsys, f"{bad} is not a frustum cache made by `track3d-train boxnet prepare`", KINDS[kind])
     assert train_main(["boxnet", "train", "--cache", str(bad), "--out", str(tmp_path / "run"), "--quiet"]) == 2
     _one_line(capsys, f"{bad} is not a frustum cache made by `track3d-train boxnet prepare`", KINDS[kind])
+    assert not (tmp_path / "run").exists()   # no empty run folder left behind
+
+
+def test_boxnet_prepare_of_an_empty_split_says_so(tmp_path, capsys):
+    # it had said "no frustum with >= 16 points" (after an empty progress bar and an --out folder)
+    from track3d.synthetic import make_synthetic_dataset
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 3})
+    d = json.loads((root / "dataset.json").read_text())
+    d["splits"]["train"] = []
+    (root / "dataset.json").write_text(json.dumps(d))
+    assert train_main(["boxnet", "prepare", "--data", str(root), "--split", "train", "--out", str(tmp_path / "c"),
+                       "--quiet"]) == 2
+    _one_line(capsys, "split 'train' of", "has no sequences")
+    assert not (tmp_path / "c").exists()
 
 
 def test_a_frustum_cache_from_prepare_reads_and_a_damaged_one_is_named(tmp_path, capsys):

@@ -104,6 +104,8 @@ def prepare_split(root: str | Path, split: str, out: str | Path, jitters: int = 
 
     ds = Dataset(root)
     seqs = ds.sequences(split)
+    if not seqs:   # before the output folder is made, and not as "no frustum with >= 16 points"
+        raise ValueError(f"split {split!r} of {root} has no sequences")
     wanted = None if sensors is None else {str(x).strip().lower() for x in sensors}
     if wanted is not None:
         seqs = [q for q in seqs if str(q.depth_sensor or "").lower() in wanted]

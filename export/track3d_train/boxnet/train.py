@@ -228,8 +228,8 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
         raise ValueError("iou_weight needs a box coding whose labels decode as its outputs do: not 'paper'")
     torch.set_num_threads(int(cfg.threads))
     out = Path(cfg.out)
+    cache = PointCache.concat(cfg.train_cache)   # first: a wrong cache leaves no empty run folder behind
     out.mkdir(parents=True, exist_ok=True)
-    cache = PointCache.concat(cfg.train_cache)
     tr_cache, va_cache = _split_val(cache, cfg.val_every, cfg.seed)
     train_ds = BoxNetSamples(tr_cache, cfg.num_points, cfg.num_categories, cfg.size_norm, cfg.seed, cfg.flip,
                              cfg.cat_dropout if cfg.use_category else 0.0, cfg.flip_y, cfg.scale_aug,
