@@ -112,6 +112,13 @@ OLD_SPELLINGS = {"--ckpt": "--checkpoint", "--steps": "--max-steps", "--no-progr
                  "--max-minutes": "--time-budget-min", "--stride": "--frame-step", "--max-seqs": "--max-sequences"}
 
 
+@pytest.mark.parametrize("name,parser", _parsers())
+def test_every_sub_command_says_what_it_does_in_its_own_help(name, parser):
+    for p in _walk(parser):
+        if p is not parser:
+            assert p.description, f"{p.prog} --help has no description"
+
+
 @pytest.mark.parametrize("name,parser", _all_parsers())
 def test_every_name_a_help_text_points_to_exists(name, parser):
     # help that says where a default lives ("track3d.sensor_options.section_limbs_for") must name

@@ -99,11 +99,16 @@ def package_version() -> str:
 
 
 def apply_formatter(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Give `parser` and all its sub-command parsers the HelpFormatter."""
+    """Give `parser` and all its sub-command parsers the HelpFormatter, and each sub-command
+    without a description its one-line help as one (argparse shows that help only in the
+    parent's list, so `track3d-sim stats --help` had not said what stats does)."""
     parser.formatter_class = HelpFormatter
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
-            for sub in action.choices.values():
+            helps = {c.dest: c.help for c in action._choices_actions}
+            for name, sub in action.choices.items():
+                if not sub.description and helps.get(name):
+                    sub.description = helps[name]
                 apply_formatter(sub)
     return parser
 

@@ -310,7 +310,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="<dir>/<name> prefix of the tracker's ONNX pair (EdgeTrack: <name>_template.onnx / _search.onnx; SiamFC: _exemplar / _search) (default: shipped)")
     b.add_argument("--boxnet-model", metavar="ONNX", help="an A3BoxNet ONNX file (default: shipped)")
     b.add_argument("--frames", type=bounded(int, 1), default=1000, help="timed frames per thread count (after 20 warm-up)")
-    b.add_argument("--threads", type=bounded(int, 1), nargs="+", default=[1, 2], help="thread counts to time")
+    b.add_argument("--threads", type=bounded(int, 1), nargs="+", default=[1, 2], help="thread counts to time (default: 1 2)")
     b.add_argument("--data", help="time on this dataset's first sequences instead of synthetic frames")
     b.add_argument("--split", default="test", help="dataset split with --data")
     b.add_argument("--sequence", "--sequences", dest="sequences", nargs="+", metavar="NAME",

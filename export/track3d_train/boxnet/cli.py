@@ -130,7 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--scale-sigma", type=bounded(float, 0), default=0.1, help="log-scale std (shared by w and h)")
     q.add_argument("--aspect-sigma", type=bounded(float, 0), default=0.05, help="log-aspect std")
     q.add_argument("--fail-prob", type=bounded(float, 0, high=1), default=0.1, help="probability of a 3x larger error")
-    q.add_argument("--frame-step", type=bounded(int, 1), default=1, help="use every k-th frame")
+    q.add_argument("--frame-step", type=bounded(int, 1), default=1, metavar="K", help="use every k-th frame")
     q.add_argument("--stereo-match", type=bounded(int, 0), default=None, metavar="MAX_PX",
                    help="clouds matched from the stereo pair around each box as the loop's StereoCloud does "
                         "(`track3d track --depth stereo`), with --stereo-option max_match_px=MAX_PX (0: every row "
@@ -187,11 +187,12 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--val-every", type=bounded(int, 0), default=8, help="every k-th train sequence is validation (0: none)")
     t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
     t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
-    t.add_argument("--time-budget-min", dest="max_minutes", type=bounded(float, 0), default=0.0,
+    t.add_argument("--time-budget-min", dest="max_minutes", type=bounded(float, 0), default=0.0, metavar="MINUTES",
                    help="time budget in minutes (0: none): the cosine LR spans it and training stops when it "
                         "is spent (resume-aware)")
     hidden_alias(t, "--max-minutes", "max_minutes", type=bounded(float, 0))  # the name before --time-budget-min
-    t.add_argument("--max-steps", type=bounded(int, 0), default=0, help="stop after this many steps")
+    t.add_argument("--max-steps", type=bounded(int, 0), default=0, metavar="N",
+                   help="stop after this many steps (0: no cap, the epochs and the time budget decide)")
     t.add_argument("--no-resume", action="store_true", help="start over even if <out>/last.pt exists")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     hidden_alias(t, "--no-progress", "quiet", action="store_true")
@@ -202,7 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "onnxruntime on random inputs (fails beyond float32 noise).")
     e.add_argument("--checkpoint", dest="ckpt", help="A3BoxNet checkpoint (best.pt / last.pt); required")
     hidden_alias(e, "--ckpt", "ckpt")
-    e.add_argument("--out", default="runtime/track3d/models/a3boxnet.onnx", help="ONNX file to write")
+    e.add_argument("--out", default="a3boxnet.onnx",
+                   help="ONNX file to write (a shipped model in track3d/models only with --force)")
     e.add_argument("--force", action="store_true", help="overwrite a shipped model in track3d/models")
     e.add_argument("--no-parity", action="store_true", help="skip the torch / onnxruntime parity check")
     e.add_argument("--meta-json", default=None, help="also write the metadata to this JSON file")

@@ -246,7 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
     t = sub.add_parser("train", help="train (resumes from <out>/ckpt.pt)", formatter_class=d)
     t.add_argument("--cache", required=True, help="cache folder from `prepare`")
     t.add_argument("--out", required=True, help="run folder: ckpt.pt, log.jsonl, curves.json/png")
-    t.add_argument("--max-steps", dest="steps", type=bounded(int, 1), default=20000,
+    t.add_argument("--max-steps", dest="steps", type=bounded(int, 1), default=20000, metavar="N",
                    help="step cap; the cosine LR ends here or at the time budget, whichever comes first")
     hidden_alias(t, "--steps", "steps", type=bounded(int, 1))  # the name before --max-steps
     t.add_argument("--batch", type=bounded(int, 1), default=32, help="pairs per step")

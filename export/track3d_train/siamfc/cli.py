@@ -132,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--data", help="dataset root (dataset.json)")
     q.add_argument("--split", default="train", help="split name")
     q.add_argument("--out", required=True, help="cache folder")
-    q.add_argument("--frame-step", dest="stride", type=bounded(int, 1), default=1, help="use every k-th frame")
+    q.add_argument("--frame-step", dest="stride", type=bounded(int, 1), default=1, metavar="K", help="use every k-th frame")
     hidden_alias(q, "--stride", "stride", type=bounded(int, 1))  # the name before --frame-step
     q.add_argument("--max-frames", type=bounded(int, 1), default=2000, help="bound on cached crops (~195 kB each)")
     q.add_argument("--synthetic", type=bounded(int, 0), default=0, help="N synthetic sequences instead of a dataset")
@@ -151,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="search crop size in training (default: 239, SiamFC's 255 - 2 x 8)")
         t.add_argument("--cache", required=True, help="cache folder from `prepare`")
         t.add_argument("--out", required=True, help="run folder: ckpt.pt, log.jsonl, loss.png")
-        t.add_argument("--max-steps", dest="steps", type=bounded(int, 1), default=2000,
+        t.add_argument("--max-steps", dest="steps", type=bounded(int, 1), default=2000, metavar="N",
                        help="training steps (the LR schedule spans them)")
         hidden_alias(t, "--steps", "steps", type=bounded(int, 1))
         t.add_argument("--batch", type=bounded(int, 1), default=16, help="batch size (pairs)")
