@@ -231,11 +231,15 @@ def test_an_unknown_name_is_refused_before_any_frame_is_made(capsys, monkeypatch
 def test_the_table_says_what_it_measured(tmp_path, capsys):
     from track3d.synthetic import make_synthetic_dataset
 
-    root = make_synthetic_dataset(tmp_path / "ds", {"a": 5})
+    # the frames are taken from the first sequences until there are 100: the table names those
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 60, "b": 60, "c": 60})
     assert main(["bench", "--tracker", "kcf", "--estimator", "baseline", "--data", str(root), "--frames", "4",
                  "--threads", "1", "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "split test, its first sequence" in out and "FPS = 1000 / the median end-to-end ms" in out
+    assert "split test, sequences a b\n" in out and "FPS = 1000 / the median end-to-end ms" in out
+    assert main(["bench", "--tracker", "kcf", "--estimator", "baseline", "--data", str(root), "--frames", "4",
+                 "--threads", "1", "--quiet", "--sequence", "c", "b", "a"]) == 0
+    assert "sequences c b\n" in capsys.readouterr().out
     rep = {"mode": "loop", "machine": {"cpu": "c", "arch": "x", "logical_cpus": 2, "isa": [], "versions": {}},
            "source": {"kind": "synthetic"}, "track3d": {}, "warnings": [],
            "load": {"busy_before": 0, "busy_after": 0, "loadavg_before": [0], "loadavg_after": [0]},

@@ -340,6 +340,9 @@ def test_folder_kinds_are_named(tmp_path, capsys):
     # a value refused in words that do not name it: the options given are named
     (["--tracker", "siamfc-edge", "--tracker-option", "window_influence=abc"],
      ["could not convert", "(given: --tracker-option window_influence=abc)"]),
+    # only what the user typed: not the precision the command passes on to every network
+    (["--tracker", "siamfc-edge", "--precision", "fp32", "--tracker-option", "window_influence=abc"],
+     ["(given: --tracker-option window_influence=abc)"]),
 ])
 def test_a_bad_option_value_is_named(tmp_path, capsys, argv, needles):
     from track3d.synthetic import make_synthetic_dataset

@@ -22,4 +22,11 @@ def test_the_overlay_carries_a_key_of_the_boxes_drawn():
     only_truth = draw_overlay(blank, CAM, gt2d=box)[-20:]
     assert _has(only_truth, GT) and not _has(only_truth, FUSED) and not _has(only_truth, BOX3D)
     assert not draw_overlay(blank, CAM)[-20:].any()   # nothing drawn, no key
+    # the loop passes nan boxes where it has none (a 2D-only run's 3D box, a skipped frame's):
+    # not drawn, so not in the key
+    nan4, nan6 = np.full(4, np.nan), np.full(6, np.nan)
+    two_d = draw_overlay(blank, CAM, box, box + 3, nan6, box - 3, nan6)[-20:]
+    assert _has(two_d, FUSED) and not _has(two_d, BOX3D)
+    skipped = draw_overlay(blank, CAM, nan4, nan4, nan6, box, cube)[-20:]
+    assert _has(skipped, GT) and not _has(skipped, FUSED) and not _has(skipped, RAW)
     assert not blank.any()                            # the caller's image untouched

@@ -12,7 +12,7 @@ from track3d.dataset import DatasetError
 from track3d.estimators import BaselineEstimator, create_estimator
 from track3d.evaluation import Experiment, TrackerSpec
 from track3d.evaluation.metrics import LostScore
-from track3d.evaluation.results import read_result
+from track3d.evaluation.results import read_result, read_run_record, run_config_key
 from track3d.synthetic import make_synthetic_dataset
 from track3d.tracker import Track3D
 from track3d.trackers2d import OracleTracker
@@ -119,6 +119,11 @@ def test_a_2d_only_run_restarts_on_2d_overlap(synth, tmp_path):
     assert list(r.status) == ["init"] + ["tracking"] * 5
     s = exp.score("oracle")[0]
     assert s.restarts == 0 and s.frames == 5 and s.ao_2d == pytest.approx(1.0)
+    # the record says so: a run of the old rule (no such key) is another configuration
+    rec = read_run_record(tmp_path / "res", "test", "oracle")
+    assert rec["restart_overlap"] == "2d"
+    old = {k: v for k, v in rec.items() if k != "restart_overlap"}
+    assert run_config_key(old) != run_config_key(rec)
 
     def factory(seq):
         return Track3D(seq.camera, _Oracle2DWrongAt(seq.gt2d, seq.absent, {2}), create_estimator("none"))

@@ -267,6 +267,14 @@ def test_the_status_file_is_written_last(tmp_path, monkeypatch):
                                                      np.zeros(n), np.zeros(n), np.zeros((n, 5))))
     assert order[-1] == "s_status.txt" and len(order) == 7
     assert len(R.read_result(tmp_path / "s")) == n
+    # rewriting a finished sequence: its old status file goes first, so a write killed half way
+    # leaves the sequence unfinished, not the old status beside new boxes
+    monkeypatch.setattr(R, "_save", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt()))
+    with pytest.raises(KeyboardInterrupt):
+        R.write_result(tmp_path / "s", R.SequenceResult("s", np.ones((n, 4)), np.ones((n, 4)), np.ones((n, 6)),
+                                                         np.array(["init", "tracking", "lost"], dtype=object),
+                                                         np.zeros(n), np.zeros(n), np.zeros((n, 5))))
+    assert not (tmp_path / "s" / "s_status.txt").exists()
 
 
 @pytest.mark.parametrize("what", ["out_is_a_file", "results_is_the_split", "results_is_a_run",

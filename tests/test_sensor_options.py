@@ -53,3 +53,12 @@ def test_names_are_case_blind_and_checked():
         so.check_depth_sensor("sterio")
     with pytest.raises(ValueError):
         so.check_depth_sensor(3)
+
+
+def test_the_names_track3d_tracker_exported_still_import_from_it():
+    # they were in track3d.tracker.__all__ before the tables moved: a caller's import must not break
+    import track3d.tracker as T
+
+    for name in ("FRUSTUM_MARGIN", "frustum_margin_for", "fusion_weight_for", "section_weight_for",
+                 "section_limbs_for", "measured_faces_for", "sensor_options", "DEPTH_SENSORS", "check_depth_sensor"):
+        assert name in T.__all__ and getattr(T, name) is getattr(so, name), name

@@ -151,27 +151,29 @@ def synthetic_frames(camera: Camera, n: int = 60, seed: int = 0, stereo: bool = 
 
 def _dataset_frames(root: str, split: str, max_frames: int, names: tuple[str, ...] | None = None,
                     stereo: bool = False):
-    """(camera, category, frames) of the first sequences of a dataset split (or of `names`),
-    preloaded; stereo: the right image in place of the points."""
+    """(camera, passes, names): the frames of the first sequences of a dataset split (or of
+    `names`) until there are `max_frames`, preloaded, as (category, frames) per sequence, and the
+    names of the sequences taken; stereo: the right image in place of the points."""
     from .dataset import Dataset
 
     ds = Dataset(root)
     seqs = [ds.sequence(split, n) for n in dict.fromkeys(names)] if names else ds.sequences(split)
     if not seqs:
         raise ValueError(f"split {split!r} of {root} has no sequences")
-    passes = []
+    passes, used = [], []
     total = 0
     for seq in seqs:
         fr = [(seq.image(i), seq.right_image(i) if stereo else seq.points(i), seq.gt2d[i]) for i in range(len(seq))
               if not seq.absent[i] and np.all(np.isfinite(seq.gt2d[i])) and seq.gt2d[i][2] > 0]
         if len(fr) >= 2:
             passes.append((seq.category, fr))
+            used.append(seq.name)
             total += len(fr)
         if total >= max_frames:
             break
     if not passes:
         raise ValueError(f"no sequence of {root}/{split} has two frames with a visible target")
-    return ds.camera, passes
+    return ds.camera, passes, used
 
 
 # --- timing -----------------------------------------------------------------------------------
@@ -336,9 +338,10 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
     stereo = cfg.depth == "stereo"
     say = log or (lambda s: None)
     if cfg.data:
-        camera, passes = _dataset_frames(cfg.data, cfg.split, max(cfg.synthetic_frames, 100), cfg.sequences, stereo)
-        source = {"kind": "dataset", "data": str(cfg.data), "split": cfg.split,
-                  **({"sequences": list(cfg.sequences)} if cfg.sequences else {})}
+        camera, passes, used = _dataset_frames(cfg.data, cfg.split, max(cfg.synthetic_frames, 100), cfg.sequences,
+                                               stereo)
+        # the sequences timed: those loaded until there were enough frames, not those asked for
+        source = {"kind": "dataset", "data": str(cfg.data), "split": cfg.split, "sequences": used}
     else:
         camera = Camera.from_fov(640, 480, 45.0)
         say(f"synthesising {cfg.synthetic_frames} frames (640x480 sphere{', stereo pair' if stereo else ''}) ...")
@@ -440,8 +443,7 @@ def format_table(report: dict) -> str:
              f"frames: {report['source']['kind']}"
              + (f" {report['source'].get('data')}" if report["source"].get("data") else "")
              + (f", split {report['source']['split']}" if report["source"].get("split") else "")
-             + (f", sequences {' '.join(report['source']['sequences'])}" if report["source"].get("sequences")
-                else (", its first sequence" if report["source"].get("data") else ""))
+             + (f", sequences {' '.join(report['source']['sequences'])}" if report["source"].get("sequences") else "")
              + (f"; depth: {report['source']['depth']}" if report["source"].get("depth") else "")]
     d = report.get("track3d") or {}
     models = ", ".join(f"{x['file']} ({x['sha256'][:12]})" for x in d.get("models", []))

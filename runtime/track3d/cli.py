@@ -456,8 +456,9 @@ def _cmd_track(a) -> int:
     except ValueError as e:
         # a value the tracker or estimator refused in words that do not name it ("could not
         # convert string to float: 'abc'"): say which options were given
-        given = [(f"--tracker-option {k}={v}", k) for k, v in topts.items()] + \
-                [(f"--estimator-option {k}={v}", k) for k, v in eopts.items()]
+        # the user's own, not the options the command adds (precision, depth_sensor)
+        given = [(f"--tracker-option {p}", p.split("=", 1)[0]) for p in a.tracker_option or []] + \
+                [(f"--estimator-option {p}", p.split("=", 1)[0]) for p in a.estimator_option or []]
         if given and not any(k in str(e) for _, k in given):
             raise ValueError(f"{e} (given: {', '.join(g for g, _ in given)})") from None
         raise

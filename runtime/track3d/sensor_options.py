@@ -1,7 +1,8 @@
 """The loop's options chosen by the depth sensor, each with the measurement that chose it.
 
     opts = sensor_options("stereo")        # Track3D's keyword arguments for stereo depth
-    track = Track3D(camera, **opts)        # what Track3D.from_default(..., depth_sensor=...) does
+    track = Track3D.create(camera, tracker="kcf", estimator="baseline", **opts)
+    # Track3D.from_default(camera, depth_sensor="stereo") takes them by itself
 
 Each option is a default (``FRUSTUM_MARGIN``, ``SILHOUETTE``, ...), a table of the sensors that
 differ from it (``SENSOR_FRUSTUM_MARGINS``, ...; keys are the simulator's sensor names, lower

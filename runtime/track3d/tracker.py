@@ -58,6 +58,10 @@ from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
 from .sensor_options import (BODY_VIEWS, CONTAIN_SLACK_PX, DARK_SIDE, EDGE_PAD, FIND_MIN_RETURNS, FRONT_FILTER,
                              FRONT_QUANTILE, FRUSTUM_MARGIN, FUSION_COVER, OUTLINE_SHARE, OUTLINE_SHARE_PHASE,
                              SECTION_LIMBS, SILHOUETTE, check_depth_sensor, sensor_options)
+# the names this module exported before the tables moved to track3d.sensor_options: still
+# importable from here, for callers of earlier releases
+from .sensor_options import (DEPTH_SENSORS, frustum_margin_for, fusion_weight_for, measured_faces_for,
+                             section_limbs_for, section_weight_for)
 from .silhouette import contain, find_body, past_border, silhouette_box
 from .fusion import WEIGHT_2D, WEIGHT_3D, fuse, fuse_section, limb_depths
 from .range_cut import (CAP_FUSION_COVERAGE, DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_COVERAGE, box_at_range, box_from_view,
@@ -66,7 +70,10 @@ from .trackers2d import Tracker2D, create_tracker
 from .unmatched_texture import trim_unmatched
 
 __all__ = ["Track3D", "TrackResult", "cut_box", "measured_bounds", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES",
-           "MIN_POINTS"]
+           "MIN_POINTS",
+           # from track3d.sensor_options, as before it existed
+           "FRUSTUM_MARGIN", "frustum_margin_for", "fusion_weight_for", "section_weight_for", "section_limbs_for",
+           "measured_faces_for", "sensor_options", "DEPTH_SENSORS", "check_depth_sensor"]
 
 TRACKING, NO_POINTS, LOST = "tracking", "no_points", "lost"
 STATUSES = (TRACKING, NO_POINTS, LOST)

@@ -203,8 +203,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "onnxruntime on random inputs (fails beyond float32 noise).")
     e.add_argument("--checkpoint", dest="ckpt", help="A3BoxNet checkpoint (best.pt / last.pt); required")
     hidden_alias(e, "--ckpt", "ckpt")
-    e.add_argument("--out", default="a3boxnet.onnx",
-                   help="ONNX file to write (a shipped model in track3d/models only with --force)")
+    e.add_argument("--out", required=True,
+                   help="ONNX file to write (a shipped model in track3d/models only with --force; a file named "
+                        "like a shipped model in the folder a run starts from is taken instead of it)")
     e.add_argument("--force", action="store_true", help="overwrite a shipped model in track3d/models")
     e.add_argument("--no-parity", action="store_true", help="skip the torch / onnxruntime parity check")
     e.add_argument("--meta-json", default=None, help="also write the metadata to this JSON file")

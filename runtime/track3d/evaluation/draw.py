@@ -26,9 +26,17 @@ def box3d_corners(box3d: np.ndarray) -> np.ndarray:
     return b[:3] + (bits - 0.5) * b[3:]
 
 
+def _drawn(box) -> bool:
+    """Whether `_rect` (a (4,) box) or `_cube` (a (6,) box) draws `box`: finite, of positive size."""
+    if box is None:
+        return False
+    b = np.asarray(box, np.float64)
+    return b.shape in ((4,), (6,)) and bool(np.all(np.isfinite(b))) and bool(np.all(b[2 if len(b) == 4 else 3:] > 0))
+
+
 def _rect(img, box, color, thickness):
     b = np.asarray(box, np.float64)
-    if b.shape == (4,) and np.all(np.isfinite(b)) and b[2] > 0 and b[3] > 0:
+    if b.shape == (4,) and _drawn(b):
         p0 = (int(round(b[0])), int(round(b[1])))
         p1 = (int(round(b[0] + b[2])), int(round(b[1] + b[3])))
         cv2.rectangle(img, p0, p1, color, thickness, cv2.LINE_AA)
@@ -36,7 +44,7 @@ def _rect(img, box, color, thickness):
 
 def _cube(img, camera, box3d, color, thickness):
     b = np.asarray(box3d, np.float64)
-    if b.shape != (6,) or not np.all(np.isfinite(b)):
+    if b.shape != (6,) or not _drawn(b):
         return
     c = box3d_corners(b)
     uv = camera.project(c)
@@ -63,10 +71,11 @@ def draw_overlay(image: np.ndarray, camera: Camera, box2d: np.ndarray | None = N
         _rect(img, box2d, FUSED, 2)
     if text:
         cv2.putText(img, text, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
-    # the colour key, of the boxes drawn: an overlay is often looked at far from these docs
-    key = [(name, colour) for name, colour, box in (("truth", GT, gt2d if gt2d is not None else gt3d),
-                                                     ("2D tracker", RAW, box2d_raw), ("reported", FUSED, box2d),
-                                                     ("3D box", BOX3D, box3d)) if box is not None]
+    # the colour key, of the boxes drawn (a nan box, as a 2D-only run's 3D box, is not drawn):
+    # an overlay is often looked at far from these docs
+    key = [(name, colour) for name, colour, boxes in (("truth", GT, (gt2d, gt3d)), ("2D tracker", RAW, (box2d_raw,)),
+                                                       ("reported", FUSED, (box2d,)), ("3D box", BOX3D, (box3d,)))
+           if any(_drawn(b) for b in boxes)]
     x, y = 6, img.shape[0] - 8
     for name, colour in key:
         cv2.putText(img, name, (x, y), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour, 1, cv2.LINE_AA)

@@ -300,9 +300,10 @@ def _comparison_warnings(names: list[str], runs: dict, lengths: dict) -> list[st
     if len({tuple(sorted(v.items())) for v in lengths.values()}) > 1:
         desc = ", ".join(f"{n}: {sum(lengths[n].values())}" for n in names)
         out.append(f"the runs cover different frames ({desc} result frames): their scores are not comparable")
-    settings = {n: (r.get("restart"), r.get("restart_skip")) for n, r in runs.items() if r}
+    settings = {n: (r.get("restart"), r.get("restart_skip"), r.get("restart_overlap")) for n, r in runs.items() if r}
     if len(set(settings.values())) > 1:
-        desc = ", ".join(f"{n}: restart={v[0]} skip={v[1]}" for n, v in settings.items())
+        desc = ", ".join(f"{n}: restart={v[0]} skip={v[1]}" + (f" on the {v[2]} overlap" if v[2] else "")
+                         for n, v in settings.items())
         out.append(f"the runs used different restart settings ({desc})")
     starts = {n: bool(r.get("init_3d", False)) for n, r in runs.items() if r}
     if len(set(starts.values())) > 1:
@@ -475,6 +476,7 @@ class Experiment:
         track = factory(self.sequences[0])
         desc = track.describe() if hasattr(track, "describe") else {}
         fade = getattr(track, "first_box_fade", None)
+        two_d = not getattr(track, "needs_points", True)
         del track
         return {"track3d": desc, "threads": getattr(spec, "threads", None), "restart": self.restart,
                 "restart_skip": self.restart_skip, "max_frames": self.max_frames, "split": self.split,
@@ -484,6 +486,9 @@ class Experiment:
                 "frames": {},
                 # only when on: the records of runs without it stay as they were
                 **({"init_3d": True, "first_box_fade": fade} if self.init_3d else {}),
+                # a 2D-only run restarts on the 2D overlap (before, on a 3D IoU it did not have: every
+                # other frame); said, so that such a run is never mixed with one of the old rule
+                **({"restart_overlap": "2d"} if two_d and self.restart else {}),
                 # clouds matched from the pair: the matcher's settings decide them
                 **({"stereo": asdict(self.stereo_params or StereoParams())} if self.depth == "stereo" else {})}
 

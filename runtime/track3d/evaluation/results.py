@@ -84,6 +84,8 @@ def write_result(folder: str | Path, r: SequenceResult) -> None:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     n = r.name
+    # an earlier run's status file would vouch for the new files half written beside it
+    (folder / f"{n}_status.txt").unlink(missing_ok=True)
     _save(folder / f"{n}_001.txt", r.box2d, "%.4f")
     _save(folder / f"{n}_raw_001.txt", r.box2d_raw, "%.4f")
     _save(folder / f"{n}_3d_001.txt", r.box3d, "%.6f")
@@ -173,6 +175,7 @@ def run_config_key(rec: dict) -> dict:
             "restart": rec.get("restart"), "restart_skip": rec.get("restart_skip"),
             # only when on: the keys of runs without it stay as they were
             **({"init_3d": True, "first_box_fade": rec.get("first_box_fade")} if rec.get("init_3d") else {}),
+            **({"restart_overlap": rec["restart_overlap"]} if rec.get("restart_overlap") else {}),
             **({"stereo": rec["stereo"]} if rec.get("stereo") is not None else {})}
 
 
