@@ -38,6 +38,18 @@ def damaged(tiny_dataset, tmp_path):
     return seq
 
 
+def test_preview_says_what_it_drew(tiny_dataset, tmp_path, capsys):
+    # it printed nothing, and --frames past the sequence's length drew fewer without a word
+    seq = tiny_dataset / "test" / "0001"
+    total = len(list((seq / "left").glob("*.png")))
+    assert main(["preview", str(seq), "--out", str(tmp_path / "p.png"), "--frames", str(total + 40)]) == 0
+    out = capsys.readouterr().out
+    assert f"{total} of {total} frames (--frames {total + 40}, the sequence has {total})" in out
+    assert str(tmp_path / "p.png") in out
+    assert main(["preview", str(seq), "--out", str(tmp_path / "p2.png"), "--frames", "2"]) == 0
+    assert f"2 of {total} frames ->" in capsys.readouterr().out
+
+
 def test_stats_makes_the_folder_of_out(tiny_dataset, tmp_path):
     out = tmp_path / "new" / "sub" / "s.png"
     assert main(["stats", str(tiny_dataset), "--out", str(out)]) == 0

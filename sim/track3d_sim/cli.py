@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from pathlib import Path
 
 from track3d.argparsing import ArgumentParser, apply_formatter, exit_for_missing_extra, hidden_alias, package_version
 
@@ -201,8 +202,12 @@ def main(argv=None) -> int:
             from .stats import plot_stats
             plot_stats(args.root, args.out, args.split)
         elif args.cmd == "preview":
-            from .preview import preview
-            preview(args.sequence, args.out, n=args.frames, gain=args.gain, right=args.right)
+            from .preview import preview, shown_frames
+            out = preview(args.sequence, args.out, n=args.frames, gain=args.gain, right=args.right)
+            shown, total = shown_frames(args.sequence, args.out, args.frames)
+            more = f" (--frames {args.frames}, the sequence has {total})" if args.frames > total and \
+                Path(out).suffix.lower() != ".gif" else ""
+            print(f"track3d-sim preview: {shown} of {total} frames{more} -> {out}")
         elif args.cmd == "ply":
             from .preview import export_ply
             export_ply(args.sequence, args.frame, args.out)

@@ -83,6 +83,15 @@ def draw_frame(seq, i: int, gain: float = 1.0, right: bool = False):
     return im
 
 
+def shown_frames(sequence: str | Path, out: str | Path, n: int) -> tuple[int, int]:
+    """(frames shown, frames in the sequence) of `preview(sequence, out, n)`: a GIF shows every
+    frame, a sheet `n` spread over the sequence (at most all of them)."""
+    total = len(_open_sequence(Path(sequence)))
+    if Path(out).suffix.lower() == ".gif":
+        return total, total
+    return len(np.unique(np.linspace(0, total - 1, max(1, min(n, total))).round().astype(int))), total
+
+
 def preview(sequence: str | Path, out: str | Path, n: int = 12, gain: float = 1.0, right: bool = False) -> Path:
     from PIL import Image, ImageDraw
     out = check_out(out, "preview", (".png", ".jpg", ".jpeg", ".gif"))
@@ -99,7 +108,7 @@ def preview(sequence: str | Path, out: str | Path, n: int = 12, gain: float = 1.
         make_parent(out)
         frames[0].save(out, save_all=True, append_images=frames[1:], duration=100, loop=0)
         return out
-    idx = np.unique(np.linspace(0, N - 1, max(1, min(n, N))).round().astype(int))
+    idx = np.unique(np.linspace(0, N - 1, max(1, min(n, N))).round().astype(int))   # as shown_frames counts
     tiles = [draw_frame(seq, int(i), gain, right) for i in idx]
     cols = min(4 if not right else 2, len(tiles))
     rows = (len(tiles) + cols - 1) // cols
