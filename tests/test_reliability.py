@@ -362,3 +362,30 @@ def test_sim_demo_checks_names_before_simulating(tmp_path, capsys, monkeypatch):
     for flag, message in (("--tracker", "unknown 2D tracker 'nope'"), ("--estimator", "unknown 3D box estimator 'nope'")):
         assert sim_main(["demo", "--out", str(tmp_path / "d"), flag, "nope", "--quiet"]) == 2
         assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("bad", [[0.0, 0.0, -20.0, 1.0, 1.0, 1.0], [0.0, 0.0, 1e12, 1e12, 1.0, 1.0],
+                                 [0.0, 0.0, 0.0, 1.0, 1.0, 1.0]])
+def test_an_estimators_box_behind_the_camera_or_out_of_range_is_no_estimate(bad):
+    # a plug-in estimator's box was checked for finite values and a positive size only: one
+    # behind the camera was reported as tracking, and a 1e12 m one bent the fused 2D box
+    from track3d.bench import synthetic_frames
+    from track3d.estimators import BaselineEstimator
+
+    class Bad(BaselineEstimator):
+        def estimate(self, points, category=-1):
+            return np.array(bad)
+
+    class NoBox(BaselineEstimator):
+        def estimate(self, points, category=-1):
+            return np.full(6, np.nan)
+
+    frames = synthetic_frames(CAM, n=3)
+    outs = []
+    for est in (Bad(), NoBox()):
+        t = Track3D.create(CAM, tracker="kcf", estimator="baseline")
+        t.estimator = est
+        t.init(frames[0][0], frames[0][2], 0)
+        outs.append(t.update(frames[1][0], frames[1][1]))
+    assert outs[0].status == NO_POINTS and np.all(np.isnan(outs[0].box3d))
+    np.testing.assert_array_equal(outs[0].box2d, outs[1].box2d)   # nothing of it fused into the 2D box

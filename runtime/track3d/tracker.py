@@ -597,7 +597,10 @@ class Track3D:
             b = np.asarray(b, dtype=np.float64).reshape(-1)
         except ValueError:  # points outside the estimator's domain (e.g. A3BoxNet's extent)
             return None
-        if b.shape != (6,) or not np.all(np.isfinite(b)) or np.any(b[3:] <= 0.0):
+        # a box behind the camera or past any coordinate the loop takes in is no estimate (a plug-in's
+        # [0, 0, -20, 1, 1, 1] had been reported as tracking, and a 1e12 m box bent the fused 2D box)
+        if b.shape != (6,) or not np.all(np.isfinite(b)) or np.any(b[3:] <= 0.0) or b[2] <= 0.0 \
+                or np.any(np.abs(b) > MAX_COORD_M):
             return None
         return b
 
