@@ -389,3 +389,42 @@ def test_an_estimators_box_behind_the_camera_or_out_of_range_is_no_estimate(bad)
         outs.append(t.update(frames[1][0], frames[1][1]))
     assert outs[0].status == NO_POINTS and np.all(np.isnan(outs[0].box3d))
     np.testing.assert_array_equal(outs[0].box2d, outs[1].box2d)   # nothing of it fused into the 2D box
+
+
+@pytest.mark.parametrize("name", ["edgetrack", "siamfc-edge"])
+def test_a_corrected_box_far_off_the_image_does_not_break_the_next_update(name):
+    # found by the fuzz test of learned trackers in the loop: correct([0, 1e200, 1, 1]) was
+    # taken (the size is capped, the centre was not) and the next update raised from its crop
+    from track3d.bench import synthetic_frames
+    from track3d.trackers2d import create_tracker
+
+    frames = synthetic_frames(CAM, n=3)
+    t = create_tracker(name)
+    t.init(frames[0][0], frames[0][2])
+    t.correct([0.0, 1e200, 1.0, 1.0])
+    ok, box = t.update(frames[1][0])
+    assert np.all(np.isfinite(box)) and abs(box[1]) < 1e5
+
+
+def test_loose_inputs_an_embedding_user_found_are_refused_or_taken_right():
+    from track3d.bench import synthetic_frames
+
+    frames = synthetic_frames(CAM, n=2)
+    t = Track3D.create(CAM, tracker="kcf", estimator="baseline")
+    t.init(frames[0][0], frames[0][2], 0)
+    before = t.get_state()
+    for cloud in (np.zeros((0, 5), np.float32), np.zeros((3, 0), np.float32), np.zeros((4, 3), bool)):
+        with pytest.raises(ValueError, match="points must"):
+            t.update(frames[1][0], cloud)
+    assert json.dumps(t.get_state()) == json.dumps(before)          # refused before anything moved
+    assert t.update(frames[1][0], np.zeros((0, 3), np.float32)).status == NO_POINTS   # a frame without depth
+    for bad in ({"fusion": "no"}, {"lost_after": 2.5}, {"min_points": 1.5}):
+        with pytest.raises(ValueError):
+            Track3D.create(CAM, tracker="kcf", estimator="baseline", **bad)
+    # a sun direction whose norm overflows is still a direction, and its checkpoint restores
+    t.set_sun([1e308] * 3)
+    np.testing.assert_allclose(t.sun, np.full(3, 3 ** -0.5))
+    t2 = Track3D.create(CAM, tracker="kcf", estimator="baseline")
+    t2.set_state(json.loads(json.dumps(t.get_state())))
+    t.set_sun([1e-200, 0.0, 0.0])
+    np.testing.assert_array_equal(t.sun, [1.0, 0.0, 0.0])

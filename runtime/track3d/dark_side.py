@@ -35,10 +35,19 @@ def check_sun(direction) -> np.ndarray | None:
         d = np.asarray(direction, dtype=np.float64).reshape(3)
     except (TypeError, ValueError):
         raise ValueError(f"sun direction must be 3 numbers (camera frame, toward the sun), got {direction!r:.80}") from None
-    n = float(np.linalg.norm(d))
-    if not (np.all(np.isfinite(d)) and n > 1e-12):
+    if not np.all(np.isfinite(d)):
         raise ValueError(f"sun direction must be 3 finite numbers of non-zero length, got {d.tolist()}")
-    return d / n
+    with np.errstate(over="ignore"):
+        n = float(np.linalg.norm(d))
+    if np.isfinite(n) and n > 1e-12:
+        return d / n
+    # scaled first where the norm over- or underflows: [1e308] * 3 had come out [0, 0, 0], which
+    # the state then refused to restore; [1e-200, 0, 0] is a direction too
+    big = float(np.max(np.abs(d)))
+    if not big > 0.0:
+        raise ValueError(f"sun direction must be 3 finite numbers of non-zero length, got {d.tolist()}")
+    d = d / big
+    return d / float(np.linalg.norm(d))
 
 
 def _centre_ray(box2d: np.ndarray, camera: Camera) -> np.ndarray:

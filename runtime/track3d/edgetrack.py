@@ -166,7 +166,9 @@ class EdgeTracker:
         b = np.asarray(box, dtype=np.float64).reshape(-1)
         if b.shape != (4,) or not np.all(np.isfinite(b)) or b[2] <= 0 or b[3] <= 0:
             raise ValueError(f"box must be [x, y, w, h], finite with positive size, got {b.tolist()}")
-        self.center = b[:2] + b[2:] / 2.0
+        # the centre held within MAX_BOX_SCALE x the image of it, as the size is: a corrected box
+        # at y = 1e200 had made the next crop's map degenerate (a ValueError out of update)
+        self.center = np.clip(b[:2] + b[2:] / 2.0, -self._max_side, self._max_side)
         # a (fused or corrected) state box beyond MAX_BOX_SCALE x the image is capped there, as
         # SiamFC's: a side of 1e200 overflowed the crop size to 0 (ZeroDivisionError in update);
         # a side below MIN_BOX_SIDE is raised to it (sides of 1e-182 x 1e-194 underflowed it)
@@ -272,6 +274,7 @@ class EdgeTracker:
         # a state restored or corrected without init() on this image size: the same cap
         self._max_side = MAX_BOX_SCALE * max(hh, ww)
         self.target_sz = np.minimum(self.target_sz, self._max_side)
+        self.center = np.clip(self.center, -self._max_side, self._max_side)
         wide = self.lost or self.settling
         size = self.lost_instance_size if wide else self.instance_size
         scale = self.exemplar_size / self._z_sz()            # crop pixels per image pixel

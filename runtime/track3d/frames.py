@@ -48,10 +48,10 @@ def check_cloud(points, needed: bool = True):
                              "depth pass an empty (0, 3) array (status no_points), for a dropped frame update(None, None)")
         return None
     p = np.asarray(points)
-    if p.dtype.kind not in "fiub":
+    if p.dtype.kind not in "fiu":   # not bools: a mask is no cloud
         raise ValueError(f"points must be an (N, 3) array of numbers, got dtype {p.dtype}")
-    if p.size and (p.ndim != 2 or p.shape[1] != 3):
-        raise ValueError(f"points must have shape (N, 3), got {p.shape}")
+    if p.ndim != 2 or p.shape[1] != 3:   # an empty cloud too: (0, 3), not (0, 5) or (3, 0)
+        raise ValueError(f"points must have shape (N, 3), got {p.shape} (a frame without depth: (0, 3))")
     return p
 
 

@@ -152,7 +152,9 @@ class SiamFCTracker:
         b = np.asarray(box, dtype=np.float64).reshape(4)
         if not np.all(np.isfinite(b)) or b[2] <= 0 or b[3] <= 0:
             raise ValueError(f"box must be finite with positive size, got {b.tolist()}")
-        self.center = b[:2] + b[2:] / 2.0
+        # the centre held within MAX_BOX_SCALE x the image of it, as the size is: a corrected box
+        # at y = 1e200 had made the next crop's map degenerate (a ValueError out of update)
+        self.center = np.clip(b[:2] + b[2:] / 2.0, -self._max_side, self._max_side)
         # A (fused) state box larger than MAX_BOX_SCALE x the image is capped there: beyond,
         # the crops overflow and the tracker would follow nothing. Below MIN_BOX_SIDE the crop
         # size (a product of the sides) underflows to 0.
@@ -197,6 +199,7 @@ class SiamFCTracker:
             raise RuntimeError("update() before init()")
         image = check_image(image)
         t0 = _now()
+        self.center = np.clip(self.center, -self._max_side, self._max_side)   # a restored state too (_set_box)
         crops = np.empty((self.scale_num, self.instance_size, self.instance_size, 3), np.uint8)
         for i, f in enumerate(self.scale_factors):
             crops[i] = crop_square(image, self.center, self.x_sz * f, self.instance_size, self.avg_color)

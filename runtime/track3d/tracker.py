@@ -52,7 +52,8 @@ from .dark_side import check_sun, dark_side_box, phase_deg, reach_dark_side
 from .camera import Camera
 from .estimators import BoxEstimator, create_estimator
 from .first_box import FIRST_BOX_FADE, check_fade, with_first_depth
-from .frames import MAX_COORD_M, check_category, check_cloud, check_image, check_init_box, check_init_box3d
+from .frames import (MAX_COORD_M, check_category, check_cloud, check_image, check_init_box, check_init_box3d,
+                     is_integer)
 from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
 from .sensor_options import (BODY_VIEWS, CONTAIN_SLACK_PX, DARK_SIDE, EDGE_PAD, FIND_MIN_RETURNS, FRONT_FILTER,
@@ -462,12 +463,16 @@ class Track3D:
         self.camera = camera
         self.tracker2d = tracker2d
         self.estimator = estimator
+        if not isinstance(fusion, (bool, np.bool_)):   # "no" had read as True
+            raise ValueError(f"fusion must be True or False, got {fusion!r}")
         self.fusion = bool(fusion)
         self.weight_3d = float(weight_3d)
         self.z_range = (z0, z1)
+        if not is_integer(min_points):
+            raise ValueError(f"min_points must be an integer >= 1, got {min_points!r}")
         self.min_points = int(min_points)
-        if int(lost_after) < 1:
-            raise ValueError(f"lost_after must be >= 1, got {lost_after}")
+        if not is_integer(lost_after) or int(lost_after) < 1:   # 2.5 had been taken as 2
+            raise ValueError(f"lost_after must be an integer >= 1, got {lost_after!r}")
         if not 0.0 <= float(min_score) <= 1.0:
             raise ValueError(f"min_score must be in [0, 1], got {min_score}")
         self.lost_after = int(lost_after)
