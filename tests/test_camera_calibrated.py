@@ -114,3 +114,11 @@ def test_every_constructor_wants_whole_pixels(make, width):
     with pytest.raises(ValueError, match="whole number of pixels"):
         make(width)
     assert make(np.int64(640)).width == 640 and type(make(640.0).width) is int
+
+
+@pytest.mark.parametrize("bad", [(float("nan"), 600.0, 320.0, 240.0), (600.0, 600.0, float("inf"), 240.0),
+                                 (600.0, 600.0, 320.0, float("nan"))])
+def test_non_finite_intrinsics_are_named(bad):
+    # fx = nan had been told "camera fov_x_deg must be in (0, 180)", cx = inf was taken
+    with pytest.raises(ValueError, match="must be finite"):
+        Camera.from_intrinsics(640, 480, *bad)

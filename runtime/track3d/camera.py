@@ -59,6 +59,12 @@ class Camera:
         coordinates, pixel i spans [i, i+1): OpenCV's calibration gives cx for pixel centres at
         integers, add 0.5 to it), `dist` OpenCV's distortion coefficients or None."""
         w, h = _resolution(width, height)
+        try:
+            vals = [float(v) for v in (fx, fy, cx, cy)]
+        except (TypeError, ValueError):
+            raise ValueError(f"fx, fy, cx, cy must be numbers, got {fx!r}, {fy!r}, {cx!r}, {cy!r}") from None
+        if not all(math.isfinite(v) for v in vals):   # nan had been told "fov_x_deg must be in (0, 180)"
+            raise ValueError(f"fx, fy, cx, cy must be finite, got fx={fx}, fy={fy}, cx={cx}, cy={cy}")
         if fx <= 0 or fy <= 0:
             raise ValueError(f"focal lengths must be positive, got fx={fx}, fy={fy}")
         ax = math.degrees(2.0 * math.atan(w / (2.0 * fx)))

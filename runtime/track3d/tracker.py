@@ -298,8 +298,10 @@ class TrackResult:
     a body gone past the depth sensor's range has its 3D box carried by the 2D box),
     "lost"; num_points the frustum size; ms per-stage milliseconds (STAGES);
     score the 2D tracker's confidence in 0..1 for this frame (None when it has none);
-    held_frames how many frames the 3D box has been held without a new estimate (0: estimated
-    on this frame); ``lost`` is True once the tracker has decided the target is lost."""
+    held_frames how many frames since the estimator last gave a box (0: on this frame; a held
+    box may still be measured from the depth's outline or carried by the 2D box past the depth
+    range, and is NaN before any 3D box); ``lost`` is True once the tracker has decided the target
+    is lost."""
 
     box2d: np.ndarray
     box2d_raw: np.ndarray
