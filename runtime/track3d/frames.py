@@ -50,7 +50,8 @@ def check_cloud(points, needed: bool = True):
     p = np.asarray(points)
     if p.dtype.kind not in "fiu":   # not bools: a mask is no cloud
         raise ValueError(f"points must be an (N, 3) array of numbers, got dtype {p.dtype}")
-    if p.ndim != 2 or p.shape[1] != 3:   # an empty cloud too: (0, 3), not (0, 5) or (3, 0)
+    # an empty cloud too: (0, 3) or (0,), not (0, 5) or (3, 0)
+    if p.shape != (0,) and (p.ndim != 2 or p.shape[1] != 3):
         raise ValueError(f"points must have shape (N, 3), got {p.shape} (a frame without depth: (0, 3))")
     return p
 
