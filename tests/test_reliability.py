@@ -428,3 +428,23 @@ def test_loose_inputs_an_embedding_user_found_are_refused_or_taken_right():
     t2.set_state(json.loads(json.dumps(t.get_state())))
     t.set_sun([1e-200, 0.0, 0.0])
     np.testing.assert_array_equal(t.sun, [1.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("cloud", [lambda box: None, lambda box: np.zeros((4, 2), np.float32)])
+def test_a_failing_cloud_callable_at_init_leaves_the_tracker_unstarted(cloud):
+    # init(points=callable) called it after the tracker had started: a ValueError, and then the
+    # next update ran as "tracking" on a half-made start
+    from track3d.bench import synthetic_frames
+
+    frames = synthetic_frames(CAM, n=2)
+    t = Track3D.create(CAM, tracker="kcf", estimator="baseline")
+    with pytest.raises(ValueError):
+        t.init(frames[0][0], frames[0][2], 0, points=cloud)
+    with pytest.raises(ValueError, match="init"):
+        t.update(frames[1][0], frames[1][1])
+    # a good callable gives the same first box as the array
+    a = Track3D.create(CAM, tracker="kcf", estimator="baseline")
+    a.init(frames[0][0], frames[0][2], 0, points=frames[0][1])
+    c = Track3D.create(CAM, tracker="kcf", estimator="baseline")
+    c.init(frames[0][0], frames[0][2], 0, points=lambda box: frames[0][1])
+    np.testing.assert_array_equal(a.box3d, c.box3d)

@@ -768,6 +768,10 @@ class Track3D:
         category = check_category(category, getattr(self.estimator, "num_categories", None))
         image = self.camera.undistort_image(check_image(image, self._size))
         points = check_cloud(points, needed=False) if self.needs_points else None
+        if callable(points):
+            # called (for the box _frustum would cut) before anything changes: a callable that fails
+            # had left the tracker started
+            points = check_cloud(points(self._cut_box(b).copy()), needed=True)
         self.category = category
         self.tracker2d.init(image, b)
         self.box2d = b.copy()
