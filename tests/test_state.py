@@ -80,6 +80,31 @@ def test_state_of_another_configuration_is_refused():
         _make("csrt", "baseline").set_state(t.get_state())
 
 
+def test_state_of_other_models_or_loop_options_is_refused():
+    # only the names and the camera had been checked: a stereo model's state restored into the
+    # ideal-depth loop, one of lost_after 10 into lost_after 3, and went on as "tracking"
+    img, pts, box = _frame(0)
+    t = _make("kcf", "a3boxnet")
+    t.init(img, box, 0, points=pts)
+    state = json.loads(json.dumps(t.get_state()))
+    other_model = _make("kcf", "a3boxnet", estimator_options={"model": "a3boxnet_narrow.onnx"})
+    with pytest.raises(ValueError, match="other model files.*a3boxnet"):
+        other_model.set_state(state)
+    other_loop = _make("kcf", "a3boxnet", lost_after=3)
+    before = json.dumps(other_loop.get_state())
+    with pytest.raises(ValueError, match="other loop options"):
+        other_loop.set_state(state)
+    assert json.dumps(other_loop.get_state()) == before            # refused before anything changed
+    same = _make("kcf", "a3boxnet", estimator_options={"threads": 2})   # threads change no output
+    same.set_state(state)                                          # the same configuration restores
+    for bad in ({"models": "x", "options": "y"}, {"models": [1], "options": "y"}, [1, 2], None):
+        damaged = {**state, "config": bad}
+        with pytest.raises(ValueError, match="config"):
+            _make("kcf", "a3boxnet").set_state(damaged)
+    older = {k: v for k, v in state.items() if k != "config"}      # a state written before the key
+    _make("kcf", "a3boxnet").set_state(older)
+
+
 def test_black_frames_turn_lost_after_k_and_held_frames_count():
     t = _make("oracle", "baseline", tracker_options={"gt": np.tile([60.0, 40, 30, 30], (40, 1))}, lost_after=5)
     img, pts, box = _frame(0)

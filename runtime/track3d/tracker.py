@@ -1220,10 +1220,24 @@ class Track3D:
             "sun": None if self.sun is None else self.sun.tolist(),
             "front": list(self._front) if np.isfinite(self._front[0]) else None,
             "first_box": None if self._first is None else self._first.tolist(),
+            "config": self._config_key(),
         })
 
+    def _config_key(self) -> dict:
+        """What a state continues bit for bit only on: the model files (name: sha256 prefix) and a
+        digest of the loop's options (describe()'s, and the first box's fade). Threads and the
+        parts' other options are left out: they change no output, or change the models."""
+        import hashlib
+        import json
+
+        d = self.describe()
+        opts = json.dumps({**d["options"], "first_box_fade": self.first_box_fade}, sort_keys=True, default=str)
+        return {"models": sorted(f"{m.get('file')}:{str(m.get('sha256'))[:16]}" for m in d["models"]),
+                "options": hashlib.sha256(opts.encode()).hexdigest()[:16]}
+
     def set_state(self, state: dict) -> None:
-        """Restore a :meth:`get_state` (of a Track3D built with the same names and models).
+        """Restore a :meth:`get_state` of a Track3D built with the same names, model files, loop
+        options and camera (the state's `config` key; a state from before the key is taken as is).
 
         A damaged state (a field missing, of the wrong type, not finite, a box of no size, a
         part's state its own ``set_state`` refuses) raises ValueError with one line and leaves
@@ -1240,6 +1254,22 @@ class Track3D:
         set2d = getattr(self.tracker2d, "set_state", None)
         if set2d is None:
             raise ValueError(f"the 2D tracker {self.tracker2d!r} has no set_state()")
+        # another model file or other loop options would go on from the state, but not as the
+        # tracker that wrote it (a stereo model's state had restored into the ideal-depth loop);
+        # states written before the key are taken as they are
+        if "config" in st:
+            theirs, ours = st["config"], self._config_key()
+            if not (isinstance(theirs, dict) and isinstance(theirs.get("models"), list)
+                    and all(isinstance(m, str) for m in theirs["models"]) and isinstance(theirs.get("options"), str)):
+                raise ValueError(f"Track3D state damaged: config must hold models (a list of names) and options "
+                                 f"(a digest), got {theirs!r:.80}")
+            if theirs["models"] != ours["models"]:
+                other = sorted(set(theirs["models"]) ^ set(ours["models"]))
+                raise ValueError(f"state of other model files cannot restore this tracker (differ: "
+                                 f"{', '.join(x.split(':')[0] for x in other)[:120]})")
+            if theirs["options"] != ours["options"]:
+                raise ValueError("state of other loop options cannot restore this tracker (describe()['options'] "
+                                 "or first_box_fade differ)")
 
         def box_or_none(key: str, n: int):
             v = st.get(key)
