@@ -56,7 +56,8 @@ from .frames import (MAX_COORD_M, check_category, check_cloud, check_image, chec
                      is_integer)
 from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
-from .sensor_options import (BODY_VIEWS, CONTAIN_SLACK_PX, DARK_SIDE, EDGE_PAD, FIND_MIN_RETURNS, FRONT_FILTER,
+from .sensor_options import (BODY_VIEWS, CONTAIN_SLACK_PX, DARK_SIDE, EDGE_PAD, FIND_DEPTH_SLACK, FIND_MIN_RETURNS,
+                             FRONT_FILTER,
                              FRONT_QUANTILE, FRUSTUM_MARGIN, FUSION_COVER, OUTLINE_SHARE, OUTLINE_SHARE_PHASE,
                              SECTION_LIMBS, SILHOUETTE, check_depth_sensor, sensor_options)
 # the names this module exported before the tables moved to track3d.sensor_options: still
@@ -952,8 +953,7 @@ class Track3D:
                 # no returns near the tracker's box: the body, if in view, is elsewhere (a tracker
                 # left on the sky by a body that went out of view and came back); the whole
                 # view's depth finds it, if it holds enough returns to be a body, not noise
-                body = find_body(points, raw, self._M, self._size, self.z_range)
-                found = None if body is None else self._frustum(points, body)
+                body, found = self._find_body(points, raw)
                 if found is not None and len(found[0]) >= FIND_MIN_RETURNS:
                     seen = lit = body
                     cut = found   # the frustum of the box the loop goes on from, cut once
@@ -962,7 +962,7 @@ class Track3D:
             if outline is None:
                 # no returns at the tracker's box: the body, if in view, is elsewhere (a fast swing
                 # the 2D search did not follow); the depth finds it
-                seen = find_body(points, raw, self._M, self._size, self.z_range)
+                seen, cut = self._find_body(points, raw)
                 if seen is None:
                     seen = raw
             else:
@@ -1074,7 +1074,26 @@ class Track3D:
             at_last = len(self._frustum(points, self.box2d.copy())[0])
         if at_last > 0:   # returns at the last box: the depth-held rule's case, not a body elsewhere
             return None
-        return find_body(points, self.box2d, self._M, self._size, self.z_range)
+        return self._find_body(points, self.box2d)[0]
+
+    def _find_body(self, points: np.ndarray, near: np.ndarray
+                   ) -> tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray] | None]:
+        """The body the whole view's depth shows (`silhouette.find_body`, the one nearest `near`)
+        when it continues the track: the median depth of its returns within the last 3D box's
+        depth span widened by FIND_DEPTH_SLACK of its range (another body in view is not the
+        target). -> (its box [x, y, w, h], its frustum (points, bounds)), or (None, None). Without a
+        3D box yet every body found is taken."""
+        body = find_body(points, near, self._M, self._size, self.z_range)
+        if body is None:
+            return None, None
+        cut = self._frustum(points, body)
+        b = self.box3d
+        if len(cut[0]) and np.all(np.isfinite(b)):
+            z = float(np.median(cut[0][:, 2]))
+            slack = FIND_DEPTH_SLACK * float(b[2])
+            if not b[2] - b[5] / 2.0 - slack <= z <= b[2] + b[5] / 2.0 + slack:
+                return None, None
+        return body, cut
 
     def _inside(self, box: np.ndarray) -> bool:
         """Whether `box` lies inside the image, off its border by more than half a pixel."""
