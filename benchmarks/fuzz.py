@@ -405,8 +405,11 @@ def _t_loop(name):
 
 def _damaged(rng, pts: np.ndarray) -> np.ndarray:
     """A body's returns as a sensor may send them: mostly as they are, sometimes empty, with
-    non-finite or huge rows, collapsed to one point, noisy, cut short, or any random cloud."""
+    non-finite or huge rows, collapsed to one point, noisy, cut short, any random cloud, or not
+    at all (None: the depth did not arrive)."""
     r = rng.random()
+    if r < 0.02:
+        return None
     if r < 0.05:
         return np.zeros((0, 3), np.float32)
     if r < 0.10 and len(pts):

@@ -139,16 +139,14 @@ def test_frames_that_break_the_contract_are_refused(frames):
 
 
 def test_a_bad_cloud_is_refused_before_the_loop_moves_on(frames):
-    """A cloud that breaks the contract (None with a 3D estimator, another shape, strings) is
-    refused before the 2D tracker runs: the refused frame leaves the tracker as it was (the 2D
-    tracker used to have taken its step already), and None's message names the way to say
-    "no depth this frame" (an empty cloud: no_points)."""
+    """A cloud that breaks the contract (another shape, strings) is refused before the 2D
+    tracker runs: the refused frame leaves the tracker as it was (the 2D tracker used to have
+    taken its step already)."""
     img, pts, b2, _ = frames[1]
     fake = _Scripted([(True, b2)] * 2)
     t = Track3D(CAM, fake, create_estimator("baseline"))
     t.init(frames[0][0], frames[0][2], 0)
-    for bad, match in ((None, r"empty \(0, 3\) array"), (pts[:, :2], r"\(N, 3\)"), ("cloud", "numbers"),
-                       (np.array([object()] * 3), "numbers")):
+    for bad, match in ((pts[:, :2], r"\(N, 3\)"), ("cloud", "numbers"), (np.array([object()] * 3), "numbers")):
         with pytest.raises(ValueError, match=match):
             t.update(img, bad)
     assert len(fake.script) == 2 and not fake.corrected        # the 2D tracker was not stepped
@@ -156,6 +154,31 @@ def test_a_bad_cloud_is_refused_before_the_loop_moves_on(frames):
     assert t.update(img, pts).status == TRACKING
     with pytest.raises(ValueError, match=r"\(N, 3\)"):
         t.init(frames[0][0], frames[0][2], 0, points=pts[:, :2])
+
+
+def test_depth_that_did_not_arrive_is_held_not_lost(frames):
+    """docs/runtime.md: a frame whose depth did not arrive is update(image, None): no_points
+    with the last 3D box kept for as long as the 2D tracker tracks. It used to be refused, and the
+    empty cloud the message named instead counted as evidence of empty space: the third frame of
+    a depth hiccup was "lost" with the 2D tracker sure of the body (score 1.0)."""
+    from track3d.bench import synthetic_frames
+    from track3d.camera import Camera
+
+    camera = Camera.from_fov(320, 240, 45.0)
+    seq = synthetic_frames(camera, n=13)
+    t = Track3D.from_default(camera, threads=1)
+    t.init(seq[0][0], seq[0][2], 0, points=seq[0][1])
+    last = t.update(seq[1][0], seq[1][1])
+    assert last.status == TRACKING
+    for k in range(2, 9):
+        out = t.update(seq[k][0], None)
+        assert out.status == NO_POINTS and not out.lost and out.held_frames == k - 1, (k, out.status)
+        np.testing.assert_array_equal(out.box3d, last.box3d)
+        assert out.num_points == 0
+    assert t.update(seq[9][0], seq[9][1]).status == TRACKING
+    # an empty cloud is the sensor seeing nothing: the body gone from a range sensor's view
+    statuses = [t.update(seq[k][0], np.zeros((0, 3), np.float32)).status for k in (10, 11, 12)]
+    assert statuses == [NO_POINTS, NO_POINTS, "lost"]
 
 
 def test_thin_or_degenerate_frustums_are_no_points(frames):

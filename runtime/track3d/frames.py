@@ -44,15 +44,14 @@ def check_cloud(points, needed: bool = True):
         return points
     if points is None:
         if needed:
-            raise ValueError("points is None but the 3D box estimator needs the frame's cloud: for a frame without "
-                             "depth pass an empty (0, 3) array (status no_points), for a dropped frame update(None, None)")
+            raise ValueError("points is None: a cloud is needed here (an (N, 3) array; no returns: (0, 3))")
         return None
     p = np.asarray(points)
     if p.dtype.kind not in "fiu":   # not bools: a mask is no cloud
         raise ValueError(f"points must be an (N, 3) array of numbers, got dtype {p.dtype}")
     # an empty cloud too: (0, 3) or (0,), not (0, 5) or (3, 0)
     if p.shape != (0,) and (p.ndim != 2 or p.shape[1] != 3):
-        raise ValueError(f"points must have shape (N, 3), got {p.shape} (a frame without depth: (0, 3))")
+        raise ValueError(f"points must have shape (N, 3), got {p.shape} (no returns: (0, 3))")
     return p
 
 

@@ -862,9 +862,13 @@ class Track3D:
         """Track into the next frame: image (H, W, 3) uint8 RGB, points (N, 3) float32 cloud, or a
         callable box2d -> (N, 3) cloud that the loop calls with the 2D tracker's box (a stereo
         camera computes depth only there: `track3d.stereo.StereoCloud.bind`; its time counts in
-        the "frustum" stage); None with the null estimator ("none": 2D only). A frame without depth
-        is an empty (0, 3) cloud (status no_points); a cloud that breaks the contract (None with a
-        3D estimator, another shape, not numbers) is refused with ValueError before any state moves.
+        the "frustum" stage). None: the depth did not arrive this frame (a sensor fault): the 2D
+        tracker runs, the status is no_points and the last 3D box is kept (with the null estimator,
+        "none", the cloud is not used). An empty (0, 3) cloud is the sensor seeing nothing: also
+        no_points, but to a range sensor in space a view without returns is a view without the body,
+        so EMPTY_LOST_AFTER such frames in a row, unexplained by the sensor's range, are "lost". A
+        cloud that breaks the contract (another shape, not numbers) is refused with ValueError
+        before any state moves.
 
         image None: a dropped frame, see :meth:`skip`. Before init(): ValueError (it used to
         answer "lost" with nan boxes, which a caller could take for a real loss)."""
@@ -874,8 +878,9 @@ class Track3D:
         ms: dict[str, float] = dict.fromkeys(STAGES, 0.0)
         t0 = time.perf_counter()
         image = self.camera.undistort_image(check_image(image, self._size))
-        if self.needs_points:
-            points = check_cloud(points)
+        # None: the depth did not arrive (a sensor fault), unlike an empty cloud, which is the
+        # sensor seeing nothing (a body that left the view: EMPTY_LOST_AFTER)
+        points = check_cloud(points, needed=False) if self.needs_points else points
         res = self.tracker2d.update(image)
         own = None   # the tracker's own box when the loop went on from another (the depth's body)
         try:
@@ -930,6 +935,15 @@ class Track3D:
             r = TrackResult(self._shown(raw), raw.copy(), self.box3d.copy(), TRACKING, 0, ms,
                             _tracker_score(self.tracker2d))
             return self._judge(r, estimated=False)
+        if points is None:
+            # the depth did not arrive: the 2D tracker's box, the last 3D box held; a frame the 2D
+            # tracker says it tracked is not bad (the tracker judging its own loss), as one past
+            # the depth range is not, and no evidence of empty space either
+            self.box2d = raw.copy()
+            ms["total"] = (time.perf_counter() - t0) * 1e3
+            r = TrackResult(self._shown(raw), raw.copy(), self.box3d.copy(), NO_POINTS, 0, ms,
+                            _tracker_score(self.tracker2d))
+            return self._judge(r, estimated=False, seen=_judges_loss(self.tracker2d))
         lit = None   # the outline where it is off (stereo: the lit part), for containment and the share
         dark = None  # that outline reaching into the body's dark side (track3d.dark_side), with the sun known
         wants_lit = self.silhouette == 0.0 and (self.outline_contain or (self.outline_share > 0.0 and self.fusion))
