@@ -122,3 +122,34 @@ def test_non_finite_intrinsics_are_named(bad):
     # fx = nan had been told "camera fov_x_deg must be in (0, 180)", cx = inf was taken
     with pytest.raises(ValueError, match="must be finite"):
         Camera.from_intrinsics(640, 480, *bad)
+
+
+def test_a_calibrated_camera_has_no_baseline_unless_given_and_stereo_refuses_it():
+    """from_intrinsics / from_K had defaulted baseline_m to the simulator's 0.4 m: a 12 cm rig's
+    stereo depth came out 3.3 times too far, "tracking", without a word. Now None (no pair),
+    and the stereo matcher names what it needs; a baseline of 0, < 0 or nan, which had failed
+    deep in OpenCV (an assertion, an 18 EB allocation), is refused by the camera."""
+    from track3d.stereo import StereoCloud, StereoMatcher
+
+    cam = Camera.from_intrinsics(640, 480, 600.0, 600.0, 320.0, 240.0)
+    assert cam.baseline_m is None
+    assert Camera.from_K(640, 480, cam.K).baseline_m is None
+    with pytest.raises(ValueError, match="baseline"):
+        StereoMatcher(cam)
+    with pytest.raises(ValueError, match="baseline"):
+        StereoCloud(cam)
+    with pytest.raises(ValueError, match="baseline"):
+        cam.disparity(10.0)
+    assert Camera.from_dict(cam.to_dict()) == cam                  # None survives the file
+    given = Camera.from_intrinsics(640, 480, 600.0, 600.0, 320.0, 240.0, baseline_m=0.12)
+    assert StereoMatcher(given).fb == pytest.approx(72.0)
+    assert Camera.from_dict(given.to_dict()) == given
+    assert Camera.from_fov(640, 480, 45.0).baseline_m == 0.4        # the simulator's camera
+    for bad in (0.0, -0.4, float("nan"), float("inf"), "x"):
+        with pytest.raises(ValueError, match="baseline_m"):
+            Camera.from_intrinsics(640, 480, 600.0, 600.0, 320.0, 240.0, baseline_m=bad)
+        with pytest.raises(ValueError, match="baseline_m"):
+            Camera.from_fov(640, 480, 45.0, baseline_m=bad)
+    with pytest.raises(ValueError, match="rectified"):
+        StereoMatcher(Camera.from_intrinsics(640, 480, 600.0, 600.0, 320.0, 240.0, dist=[0.1, 0, 0, 0],
+                                             baseline_m=0.12))

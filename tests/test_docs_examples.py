@@ -28,3 +28,17 @@ def test_runtime_embedding_example_runs_as_written(tmp_path):
     statuses = [line.split()[0] for line in r.stdout.splitlines()[:4]]
     assert statuses == ["tracking"] * 4, r.stdout          # the synthetic sphere is tracked
     assert (tmp_path / "track3d.state").is_file()
+
+
+def test_runtime_stereo_example_runs_as_written(tmp_path):
+    """The Stereo section's example, with a camera whose baseline is given (it had shown
+    StereoCloud(camera) with no word on the baseline, which from_intrinsics defaulted to 0.4 m)."""
+    code = python_block(ROOT / "docs" / "runtime.md", "## Stereo (`track3d.stereo`)")
+    assert "baseline_m=" in code
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    lines = r.stdout.splitlines()
+    assert [line.split()[0] for line in lines] == ["tracking"] * 3, r.stdout
+    # the sphere's centre drifts from 22 m towards 14 m: the depth of its box is the pair's
+    z = float(lines[-1].split("[")[1].split()[2])
+    assert 12.0 < z < 22.0, r.stdout

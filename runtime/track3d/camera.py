@@ -22,13 +22,14 @@ __all__ = ["Camera"]
 
 @dataclass(frozen=True)
 class Camera:
-    """Two identical pinhole cameras; the right one sits at x = +baseline_m."""
+    """Two identical pinhole cameras; the right one sits at x = +baseline_m (None: no known
+    pair, a single camera; stereo matching then refuses it). 0.4 m is the simulator's."""
 
     width: int
     height: int
     fov_x_deg: float
     fov_y_deg: float
-    baseline_m: float = 0.4
+    baseline_m: float | None = 0.4
     intrinsics: tuple[float, float, float, float] | None = None   # (fx, fy, cx, cy) pixels; None: eq. (1)
     dist: tuple[float, ...] | None = None                          # OpenCV distortion coefficients
 
@@ -40,6 +41,16 @@ class Camera:
             v = float(getattr(self, name))
             if not (0.0 < v < 180.0) or not math.isfinite(v):
                 raise ValueError(f"camera {name} must be in (0, 180) degrees, got {v}")
+        if self.baseline_m is not None:
+            try:
+                b = float(self.baseline_m)
+            except (TypeError, ValueError):
+                raise ValueError(f"camera baseline_m must be a number of metres or None, got {self.baseline_m!r}") \
+                    from None
+            if not (math.isfinite(b) and b > 0.0):   # 0 or < 0 had failed deep in OpenCV's matcher
+                raise ValueError(f"camera baseline_m must be a finite distance > 0 m (or None: no stereo pair), "
+                                 f"got {self.baseline_m}")
+            object.__setattr__(self, "baseline_m", b)
         if self.intrinsics is not None:
             k = tuple(float(v) for v in self.intrinsics)
             if len(k) != 4 or not all(math.isfinite(v) for v in k) or k[0] <= 0 or k[1] <= 0:
@@ -54,10 +65,12 @@ class Camera:
 
     @classmethod
     def from_intrinsics(cls, width: int, height: int, fx: float, fy: float, cx: float, cy: float,
-                        dist=None, baseline_m: float = 0.4) -> "Camera":
+                        dist=None, baseline_m: float | None = None) -> "Camera":
         """A calibrated camera: focal lengths and principal point in pixels (continuous pixel
         coordinates, pixel i spans [i, i+1): OpenCV's calibration gives cx for pixel centres at
-        integers, add 0.5 to it), `dist` OpenCV's distortion coefficients or None."""
+        integers, add 0.5 to it), `dist` OpenCV's distortion coefficients or None, `baseline_m`
+        the stereo pair's baseline in metres (None, the default: no pair; stereo depth needs it,
+        which is why it is not defaulted to the simulator's 0.4 m)."""
         w, h = _resolution(width, height)
         try:
             vals = [float(v) for v in (fx, fy, cx, cy)]
@@ -69,12 +82,12 @@ class Camera:
             raise ValueError(f"focal lengths must be positive, got fx={fx}, fy={fy}")
         ax = math.degrees(2.0 * math.atan(w / (2.0 * fx)))
         ay = math.degrees(2.0 * math.atan(h / (2.0 * fy)))
-        return cls(w, h, ax, ay, float(baseline_m), (float(fx), float(fy), float(cx), float(cy)),
+        return cls(w, h, ax, ay, baseline_m, (float(fx), float(fy), float(cx), float(cy)),
                    None if dist is None else tuple(np.asarray(dist, dtype=np.float64).reshape(-1).tolist()))
 
     @classmethod
-    def from_K(cls, width: int, height: int, K, dist=None, baseline_m: float = 0.4) -> "Camera":
-        """A calibrated camera from its (3, 3) intrinsic matrix (no skew)."""
+    def from_K(cls, width: int, height: int, K, dist=None, baseline_m: float | None = None) -> "Camera":
+        """A calibrated camera from its (3, 3) intrinsic matrix (no skew); as from_intrinsics."""
         k = _matrix3(K)
         if abs(k[0, 1]) > 1e-9 or np.any(np.abs(k[2] - [0, 0, 1]) > 1e-9) or abs(k[1, 0]) > 1e-9:
             raise ValueError("K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)")
@@ -109,8 +122,9 @@ class Camera:
         return cv2.remap(image, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
 
     @classmethod
-    def from_fov(cls, width: int, height: int, fov_x_deg: float, baseline_m: float = 0.4) -> "Camera":
-        """Square pixels: the vertical perspective angle follows from the horizontal one."""
+    def from_fov(cls, width: int, height: int, fov_x_deg: float, baseline_m: float | None = 0.4) -> "Camera":
+        """Square pixels: the vertical perspective angle follows from the horizontal one. The
+        simulator's camera (eq. 1), with its 0.4 m baseline unless given."""
         width, height = _resolution(width, height)  # before the division below
         fy_half = math.atan(height / width * math.tan(math.radians(fov_x_deg) / 2.0))
         return cls(width, height, float(fov_x_deg), math.degrees(2.0 * fy_half), baseline_m)
@@ -153,7 +167,12 @@ class Camera:
     @property
     def right_offset(self) -> np.ndarray:
         """Centre of the right camera in the left frame, (3,) float64."""
-        return np.array([self.baseline_m, 0.0, 0.0])
+        return np.array([self._baseline(), 0.0, 0.0])
+
+    def _baseline(self) -> float:
+        if self.baseline_m is None:
+            raise ValueError("this camera has no stereo pair (baseline_m None): give it baseline_m")
+        return float(self.baseline_m)
 
     # --- projection ---
     def project(self, points: np.ndarray) -> np.ndarray:
@@ -169,7 +188,7 @@ class Camera:
 
     def disparity(self, z: np.ndarray) -> np.ndarray:
         """Stereo disparity in pixels of a point at depth z (metres): d = fx * baseline / z."""
-        return self.fx * self.baseline_m / np.asarray(z, dtype=np.float64)
+        return self.fx * self._baseline() / np.asarray(z, dtype=np.float64)
 
     def pixel_rays(self) -> np.ndarray:
         """(H, W, 3) float64 ray directions through pixel centres, scaled so that z = 1."""
@@ -223,7 +242,7 @@ class Camera:
             "height": int(self.height),
             "fov_x_deg": float(self.fov_x_deg),
             "fov_y_deg": float(self.fov_y_deg),
-            "baseline_m": float(self.baseline_m),
+            "baseline_m": None if self.baseline_m is None else float(self.baseline_m),
             "K": self.K.tolist(),
         }
         if self.calibrated:
@@ -239,13 +258,13 @@ class Camera:
         otherwise the angles define K (eq. 1) and a K given next to them must agree."""
         if "K" in d and (d.get("calibrated") or "fov_x_deg" not in d or d.get("dist")):
             try:
-                return cls.from_K(d["width"], d["height"], d["K"], d.get("dist"),
-                                  float(d.get("baseline_m", 0.4)))
+                # a calibrated camera's file without a baseline has no known pair
+                return cls.from_K(d["width"], d["height"], d["K"], d.get("dist"), d.get("baseline_m"))
             except KeyError as e:
                 raise ValueError(f"camera description lacks the key {e.args[0]!r}") from None
         try:
             cam = cls(d["width"], d["height"], float(d["fov_x_deg"]), float(d["fov_y_deg"]),
-                      float(d.get("baseline_m", 0.4)))
+                      d.get("baseline_m", 0.4))
         except KeyError as e:
             raise ValueError(f"camera description lacks the key {e.args[0]!r}") from None
         if "K" in d and not np.allclose(_matrix3(d["K"]), cam.K, rtol=1e-9, atol=1e-6):

@@ -184,6 +184,12 @@ class StereoMatcher:
         p = params or StereoParams()
         if overrides:
             p = StereoParams(**{**p.__dict__, **overrides})
+        if camera.baseline_m is None:
+            raise ValueError("stereo depth needs the pair's baseline: give the camera baseline_m "
+                             "(e.g. Camera.from_intrinsics(..., baseline_m=0.12))")
+        if camera.dist is not None:
+            raise ValueError("stereo matching takes a rectified pair: rectify both images (e.g. "
+                             "cv2.stereoRectify) and give the rectified camera, without distortion")
         self.camera = camera
         self.params = p
         self.fb = camera.fx * camera.baseline_m

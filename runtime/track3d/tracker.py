@@ -1193,7 +1193,10 @@ class Track3D:
         if not self.texture_trim or not len(near):
             return box
         z = float(near[:, 2].min())
-        blind = self.camera.fx * self.camera.baseline_m / z if z > 0.0 else float(self._size[0])
+        if self.camera.baseline_m is None:   # clouds of a pair the camera does not describe: no band known
+            blind = 0.0
+        else:
+            blind = self.camera.fx * self.camera.baseline_m / z if z > 0.0 else float(self._size[0])
         return trim_unmatched(box, lit, image, len(near), blind)
 
     def _measure_held(self, cloud: np.ndarray, box: np.ndarray) -> bool:

@@ -23,6 +23,7 @@ never scored; the number of restarts is the number of init frames after the firs
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -101,7 +102,9 @@ def _load(path: Path, cols: int) -> np.ndarray:
     if not path.is_file():
         raise FileNotFoundError(f"missing result file {path}")
     try:
-        a = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
+        with warnings.catch_warnings():   # an empty file is an empty array (below), not numpy's warning
+            warnings.filterwarnings("ignore", "loadtxt: input contained no data", UserWarning)
+            a = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
     except ValueError as e:   # numpy's words name neither the file nor what to do about it
         raise ValueError(f"malformed result file {path}: {str(e).split(';')[0]}") from None
     if a.size == 0:
