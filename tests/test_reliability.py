@@ -496,3 +496,24 @@ def test_a_second_body_does_not_take_the_track(sensor):
         if out.status == "tracking":
             assert np.abs(out.box2d[:2] - box[:2]).max() < 6.0, (k, out.box2d, box)
     assert out.status == "tracking"   # back on the target once its returns are
+
+
+@pytest.mark.parametrize("scale", [1000.0, 100.0, 0.001])
+def test_a_cloud_in_other_units_is_named_at_init(scale):
+    """A cloud in millimetres (or cm, km) had left the first 3D box NaN and every frame
+    "no_points", then "lost", with the 2D tracker sure of the body. init names it now, before
+    anything changes; a body a little past the range (x3: 65 m) starts without a 3D box, as before."""
+    from track3d.bench import synthetic_frames
+    from track3d.camera import Camera
+
+    camera = Camera.from_fov(320, 240, 45.0)
+    image, cloud, box2d = synthetic_frames(camera, n=1)[0]
+    t = Track3D.from_default(camera, threads=1)
+    with pytest.raises(ValueError, match="is the cloud in metres"):
+        t.init(image, box2d, 0, points=cloud * scale)
+    with pytest.raises(ValueError, match="before init"):
+        t.update(image, cloud)                       # the refused init left it unstarted
+    t.init(image, box2d, 0, points=cloud * 3.0)
+    assert np.isnan(t.box3d).all()
+    t.init(image, box2d, 0, points=cloud)
+    assert np.isfinite(t.box3d).all() and 15.0 < t.box3d[2] < 25.0

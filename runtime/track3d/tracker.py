@@ -773,6 +773,8 @@ class Track3D:
             # called (for the box _frustum would cut) before anything changes: a callable that fails
             # had left the tracker started
             points = check_cloud(points(self._cut_box(b).copy()), needed=True)
+        if points is not None and self.needs_points:
+            self._check_units(points, b)
         self.category = category
         self.tracker2d.init(image, b)
         self.box2d = b.copy()
@@ -1059,6 +1061,23 @@ class Track3D:
                         _tracker_score(self.tracker2d))
         return self._judge(r, estimated=est is not None, seen=_judges_loss(self.tracker2d),
                            empty=est is None and len(pts) == 0)
+
+    def _check_units(self, points: np.ndarray, box2d: np.ndarray) -> None:
+        """ValueError when the first box's returns all lie 10x or more outside `z_range`: a cloud
+        in millimetres, centimetres or kilometres (a millimetre cloud had left the first 3D box NaN
+        and every frame "no_points", then "lost", with the 2D tracker sure of the body). Returns
+        just past the range (a body still far) are no error: the 3D box starts when it comes in."""
+        if len(self._frustum(points, box2d)[0]):
+            return
+        z0, z1 = self.z_range
+        seen = extract_frustum_bounds(points, self._cut_box(box2d), self._M, 0.0, MAX_COORD_M)[0]
+        if len(seen) < max(self.min_points, 1):
+            return
+        z = float(np.median(seen[:, 2]))
+        if z > 10.0 * z1 or z < z0 / 10.0:
+            raise ValueError(f"the cloud's {len(seen)} returns in the first box lie at a median depth of {z:.4g}, "
+                             f"far outside the loop's depth range [{z0:g}, {z1:g}] m: is the cloud in metres? "
+                             f"(Track3D(z_range=...) for another range)")
 
     def _crescent(self, box2d: np.ndarray) -> bool:
         """Whether the sun is known and lies past `outline_share_phase` at the box: the lit outline
