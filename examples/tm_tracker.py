@@ -43,8 +43,8 @@ class TemplateTracker:
         b = np.asarray(box, dtype=np.float64).reshape(4)
         x, y, w, h = (int(round(v)) for v in b)
         gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
-        x0, y0 = max(x, 0), max(y, 0)
-        self.template = gray[y0:y0 + max(h, 1), x0:x0 + max(w, 1)].copy()
+        x0, y0 = max(x, 0), max(y, 0)   # the part of the box inside the image
+        self.template = gray[y0:max(y + h, y0 + 1), x0:max(x + w, x0 + 1)].copy()
         self.box = np.array([x0, y0, self.template.shape[1], self.template.shape[0]], np.float64)
         self.score = None
 

@@ -149,3 +149,20 @@ def test_a_tracker_breaking_the_protocol_is_named(returned):
     t.init(img, [10, 10, 8, 8])
     with pytest.raises(ValueError, match=r"returned .* from update\(image\); the protocol is \(ok: bool, box"):
         t.update(img, np.zeros((0, 3), np.float32))
+
+
+def test_example_tracker_crops_a_box_past_the_image_to_its_visible_part(clean_registry):
+    """examples/tm_tracker.py: a first box starting left of / above the image kept its full size
+    after its corner was clamped, so the template took background and the box grew."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("tm_tracker_example", EXAMPLE)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    image = np.zeros((120, 160, 3), np.uint8)
+    t = mod.TemplateTracker()
+    t.init(image, [-20, 100, 100, 80])
+    assert t.template.shape == (20, 80)          # rows 100..119, columns 0..79
+    np.testing.assert_array_equal(t.box, [0, 100, 80, 20])
+    t.init(image, [10, -5, 30, 25])
+    np.testing.assert_array_equal(t.box, [10, 0, 30, 20])
