@@ -334,6 +334,15 @@ def test_describe_lists_models_with_hashes():
     assert all(len(m["sha256"]) == 64 for m in d["models"])
 
 
+def test_describe_names_a_first_box_fade_other_than_the_default():
+    """describe() had left first_box_fade out, so two runs that differed only in it looked the same."""
+    from track3d.first_box import FIRST_BOX_FADE
+
+    assert "first_box_fade" not in Track3D.create(CAM, "kcf", "baseline").describe()["options"]
+    d = Track3D.create(CAM, "kcf", "baseline", first_box_fade=0.5).describe()
+    assert d["options"]["first_box_fade"] == 0.5 != FIRST_BOX_FADE
+
+
 def test_pickling_a_tracker_points_to_get_state():
     """pickle.dumps(t) used to end inside onnxruntime: "cannot pickle 'InferenceSession' object"."""
     t = Track3D.create(CAM, tracker="kcf", estimator="baseline")   # no onnxruntime session at all

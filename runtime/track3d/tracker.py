@@ -1455,7 +1455,9 @@ class Track3D:
                         **({"dark_side": self.dark_side} if self.dark_side > 0.0 else {}),
                         **({"fusion_cover": self.fusion_cover} if self.fusion_cover > 0.0 else {}),
                         # only when on: the records of runs without the views stay as they were
-                        **({"body_views": asdict(self._views.params)} if self._views is not None else {})},
+                        **({"body_views": asdict(self._views.params)} if self._views is not None else {}),
+                        # acts only with a first 3D box (init(box3d=)); named when not the default
+                        **({"first_box_fade": self.first_box_fade} if self.first_box_fade != FIRST_BOX_FADE else {})},
             "models": models,
         }
 
