@@ -320,3 +320,56 @@ def test_camera_effects_change_images_not_labels_and_are_recorded():
                                            "motion_blur": False}
     dn_a, dn_b = a["meta"]["frame_data"]["mean_object_dn"], b["meta"]["frame_data"]["mean_object_dn"]
     assert all(y > 1.5 * x for x, y in zip(dn_a, dn_b))
+
+
+def test_false_alarms_hand_cases():
+    """add_false_alarms: rate 0 changes nothing; rate 1 puts every pixel's return in the gate,
+    before the surface where there is one (the first return), as z along the pixel's ray."""
+    cam = Camera.from_fov(8, 6, 60.0)
+    z = np.zeros((6, 8))
+    z[2:4, 3:5] = 10.0
+    rng = np.random.default_rng(0)
+    assert np.array_equal(S.add_false_alarms(z, cam, 0.0, (1.0, 45.0), rng), z)
+    out = S.add_false_alarms(z, cam, 1.0, (1.0, 45.0), np.random.default_rng(1))
+    r = out * np.sqrt((cam.pixel_rays() ** 2).sum(-1))         # range along each ray
+    assert (r >= 1.0 - 1e-9).all() and (r <= 45.0 + 1e-9).all()
+    body = z > 0
+    assert (out[body] <= 10.0 + 1e-9).all()                    # in front of the surface (same ray)
+    assert (out[~body] > 0).all()                              # the sky returns too
+    same = S.add_false_alarms(z, cam, 1.0, (1.0, 45.0), np.random.default_rng(1))
+    assert same.tobytes() == out.tobytes()                     # deterministic
+    # a gate nearer than the surface's start: no alarm possible there
+    assert np.array_equal(S.add_false_alarms(z, cam, 1.0, (50.0, 60.0), np.random.default_rng(2))[body], z[body])
+    assert S.false_alarm_gate("tof") == (TOF.min_range_m, TOF.max_range_m)
+    assert S.false_alarm_gate("ideal") == (1.0, 45.0)
+
+
+def test_false_alarms_change_only_the_depth_and_are_recorded(rendered):
+    """A run with --false-alarms draws its own stream: labels, images and the sensor's own noise
+    stay as without; about rate x pixels change; meta.json records the rate and the gate."""
+    from track3d_sim.generate import make_settings
+    from track3d_sim.sequence import render_sequence
+
+    out, spec, settings, cam = rendered
+    noisy = make_settings("tiny", seed=3, frames=3, false_alarms=0.01)
+    for sensor in ("ideal", "tof"):
+        r = render_sequence(dataclasses.replace(spec, sensor=sensor), noisy, cam, None, keep_depth=True)
+        base = out[sensor]
+        for k in ("gt2d", "gt3d", "absent", "cut"):
+            np.testing.assert_array_equal(r[k], base[k])
+        assert r["meta"]["frame_data"] == base["meta"]["frame_data"]
+        d, g = np.array(r["depth"]), np.array(base["depth"])
+        changed = d != g
+        assert 0.003 < changed.mean() < 0.03 and (d[changed] > 0).all()
+        assert r["meta"]["depth_sensor"]["false_alarm_rate"] == 0.01
+    assert "false_alarm_rate" not in out["ideal"]["meta"]["depth_sensor"]
+
+
+def test_false_alarm_settings_are_checked():
+    from track3d_sim.generate import make_settings
+
+    for bad in (-1e-5, 0.5, "x"):
+        with pytest.raises(SimError, match="false alarm rate"):
+            make_settings("tiny", false_alarms=bad)
+    with pytest.raises(SimError, match="range sensor"):
+        make_settings("tiny", sensors="stereo", false_alarms=1e-4)

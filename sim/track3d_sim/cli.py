@@ -103,6 +103,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "0 <= LO <= HI <= 170, e.g. 100:150 for a set of crescents lit from behind; the "
                         "sequences keep their bodies, motions and scenes (default: the natural mix, "
                         "|N(0, 55)| capped at 150, mostly front-lit)")
+    g.add_argument("--false-alarms", type=float, dest="false_alarms", metavar="RATE",
+                   help="per-pixel, per-frame probability of a false return of the range sensors (ideal, "
+                        "tof, flash-lidar; not stereo): a range drawn in the sensor's gate, before the surface, "
+                        "e.g. 1e-5, about 3 a frame at 640x480 (default: 0, none)")
     g.add_argument("--subdivisions", type=int, help="icosphere subdivisions of procedural meshes (6 = 82k faces; "
                                                     "default: from the preset)")
     g.add_argument("--mesh", action="append", type=_mesh, default=[], metavar="PATH[:SIZE_M]",
@@ -190,7 +194,8 @@ def main(argv=None) -> int:
                                      sensors=args.sensors, points_only=args.points_only or None,
                                      mesh_dir=args.mesh_dir, auto_exposure=args.auto_exposure or None,
                                      motion_blur=args.motion_blur or None,
-                                     shape_generators=args.shape_generators, sun_phase=args.sun_phase)
+                                     shape_generators=args.shape_generators, sun_phase=args.sun_phase,
+                                     false_alarms=args.false_alarms)
             generate(settings, args.out, workers=args.workers, overwrite=args.overwrite,
                      progress=not args.no_progress, ray=args.ray)
         elif args.cmd == "restereo":

@@ -31,7 +31,7 @@ from .generators import GENERATORS
 from .scenes import SCENES
 from .sequence import (SPLITS, USER, body_sources, fine_name, plan, resolve_pool, resolve_unseen, split_categories,
                        write_sequence)
-from .sensors import DEPTH_SENSORS, SENSORS_NEEDING_IMAGES
+from .sensors import DEPTH_SENSORS, FALSE_ALARM_SENSORS, SENSORS_NEEDING_IMAGES
 from .shapes import FAMILIES, load_user_mesh
 from .textures import TEXTURES
 
@@ -87,7 +87,8 @@ def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
     (folder: every mesh file in it, cycled over the sequences), sensors (names or "a,b"),
     points_only (bool), unseen_generators (names or "a,b"), shape_generators (names or "a,b": the
     generators of train and test; None = the default ones), sun_phase ([lo, hi] degrees: the phase
-    angle drawn uniformly in it; None = the default mix). Raises SimError (one line)."""
+    angle drawn uniformly in it; None = the default mix), false_alarms (per-pixel rate of false
+    returns of the range sensors, sensors.add_false_alarms; 0 = none). Raises SimError (one line)."""
     if preset not in PRESETS:
         raise SimError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
     s = dict(PRESETS[preset])
@@ -125,6 +126,15 @@ def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
     s["auto_exposure"] = bool(s.get("auto_exposure", False))
     s["motion_blur"] = bool(s.get("motion_blur", False))
     s["sun_phase"] = _sun_phase(s.get("sun_phase"))
+    try:
+        s["false_alarms"] = float(s.get("false_alarms") or 0.0)
+    except (TypeError, ValueError):
+        raise SimError(f"false alarm rate must be a number, got {s.get('false_alarms')!r}") from None
+    if not 0.0 <= s["false_alarms"] <= 0.01:
+        raise SimError(f"false alarm rate must be in 0..0.01 per pixel and frame, got {s['false_alarms']:g}")
+    if s["false_alarms"] > 0.0 and not FALSE_ALARM_SENSORS & set(sensors):
+        raise SimError(f"--false-alarms needs a range sensor ({', '.join(sorted(FALSE_ALARM_SENSORS))}); "
+                       f"stereo's errors are its matcher's")
     if s["points_only"] and SENSORS_NEEDING_IMAGES & set(sensors):
         raise SimError(f"--points-only renders no images, but the depth sensor(s) "
                        f"{', '.join(sorted(SENSORS_NEEDING_IMAGES & set(sensors)))} measure depth from them")
@@ -182,7 +192,8 @@ def _identity(settings: dict) -> dict:
             "generators": body_sources(False, pool, settings.get("unseen_generators") or ()),
             "meshes": _public_meshes(settings), **{k: settings[k] for k in keys},
             **({"shape_generators": list(pool)} if pool is not None else {}),
-            **({"sun_phase": list(settings["sun_phase"])} if settings.get("sun_phase") is not None else {})}
+            **({"sun_phase": list(settings["sun_phase"])} if settings.get("sun_phase") is not None else {}),
+            **({"false_alarms": settings["false_alarms"]} if settings.get("false_alarms") else {})}
 
 
 def plan_of(settings: dict):

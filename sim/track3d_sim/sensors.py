@@ -26,6 +26,12 @@ The ToF signal model, per pixel (range r = |ray| * z, albedo a, cos of incidence
     no return when c < min_cos_incidence, r > max_range_m or r < min_range_m
 
 The range error is applied along the pixel's ray (z scales with r).
+
+False alarms (`add_false_alarms`, `track3d-sim generate --false-alarms RATE`, any sensor but
+stereo): each pixel, with probability RATE, returns a range where there is no surface (a dark
+count, a solar photon, a dust grain), drawn uniformly in the sensor's range gate and before the
+surface where the pixel sees one (the sensor reports the first return). The gate is the ToF
+models' [min_range_m, max_range_m], the paper's 1-45 m for ideal depth.
 """
 from __future__ import annotations
 
@@ -37,7 +43,8 @@ import numpy as np
 from .errors import SimError
 
 __all__ = ["RenderedFrame", "ToFModel", "TOF", "FLASH_LIDAR", "DEPTH_SENSORS", "SENSORS_NEEDING_IMAGES", "measure_depth",
-           "tof_signal", "tof_sigma", "tof_return_probability", "sensor_info"]
+           "tof_signal", "tof_sigma", "tof_return_probability", "sensor_info", "add_false_alarms",
+           "false_alarm_gate", "FALSE_ALARM_SENSORS"]
 
 
 @dataclass
@@ -225,6 +232,35 @@ DEPTH_SENSORS = {"ideal": _ideal, "tof": _tof_full(TOF), "flash-lidar": _tof_low
                  "stereo": _stereo}
 # sensors that measure depth from the rendered images (so a points-only run cannot have them)
 SENSORS_NEEDING_IMAGES = frozenset({"stereo"})
+
+
+# sensors whose depth may carry false alarms (stereo's errors are the matcher's own)
+FALSE_ALARM_SENSORS = frozenset({"ideal", "tof", "flash-lidar"})
+IDEAL_GATE_M = (1.0, 45.0)   # the paper's working range (IV-A)
+
+
+def false_alarm_gate(sensor: str) -> tuple[float, float]:
+    """The range gate (near, far) in metres a false alarm of `sensor` falls in."""
+    m = TOF_MODELS.get(sensor)
+    return IDEAL_GATE_M if m is None else (float(m.min_range_m), float(m.max_range_m))
+
+
+def add_false_alarms(depth: np.ndarray, camera, rate: float, gate: tuple[float, float],
+                     rng: np.random.Generator) -> np.ndarray:
+    """`depth` (H, W) metres, 0 = no return, with each pixel's return replaced, with probability
+    `rate`, by a false alarm: a range uniform in the gate, before the pixel's surface when it
+    has one (the first return), as z along the pixel's ray. A new array; `rng` draws two values
+    per pixel whatever the scene, so the stream does not depend on it."""
+    z = np.asarray(depth, np.float64)
+    norm = _ray_norm(camera)
+    u = rng.random(z.shape)
+    t = rng.random(z.shape)
+    near, far = gate
+    stop = np.where(z > 0, np.minimum(z * norm, far), far)
+    alarm = (u < rate) & (stop > near)
+    out = z.copy()
+    out[alarm] = (near + (stop[alarm] - near) * t[alarm]) / norm[alarm]
+    return out
 
 
 def sensor_info(sensor: str) -> dict:

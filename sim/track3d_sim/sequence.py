@@ -26,7 +26,8 @@ from .motion import FPS, make_motion
 from .render import (BASE_EXPOSURE_MS, BLUR_STEP_PX, MAX_BLUR_SUBSTEPS, BodyRenderer, auto_exposure, blur_substeps,
                      exposure_poses, hot_pixels, sensor)
 from .scenes import SCENES, make_background
-from .sensors import RenderedFrame, measure_depth, sensor_info
+from .sensors import (FALSE_ALARM_SENSORS, RenderedFrame, add_false_alarms, false_alarm_gate, measure_depth,
+                      sensor_info)
 from .shapes import FAMILIES, VOLUME_RANGE, Shape, load_user_mesh, scale_to_volume
 from .textures import TEXTURES, SolidTexture
 
@@ -247,6 +248,9 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
     """
     rng, ss = _rngs(settings["seed"], spec)
     depth_sensor = sensor_info(spec.sensor)  # an unknown name fails here, before any work
+    if float(settings.get("false_alarms") or 0.0) > 0.0 and spec.sensor in FALSE_ALARM_SENSORS:
+        depth_sensor = {**depth_sensor, "false_alarm_rate": float(settings["false_alarms"]),
+                        "false_alarm_gate_m": list(false_alarm_gate(spec.sensor))}
     meshes = settings.get("meshes") or []
     user_mesh = meshes[spec.mesh] if spec.generator == USER and 0 <= spec.mesh < len(meshes) else None
     # points-only (box-network data): depth, labels and meta; no shading, shadow rays or images
@@ -343,6 +347,11 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
                                                                 images[0] if images else None,
                                                                 images[1] if images else None),
                                   camera, drng)
+        rate = float(settings.get("false_alarms") or 0.0)
+        if rate > 0.0 and spec.sensor in FALSE_ALARM_SENSORS:
+            # stream 3, drawn only in runs with false alarms: the other streams stay as they were
+            arng = np.random.default_rng([int(settings["seed"]), SPLIT_IDS[spec.split], spec.index, i, 3])
+            depth = add_false_alarms(depth, camera, rate, false_alarm_gate(spec.sensor), arng)
         frames_meta["R"].append(np.round(R.reshape(-1), 7).tolist())
         frames_meta["T"].append(np.round(T, 6).tolist())
         if keep_depth:
