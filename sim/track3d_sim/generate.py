@@ -279,6 +279,10 @@ _W = {}
 
 
 def _init_worker(settings, root, queue):
+    import signal
+    # Ctrl-C reaches the whole process group: the parent ends the pool, the workers do not each
+    # print a traceback
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _W.update(settings=settings, root=Path(root), queue=queue, camera=camera_of(settings))
 
 
@@ -288,21 +292,34 @@ def _work(spec):
     return spec.split, spec.name
 
 
+def _interrupted(signum, frame):
+    raise KeyboardInterrupt
+
+
 def _run_pool(todo, settings, out: Path, workers: int, update) -> None:
     import multiprocessing as mp
+    import signal
     ctx = mp.get_context("spawn")
     queue = ctx.Queue()
-    with ctx.Pool(min(workers, len(todo)), initializer=_init_worker, initargs=(settings, str(out), queue)) as pool:
-        res = pool.map_async(_work, todo, chunksize=1)
-        while True:
-            try:
-                update(queue.get(timeout=0.2))
-            except Exception:
-                if res.ready():
-                    break
-        res.get()
-        while not queue.empty():
-            update(queue.get())
+    # SIGTERM ends the run as Ctrl-C does, through the pool's exit, which terminates the workers: by
+    # default it killed this process alone, and its orphaned workers went on writing into --out while
+    # the run was resumed
+    before = signal.signal(signal.SIGTERM, _interrupted)
+    try:
+        with ctx.Pool(min(workers, len(todo)), initializer=_init_worker,
+                      initargs=(settings, str(out), queue)) as pool:
+            res = pool.map_async(_work, todo, chunksize=1)
+            while True:
+                try:
+                    update(queue.get(timeout=0.2))
+                except Exception:
+                    if res.ready():
+                        break
+            res.get()
+            while not queue.empty():
+                update(queue.get())
+    finally:
+        signal.signal(signal.SIGTERM, before)
 
 
 def _ray_sequence(spec, settings: dict, root: str) -> str:
