@@ -196,6 +196,21 @@ def _identity(settings: dict) -> dict:
             **({"false_alarms": settings["false_alarms"]} if settings.get("false_alarms") else {})}
 
 
+def train_coverage_note(specs) -> str | None:
+    """A warning when the train split holds sequences but not every generator the test split
+    holds (its fine categories cycle generator by generator, so a small train split covers the
+    first few generators only: 18 train sequences, the small preset's, cover 5 of 7), else None."""
+    train = [s for s in specs if s.split == "train"]
+    if not train:
+        return None
+    have = {s.generator for s in train}
+    missing = sorted({s.generator for s in specs if s.split == "test"} - have)
+    if not missing:
+        return None
+    return (f"warning: the train split's {len(train)} sequences hold no {', '.join(missing)}, which the test "
+            f"split holds (train categories cycle generator by generator; docs/simulator.md 'Splits')")
+
+
 def plan_of(settings: dict):
     """The SeqSpecs of a run."""
     return plan(settings["train"], settings["test"], settings["test_unseen"], settings["unseen_generators"],
@@ -413,6 +428,9 @@ def _generate(settings, out: Path, workers, overwrite, progress, log, ray, ray_m
     state = prepare_output(out, settings, overwrite)
     if settings["unseen_generators"]:
         log(f"test_unseen: {', '.join(settings['unseen_generators'])} ({settings['unseen_note']})")
+    note = train_coverage_note(specs)
+    if note:
+        log(note)
     if state == "complete":
         missing = [f"{s.split}/{s.name}" for s in specs if not (out / s.split / s.name).is_dir()]
         if not missing:
