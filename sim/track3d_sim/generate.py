@@ -428,9 +428,6 @@ def _generate(settings, out: Path, workers, overwrite, progress, log, ray, ray_m
     state = prepare_output(out, settings, overwrite)
     if settings["unseen_generators"]:
         log(f"test_unseen: {', '.join(settings['unseen_generators'])} ({settings['unseen_note']})")
-    note = train_coverage_note(specs)
-    if note:
-        log(note)
     if state == "complete":
         missing = [f"{s.split}/{s.name}" for s in specs if not (out / s.split / s.name).is_dir()]
         if not missing:
@@ -449,7 +446,11 @@ def _generate(settings, out: Path, workers, overwrite, progress, log, ray, ray_m
     total = len(todo) * settings["frames"]
     bar = None
     if progress:
-        from tqdm import tqdm
+        from tqdm import tqdm   # a missing extra is the one line, before any warning
+    note = train_coverage_note(specs) if todo else None
+    if note:
+        log(note)
+    if progress:
         bar = tqdm(total=total, unit="frame", desc="track3d-sim", file=sys.stderr, dynamic_ncols=True)
     update = bar.update if bar else (lambda n: None)
     t0 = time.time()
