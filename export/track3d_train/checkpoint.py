@@ -10,7 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["load_checkpoint_dict", "save_checkpoint", "network_of", "SIGNATURES"]
+__all__ = ["load_checkpoint_dict", "save_checkpoint", "network_of", "SIGNATURES", "random_state",
+           "restore_random_state"]
 
 
 def _config_with(key: str, config: str = "config") -> Callable[[dict], bool]:
@@ -36,6 +37,23 @@ def save_checkpoint(path: str | Path, ck: dict) -> None:
     tmp = p.with_name(p.name + ".tmp")
     torch.save(ck, str(tmp))
     os.replace(tmp, p)
+
+
+def random_state(rng) -> dict:
+    """The random streams a resumed run must continue, for its checkpoint: the numpy Generator
+    `rng` (a pair sampler's: data order and augmentation) and torch's CPU generator. Reseeding on
+    resume instead (from the step, say) makes the result depend on when the run was killed."""
+    import torch
+
+    return {"numpy": rng.bit_generator.state, "torch": torch.get_rng_state()}
+
+
+def restore_random_state(rng, state: dict) -> None:
+    """Put `random_state`'s streams back: `rng` continues where the checkpointed run's stood."""
+    import torch
+
+    rng.bit_generator.state = state["numpy"]
+    torch.set_rng_state(state["torch"])
 
 
 def network_of(ck) -> str | None:

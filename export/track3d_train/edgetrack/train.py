@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..checkpoint import save_checkpoint
+from ..checkpoint import random_state, restore_random_state, save_checkpoint
 from ..training_log import read_log, trim_log
 from .data import MAKER, CropCache, PairSampler, load_background
 from .model import EdgeTrack, EdgeTrackConfig, cell_centres, edgetrack_loss
@@ -193,9 +193,12 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
         net.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optim"])
         step, elapsed0 = int(ck["step"]), float(ck.get("elapsed_s", 0.0))
-        sampler.rng = np.random.default_rng([seed, step])
+        if "random" in ck:   # the sampler's and torch's streams go on as if never stopped
+            restore_random_state(sampler.rng, ck["random"])
+        else:                # a checkpoint from before they were saved
+            sampler.rng = np.random.default_rng([seed, step])
+            torch.manual_seed(seed + step)
         trim_log(log_path, step)   # rows logged after the checkpoint (a kill between checkpoints)
-        torch.manual_seed(seed + step)
         print(f"resumed from {ck_path} at step {step} ({elapsed0 / 60:.1f} min trained)")
     else:
         if init_from:
@@ -223,7 +226,8 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
         save_checkpoint(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
                         "config": net.cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
                         "batch": batch, "seed": seed, "border_cut": border_cut, "calib": [net.cfg.calib_a, net.cfg.calib_b],
-                        "pad": sampler.pad, "init_from": origin, **data_info})
+                        "pad": sampler.pad, "init_from": origin, "random": random_state(sampler.rng),
+                        "log_acc": [acc, nacc], **data_info})
 
     net.train()
     t_start = time.perf_counter()
@@ -234,6 +238,8 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
         bar = tqdm(total=steps, initial=step, desc="edgetrack", unit="step")
     acc = {"loss": 0.0, "cls": 0.0, "reg": 0.0}
     nacc = 0
+    if ck is not None and "log_acc" in ck:   # the log interval the checkpoint fell in, part summed
+        acc, nacc = dict(ck["log_acc"][0]), int(ck["log_acc"][1])
     stopped = "steps"
     elapsed = elapsed0
     with open(log_path, "a") as log:

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..checkpoint import save_checkpoint
+from ..checkpoint import random_state, restore_random_state, save_checkpoint
 from ..training_log import read_log, trim_log
 from .data import CropCache, PairSampler
 from .model import SiamFC, SiamFCConfig, balanced_bce
@@ -66,6 +66,7 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
     opt = torch.optim.SGD(net.parameters(), lr=lr, momentum=0.9, weight_decay=weight_decay)
     gamma = (lr_end / lr) ** (1.0 / max(steps, 1))
     step, elapsed0 = 0, 0.0
+    acc, nacc = 0.0, 0
     sampler = PairSampler(CropCache(cache_dir), cfg.exemplar_size, cfg.train_instance_size,
                           max_gap=max_gap, seed=seed)
     from .data import cache_data_info
@@ -75,16 +76,21 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
     def checkpoint(elapsed):
         save_checkpoint(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
                                   "config": cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
-                                  "batch": batch, "seed": seed, **data_info})
+                                  "batch": batch, "seed": seed, "random": random_state(sampler.rng),
+                                  "log_acc": [acc, nacc], **data_info})
 
     if resume and ck_path.is_file():
         ck = torch.load(str(ck_path), map_location="cpu", weights_only=False)
         net.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optim"])
         step, elapsed0 = int(ck["step"]), float(ck.get("elapsed_s", 0.0))
-        sampler.rng = np.random.default_rng([seed, step])
+        if "random" in ck:   # the sampler's and torch's streams go on as if never stopped
+            restore_random_state(sampler.rng, ck["random"])
+        else:                # a checkpoint from before they were saved
+            sampler.rng = np.random.default_rng([seed, step])
+            torch.manual_seed(seed + step)
+        acc, nacc = ck.get("log_acc", (0.0, 0))   # the log interval the checkpoint fell in, part summed
         trim_log(log_path, step)   # rows logged after the checkpoint (a kill between checkpoints)
-        torch.manual_seed(seed + step)
         print(f"resumed from {ck_path} at step {step}")
     elif init_from:
         from ..checkpoint import load_checkpoint_dict
@@ -104,7 +110,6 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=steps, initial=step, desc=f"siamfc-{cfg.variant}", unit="step")
-    acc, nacc = 0.0, 0
     stopped = "steps"
     with open(log_path, "a") as log:
         while step < steps:
