@@ -109,3 +109,63 @@ def test_siamfc_resumed_after_a_kill_is_bit_identical(sf_cache, tmp_path, monkey
     b = torch.load(str(tmp_path / "killed" / "ckpt.pt"), weights_only=False)
     _same_state(a["model"], b["model"])
     assert _train_losses(tmp_path / "whole" / "log.jsonl") == _train_losses(tmp_path / "killed" / "log.jsonl")
+
+
+@pytest.fixture(scope="module")
+def bx_cache(tiny_dataset, tmp_path_factory):
+    from track3d_train.boxnet.data import prepare_split
+
+    out = tmp_path_factory.mktemp("bx_resume")
+    return prepare_split(tiny_dataset, "train", out / "train.npz", jitters=2, max_points=256, min_points=8,
+                         progress=False)
+
+
+def _bx_cfg(cache, out, **kw):
+    from track3d_train.boxnet.train import TrainConfig
+
+    return TrainConfig(**{**dict(train_cache=str(cache), out=str(out), num_points=64, width=0.25, epochs=3, batch=8,
+                                 val_every=2, val_max=16, lr=3e-3, seed=2), **kw})
+
+
+def test_boxnet_max_steps_mid_epoch_is_a_partial_epoch_and_resumes_exactly(bx_cache, tmp_path):
+    """--max-steps inside an epoch: the log names the step cap (it had said "budget reached"), the
+    epoch is recorded as partial (it had been a full one, and a resumed run skipped the rest of
+    it), and a run resumed from there ends with the uninterrupted run's bytes."""
+    from track3d_train.boxnet.train import train
+
+    logs = []
+    whole = train(_bx_cfg(bx_cache, tmp_path / "whole"), progress=False, log=logs.append)
+    per_epoch = whole["epochs"][0]["step"]
+    assert len(whole["epochs"]) == 3 and per_epoch >= 3 and not any(e.get("partial") for e in whole["epochs"])
+    cut = per_epoch + 2                                   # two batches into the second epoch
+    logs.clear()
+    h = train(_bx_cfg(bx_cache, tmp_path / "cut", max_steps=cut), progress=False, log=logs.append)
+    assert [e.get("partial", False) for e in h["epochs"]] == [False, True]
+    assert h["epochs"][-1]["batches"] == 2 and h["epochs"][-1]["of"] == per_epoch
+    assert logs[-1] == f"stopping in epoch 2 after 2 of {per_epoch} batches, step {cut}: --max-steps {cut} reached"
+    assert not any("budget" in m for m in logs)
+    ck = torch.load(str(tmp_path / "cut" / "last.pt"), weights_only=False)
+    assert ck["epoch"] == 0 and ck["partial"]["epoch"] == 1 and ck["partial"]["batches"] == 2
+    # the same command again does nothing more; a higher cap completes the cut epoch, then the rest
+    assert len(train(_bx_cfg(bx_cache, tmp_path / "cut", max_steps=cut), progress=False, log=logs.append)
+               ["epochs"]) == 2
+    h = train(_bx_cfg(bx_cache, tmp_path / "cut", max_steps=0), progress=False, log=logs.append)
+    a = torch.load(str(tmp_path / "whole" / "last.pt"), weights_only=False)
+    b = torch.load(str(tmp_path / "cut" / "last.pt"), weights_only=False)
+    _same_state(a["model"], b["model"])
+    assert [e["step"] for e in h["epochs"]] == [e["step"] for e in whole["epochs"]]
+    assert [e["train"] for e in h["epochs"]] == [e["train"] for e in whole["epochs"]]
+    assert [e["val"] for e in h["epochs"]] == [e["val"] for e in whole["epochs"]]
+    assert h["steps"] == whole["steps"]
+
+
+def test_boxnet_max_steps_at_an_epoch_end_is_a_whole_epoch(bx_cache, tmp_path):
+    from track3d_train.boxnet.train import train
+
+    logs = []
+    per_epoch = train(_bx_cfg(bx_cache, tmp_path / "probe", epochs=1), progress=False,
+                      log=lambda *_: None)["epochs"][0]["step"]
+    h = train(_bx_cfg(bx_cache, tmp_path / "r", max_steps=per_epoch), progress=False, log=logs.append)
+    assert len(h["epochs"]) == 1 and not h["epochs"][0].get("partial")
+    assert logs[-1] == f"stopping after epoch 1, step {per_epoch}: --max-steps {per_epoch} reached"
+    assert "partial" not in torch.load(str(tmp_path / "r" / "last.pt"), weights_only=False)

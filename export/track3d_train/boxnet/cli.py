@@ -67,7 +67,10 @@ def _train(a) -> int:
                       iou_weight=a.iou_weight)
     _log(f"training A3BoxNet into {a.out}: {cfg}")
     h = train(cfg, resume=not a.no_resume, progress=not a.quiet, log=_log, init_from=a.init_from)
-    _log(f"done: {len(h['epochs'])} epochs, {h['seconds'] / 60:.1f} min; curve in {Path(a.out) / 'loss_curve.png'}")
+    full = sum(not e.get("partial") for e in h["epochs"])
+    cut = next((e for e in h["epochs"] if e.get("partial")), None)
+    part = f" and {cut['batches']} of {cut['of']} batches of epoch {cut['epoch']}" if cut else ""
+    _log(f"done: {full} epochs{part}, {h['seconds'] / 60:.1f} min; curve in {Path(a.out) / 'loss_curve.png'}")
     return 0
 
 

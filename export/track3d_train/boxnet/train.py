@@ -267,6 +267,9 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
                "val_items": len(val_ds) if val_ds else 0, "data_hash": cache.info.get("data_hash"),
                "cache": cache.info, "seconds": 0.0}
     start_epoch, step, best = 0, 0, -1.0
+    # an epoch a stop cut short (--max-steps, the time budget, a signal): {"epoch", "batches" done,
+    # "sums" of the terms, "train_seconds"}; a resumed run completes it, the same batches in order
+    partial = None
     last = out / "last.pt"
     if resume and last.is_file():
         ck = torch.load(str(last), map_location="cpu", weights_only=False)
@@ -275,7 +278,15 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
         model.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optim"])
         start_epoch, step, best, history = ck["epoch"] + 1, ck["step"], ck["best"], ck["history"]
-        log(f"resumed from {last}: epoch {start_epoch}, step {step}")
+        if "torch_random" in ck:
+            torch.set_rng_state(ck["torch_random"])
+        partial = ck.get("partial")
+        if partial is not None:
+            start_epoch = partial["epoch"]
+            log(f"resumed from {last}: epoch {start_epoch + 1}, batch {partial['batches']} of {per_epoch}, "
+                f"step {step}")
+        else:
+            log(f"resumed from {last}: epoch {start_epoch}, step {step}")
     elif init_from:
         init_from, src = _load_source(init_from, train_ds)
         # the weights carry over between box codings (same layers; the heads re-learn what their
@@ -303,22 +314,68 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
     if budget_s > 0 and progress_at(step, t_before) >= 1.0:
         log(f"the time budget of {cfg.max_minutes} min is already spent ({t_before / 60:.1f} min)")
         return history
+    if cfg.max_steps and step >= cfg.max_steps:
+        log(f"already at --max-steps {cfg.max_steps} (step {step})")
+        return history
+
+    def end_epoch(epoch: int, n: int, sums: dict, train_seconds: float, cut: bool) -> None:
+        """Record the epoch (validated; `cut`: a stop ended it after n of per_epoch batches, marked
+        partial) and write the checkpoints, last.pt able to resume a cut epoch where it stopped."""
+        nonlocal best
+        rec = {"epoch": epoch + 1, "step": step, "lr": lr_at(progress_at(step, t_before + time.time() - t_session)),
+               "train": {k: v / max(n, 1) for k, v in sums.items()}, "train_seconds": train_seconds}
+        if cut:
+            rec.update(partial=True, batches=n, of=per_epoch)
+        if val_ds is not None:
+            rec["val"] = _validate(model, val_ds, 64)
+        history["seconds"] = t_before + (time.time() - t_session)
+        history["epochs"].append(rec)
+        score = rec["val"]["AO_3d"] if "val" in rec else -rec["train"]["total"]
+        msg = f"epoch {epoch + 1}{f' (partial: {n} of {per_epoch} batches)' if cut else ''}: " \
+              f"train {rec['train']['total']:.4f}"
+        if "val" in rec:
+            v = rec["val"]
+            msg += f" | val loss {v['loss']:.4f} AO_3d {v['AO_3d']:.3f} AO_bev {v['AO_bev']:.3f} ACE {v['ACE_3d']:.3f} m"
+        log(msg + f" | {rec['train_seconds']:.0f} s")
+        ck = {"model": model.state_dict(), "optim": opt.state_dict(), "epoch": epoch - 1 if cut else epoch,
+              "step": step, "best": max(best, score), "history": history, "model_config": mcfg.to_dict(),
+              "train_config": asdict(cfg), "torch_random": torch.get_rng_state()}
+        if cut:
+            ck["partial"] = {"epoch": epoch, "batches": n, "sums": dict(sums), "train_seconds": train_seconds}
+        if score > best:
+            best = score
+            torch.save(ck, str(out / "best.pt"))
+        torch.save(ck, str(out / "last.tmp"))
+        (out / "last.tmp").replace(last)
+        (out / "history.json").write_text(json.dumps(history, indent=1))
+        try:
+            plot_history(history, out / "loss_curve.png")
+        except Exception as e:  # plotting must never kill a training run
+            log(f"(plot failed: {e})")
+
     for epoch in range(start_epoch, cfg.epochs):
         model.train()
         train_ds.epoch = epoch
         rng = np.random.default_rng(cfg.seed * 1000 + epoch)
         order = rng.permutation(len(train_ds))[:per_epoch * cfg.batch]
-        sums, n = {}, 0
+        sums, n, t_epoch = {}, 0, 0.0
+        if partial is not None and partial["epoch"] == epoch:   # resume within the epoch: its remaining batches
+            sums, n, t_epoch = dict(partial["sums"]), int(partial["batches"]), float(partial["train_seconds"])
+            order = order[n * cfg.batch:]
+            if history["epochs"] and history["epochs"][-1].get("partial"):
+                history["epochs"].pop()   # the cut epoch's record: the completed (or further cut) one replaces it
+        partial = None
         it = _batches(train_ds, order, cfg.batch)
         if progress:
             from tqdm import tqdm
-            it = tqdm(it, total=per_epoch, desc=f"epoch {epoch + 1}/{cfg.epochs}", unit="batch", mininterval=5)
+            it = tqdm(it, total=per_epoch, initial=n, desc=f"epoch {epoch + 1}/{cfg.epochs}", unit="batch",
+                      mininterval=5)
         t0 = time.time()
-        stop = False
+        stop = None   # why the run stops (a sentence for the log), or None
         for pts, cat, crel, cls, res, scale in it:
             frac = progress_at(step, t_before + time.time() - t_session)
             if budget_s > 0 and frac >= 1.0:
-                stop = True
+                stop = f"the time budget of {cfg.max_minutes:g} min is spent"
                 break
             for g in opt.param_groups:
                 g["lr"] = lr_at(frac)
@@ -340,36 +397,16 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
             if step % 10 == 0:
                 history["steps"].append({"step": step, **terms})
             if cfg.max_steps and step >= cfg.max_steps:
-                stop = True
+                stop = f"--max-steps {cfg.max_steps} reached"
                 break
+        if progress:
+            it.close()
         if n == 0:
             break
-        rec = {"epoch": epoch + 1, "step": step, "lr": lr_at(progress_at(step, t_before + time.time() - t_session)), "train": {k: v / max(n, 1) for k, v in sums.items()},
-               "train_seconds": time.time() - t0}
-        if val_ds is not None:
-            rec["val"] = _validate(model, val_ds, 64)
-        history["seconds"] = t_before + (time.time() - t_session)
-        history["epochs"].append(rec)
-        score = rec["val"]["AO_3d"] if "val" in rec else -rec["train"]["total"]
-        msg = f"epoch {epoch + 1}: train {rec['train']['total']:.4f}"
-        if "val" in rec:
-            v = rec["val"]
-            msg += f" | val loss {v['loss']:.4f} AO_3d {v['AO_3d']:.3f} AO_bev {v['AO_bev']:.3f} ACE {v['ACE_3d']:.3f} m"
-        log(msg + f" | {rec['train_seconds']:.0f} s")
-        ck = {"model": model.state_dict(), "optim": opt.state_dict(), "epoch": epoch, "step": step,
-              "best": max(best, score), "history": history, "model_config": mcfg.to_dict(),
-              "train_config": asdict(cfg)}
-        if score > best:
-            best = score
-            torch.save(ck, str(out / "best.pt"))
-        torch.save(ck, str(out / "last.tmp"))
-        (out / "last.tmp").replace(last)
-        (out / "history.json").write_text(json.dumps(history, indent=1))
-        try:
-            plot_history(history, out / "loss_curve.png")
-        except Exception as e:  # plotting must never kill a training run
-            log(f"(plot failed: {e})")
+        cut = n < per_epoch
+        end_epoch(epoch, n, sums, t_epoch + time.time() - t0, cut)
         if stop:
-            log(f"stopping after epoch {epoch + 1} (budget reached)")
+            where = f"in epoch {epoch + 1} after {n} of {per_epoch} batches" if cut else f"after epoch {epoch + 1}"
+            log(f"stopping {where}, step {step}: {stop}")
             break
     return history
