@@ -212,3 +212,28 @@ def test_edgetrack_help_example_keeps_its_line_continuation(capsys):
     text = _help(capsys, ["edgetrack", "--help"])
     assert re.search(r"data/engine-calib2 \\\n +--split train", text), text[:1500]
     assert not re.search(r"\S {4,}--split", text)
+
+
+def test_epoch_samples_says_it_is_capped_at_the_cache(capsys, tmp_path):
+    """--epoch-samples 1024 on a cache of fewer training items had silently given fewer steps per
+    epoch: the help says so, and the log once when it happens."""
+    from track3d.synthetic import make_synthetic_dataset
+    from track3d_train.boxnet.data import PointCache, prepare_split
+    from track3d_train.boxnet.train import TrainConfig, train
+
+    assert "capped at the cache's training items" in _flag_help(_help(capsys, ["boxnet", "train", "--help"]),
+                                                                 "--epoch-samples")
+    cache = prepare_split(make_synthetic_dataset(tmp_path / "ds", {"a": 3}), "test", tmp_path / "c.npz", jitters=1,
+                          min_points=4, progress=False)
+    items = len(PointCache(cache))
+    logs = []
+    cfg = TrainConfig(train_cache=str(cache), out=str(tmp_path / "run"), num_points=32, width=0.25, epochs=1,
+                      epoch_samples=1024, batch=4, val_every=0, max_steps=1)
+    train(cfg, progress=False, log=logs.append)
+    capped = [m for m in logs if "epoch_samples 1024" in m]
+    assert capped == [f"epoch_samples 1024 is more than the cache's {items} training items: an epoch is one pass "
+                      f"over them, {items // 4} steps of 4"]
+    logs.clear()
+    train(TrainConfig(**{**cfg.__dict__, "epoch_samples": items, "out": str(tmp_path / "run2")}), progress=False,
+          log=logs.append)
+    assert not [m for m in logs if "training items" in m]

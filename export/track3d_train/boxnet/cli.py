@@ -163,7 +163,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "same with the label normalised by max(size) (paper), E * (1 + r) with E the points' "
                         "per-axis extents (extent), or with x / y from the whole frustum's box (frustum)")
     t.add_argument("--epochs", type=bounded(int, 1), default=25, help="planned epochs (the LR schedule spans them)")
-    t.add_argument("--epoch-samples", type=bounded(int, 0), default=0, help="items per epoch (0: the whole cache)")
+    t.add_argument("--epoch-samples", type=bounded(int, 0), default=0,
+                   help="items per epoch, drawn at random (0: the whole cache); capped at the cache's training "
+                        "items (the validation sequences held out): more gives one pass over them, said once "
+                        "in the log")
     t.add_argument("--batch", type=bounded(int, 1), default=32, help="batch size")
     t.add_argument("--lr", type=bounded(float, above=0), default=1e-3, help="initial learning rate")
     t.add_argument("--no-flip", action="store_true", help="no random x-mirroring")

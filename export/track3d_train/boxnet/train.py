@@ -26,7 +26,7 @@ class TrainConfig:
     use_category: bool = True
     size_norm: str = "points"
     epochs: int = 25
-    epoch_samples: int = 0          # 0: the whole cache per epoch
+    epoch_samples: int = 0          # 0: the whole cache per epoch; capped at the training items
     batch: int = 32
     lr: float = 1e-3
     lr_min: float = 1e-5
@@ -250,6 +250,9 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
     if per_epoch < 1:
         raise ValueError(f"the training cache has {len(train_ds)} items, fewer than one batch of {cfg.batch}")
     total_steps = per_epoch * cfg.epochs
+    if cfg.epoch_samples > len(train_ds):
+        log(f"epoch_samples {cfg.epoch_samples} is more than the cache's {len(train_ds)} training items: an epoch "
+            f"is one pass over them, {per_epoch} steps of {cfg.batch}")
 
     budget_s = 60.0 * cfg.max_minutes
 
