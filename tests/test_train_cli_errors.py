@@ -237,3 +237,21 @@ def test_epoch_samples_says_it_is_capped_at_the_cache(capsys, tmp_path):
     train(TrainConfig(**{**cfg.__dict__, "epoch_samples": items, "out": str(tmp_path / "run2")}), progress=False,
           log=logs.append)
     assert not [m for m in logs if "training items" in m]
+
+
+@pytest.mark.parametrize("command,default", [("siamfc", 1.0), ("edgetrack", 3.0)])
+def test_train_checkpoint_interval_is_a_flag(capsys, monkeypatch, tmp_path, command, default):
+    """SiamFC's 60 s checkpoint interval had no flag (EdgeTrack's had: --ckpt-every-min)."""
+    import importlib
+
+    text = _flag_help(_help(capsys, [command, "train", "--help"]), "--ckpt-every-min")
+    assert f"default: {default}" in text and "SIGTERM" in text
+    seen = {}
+    monkeypatch.setattr(importlib.import_module(f"track3d_train.{command}.train"), "train",
+                        lambda *a, **k: seen.update(k) or {"step": 0})
+    cache = tmp_path / "cache"
+    (cache / "target").mkdir(parents=True)
+    (cache / "target" / "index.json").write_text("{}")
+    assert train_main([command, "train", "--cache", str(cache), "--out", str(tmp_path / "run"),
+                       "--ckpt-every-min", "0.5", "--quiet"]) == 0
+    assert seen["ckpt_every_s"] == 30.0

@@ -1,10 +1,14 @@
 """A training run killed and resumed ends with the same bytes as one never interrupted: the
 weights, the optimiser, EdgeTrack's fitted calibration and the training log's losses, whatever
 step the kill came at (the samplers' random streams, torch's, the data order and the partial
-log interval are all in the checkpoint). Tiny networks on tiny synthetic caches, seconds each."""
+log interval are all in the checkpoint). SIGTERM and SIGINT (Ctrl-C) write that checkpoint at
+the next step boundary, then end the run (TrainingInterrupted). Tiny networks on tiny synthetic
+caches, seconds each."""
 from __future__ import annotations
 
 import json
+import os
+import signal
 
 import numpy as np
 import pytest
@@ -169,3 +173,153 @@ def test_boxnet_max_steps_at_an_epoch_end_is_a_whole_epoch(bx_cache, tmp_path):
     assert len(h["epochs"]) == 1 and not h["epochs"][0].get("partial")
     assert logs[-1] == f"stopping after epoch 1, step {per_epoch}: --max-steps {per_epoch} reached"
     assert "partial" not in torch.load(str(tmp_path / "r" / "last.pt"), weights_only=False)
+
+
+# -- SIGTERM / SIGINT: a checkpoint at the step boundary, then TrainingInterrupted -----------------
+class Terminated(BaseException):
+    """SIGTERM reached the test's own handler: the training loop did not catch it."""
+
+
+@pytest.fixture
+def sigterm_raises():
+    """SIGTERM raises Terminated in this test (its default would end pytest); a training loop
+    replaces the handler while it runs and puts this one back after."""
+    def handler(signum, frame):
+        raise Terminated
+
+    old = signal.signal(signal.SIGTERM, handler)
+    yield handler
+    signal.signal(signal.SIGTERM, old)
+
+
+def _signal_at_sample(monkeypatch, sampler_cls, call: int, signum: int):
+    """While the `call`-th training batch is drawn, `signum` reaches this process."""
+    real = sampler_cls.sample
+    calls = []
+
+    def sample(self, batch, *a, **k):
+        out = real(self, batch, *a, **k)
+        if batch == BATCH:
+            calls.append(1)
+            if len(calls) == call:
+                os.kill(os.getpid(), signum)
+        return out
+
+    monkeypatch.setattr(sampler_cls, "sample", sample)
+    return lambda: monkeypatch.setattr(sampler_cls, "sample", real)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_edgetrack_a_signal_checkpoints_at_the_step_and_the_resumed_run_is_bit_identical(
+        et_cache, tmp_path, monkeypatch, sigterm_raises, signum):
+    """A kill had written no checkpoint: up to --ckpt-every-min of work lost (a run killed at 20 s
+    restarted at step 0)."""
+    from track3d_train.edgetrack.data import PairSampler
+    from track3d_train.edgetrack.model import EdgeTrackConfig
+    from track3d_train.edgetrack.train import train
+    from track3d_train.interrupt import TrainingInterrupted
+
+    kw = dict(steps=7, batch=BATCH, val_every=3, val_sequences=1, val_pairs=8, log_every=2, seed=1,
+              ckpt_every_s=1e9, progress=False)
+    whole = train(EdgeTrackConfig(**ET_TINY), et_cache, tmp_path / "whole", **kw)
+    restore = _signal_at_sample(monkeypatch, PairSampler, 4, signum)
+    with pytest.raises(TrainingInterrupted) as e:
+        train(EdgeTrackConfig(**ET_TINY), et_cache, tmp_path / "stopped", **kw)
+    restore()
+    assert (e.value.signum, e.value.step, e.value.exit_code) == (signum, 4, 128 + signum)
+    assert e.value.checkpoint == str(tmp_path / "stopped" / "ckpt.pt")
+    assert torch.load(e.value.checkpoint, weights_only=False)["step"] == 4
+    assert signal.getsignal(signal.SIGTERM) is sigterm_raises                  # the handlers are put back
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    resumed = train(EdgeTrackConfig(**ET_TINY), et_cache, tmp_path / "stopped", **kw)
+    assert resumed["step"] == 7 and resumed["calib"] == whole["calib"]
+    a = torch.load(str(tmp_path / "whole" / "ckpt.pt"), weights_only=False)
+    b = torch.load(str(tmp_path / "stopped" / "ckpt.pt"), weights_only=False)
+    _same_state(a["model"], b["model"])
+    assert _train_losses(tmp_path / "whole" / "log.jsonl") == _train_losses(tmp_path / "stopped" / "log.jsonl")
+
+
+def test_siamfc_sigterm_checkpoints_at_the_step_and_the_resumed_run_is_bit_identical(
+        sf_cache, tmp_path, monkeypatch, sigterm_raises):
+    from track3d_train.interrupt import TrainingInterrupted
+    from track3d_train.siamfc.data import PairSampler
+    from track3d_train.siamfc.model import config_for
+    from track3d_train.siamfc.train import train
+
+    cfg = config_for("edge", width=0.125, train_instance_size=159)
+    kw = dict(steps=6, batch=BATCH, log_every=2, seed=3, ckpt_every_s=1e9, progress=False)
+    train(cfg, sf_cache, tmp_path / "whole", **kw)
+    restore = _signal_at_sample(monkeypatch, PairSampler, 3, signal.SIGTERM)
+    with pytest.raises(TrainingInterrupted) as e:
+        train(cfg, sf_cache, tmp_path / "stopped", **kw)
+    restore()
+    assert e.value.step == 3 and torch.load(e.value.checkpoint, weights_only=False)["step"] == 3
+    assert train(cfg, sf_cache, tmp_path / "stopped", **kw)["step"] == 6
+    _same_state(torch.load(str(tmp_path / "whole" / "ckpt.pt"), weights_only=False)["model"],
+                torch.load(str(tmp_path / "stopped" / "ckpt.pt"), weights_only=False)["model"])
+
+
+def _signal_at_train_step(monkeypatch, call: int, signum: int):
+    """While the `call`-th training loss of A3BoxNet is computed (validation runs without
+    gradients and is not counted), `signum` reaches this process."""
+    from track3d_train.boxnet import losses
+
+    real = losses.boxnet_loss
+    calls = []
+
+    def loss(*a, **k):
+        if torch.is_grad_enabled():
+            calls.append(1)
+            if len(calls) == call:
+                os.kill(os.getpid(), signum)
+        return real(*a, **k)
+
+    monkeypatch.setattr(losses, "boxnet_loss", loss)
+    return lambda: monkeypatch.setattr(losses, "boxnet_loss", real)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("where", ["mid-epoch", "epoch end"])
+def test_boxnet_a_signal_checkpoints_at_the_step_and_the_resumed_run_is_bit_identical(
+        bx_cache, tmp_path, monkeypatch, sigterm_raises, signum, where):
+    """boxnet checkpointed only at an epoch's end: a kill lost the epoch's work."""
+    from track3d_train.boxnet.train import train
+    from track3d_train.interrupt import TrainingInterrupted
+
+    whole = train(_bx_cfg(bx_cache, tmp_path / "whole"), progress=False, log=lambda *_: None)
+    per_epoch = whole["epochs"][0]["step"]
+    at = per_epoch + (2 if where == "mid-epoch" else per_epoch)   # in the second epoch, or at its end
+    restore = _signal_at_train_step(monkeypatch, at, signum)
+    with pytest.raises(TrainingInterrupted) as e:
+        train(_bx_cfg(bx_cache, tmp_path / "stopped"), progress=False, log=lambda *_: None)
+    restore()
+    assert e.value.step == at and e.value.checkpoint == str(tmp_path / "stopped" / "last.pt")
+    ck = torch.load(e.value.checkpoint, weights_only=False)
+    assert ck["step"] == at
+    if where == "mid-epoch":   # no validation, no record of the cut epoch: the resumed run makes it
+        assert ck["partial"]["batches"] == 2 and len(ck["history"]["epochs"]) == 1
+    else:
+        assert "partial" not in ck and len(ck["history"]["epochs"]) == 2
+    h = train(_bx_cfg(bx_cache, tmp_path / "stopped"), progress=False, log=lambda *_: None)
+    _same_state(torch.load(str(tmp_path / "whole" / "last.pt"), weights_only=False)["model"],
+                torch.load(str(tmp_path / "stopped" / "last.pt"), weights_only=False)["model"])
+    assert [(e["train"], e["val"]) for e in h["epochs"]] == [(e["train"], e["val"]) for e in whole["epochs"]]
+
+
+def test_a_second_signal_stops_at_once_and_an_ignored_signal_stays_ignored(sigterm_raises):
+    from track3d_train.interrupt import StopOnSignal
+
+    with StopOnSignal() as stop:
+        assert not stop
+        os.kill(os.getpid(), signal.SIGTERM)
+        assert stop and stop.signum == signal.SIGTERM
+        with pytest.raises(KeyboardInterrupt):   # the second: while the checkpoint is written, say
+            os.kill(os.getpid(), signal.SIGINT)
+    assert signal.getsignal(signal.SIGTERM) is sigterm_raises
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)   # nohup, a background job
+    try:
+        with StopOnSignal() as stop:
+            os.kill(os.getpid(), signal.SIGINT)
+            assert not stop
+    finally:
+        signal.signal(signal.SIGINT, old)

@@ -84,6 +84,8 @@ def _batches(ds, order, batch):
         yield _collate([ds[int(i)] for i in order[s:s + batch]])
 
 
+INTERRUPTED = "interrupted"   # a stop by SIGTERM / SIGINT (interrupt.StopOnSignal)
+
 JOINT_TERMS = ("center1", "center2", "size_cls", "size_res")
 
 
@@ -219,6 +221,7 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
     resumes from its own last.pt."""
     import torch
 
+    from ..interrupt import StopOnSignal
     from .data import BoxNetSamples, PointCache
     from .losses import boxnet_loss, distill_loss
     from .model import A3BoxNet, BoxNetConfig
@@ -324,7 +327,6 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
     def end_epoch(epoch: int, n: int, sums: dict, train_seconds: float, cut: bool) -> None:
         """Record the epoch (validated; `cut`: a stop ended it after n of per_epoch batches, marked
         partial) and write the checkpoints, last.pt able to resume a cut epoch where it stopped."""
-        nonlocal best
         rec = {"epoch": epoch + 1, "step": step, "lr": lr_at(progress_at(step, t_before + time.time() - t_session)),
                "train": {k: v / max(n, 1) for k, v in sums.items()}, "train_seconds": train_seconds}
         if cut:
@@ -340,76 +342,94 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
             v = rec["val"]
             msg += f" | val loss {v['loss']:.4f} AO_3d {v['AO_3d']:.3f} AO_bev {v['AO_bev']:.3f} ACE {v['ACE_3d']:.3f} m"
         log(msg + f" | {rec['train_seconds']:.0f} s")
-        ck = {"model": model.state_dict(), "optim": opt.state_dict(), "epoch": epoch - 1 if cut else epoch,
-              "step": step, "best": max(best, score), "history": history, "model_config": mcfg.to_dict(),
-              "train_config": asdict(cfg), "torch_random": torch.get_rng_state()}
-        if cut:
-            ck["partial"] = {"epoch": epoch, "batches": n, "sums": dict(sums), "train_seconds": train_seconds}
-        if score > best:
-            best = score
-            torch.save(ck, str(out / "best.pt"))
-        torch.save(ck, str(out / "last.tmp"))
-        (out / "last.tmp").replace(last)
-        (out / "history.json").write_text(json.dumps(history, indent=1))
+        save(epoch, n, sums, train_seconds, cut, score)
         try:
             plot_history(history, out / "loss_curve.png")
         except Exception as e:  # plotting must never kill a training run
             log(f"(plot failed: {e})")
 
-    for epoch in range(start_epoch, cfg.epochs):
-        model.train()
-        train_ds.epoch = epoch
-        rng = np.random.default_rng(cfg.seed * 1000 + epoch)
-        order = rng.permutation(len(train_ds))[:per_epoch * cfg.batch]
-        sums, n, t_epoch = {}, 0, 0.0
-        if partial is not None and partial["epoch"] == epoch:   # resume within the epoch: its remaining batches
-            sums, n, t_epoch = dict(partial["sums"]), int(partial["batches"]), float(partial["train_seconds"])
-            order = order[n * cfg.batch:]
-            if history["epochs"] and history["epochs"][-1].get("partial"):
-                history["epochs"].pop()   # the cut epoch's record: the completed (or further cut) one replaces it
-        partial = None
-        it = _batches(train_ds, order, cfg.batch)
-        if progress:
-            from tqdm import tqdm
-            it = tqdm(it, total=per_epoch, initial=n, desc=f"epoch {epoch + 1}/{cfg.epochs}", unit="batch",
-                      mininterval=5)
-        t0 = time.time()
-        stop = None   # why the run stops (a sentence for the log), or None
-        for pts, cat, crel, cls, res, scale in it:
-            frac = progress_at(step, t_before + time.time() - t_session)
-            if budget_s > 0 and frac >= 1.0:
-                stop = f"the time budget of {cfg.max_minutes:g} min is spent"
+    def save(epoch: int, n: int, sums: dict, train_seconds: float, cut: bool, score: float | None) -> None:
+        """last.pt (atomically; `cut`: with what resumes the epoch at batch n), history.json, and
+        best.pt when `score` (a validation's; None: none) is the best yet."""
+        nonlocal best
+        history["seconds"] = t_before + (time.time() - t_session)
+        ck = {"model": model.state_dict(), "optim": opt.state_dict(), "epoch": epoch - 1 if cut else epoch,
+              "step": step, "best": best if score is None else max(best, score), "history": history,
+              "model_config": mcfg.to_dict(), "train_config": asdict(cfg), "torch_random": torch.get_rng_state()}
+        if cut:
+            ck["partial"] = {"epoch": epoch, "batches": n, "sums": dict(sums), "train_seconds": train_seconds}
+        if score is not None and score > best:
+            best = score
+            torch.save(ck, str(out / "best.pt"))
+        torch.save(ck, str(out / "last.tmp"))
+        (out / "last.tmp").replace(last)
+        (out / "history.json").write_text(json.dumps(history, indent=1))
+
+    # SIGTERM / SIGINT: last.pt at the next step boundary (a cut epoch resumes there), then
+    # TrainingInterrupted
+    with StopOnSignal() as signals:
+        for epoch in range(start_epoch, cfg.epochs):
+            model.train()
+            train_ds.epoch = epoch
+            rng = np.random.default_rng(cfg.seed * 1000 + epoch)
+            order = rng.permutation(len(train_ds))[:per_epoch * cfg.batch]
+            sums, n, t_epoch = {}, 0, 0.0
+            if partial is not None and partial["epoch"] == epoch:   # resume within the epoch: its remaining batches
+                sums, n, t_epoch = dict(partial["sums"]), int(partial["batches"]), float(partial["train_seconds"])
+                order = order[n * cfg.batch:]
+                if history["epochs"] and history["epochs"][-1].get("partial"):
+                    history["epochs"].pop()   # the cut epoch's record: the completed (or further cut) one replaces it
+            partial = None
+            it = _batches(train_ds, order, cfg.batch)
+            if progress:
+                from tqdm import tqdm
+                it = tqdm(it, total=per_epoch, initial=n, desc=f"epoch {epoch + 1}/{cfg.epochs}", unit="batch",
+                          mininterval=5)
+            t0 = time.time()
+            stop = None   # why the run stops (a sentence for the log), or None
+            for pts, cat, crel, cls, res, scale in it:
+                frac = progress_at(step, t_before + time.time() - t_session)
+                if budget_s > 0 and frac >= 1.0:
+                    stop = f"the time budget of {cfg.max_minutes:g} min is spent"
+                    break
+                for g in opt.param_groups:
+                    g["lr"] = lr_at(frac)
+                out_s = model(pts, cat)
+                loss, terms = boxnet_loss(out_s, crel, cls, res, scale, cfg.iou_weight)
+                if teacher is not None:
+                    with torch.no_grad():
+                        out_t = teacher(pts, cat)
+                    d, dterms = distill_loss(out_s, out_t, scale)
+                    loss = loss + cfg.distill_weight * d
+                    terms = {**terms, **dterms, "total": loss.item()}
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                opt.step()
+                step += 1
+                n += 1
+                for k, v in terms.items():
+                    sums[k] = sums.get(k, 0.0) + v
+                if step % 10 == 0:
+                    history["steps"].append({"step": step, **terms})
+                if cfg.max_steps and step >= cfg.max_steps:
+                    stop = f"--max-steps {cfg.max_steps} reached"
+                    break
+                if signals:
+                    stop = INTERRUPTED
+                    break
+            if progress:
+                it.close()
+            if n == 0:
                 break
-            for g in opt.param_groups:
-                g["lr"] = lr_at(frac)
-            out_s = model(pts, cat)
-            loss, terms = boxnet_loss(out_s, crel, cls, res, scale, cfg.iou_weight)
-            if teacher is not None:
-                with torch.no_grad():
-                    out_t = teacher(pts, cat)
-                d, dterms = distill_loss(out_s, out_t, scale)
-                loss = loss + cfg.distill_weight * d
-                terms = {**terms, **dterms, "total": loss.item()}
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            step += 1
-            n += 1
-            for k, v in terms.items():
-                sums[k] = sums.get(k, 0.0) + v
-            if step % 10 == 0:
-                history["steps"].append({"step": step, **terms})
-            if cfg.max_steps and step >= cfg.max_steps:
-                stop = f"--max-steps {cfg.max_steps} reached"
+            cut = n < per_epoch
+            if stop is INTERRUPTED and cut:   # fast: no validation, the epoch's record comes when it is complete
+                save(epoch, n, sums, t_epoch + time.time() - t0, True, None)
+                raise signals.interrupted(step, last)
+            end_epoch(epoch, n, sums, t_epoch + time.time() - t0, cut)
+            if signals and epoch + 1 < cfg.epochs and stop in (None, INTERRUPTED):   # came at the epoch's end
+                raise signals.interrupted(step, last)
+            if stop and stop is not INTERRUPTED:
+                where = f"in epoch {epoch + 1} after {n} of {per_epoch} batches" if cut else f"after epoch {epoch + 1}"
+                log(f"stopping {where}, step {step}: {stop}")
                 break
-        if progress:
-            it.close()
-        if n == 0:
-            break
-        cut = n < per_epoch
-        end_epoch(epoch, n, sums, t_epoch + time.time() - t0, cut)
-        if stop:
-            where = f"in epoch {epoch + 1} after {n} of {per_epoch} batches" if cut else f"after epoch {epoch + 1}"
-            log(f"stopping {where}, step {step}: {stop}")
-            break
     return history

@@ -253,7 +253,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--lr", type=bounded(float, above=0), default=3e-3, help="peak AdamW learning rate")
     t.add_argument("--max-gap", type=bounded(int, 1), default=50, help="max frame gap of a pair")
     t.add_argument("--val-every", type=bounded(int, 1), default=200, help="steps between validations")
-    t.add_argument("--ckpt-every-min", type=bounded(float, above=0), default=3.0, help="minutes between atomic checkpoints")
+    t.add_argument("--ckpt-every-min", type=bounded(float, above=0), default=3.0, help="minutes between atomic checkpoints (SIGTERM / Ctrl-C writes one too)")
     t.add_argument("--seed", type=bounded(int, 0), default=0, help="random seed")
     t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
     t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None,

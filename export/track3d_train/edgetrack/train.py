@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from ..checkpoint import random_state, restore_random_state, save_checkpoint
+from ..interrupt import StopOnSignal
 from ..training_log import read_log, trim_log
 from .data import MAKER, CropCache, PairSampler, load_background
 from .model import EdgeTrack, EdgeTrackConfig, cell_centres, edgetrack_loss
@@ -242,7 +243,8 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
         acc, nacc = dict(ck["log_acc"][0]), int(ck["log_acc"][1])
     stopped = "steps"
     elapsed = elapsed0
-    with open(log_path, "a") as log:
+    # SIGTERM / SIGINT: a checkpoint at the next step boundary, then TrainingInterrupted
+    with open(log_path, "a") as log, StopOnSignal() as stop:
         while step < steps:
             # short warm-up, then cosine to 1% of lr over the steps or the time budget, whichever
             # ends first (the step rate on a shared CPU is not known in advance)
@@ -289,9 +291,14 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
             if budget_hit:
                 stopped = "time budget"
                 break
+            if stop and step < steps:
+                stopped = "interrupted"
+                break
     if bar:
         bar.close()
     checkpoint(elapsed)
+    if stopped == "interrupted":
+        raise stop.interrupted(step, ck_path)
     try:
         plot_curves(log_path, out / "curves.json", out / "curves.png")
     except Exception as e:

@@ -58,7 +58,8 @@ def _train(a) -> int:
           f"{cfg.train_instance_size}, batch {a.batch}, {a.steps} steps, {a.threads} thread(s)")
     s = train(cfg, a.cache, a.out, steps=a.steps, batch=a.batch, lr=a.lr, lr_end=a.lr_end, seed=a.seed,
               threads=a.threads, time_budget_s=a.time_budget_min * 60 if a.time_budget_min else None,
-              init_from=a.init_from, resume=not a.no_resume, progress=not a.quiet, max_gap=a.max_gap)
+              ckpt_every_s=a.ckpt_every_min * 60, init_from=a.init_from, resume=not a.no_resume,
+              progress=not a.quiet, max_gap=a.max_gap)
     print(json.dumps(s))
     return 0
 
@@ -158,6 +159,8 @@ def build_parser() -> argparse.ArgumentParser:
         t.add_argument("--lr", type=bounded(float, above=0), default=1e-2, help="initial learning rate")
         t.add_argument("--lr-end", type=bounded(float, above=0), default=1e-4, help="final learning rate (geometric decay)")
         t.add_argument("--max-gap", type=bounded(int, 1), default=50, help="max frame gap of a pair")
+        t.add_argument("--ckpt-every-min", type=bounded(float, above=0), default=1.0,
+                       help="minutes between atomic checkpoints (SIGTERM / Ctrl-C writes one too)")
         t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
         t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
         t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None,

@@ -9,6 +9,7 @@ import numpy as np
 import torch
 
 from ..checkpoint import random_state, restore_random_state, save_checkpoint
+from ..interrupt import StopOnSignal
 from ..training_log import read_log, trim_log
 from .data import CropCache, PairSampler
 from .model import SiamFC, SiamFCConfig, balanced_bce
@@ -111,7 +112,8 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
         from tqdm import tqdm
         bar = tqdm(total=steps, initial=step, desc=f"siamfc-{cfg.variant}", unit="step")
     stopped = "steps"
-    with open(log_path, "a") as log:
+    # SIGTERM / SIGINT: a checkpoint at the next step boundary, then TrainingInterrupted
+    with open(log_path, "a") as log, StopOnSignal() as stop:
         while step < steps:
             for g in opt.param_groups:
                 g["lr"] = lr * gamma ** step
@@ -142,9 +144,14 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
             if budget_hit:
                 stopped = "time budget"
                 break
+            if stop and step < steps:
+                stopped = "interrupted"
+                break
     if bar:
         bar.close()
     checkpoint(elapsed0 + time.perf_counter() - t_start)
+    if stopped == "interrupted":
+        raise stop.interrupted(step, ck_path)
     try:
         plot_log(log_path, out / "loss.png", f"SiamFC {cfg.variant}")
     except Exception as e:  # plotting is a convenience
