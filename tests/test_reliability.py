@@ -303,7 +303,9 @@ def test_a3boxnet_refuses_point_sets_wider_than_it_answers_for():
     assert np.ptp(pts, axis=0).max() > MAX_EXTENT_M
     with pytest.raises(ValueError, match="span"):
         create_estimator("a3boxnet").estimate(pts, 0)
-    t = Track3D(CAM, _Fixed([0.0, 0.0, CAM.width, CAM.height]), create_estimator("a3boxnet"), z_range=(1.0, 1e4))
+    # drop_stray off: this scattered blob would otherwise be taken for false alarms, not a body
+    t = Track3D(CAM, _Fixed([0.0, 0.0, CAM.width, CAM.height]), create_estimator("a3boxnet"), z_range=(1.0, 1e4),
+                drop_stray=False)
     img = np.zeros((CAM.height, CAM.width, 3), np.uint8)
     t.init(img, [0, 0, 20, 20], 0)
     pts[:, 2] = np.abs(pts[:, 2]) * 20 + 1

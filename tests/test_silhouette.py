@@ -729,3 +729,33 @@ def test_a_held_frame_reports_the_sliver_in_view_and_keeps_its_own_box():
     np.testing.assert_allclose(t.box2d, [20, 0, 40, 40])
     assert t.tracker2d.corrected is None
     assert r.box3d[4] < 1.0 < 40 / CAM.fy * 10.0           # the sliver's height, measured (m)
+
+
+def test_a_lone_return_is_no_outline():
+    """A false alarm alone in the tracker's box (a body past the ToF range) had become a 1 x 1 px
+    outline, reported as the 2D box and carried on; an outline needs MIN_CELLS occupied cells."""
+    from track3d.silhouette import MIN_CELLS
+
+    mask = np.zeros((CAM.height, CAM.width), bool)
+    mask[60, 80] = True
+    assert MIN_CELLS > 1 and _box(_cloud(mask), [70, 50, 20, 20]) is None
+    mask[55:65, 75:85] = True
+    np.testing.assert_allclose(_box(_cloud(mask), [70, 50, 20, 20]), [75, 55, 10, 10])
+
+
+def test_the_outline_does_not_reach_a_lone_return_the_raster_skipped():
+    """A cloud past RASTER_POINTS is rasterised every k-th return: a false alarm the stride left out
+    lay in no component, yet the outline of 'every component' took every return's extent and
+    reached out to it (100 px past a ToF body)."""
+    from track3d.silhouette import RASTER_POINTS
+
+    cam = Camera.from_fov(640, 480, 45.0)
+    mask = np.zeros((480, 640), bool)
+    mask[100:300, 200:400] = True                       # 40,000 returns: a stride of 7
+    assert mask.sum() > RASTER_POINTS
+    pts = cam.backproject_depth(np.where(mask, 10.0, 0.0).astype(np.float32))
+    stray = cam.backproject_depth(np.where(np.arange(640)[None, :] + 0 * np.arange(480)[:, None] == 150,
+                                           12.0, 0.0).astype(np.float32))[:1]   # one return at u = 150, v = 0.5
+    for cloud in (pts, np.concatenate([pts, stray])):   # the stray last: the stride skips it
+        out = silhouette_box(cloud, np.array([200.0, 100, 200, 200]), cam.M, (640, 480), (0.1, 100.0), 0.5)[0]
+        np.testing.assert_allclose(out, [200, 100, 200, 200])

@@ -200,6 +200,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="with the box moved to hold the outline (--outline-contain), pull its sides in off image "
                         "texture the depth did not match (stereo: a moon or a star field behind the body; default by "
                         "the depth sensor, track3d.sensor_options.texture_trim_for: on for stereo, off for the others)")
+    t.add_argument("--drop-stray", action=argparse.BooleanOptionalAction, default=None,
+                   help="leave a depth sensor's false alarms out of every frustum: lone returns in the image, a "
+                        "few returns apart in depth (track3d.stray_returns; default by the depth sensor, "
+                        "track3d.sensor_options.drop_stray_for: on for every sensor)")
     t.add_argument("--resume-outline", action=argparse.BooleanOptionalAction, default=None,
                    help="when a 2D tracker that judges its loss (EdgeTrack) calls a frame lost while the depth's "
                         "outline at its last box holds the body in view, go on from the outline (stereo: from the "
@@ -424,7 +428,8 @@ def _cmd_track(a) -> int:
                        first_box_fade=a.first_box_fade if a.first_box_fade is not None else stereo.get("first_box_fade"),
                        front_quantile=a.front_quantile, front_filter=a.front_filter, silhouette=a.silhouette,
                        outline_share=a.outline_share, outline_share_phase=a.outline_share_phase,
-                       outline_contain=a.outline_contain, texture_trim=a.texture_trim, resume_outline=a.resume_outline, dark_side=a.dark_side, fusion_cover=a.fusion_cover, sun=not a.no_sun,
+                       outline_contain=a.outline_contain, texture_trim=a.texture_trim, resume_outline=a.resume_outline,
+                       drop_stray=a.drop_stray, dark_side=a.dark_side, fusion_cover=a.fusion_cover, sun=not a.no_sun,
                        body_views=a.body_views,
                        frustum_margin=margin,
                        # clouds from the image pairs have the stereo camera's reach, not the recorded sensor's

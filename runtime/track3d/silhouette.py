@@ -21,8 +21,8 @@ import numpy as np
 
 from .frustum import extract_frustum
 
-__all__ = ["CELL_MIN_PX", "GRID_CELLS", "MIN_SHARE", "RASTER_POINTS", "REGROW_STEPS", "silhouette_box", "find_body",
-           "contain"]
+__all__ = ["CELL_MIN_PX", "GRID_CELLS", "MIN_CELLS", "MIN_SHARE", "RASTER_POINTS", "REGROW_STEPS", "silhouette_box",
+           "find_body", "contain"]
 
 CELL_MIN_PX = 2.5     # pixels: a cell spans at least this (gaps of a coarse sensor grid close)
 GRID_CELLS = 96       # cells on the longer side of the search region at most (cost bound)
@@ -35,6 +35,10 @@ RASTER_POINTS = 6000  # returns rasterised at most (every k-th of a larger searc
 # body's bottom (IoU_2d 0.6-0.85 where NanoTrack's kept 0.95). Each step costs one frustum cut
 # and one raster; 3 cover a body several times the box's size.
 REGROW_STEPS = 3
+# An outline holds at least this many occupied cells: one or two are a depth sensor's false alarms
+# (a lone return in the tracker's box of a body past the ToF range had become a 1 x 1 px box,
+# reported and carried on; track3d.stray_returns), not a body's outline.
+MIN_CELLS = 3
 
 
 def _project(pts: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -89,11 +93,19 @@ class _Raster:
         c[0] = 0
         return c
 
-    def box(self, keep: np.ndarray, image_size: tuple[int, int]) -> np.ndarray | None:
+    def box(self, keep: np.ndarray, image_size: tuple[int, int], lone_out: bool = True) -> np.ndarray | None:
         """[x, y, w, h] of the returns in the components `keep` (n,) bool: their projections'
-        extent (pixel centres, half a pixel out), at the image border when within a cell of it."""
+        extent (pixel centres, half a pixel out), at the image border when within a cell of it.
+        lone_out: a return the raster's stride left out in no component's cell is left out too."""
         W, H = image_size
-        if keep[1:].all():   # every component (one, mostly): no per-point selection
+        every = bool(keep[1:].all())
+        if every and lone_out and len(self.u):
+            # a return the raster's stride left out lies in no component when it has no other near
+            # it (a depth sensor's false alarm beside the body: the outline had reached 100 px out
+            # to one): then the per-point selection below, which leaves it out
+            ext = np.array([self.u.argmin(), self.u.argmax(), self.v.argmin(), self.v.argmax()])
+            every = bool(self.lab.reshape(-1)[self._cells(self.u[ext], self.v[ext])].all())
+        if every:   # every component (one, mostly): no per-point selection
             us, vs = self.u, self.v
         else:
             sel = keep[self.lab.reshape(-1)[self._cells(self.u, self.v)]]
@@ -111,8 +123,8 @@ class _Raster:
 
 
 def silhouette_box(points: np.ndarray, box2d: np.ndarray, M: np.ndarray, image_size: tuple[int, int],
-                   z_range: tuple[float, float], grow: float,
-                   regrow: int = REGROW_STEPS) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
+                   z_range: tuple[float, float], grow: float, regrow: int = REGROW_STEPS,
+                   lone_out: bool = True) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
     """(box (4,) float64 [x, y, w, h] or None, search points (n, 3) float32, search region (4,)).
 
     points: the frame's cloud (N, 3) in the camera frame of M (3, 4); box2d: the 2D tracker's
@@ -124,7 +136,9 @@ def silhouette_box(points: np.ndarray, box2d: np.ndarray, M: np.ndarray, image_s
     returns in the region overlap box2d (the caller keeps its box, or looks in the whole view:
     `find_body`). The search points (the frustum of the last region, [x, y, w, h]) are returned
     so that the caller cuts its own frustum from them, not from the whole cloud again, when its
-    box lies in the region."""
+    box lies in the region. lone_out (a depth sensor's false alarms, track3d.stray_returns): an
+    outline needs MIN_CELLS occupied cells, and a lone return the raster's stride left out does not
+    stretch it; False: the loop before those rules (one cell is an outline)."""
     W, H = image_size
     x, y, w, h = (float(v) for v in box2d)
     lim = (float(W), float(H))
@@ -140,9 +154,9 @@ def silhouette_box(points: np.ndarray, box2d: np.ndarray, M: np.ndarray, image_s
         r = _Raster(pts, region, M)
         counts = r.counts(np.array([x, y, w, h]))
         total = int(counts.sum())
-        if total == 0:
+        if total < (MIN_CELLS if lone_out else 1):
             return None, pts, region
-        out = r.box(counts >= MIN_SHARE * total, image_size)
+        out = r.box(counts >= MIN_SHARE * total, image_size, lone_out)
         if out is None or step >= regrow:
             return out, pts, region
         wider = list(g)

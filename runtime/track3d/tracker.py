@@ -56,7 +56,8 @@ from .frames import (MAX_COORD_M, check_category, check_cloud, check_image, chec
                      is_integer)
 from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
-from .sensor_options import (BODY_VIEWS, CONTAIN_SLACK_PX, DARK_SIDE, EDGE_PAD, FIND_DEPTH_SLACK, FIND_MIN_RETURNS,
+from .sensor_options import (BODY_VIEWS, CONTAIN_SLACK_PX, DARK_SIDE, DROP_STRAY, EDGE_PAD, FIND_DEPTH_SLACK,
+                             FIND_MIN_RETURNS,
                              FRONT_FILTER,
                              FRONT_QUANTILE, FRUSTUM_MARGIN, FUSION_COVER, OUTLINE_SHARE, OUTLINE_SHARE_PHASE,
                              SECTION_LIMBS, SILHOUETTE, check_depth_sensor, sensor_options)
@@ -70,6 +71,7 @@ from .range_cut import (CAP_FUSION_COVERAGE, DEPTH_RATIO, MAX_DEPTH_RATIO, MIN_C
                         carry_box, cut_ratio, deepen_to_view, lateral_coverage, reaches_range)
 from .trackers2d import Tracker2D, create_tracker
 from .unmatched_texture import trim_unmatched
+from .stray_returns import drop_stray
 
 __all__ = ["Track3D", "TrackResult", "cut_box", "measured_bounds", "STATUSES", "TRACKING", "NO_POINTS", "LOST", "STAGES",
            "MIN_POINTS",
@@ -343,7 +345,8 @@ class Track3D:
                  outline_share_phase: float = OUTLINE_SHARE_PHASE, outline_contain: bool = False,
                  dark_side: float = DARK_SIDE, fusion_cover: float = FUSION_COVER, texture_trim: bool = False,
                  resume_outline: bool = False,
-                 body_views: bool | BodyViewsParams = BODY_VIEWS, first_box_fade: float = FIRST_BOX_FADE):
+                 body_views: bool | BodyViewsParams = BODY_VIEWS, first_box_fade: float = FIRST_BOX_FADE,
+                 drop_stray: bool = DROP_STRAY):
         if not isinstance(camera, Camera):
             raise TypeError(f"camera must be a track3d.Camera, got {type(camera).__name__}")
         if not 0.0 <= float(weight_3d) <= 1.0:
@@ -426,6 +429,9 @@ class Track3D:
         if not isinstance(texture_trim, (bool, np.bool_)):
             raise ValueError(f"texture_trim must be True or False, got {texture_trim!r}")
         self.texture_trim = bool(texture_trim)
+        if not isinstance(drop_stray, (bool, np.bool_)):
+            raise ValueError(f"drop_stray must be True or False, got {drop_stray!r}")
+        self.drop_stray = bool(drop_stray)
         if not isinstance(resume_outline, (bool, np.bool_)):
             raise ValueError(f"resume_outline must be True or False, got {resume_outline!r}")
         self.resume_outline = bool(resume_outline)
@@ -558,13 +564,16 @@ class Track3D:
 
     def _frustum(self, points, box2d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(frustum points, their (2, 3) [min; max]) from one C++ pass; the points are finite.
-        The cut uses the 2D box widened by ``frustum_margin`` (see FRUSTUM_MARGIN).
+        The cut uses the 2D box widened by ``frustum_margin`` (see FRUSTUM_MARGIN); with
+        ``drop_stray`` a depth sensor's false alarms are left out (track3d.stray_returns).
         points: a cloud (N, 3) or a callable box2d -> cloud (e.g. track3d.stereo.StereoCloud.bind,
         which computes depth only around the box)."""
         box2d = self._cut_box(box2d)
         if callable(points):
             points = points(box2d.copy())
-        return extract_frustum_bounds(points, box2d, self._M, *self.z_range)
+        pts, bounds = extract_frustum_bounds(points, box2d, self._M, *self.z_range)
+        # a depth sensor's false alarms are no part of the body (DROP_STRAY)
+        return drop_stray(pts, bounds, self._M) if self.drop_stray else (pts, bounds)
 
     def _measured(self, pts: np.ndarray, bounds: np.ndarray) -> np.ndarray:
         """The frustum's bounds (2, 3) as the loop measures the body with them: the least depth is
@@ -907,7 +916,8 @@ class Track3D:
                 status = NO_POINTS if n >= self.evidence_points else LOST
                 if status == NO_POINTS and self.silhouette > 0.0 and not callable(points):
                     # the returns' outline at the last box, read once for both rules
-                    sil = silhouette_box(points, self.box2d, self._M, self._size, self.z_range, self.silhouette)
+                    sil = silhouette_box(points, self.box2d, self._M, self._size, self.z_range, self.silhouette,
+                                         lone_out=self.drop_stray)
                     whole = self._resumed_outline(points, sil[0]) if self.resume_outline else None
                     measured = whole is None and self._held_outline(points, sil)
                     held = sil[0] if measured else None
@@ -957,7 +967,8 @@ class Track3D:
         seen, cloud = raw, points
         cut = None   # (frustum points, bounds) of `seen`, when already cut
         if wants_lit and not callable(points):
-            lit, near, _ = silhouette_box(points, raw, self._M, self._size, self.z_range, SILHOUETTE)
+            lit, near, _ = silhouette_box(points, raw, self._M, self._size, self.z_range, SILHOUETTE,
+                                          lone_out=self.drop_stray)
             if lit is not None:
                 lit = past_border(lit, raw, self._size)
                 if self.outline_contain:
@@ -969,12 +980,13 @@ class Track3D:
                 # no returns near the tracker's box: the body, if in view, is elsewhere (a tracker
                 # left on the sky by a body that went out of view and came back); the whole
                 # view's depth finds it, if it holds enough returns to be a body, not noise
-                body, found = self._find_body(points, raw)
-                if found is not None and len(found[0]) >= FIND_MIN_RETURNS:
+                body, found = self._find_body(points, raw, FIND_MIN_RETURNS)
+                if found is not None:
                     seen = lit = body
                     cut = found   # the frustum of the box the loop goes on from, cut once
         if self.silhouette > 0.0 and not callable(points):
-            outline, near, region = silhouette_box(points, raw, self._M, self._size, self.z_range, self.silhouette)
+            outline, near, region = silhouette_box(points, raw, self._M, self._size, self.z_range, self.silhouette,
+                                                   lone_out=self.drop_stray)
             if outline is None:
                 # no returns at the tracker's box: the body, if in view, is elsewhere (a fast swing
                 # the 2D search did not follow); the depth finds it
@@ -1109,17 +1121,23 @@ class Track3D:
             return None
         return self._find_body(points, self.box2d)[0]
 
-    def _find_body(self, points: np.ndarray, near: np.ndarray
+    def _find_body(self, points: np.ndarray, near: np.ndarray, min_returns: int | None = None
                    ) -> tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray] | None]:
         """The body the whole view's depth shows (`silhouette.find_body`, the one nearest `near`)
-        when it continues the track: the median depth of its returns within the last 3D box's
-        depth span widened by FIND_DEPTH_SLACK of its range (another body in view is not the
-        target). -> (its box [x, y, w, h], its frustum (points, bounds)), or (None, None). Without a
-        3D box yet every body found is taken."""
+        when it holds at least `min_returns` returns (None: FIND_MIN_RETURNS with `drop_stray`,
+        else any; a few false alarms or stereo's stray matches are no body) and continues the
+        track: the median depth of its returns within the last 3D box's depth span widened by
+        FIND_DEPTH_SLACK of its range (another body in view is not the target). -> (its box
+        [x, y, w, h], its frustum (points, bounds)), or (None, None). Without a 3D box yet the
+        depth is not checked."""
         body = find_body(points, near, self._M, self._size, self.z_range)
         if body is None:
             return None, None
         cut = self._frustum(points, body)
+        if min_returns is None:
+            min_returns = FIND_MIN_RETURNS if self.drop_stray else 1
+        if len(cut[0]) < min_returns:
+            return None, None
         b = self.box3d
         if len(cut[0]) and np.all(np.isfinite(b)):
             z = float(np.median(cut[0][:, 2]))
@@ -1195,7 +1213,8 @@ class Track3D:
         in view (`_resumed_outline`'s tests), (that box, False): the loop goes on from it as from
         the tracker's box. Otherwise (None, measured): the 3D box from its frustum, measured True
         when it was; the 2D box and the tracker stay as they were."""
-        lit, near, _ = silhouette_box(points, self.box2d, self._M, self._size, self.z_range, SILHOUETTE)
+        lit, near, _ = silhouette_box(points, self.box2d, self._M, self._size, self.z_range, SILHOUETTE,
+                                      lone_out=self.drop_stray)
         if lit is None:
             return None, False
         box = self._contain(self.box2d, past_border(lit, self.box2d, self._size), near, image)
@@ -1456,6 +1475,7 @@ class Track3D:
                         **({"fusion_cover": self.fusion_cover} if self.fusion_cover > 0.0 else {}),
                         # only when on: the records of runs without the views stay as they were
                         **({"body_views": asdict(self._views.params)} if self._views is not None else {}),
+                        **({"drop_stray": True} if self.drop_stray else {}),
                         # acts only with a first 3D box (init(box3d=)); named when not the default
                         **({"first_box_fade": self.first_box_fade} if self.first_box_fade != FIRST_BOX_FADE else {})},
             "models": models,

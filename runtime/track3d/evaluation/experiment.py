@@ -84,6 +84,7 @@ class TrackerSpec:
     outline_contain: bool | None = None      # None: by the sequence's depth sensor (outline_contain_for)
     texture_trim: bool | None = None         # None: by the sequence's depth sensor (texture_trim_for)
     resume_outline: bool | None = None       # None: by the sequence's depth sensor (resume_outline_for)
+    drop_stray: bool | None = None           # None: by the sequence's depth sensor (drop_stray_for)
     dark_side: float | None = None           # None: by the sequence's depth sensor (dark_side_for)
     fusion_cover: float | None = None        # None: by the sequence's depth sensor (fusion_cover_for)
     first_box_fade: float | None = None      # None: by the sequence's depth sensor (first_box_fade_for; used with a first 3D box)

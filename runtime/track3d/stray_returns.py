@@ -1,0 +1,92 @@
+"""Returns that are no part of the body: lone false alarms of a depth sensor in the frustum.
+
+A photon-counting flash LiDAR or a ToF camera reports now and then a return where there is no
+surface (a dark count, a solar photon, a dust grain), at any range the sensor gates. One such
+return in front of the body had set the measured front face, and with it the box: ideal depth
+with one false alarm in 100,000 pixels (three a frame over a 640 x 480 image) took the ideal
+calibration set's AO_3d from 0.904 to 0.456 (docs/runtime.md, "False alarms").
+
+The body's returns are neighbours of one another, in the image and in depth: one run of depths
+with no gap wider than a few centimetres between neighbours in depth order, or a few runs where
+one part of the body hides another, each a patch of neighbouring pixels. A false alarm has no
+neighbour: on the sky it has no other return near it in the image; over the body it has none
+near it in depth. `drop_stray` drops
+- each return with no other within the 3 x 3 cells of STRAY_CELL_PX pixels around its own (the
+  sky's false alarms; a flash LiDAR's returns lie ~5 px apart in a 640 x 480 image), then
+- splitting the rest at every gap wider than `gap_m` in depth, besides the largest run each run
+  of fewer than `min_count` returns, and each run of at most `max_check` returns most of which
+  have no other return of their run within `near_px` pixels (false alarms over the body).
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from .silhouette import _project
+
+__all__ = ["STRAY_GAP_M", "STRAY_MIN_COUNT", "STRAY_NEAR_PX", "STRAY_MAX_CHECK", "STRAY_CELL_PX", "drop_stray"]
+
+STRAY_GAP_M = 0.5
+STRAY_MIN_COUNT = 3
+STRAY_NEAR_PX = 8.0
+STRAY_MAX_CHECK = 256   # a run this large is no handful of false alarms (and the check is quadratic)
+STRAY_CELL_PX = 4.0
+
+
+def _alone(u: np.ndarray, v: np.ndarray, cell: float) -> np.ndarray:
+    """(n,) bool: returns with no other return in the 3 x 3 cells around their own."""
+    iu = ((u - u.min()) / np.float32(cell)).astype(np.intp)
+    iv = ((v - v.min()) / np.float32(cell)).astype(np.intp)
+    nx, ny = int(iu.max()) + 1, int(iv.max()) + 1
+    ids = iv * nx + iu
+    grid = np.bincount(ids, minlength=nx * ny).astype(np.float32).reshape(ny, nx)
+    near = cv2.boxFilter(grid, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    return near.reshape(-1)[ids] < 1.5
+
+
+def drop_stray(pts: np.ndarray, bounds: np.ndarray, M: np.ndarray, gap_m: float = STRAY_GAP_M,
+               min_count: int = STRAY_MIN_COUNT, near_px: float = STRAY_NEAR_PX,
+               max_check: int = STRAY_MAX_CHECK, cell_px: float = STRAY_CELL_PX) -> tuple[np.ndarray, np.ndarray]:
+    """(points (n, 3) float32 in the camera frame of M (3, 4), their bounds (2, 3) [min; max])
+    without the stray returns (the module's rule). The arrays come back as they were (the same
+    objects) when nothing is dropped; with nothing kept, the bounds are an empty frustum's
+    ([inf; -inf], as track3d.frustum gives them)."""
+    n = len(pts)
+    if n < 2:
+        return pts, bounds
+    u, v = _project(pts, M)
+    keep = ~_alone(u, v, cell_px)
+    if not keep.any():   # nothing but lone returns: no body there (an empty frustum, as the loop judges it)
+        return pts[:0], np.array([[np.inf] * 3, [-np.inf] * 3], dtype=bounds.dtype)
+    z = pts[:, 2]
+    idx = np.flatnonzero(keep) if not keep.all() else None
+    zk = z if idx is None else z[idx]
+    zs = np.sort(zk)
+    cuts = np.flatnonzero(np.diff(zs) > gap_m)
+    if len(cuts):
+        counts = np.diff(np.concatenate([[0], cuts + 1, [len(zs)]]))
+        main = int(np.argmax(counts))
+        run = np.searchsorted(zs[cuts + 1], zk, side="right")   # each kept return's run
+        drop = np.zeros(len(counts), bool)
+        for r in np.flatnonzero(counts <= max_check):
+            if r == main:
+                continue
+            if counts[r] < min_count:
+                drop[r] = True
+                continue
+            sel = run == r
+            ur = (u if idx is None else u[idx])[sel].astype(np.float64)
+            vr = (v if idx is None else v[idx])[sel].astype(np.float64)
+            apart = np.maximum(np.abs(ur[:, None] - ur[None, :]), np.abs(vr[:, None] - vr[None, :]))
+            np.fill_diagonal(apart, np.inf)
+            drop[r] = np.mean(apart.min(axis=1) > near_px) > 0.5
+        if drop.any():
+            gone = drop[run]
+            if idx is None:
+                keep = ~gone
+            else:
+                keep[idx[gone]] = False
+    if keep.all():
+        return pts, bounds
+    kept = pts[keep]
+    return kept, np.stack([kept.min(axis=0), kept.max(axis=0)]).astype(bounds.dtype, copy=False)
