@@ -33,16 +33,34 @@ def models_of_run(run: dict | None) -> dict:
     return {m["file"]: m["sha256"][:12] for m in models if m.get("file") and m.get("sha256")}
 
 
+PROTOCOLS = {True: "restart", False: "onepass"}
+
+
+def protocol_of(run: dict | None, folder: str, report: Path) -> str:
+    """The run's protocol from its run record (``restart``), the folder's name (<split>-<protocol>)
+    only for a run without one; a folder named for the other protocol is named on stderr (a
+    one-pass run in a *-restart folder had been tabled as "restart")."""
+    restart = (run or {}).get("restart")
+    if restart is None:
+        return folder
+    protocol = PROTOCOLS[bool(restart)]
+    if protocol != folder:
+        print(f"engine_baseline: warning: {report.parent} is named '{folder}' but its run was made "
+              f"{'with restarts' if restart else 'in one pass'}: tabled as '{protocol}'", file=sys.stderr)
+    return protocol
+
+
 def collect(results: Path) -> list[dict]:
     """One row per (sensor, split, protocol, tracker) from RESULTS/engine-*/*-report/report.json."""
     rows = []
     for rep in sorted(results.glob("engine-*/*-report/report.json")):
         sensor = rep.parents[1].name.removeprefix("engine-")
-        split, _, protocol = rep.parent.name.removesuffix("-report").rpartition("-")
+        split, _, folder = rep.parent.name.removesuffix("-report").rpartition("-")
         r = json.loads(rep.read_text())
         paired = r.get("paired") or {}
         for name, t in r["trackers"].items():
             ov = t["overall"]
+            protocol = protocol_of(t.get("run"), folder, rep)
             rows.append({"sensor": sensor, "split": split, "protocol": protocol, "tracker": name,
                          "dataset": Path(r["dataset"]).name, "cpu": r.get("cpu"),
                          **{k: ov.get(k) for _, k, _ in COLUMNS}, "models": models_of_run(t.get("run")),

@@ -606,3 +606,21 @@ def test_bench_crop_times_the_loops_crops_and_checks_the_kernel_against_its_refe
     assert all(c["scale"] >= 0.5 and c["kernel"]["median_ms"] > 0 for c in rec["cases"])
     if rec["opencv"].startswith("5.0."):                      # the release whose arithmetic the kernel fixes
         assert all(c["opencv_equal"] for c in rec["cases"])
+
+
+def test_engine_rows_take_the_protocol_from_the_run_not_the_folder(tmp_path, capsys):
+    """A one-pass run in a *-restart folder had been tabled as "restart" with no word (the folder's
+    name decided); the run record's ``restart`` decides now, and the mismatch is named."""
+    import engine_baseline
+
+    rep = tmp_path / "engine-tof" / "test-restart-report" / "report.json"
+    rep.parent.mkdir(parents=True)
+    ov = {"ao_2d": 0.8, "ao_bev": 0.7, "ao_3d": 0.6, "ace_3d": 0.5, "restarts": 0, "frames": 60}
+    rep.write_text(json.dumps({"dataset": "data/engine-tof", "trackers": {
+        "mosse-op": {"overall": ov, "run": {"restart": False}},
+        "kcf": {"overall": ov, "run": {"restart": True}},
+        "old": {"overall": ov}}}))
+    rows = {r["tracker"]: r["protocol"] for r in engine_baseline.collect(tmp_path)}
+    assert rows == {"mosse-op": "onepass", "kcf": "restart", "old": "restart"}
+    err = capsys.readouterr().err
+    assert "mosse-op" not in err and "named 'restart'" in err and err.count("warning") == 1
