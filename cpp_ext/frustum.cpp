@@ -201,6 +201,82 @@ py::array_t<float> sample_points(FloatArray points, int64_t num, uint64_t seed) 
   return out;
 }
 
+// Lone returns (track3d.stray_returns): 1 for each point with no other point in the 3 x 3 cells
+// of `cell` pixels around its own, its projection under M in float64 as block_mask computes it;
+// all 0 when fewer than 2 points, a projection is not finite, or the grid would exceed kMaxCells.
+// The numpy reference is track3d.frustum.lone_mask_numpy.
+constexpr int64_t kMaxCells = int64_t{1} << 24;
+
+py::array_t<uint8_t> lone_mask(FloatArray points, DoubleArray M, double cell) {
+  if (points.ndim() != 2 || points.shape(1) != 3)
+    throw std::invalid_argument("points must have shape (N, 3)");
+  if (M.ndim() != 2 || M.shape(0) != 3 || M.shape(1) != 4)
+    throw std::invalid_argument("M must have shape (3, 4)");
+  if (!(cell > 0.0) || !std::isfinite(cell)) throw std::invalid_argument("cell must be a positive number");
+  const int64_t n = points.shape(0);
+  const float* pts = points.data();
+  const double* m = M.data();
+  py::array_t<uint8_t> out(static_cast<py::ssize_t>(n));
+  uint8_t* o = out.mutable_data();
+  {
+    py::gil_scoped_release release;
+    std::memset(o, 0, static_cast<size_t>(n));
+    if (n >= 2) {
+      std::vector<double> u(static_cast<size_t>(n)), v(static_cast<size_t>(n));
+      bool finite = true;
+      double umin = INFINITY, vmin = INFINITY;
+      for (int64_t i = 0; i < n; ++i) {
+        const double x = pts[3 * i], y = pts[3 * i + 1], z = pts[3 * i + 2];
+        const double p2 = m[8] * x + m[9] * y + m[10] * z + m[11];
+        u[i] = (m[0] * x + m[1] * y + m[2] * z + m[3]) / p2;
+        v[i] = (m[4] * x + m[5] * y + m[6] * z + m[7]) / p2;
+        finite &= std::isfinite(u[i]) & std::isfinite(v[i]);
+        umin = std::min(umin, u[i]);
+        vmin = std::min(vmin, v[i]);
+      }
+      if (finite) {
+        std::vector<int64_t> id(static_cast<size_t>(n));
+        int64_t nx = 0, ny = 0;
+        bool small = true;
+        const double inv = 1.0 / cell;
+        for (int64_t i = 0; i < n; ++i) {
+          const double fu = (u[i] - umin) * inv, fv = (v[i] - vmin) * inv;
+          if (!(fu < 1e15 && fv < 1e15)) {
+            small = false;
+            break;
+          }
+          const int64_t iu = static_cast<int64_t>(fu), iv = static_cast<int64_t>(fv);
+          nx = std::max(nx, iu + 1);
+          ny = std::max(ny, iv + 1);
+          u[i] = static_cast<double>(iu);   // reused: the cell's column and row
+          v[i] = static_cast<double>(iv);
+        }
+        if (small && nx <= kMaxCells / std::max<int64_t>(ny, 1) && nx * ny <= kMaxCells) {
+          std::vector<int32_t> count(static_cast<size_t>(nx * ny), 0), row(static_cast<size_t>(nx * ny), 0);
+          for (int64_t i = 0; i < n; ++i) {
+            id[i] = static_cast<int64_t>(v[i]) * nx + static_cast<int64_t>(u[i]);
+            ++count[static_cast<size_t>(id[i])];
+          }
+          // the 3 x 3 sums, separably: along each row, then down each column
+          for (int64_t r = 0; r < ny; ++r) {
+            const int32_t* c = count.data() + r * nx;
+            int32_t* w = row.data() + r * nx;
+            for (int64_t k = 0; k < nx; ++k)
+              w[k] = c[k] + (k > 0 ? c[k - 1] : 0) + (k + 1 < nx ? c[k + 1] : 0);
+          }
+          for (int64_t r = 0; r < ny; ++r)
+            for (int64_t k = 0; k < nx; ++k)
+              count[static_cast<size_t>(r * nx + k)] = row[static_cast<size_t>(r * nx + k)] +
+                  (r > 0 ? row[static_cast<size_t>((r - 1) * nx + k)] : 0) +
+                  (r + 1 < ny ? row[static_cast<size_t>((r + 1) * nx + k)] : 0);
+          for (int64_t i = 0; i < n; ++i) o[i] = static_cast<uint8_t>(count[static_cast<size_t>(id[i])] == 1);
+        }
+      }
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_frustum, m) {
@@ -214,6 +290,8 @@ PYBIND11_MODULE(_frustum, m) {
         "as extract_frustum, plus the (2,3) float64 [min; max] of the kept points (+inf/-inf if none)");
   m.def("sample_indices", &sample_indices, py::arg("n"), py::arg("num"), py::arg("seed"),
         "(num,) int64 indices: num of n points, SplitMix64-seeded (see track3d.frustum)");
+  m.def("lone_mask", &lone_mask, py::arg("points"), py::arg("M"), py::arg("cell"),
+        "uint8 (N,): 1 for a point with no other in the 3 x 3 cells of `cell` px around its own");
   m.def("sample_points", &sample_points, py::arg("points"), py::arg("num"), py::arg("seed"),
         "(n,3) float32 -> (num,3) float32 sampled points (see track3d.frustum)");
 }

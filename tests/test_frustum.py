@@ -196,3 +196,31 @@ def test_sampling_errors():
         fr.sample_points(np.zeros((4, 3), np.float32), 0, 0)
     with pytest.raises(ValueError, match="shape"):
         fr.sample_points(np.zeros((4, 2), np.float32), 2, 0)
+
+
+def test_lone_mask_hand_case_and_the_extension_agrees_bit_for_bit():
+    """track3d.frustum.lone_mask: a point is lone when no other lies in the 3 x 3 cells around its
+    own. Hand case on a pinhole with fx = fy = 100, principal point (0, 0): points at z = 1 land on
+    pixel (100 x, 100 y); cells of 4 px."""
+    from track3d.frustum import lone_mask, lone_mask_numpy
+
+    M = np.array([[100.0, 0, 0, 0], [0, 100.0, 0, 0], [0, 0, 1.0, 0]])
+    uv = np.array([[0, 0], [3, 1], [11, 0], [40, 40], [47.9, 40], [48, 40]], float)   # pixels
+    pts = np.column_stack([uv / 100.0, np.ones(len(uv))]).astype(np.float32)
+    # cells (u // 4, v // 4): (0,0) (0,0) (2,0) (10,10) (11,10) (12,10): the first two share one,
+    # the third is two columns off (alone), the last three neighbour one another
+    want = np.array([False, False, True, False, False, False])
+    np.testing.assert_array_equal(lone_mask_numpy(pts, M, 4.0), want)
+    np.testing.assert_array_equal(lone_mask(pts, M, 4.0), want)
+    assert not lone_mask_numpy(pts[:1], M, 4.0).any()                    # one point: nothing to tell
+    bad = pts.copy()
+    bad[0, 2] = np.nan
+    assert not lone_mask_numpy(bad, M, 4.0).any() and not lone_mask(bad, M, 4.0).any()
+    rng = np.random.default_rng(5)
+    for t in range(300):
+        n = int(rng.choice([0, 2, 7, 300, 3000]))
+        p = rng.normal([0, 0, 20], rng.uniform(0.01, 10), (n, 3)).astype(np.float32)
+        if t % 5 == 0 and n:
+            p[rng.integers(0, n, max(1, n // 40))] = rng.choice([np.nan, np.inf, 0.0, -3.0, 1e30])
+        cell = float(rng.choice([4.0, 0.7, 50.0, 1e-7]))
+        np.testing.assert_array_equal(lone_mask(p, CAM.M, cell), lone_mask_numpy(p, CAM.M, cell))

@@ -43,7 +43,8 @@ from .frames import check_cloud
 __all__ = [
     "Z_MIN", "Z_MAX", "extract_frustum", "extract_frustum_numpy", "frustum_mask_numpy",
     "extract_frustum_bounds", "extract_frustum_bounds_numpy", "MAX_SAMPLE",
-    "sample_points", "sample_points_numpy", "sample_indices_numpy", "HAVE_EXTENSION",
+    "sample_points", "sample_points_numpy", "sample_indices_numpy", "HAVE_EXTENSION", "lone_mask",
+    "lone_mask_numpy", "LONE_MAX_CELLS",
 ]
 
 Z_MIN = 1.0   # metres, paper IV-A: 1 <= z <= 45
@@ -58,6 +59,7 @@ except ImportError:  # pragma: no cover - the package is always built with it
 _ext_extract = getattr(_ext, "extract_frustum", None)
 _ext_sample = getattr(_ext, "sample_points", None)
 _ext_bounds = getattr(_ext, "extract_frustum_bounds", None)
+_ext_lone = getattr(_ext, "lone_mask", None)
 HAVE_EXTENSION = _ext_extract is not None and _ext_sample is not None
 
 _MASK64 = (1 << 64) - 1
@@ -241,3 +243,49 @@ def sample_points(points: np.ndarray, num: int, seed: int) -> np.ndarray:
     if _ext_sample is None:
         return sample_points_numpy(p, num, seed)
     return _ext_sample(p, int(num), _check_seed(seed))
+
+
+LONE_MAX_CELLS = 1 << 24   # a grid past this many cells is no frustum's (kMaxCells in cpp_ext/frustum.cpp)
+
+
+def lone_mask_numpy(points: np.ndarray, M: np.ndarray, cell: float) -> np.ndarray:
+    """(N,) bool: the points with no other point in the 3 x 3 cells of `cell` pixels around their
+    own, projected under M (3, 4) in float64 as the frustum's selection projects them; all False
+    with fewer than 2 points, a projection that is not finite, or a grid of more than
+    LONE_MAX_CELLS cells. The reference of the C++ `lone_mask` (the same result, bit for bit)."""
+    p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+    n = len(p)
+    out = np.zeros(n, bool)
+    if n < 2:
+        return out
+    m = np.asarray(M, dtype=np.float64).reshape(-1)
+    x, y, z = (p[:, k].astype(np.float64) for k in range(3))
+    with np.errstate(all="ignore"):
+        p2 = m[8] * x + m[9] * y + m[10] * z + m[11]
+        u = (m[0] * x + m[1] * y + m[2] * z + m[3]) / p2
+        v = (m[4] * x + m[5] * y + m[6] * z + m[7]) / p2
+    if not (np.isfinite(u).all() and np.isfinite(v).all()):
+        return out
+    inv = 1.0 / float(cell)
+    fu, fv = (u - u.min()) * inv, (v - v.min()) * inv
+    if not ((fu < 1e15).all() and (fv < 1e15).all()):
+        return out
+    iu, iv = fu.astype(np.int64), fv.astype(np.int64)
+    nx, ny = int(iu.max()) + 1, int(iv.max()) + 1
+    if not (nx <= LONE_MAX_CELLS // max(ny, 1) and nx * ny <= LONE_MAX_CELLS):
+        return out
+    count = np.bincount(iv * nx + iu, minlength=nx * ny).reshape(ny, nx)
+    padded = np.pad(count, 1)
+    near = sum(padded[r:r + ny, c:c + nx] for r in range(3) for c in range(3))
+    return near[iv, iu] == 1
+
+
+def lone_mask(points: np.ndarray, M: np.ndarray, cell: float) -> np.ndarray:
+    """lone_mask_numpy's answer from the C++ extension (one pass, GIL released); the numpy
+    reference where the extension lacks it. points (N, 3) float32 (the frustum's)."""
+    if not (np.isfinite(cell) and cell > 0):
+        raise ValueError(f"cell must be a positive number of pixels, got {cell}")
+    if _ext_lone is None:
+        return lone_mask_numpy(points, M, cell)
+    return _ext_lone(np.ascontiguousarray(points, dtype=np.float32), np.ascontiguousarray(M, dtype=np.float64),
+                     float(cell)).view(bool)

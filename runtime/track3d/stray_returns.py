@@ -19,9 +19,9 @@ near it in depth. `drop_stray` drops
 """
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
+from .frustum import lone_mask
 from .silhouette import _project
 
 __all__ = ["STRAY_GAP_M", "STRAY_MIN_COUNT", "STRAY_NEAR_PX", "STRAY_MAX_CHECK", "STRAY_CELL_PX", "drop_stray"]
@@ -31,17 +31,6 @@ STRAY_MIN_COUNT = 3
 STRAY_NEAR_PX = 8.0
 STRAY_MAX_CHECK = 256   # a run this large is no handful of false alarms (and the check is quadratic)
 STRAY_CELL_PX = 4.0
-
-
-def _alone(u: np.ndarray, v: np.ndarray, cell: float) -> np.ndarray:
-    """(n,) bool: returns with no other return in the 3 x 3 cells around their own."""
-    iu = ((u - u.min()) / np.float32(cell)).astype(np.intp)
-    iv = ((v - v.min()) / np.float32(cell)).astype(np.intp)
-    nx, ny = int(iu.max()) + 1, int(iv.max()) + 1
-    ids = iv * nx + iu
-    grid = np.bincount(ids, minlength=nx * ny).astype(np.float32).reshape(ny, nx)
-    near = cv2.boxFilter(grid, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
-    return near.reshape(-1)[ids] < 1.5
 
 
 def drop_stray(pts: np.ndarray, bounds: np.ndarray, M: np.ndarray, gap_m: float = STRAY_GAP_M,
@@ -54,8 +43,7 @@ def drop_stray(pts: np.ndarray, bounds: np.ndarray, M: np.ndarray, gap_m: float 
     n = len(pts)
     if n < 2:
         return pts, bounds
-    u, v = _project(pts, M)
-    keep = ~_alone(u, v, cell_px)
+    keep = ~lone_mask(pts, M, cell_px)
     if not keep.any():   # nothing but lone returns: no body there (an empty frustum, as the loop judges it)
         return pts[:0], np.array([[np.inf] * 3, [-np.inf] * 3], dtype=bounds.dtype)
     z = pts[:, 2]
@@ -75,8 +63,8 @@ def drop_stray(pts: np.ndarray, bounds: np.ndarray, M: np.ndarray, gap_m: float 
                 drop[r] = True
                 continue
             sel = run == r
-            ur = (u if idx is None else u[idx])[sel].astype(np.float64)
-            vr = (v if idx is None else v[idx])[sel].astype(np.float64)
+            ur, vr = _project((pts if idx is None else pts[idx])[sel], M)
+            ur, vr = ur.astype(np.float64), vr.astype(np.float64)
             apart = np.maximum(np.abs(ur[:, None] - ur[None, :]), np.abs(vr[:, None] - vr[None, :]))
             np.fill_diagonal(apart, np.inf)
             drop[r] = np.mean(apart.min(axis=1) > near_px) > 0.5
