@@ -80,3 +80,59 @@ def test_unknown_names_are_one_line_errors(capsys):
     assert "has no knob 'speed'" in capsys.readouterr().err
     assert train_main(["recipe", "show", "siamfc", "--set", "oops"]) == 2
     assert "name=value" in capsys.readouterr().err
+
+
+_STEP = """
+import pathlib, signal, sys, time
+out = pathlib.Path(sys.argv[1])
+got = []
+for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+    signal.signal(s, lambda signum, frame: got.append(signum))
+(out / "ready").write_text("")
+while not got:
+    time.sleep(0.01)
+time.sleep(1.0)                      # a checkpoint being written, longer than subprocess.call's 0.25 s
+(out / "done").write_text(" ".join(str(int(s)) for s in got))
+sys.exit(130)
+"""
+
+
+@pytest.mark.parametrize("sent,passed", [("SIGINT", "SIGINT"), ("SIGTERM", "SIGTERM"), ("SIGHUP", "SIGTERM")])
+def test_a_signal_to_the_recipe_reaches_the_running_step_once_and_the_recipe_waits_for_it(tmp_path, sent, passed):
+    """Ctrl-C in `recipe run` had printed a traceback, and subprocess.call had killed the step
+    (a training writing its checkpoint) 0.25 s after it; a SIGTERM to the recipe never reached
+    the step. Now the step gets the signal once (in a session of its own a terminal's Ctrl-C
+    does not reach it a second time) and the recipe ends after it, Interrupted."""
+    import os
+    import signal
+    import sys
+    import threading
+    import time
+
+    from track3d_train.interrupt import Interrupted
+    from track3d_train.recipes import _call
+
+    def unexpected(signum, frame):
+        raise AssertionError(f"{signum} reached the test, not the recipe")
+
+    old = {s: signal.signal(s, unexpected) for s in (signal.SIGTERM, signal.SIGHUP)}
+    script = tmp_path / "step.py"
+    script.write_text(_STEP)
+
+    def send():
+        t0 = time.time()
+        while not (tmp_path / "ready").exists() and time.time() - t0 < 60:
+            time.sleep(0.01)
+        os.kill(os.getpid(), getattr(signal, sent))
+
+    threading.Thread(target=send, daemon=True).start()
+    try:
+        with pytest.raises(Interrupted) as e:
+            _call([sys.executable, str(script), str(tmp_path)])
+        assert e.value.signum == getattr(signal, sent) and e.value.exit_code == 128 + e.value.signum
+        assert (tmp_path / "done").read_text() == str(int(getattr(signal, passed)))   # once, and not killed
+        assert all(signal.getsignal(s) is unexpected for s in old)                   # the handlers put back
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    assert _call([sys.executable, "-c", "import sys; sys.exit(3)"]) == 3

@@ -11,7 +11,7 @@ import re
 import numpy as np
 import pytest
 
-pytest.importorskip("torch")
+torch = pytest.importorskip("torch")
 
 from track3d.onnxmodel import MODELS_DIR  # noqa: E402
 from track3d_train.cli import COMMANDS  # noqa: E402
@@ -255,3 +255,83 @@ def test_train_checkpoint_interval_is_a_flag(capsys, monkeypatch, tmp_path, comm
     assert train_main([command, "train", "--cache", str(cache), "--out", str(tmp_path / "run"),
                        "--ckpt-every-min", "0.5", "--quiet"]) == 0
     assert seen["ckpt_every_s"] == 30.0
+
+
+def _interrupt_with(monkeypatch, module: str, name: str, exc: BaseException):
+    import importlib
+
+    def stop(*a, **k):
+        raise exc
+
+    monkeypatch.setattr(importlib.import_module(module), name, stop)
+
+
+@pytest.mark.parametrize("argv,module,name", [
+    (["boxnet", "train", "--cache", "c.npz"], "track3d_train.boxnet.train", "train"),
+    (["edgetrack", "train", "--cache", "CACHE"], "track3d_train.edgetrack.train", "train"),
+    (["siamfc", "train", "--cache", "c"], "track3d_train.siamfc.train", "train"),
+    (["recipe", "run", "siamfc"], "track3d_train.recipes", "run"),
+])
+def test_ctrl_c_is_one_line_exit_130_that_says_how_to_resume(capsys, monkeypatch, tmp_path, argv, module, name):
+    """Ctrl-C had printed KeyboardInterrupt's traceback (60 lines) and exited -2; track3d-sim and
+    track3d track say one line and exit 130."""
+    cache = tmp_path / "cache"
+    (cache / "target").mkdir(parents=True)
+    (cache / "target" / "index.json").write_text("{}")
+    argv = [str(cache) if a == "CACHE" else a for a in argv]
+    _interrupt_with(monkeypatch, module, name, KeyboardInterrupt())
+    run = ["--out", str(tmp_path / "run")] if argv[1] == "train" else []
+    assert train_main(argv + run) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"track3d-train {argv[0]}: interrupted: run the same command again to resume"]
+    if argv[1] == "train":   # started over by --no-resume, the same command would not resume
+        assert train_main(argv + run + ["--no-resume"]) == 130
+        assert capsys.readouterr().err.strip().endswith(": run it again without --no-resume to resume")
+
+
+def test_a_training_stopped_by_a_signal_says_where_and_exits_128_plus_it(capsys, monkeypatch, tmp_path):
+    import signal
+
+    from track3d_train.interrupt import TrainingInterrupted
+
+    _interrupt_with(monkeypatch, "track3d_train.boxnet.train", "train",
+                    TrainingInterrupted(signal.SIGTERM, 41, "runs/x/last.pt"))
+    assert train_main(["boxnet", "train", "--cache", "c.npz", "--out", str(tmp_path / "r")]) == 143
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "track3d-train boxnet: interrupted (SIGTERM) at step 41, checkpoint runs/x/last.pt written: "
+        "run the same command again to resume"]
+
+
+def test_ctrl_c_in_a_command_that_does_not_resume_says_only_interrupted(capsys, monkeypatch, tmp_path):
+    _interrupt_with(monkeypatch, "track3d_train.boxnet.data", "prepare_split", KeyboardInterrupt())
+    assert train_main(["boxnet", "prepare", "--data", str(tmp_path), "--out", str(tmp_path / "c")]) == 130
+    assert capsys.readouterr().err.strip().splitlines() == ["track3d-train boxnet: interrupted"]
+
+
+def test_ctrl_c_during_edgetrack_train_checkpoints_and_says_one_line(tmp_path):
+    """The real thing: SIGINT to a running `track3d-train edgetrack train` (a kill had written no
+    checkpoint and printed a traceback; exit -2)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from track3d_train.edgetrack.data import prepare
+
+    prepare(tmp_path / "cache", synthetic=2, synthetic_frames=8, max_frames=16, progress=False, pad=None)
+    run = tmp_path / "run"
+    code = "import sys; from track3d_train.cli import main; sys.exit(main())"
+    p = subprocess.Popen([sys.executable, "-c", code, "edgetrack", "train", "--cache", str(tmp_path / "cache"),
+                          "--out", str(run), "--max-steps", "100000", "--batch", "2", "--ckpt-every-min", "60",
+                          "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = time.time()
+    while not ((run / "log.jsonl").is_file() and (run / "log.jsonl").read_text()):   # training, 10 steps logged
+        assert p.poll() is None and time.time() - t0 < 120, p.communicate()
+        time.sleep(0.1)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 130, err
+    ck = torch.load(str(run / "ckpt.pt"), weights_only=False)
+    assert err.strip().splitlines() == [f"track3d-train edgetrack: interrupted (SIGINT) at step {ck['step']}, "
+                                        f"checkpoint {run / 'ckpt.pt'} written: run the same command again to resume"]
+    assert ck["step"] >= 10

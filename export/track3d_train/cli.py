@@ -52,6 +52,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except ModuleNotFoundError as e:
         return exit_for_missing_extra(e, EXTRA_MODULES, f"track3d-train {argv[0]}")
+    except KeyboardInterrupt as e:  # Ctrl-C, or a training stopped by a signal after its checkpoint: one line
+        from .interrupt import interrupted_message
+
+        line, code = interrupted_message(e, argv)
+        print(f"track3d-train {argv[0]}: {line}", file=sys.stderr)
+        return code
 
 
 if __name__ == "__main__":

@@ -14,24 +14,51 @@ from __future__ import annotations
 import signal
 import threading
 
-__all__ = ["SIGNALS", "StopOnSignal", "TrainingInterrupted"]
+__all__ = ["SIGNALS", "StopOnSignal", "Interrupted", "TrainingInterrupted", "RESUMABLE", "interrupted_message"]
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
-class TrainingInterrupted(KeyboardInterrupt):
-    """A training loop stopped on `signum` after writing `checkpoint` at `step`. A
-    KeyboardInterrupt, so that a caller that does not know it stops as on Ctrl-C."""
+class Interrupted(KeyboardInterrupt):
+    """A command stopped by the signal `signum`, having cleaned up. A KeyboardInterrupt, so that
+    a caller that does not know it stops as on Ctrl-C."""
 
-    def __init__(self, signum: int, step: int, checkpoint):
-        self.signum, self.step, self.checkpoint = int(signum), int(step), str(checkpoint)
-        super().__init__(f"{signal.Signals(self.signum).name} at step {self.step}: "
-                         f"checkpoint {self.checkpoint} written")
+    def __init__(self, signum: int, text: str = ""):
+        self.signum = int(signum)
+        super().__init__(text or signal.Signals(self.signum).name)
 
     @property
     def exit_code(self) -> int:
         """The shell's code of a process ended by the signal: 130 for SIGINT, 143 for SIGTERM."""
         return 128 + self.signum
+
+
+class TrainingInterrupted(Interrupted):
+    """A training loop stopped on `signum` after writing `checkpoint` at `step`."""
+
+    def __init__(self, signum: int, step: int, checkpoint):
+        self.step, self.checkpoint = int(step), str(checkpoint)
+        super().__init__(signum, f"{signal.Signals(int(signum)).name} at step {self.step}: "
+                                 f"checkpoint {self.checkpoint} written")
+
+
+# the track3d-train commands that continue where an interrupted run stopped
+RESUMABLE = {("boxnet", "train"), ("edgetrack", "train"), ("siamfc", "train"), ("recipe", "run")}
+
+
+def interrupted_message(e: KeyboardInterrupt, argv: list[str]) -> tuple[str, int]:
+    """(one line, exit code) for a track3d-train command `argv` (its words after track3d-train)
+    ended by Ctrl-C or a signal: where a training stopped, and whether running the same command
+    again resumes. The code is 128 + the signal, 130 for a bare KeyboardInterrupt (Ctrl-C)."""
+    head = "interrupted"
+    if isinstance(e, TrainingInterrupted):
+        head += f" ({signal.Signals(e.signum).name}) at step {e.step}, checkpoint {e.checkpoint} written"
+    elif isinstance(e, Interrupted):
+        head += f" ({signal.Signals(e.signum).name})"
+    if tuple(argv[:2]) in RESUMABLE:
+        head += (": run it again without --no-resume to resume" if "--no-resume" in argv
+                 else ": run the same command again to resume")
+    return head, getattr(e, "exit_code", 130)
 
 
 class StopOnSignal:

@@ -24,8 +24,10 @@ from __future__ import annotations
 
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -503,10 +505,55 @@ def _program(name: str) -> str:
     return found
 
 
+# what the recipe passes on to the running step (SIGHUP, a closed terminal, as SIGTERM)
+_FORWARDED = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+
+def _call(argv: list[str]) -> int:
+    """Run one step and wait for it; its exit code. A signal to the recipe (Ctrl-C, SIGTERM,
+    SIGHUP) goes to the step once (SIGHUP as SIGTERM): a training writes its checkpoint and ends,
+    the recipe waits for that, then raises Interrupted. The step runs in a session of its own, so
+    that a terminal's Ctrl-C does not reach it twice (a second signal ends a training at once);
+    subprocess.call had killed it 0.25 s after Ctrl-C, in the middle of its checkpoint."""
+    from .interrupt import Interrupted
+
+    got: list[int] = []        # every signal the recipe received while the step ran
+    pending: list[int] = []    # those not yet passed on (one that came before the step started)
+    proc: list[subprocess.Popen] = []
+
+    def pass_on():
+        while proc and pending:
+            signum = pending.pop(0)
+            if proc[0].poll() is None:
+                proc[0].send_signal(signal.SIGTERM if signum == getattr(signal, "SIGHUP", None) else signum)
+
+    def forward(signum, frame):
+        got.append(signum)
+        pending.append(signum)
+        pass_on()
+
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for s in _FORWARDED:
+            if signal.getsignal(s) is not signal.SIG_IGN:
+                old[s] = signal.signal(s, forward)
+    try:
+        proc.append(subprocess.Popen(argv, start_new_session=True))
+        pass_on()
+        rc = proc[0].wait()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, signal.SIG_DFL if h is None else h)
+    if got:
+        raise Interrupted(got[0])
+    return rc
+
+
 def run(r: Recipe, data: str | Path, runs: str | Path, tiny: bool = False, overrides: dict | None = None,
         dry_run: bool = False, log=print) -> int:
     """Run the steps in order; a failing step stops the recipe with its exit code (run again to
-    resume). Returns 0 when every step succeeded or was already done."""
+    resume), a signal with Interrupted once the step has stopped (`_call`). Returns 0 when every
+    step succeeded or was already done."""
     steps = commands(r, data, runs, tiny, overrides)
     t_all = time.time()
     for i, (s, argv, done) in enumerate(steps, 1):
@@ -518,7 +565,7 @@ def run(r: Recipe, data: str | Path, runs: str | Path, tiny: bool = False, overr
         if dry_run:
             continue
         t0 = time.time()
-        rc = subprocess.call([_program(argv[0]), *argv[1:]])
+        rc = _call([_program(argv[0]), *argv[1:]])
         if rc != 0:
             log(f"{head}: failed with exit code {rc}; run the recipe again to resume from here")
             return rc
