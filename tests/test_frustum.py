@@ -199,10 +199,13 @@ def test_sampling_errors():
 
 
 def test_lone_mask_hand_case_and_the_extension_agrees_bit_for_bit():
-    """track3d.frustum.lone_mask: a point is lone when no other lies in the 3 x 3 cells around its
+    """track3d.frustum.lone_scan's mask: a point is lone when no other lies in the 3 x 3 cells around its
     own. Hand case on a pinhole with fx = fy = 100, principal point (0, 0): points at z = 1 land on
     pixel (100 x, 100 y); cells of 4 px."""
-    from track3d.frustum import lone_mask, lone_mask_numpy
+    from track3d.frustum import lone_mask_numpy, lone_scan
+
+    def lone_mask(p, M, cell):
+        return lone_scan(p, M, cell, 0.25)[0]
 
     M = np.array([[100.0, 0, 0, 0], [0, 100.0, 0, 0], [0, 0, 1.0, 0]])
     uv = np.array([[0, 0], [3, 1], [11, 0], [40, 40], [47.9, 40], [48, 40]], float)   # pixels
@@ -224,3 +227,24 @@ def test_lone_mask_hand_case_and_the_extension_agrees_bit_for_bit():
             p[rng.integers(0, n, max(1, n // 40))] = rng.choice([np.nan, np.inf, 0.0, -3.0, 1e30])
         cell = float(rng.choice([4.0, 0.7, 50.0, 1e-7]))
         np.testing.assert_array_equal(lone_mask(p, CAM.M, cell), lone_mask_numpy(p, CAM.M, cell))
+
+
+
+def test_lone_scan_one_run_only_when_no_depth_gap_is_wider_than_two_buckets():
+    """lone_scan's one_run lets drop_stray skip sorting the depths: it must never be True where two
+    kept points, in depth order, lie more than 2 buckets apart."""
+    from track3d.frustum import HAVE_EXTENSION, lone_scan
+
+    rng = np.random.default_rng(9)
+    seen = set()
+    for t in range(400):
+        n = int(rng.choice([2, 5, 50, 2000]))
+        p = rng.normal([0, 0, 20], [2, 2, rng.uniform(0.05, 3)], (n, 3)).astype(np.float32)
+        if t % 3 == 0:
+            p[: max(1, n // 100), 2] -= rng.uniform(0.3, 5)     # a few apart in front
+        lone, one_run = lone_scan(p, CAM.M, 4.0, 0.25)
+        seen.add(one_run)
+        z = np.sort(p[~lone, 2].astype(np.float64))
+        if one_run:
+            assert len(z) and np.all(np.diff(z) <= 0.5 + 1e-9)
+    assert seen == ({True, False} if HAVE_EXTENSION else {False})

@@ -43,7 +43,7 @@ from .frames import check_cloud
 __all__ = [
     "Z_MIN", "Z_MAX", "extract_frustum", "extract_frustum_numpy", "frustum_mask_numpy",
     "extract_frustum_bounds", "extract_frustum_bounds_numpy", "MAX_SAMPLE",
-    "sample_points", "sample_points_numpy", "sample_indices_numpy", "HAVE_EXTENSION", "lone_mask",
+    "sample_points", "sample_points_numpy", "sample_indices_numpy", "HAVE_EXTENSION", "lone_scan",
     "lone_mask_numpy", "LONE_MAX_CELLS",
 ]
 
@@ -59,7 +59,7 @@ except ImportError:  # pragma: no cover - the package is always built with it
 _ext_extract = getattr(_ext, "extract_frustum", None)
 _ext_sample = getattr(_ext, "sample_points", None)
 _ext_bounds = getattr(_ext, "extract_frustum_bounds", None)
-_ext_lone = getattr(_ext, "lone_mask", None)
+_ext_lone = getattr(_ext, "lone_scan", None)
 HAVE_EXTENSION = _ext_extract is not None and _ext_sample is not None
 
 _MASK64 = (1 << 64) - 1
@@ -250,25 +250,26 @@ LONE_MAX_CELLS = 1 << 24   # a grid past this many cells is no frustum's (kMaxCe
 
 def lone_mask_numpy(points: np.ndarray, M: np.ndarray, cell: float) -> np.ndarray:
     """(N,) bool: the points with no other point in the 3 x 3 cells of `cell` pixels around their
-    own, projected under M (3, 4) in float64 as the frustum's selection projects them; all False
-    with fewer than 2 points, a projection that is not finite, or a grid of more than
-    LONE_MAX_CELLS cells. The reference of the C++ `lone_mask` (the same result, bit for bit)."""
+    own, projected under M (3, 4) in float32 (M's entries rounded to float32; u = (row 0 . p) * w,
+    v = (row 1 . p) * w, w = 1 / (row 2 . p), each sum left to right); all False with fewer than 2
+    points, a coordinate or projection that is not finite, or a grid of more than LONE_MAX_CELLS
+    cells. The reference of the C++ `lone_scan`'s mask (the same, bit for bit)."""
     p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
     n = len(p)
     out = np.zeros(n, bool)
     if n < 2:
         return out
-    m = np.asarray(M, dtype=np.float64).reshape(-1)
-    x, y, z = (p[:, k].astype(np.float64) for k in range(3))
+    m = np.asarray(M, dtype=np.float64).reshape(-1).astype(np.float32)
+    x, y, z = p[:, 0], p[:, 1], p[:, 2]
     with np.errstate(all="ignore"):
-        p2 = m[8] * x + m[9] * y + m[10] * z + m[11]
-        u = (m[0] * x + m[1] * y + m[2] * z + m[3]) / p2
-        v = (m[4] * x + m[5] * y + m[6] * z + m[7]) / p2
-    if not (np.isfinite(u).all() and np.isfinite(v).all()):
+        w = np.float32(1.0) / (m[8] * x + m[9] * y + m[10] * z + m[11])
+        u = (m[0] * x + m[1] * y + m[2] * z + m[3]) * w
+        v = (m[4] * x + m[5] * y + m[6] * z + m[7]) * w
+    if not (np.isfinite(u).all() and np.isfinite(v).all() and np.isfinite(z).all()):
         return out
-    inv = 1.0 / float(cell)
+    inv = np.float32(1.0) / np.float32(cell)
     fu, fv = (u - u.min()) * inv, (v - v.min()) * inv
-    if not ((fu < 1e15).all() and (fv < 1e15).all()):
+    if not ((fu < np.float32(1e9)).all() and (fv < np.float32(1e9)).all()):
         return out
     iu, iv = fu.astype(np.int64), fv.astype(np.int64)
     nx, ny = int(iu.max()) + 1, int(iv.max()) + 1
@@ -280,12 +281,17 @@ def lone_mask_numpy(points: np.ndarray, M: np.ndarray, cell: float) -> np.ndarra
     return near[iv, iu] == 1
 
 
-def lone_mask(points: np.ndarray, M: np.ndarray, cell: float) -> np.ndarray:
-    """lone_mask_numpy's answer from the C++ extension (one pass, GIL released); the numpy
-    reference where the extension lacks it. points (N, 3) float32 (the frustum's)."""
-    if not (np.isfinite(cell) and cell > 0):
-        raise ValueError(f"cell must be a positive number of pixels, got {cell}")
+def lone_scan(points: np.ndarray, M: np.ndarray, cell: float, bucket: float) -> tuple[np.ndarray, bool]:
+    """(lone_mask_numpy's mask, one_run) from one pass of the C++ extension (GIL released).
+    one_run True says that the depths of the points not lone leave no `bucket`-wide slot empty
+    between their least and greatest, so none of them in depth order lies more than 2 * bucket
+    from the next; False when that was not established (always, where the extension lacks the
+    function and the numpy reference stands in). points (N, 3) float32 (the frustum's)."""
+    for name, val in (("cell", cell), ("bucket", bucket)):
+        if not (np.isfinite(val) and val > 0):
+            raise ValueError(f"{name} must be a positive number, got {val}")
     if _ext_lone is None:
-        return lone_mask_numpy(points, M, cell)
-    return _ext_lone(np.ascontiguousarray(points, dtype=np.float32), np.ascontiguousarray(M, dtype=np.float64),
-                     float(cell)).view(bool)
+        return lone_mask_numpy(points, M, cell), False
+    mask, one_run = _ext_lone(np.ascontiguousarray(points, dtype=np.float32),
+                              np.ascontiguousarray(M, dtype=np.float64), float(cell), float(bucket))
+    return mask.view(bool), bool(one_run)

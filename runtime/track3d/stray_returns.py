@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .frustum import lone_mask
+from .frustum import lone_scan
 from .silhouette import _project
 
 __all__ = ["STRAY_GAP_M", "STRAY_MIN_COUNT", "STRAY_NEAR_PX", "STRAY_MAX_CHECK", "STRAY_CELL_PX", "drop_stray"]
@@ -43,9 +43,15 @@ def drop_stray(pts: np.ndarray, bounds: np.ndarray, M: np.ndarray, gap_m: float 
     n = len(pts)
     if n < 2:
         return pts, bounds
-    keep = ~lone_mask(pts, M, cell_px)
+    lone, one_run = lone_scan(pts, M, cell_px, gap_m / 2.0)
+    keep = ~lone
     if not keep.any():   # nothing but lone returns: no body there (an empty frustum, as the loop judges it)
         return pts[:0], np.array([[np.inf] * 3, [-np.inf] * 3], dtype=bounds.dtype)
+    if one_run:   # no two of the rest more than gap_m apart in depth: one run, nothing more to drop
+        if not lone.any():
+            return pts, bounds
+        kept = pts[keep]
+        return kept, np.stack([kept.min(axis=0), kept.max(axis=0)]).astype(bounds.dtype, copy=False)
     z = pts[:, 2]
     idx = np.flatnonzero(keep) if not keep.all() else None
     zk = z if idx is None else z[idx]
