@@ -163,6 +163,19 @@ def test_max_frames_and_clear_errors(synth, tmp_path):
         exp.report(["never-ran"], plots=False)
 
 
+def test_a_run_of_fewer_frames_evaluated_on_all_is_named(synth, tmp_path):
+    """A run made with --frames 3, evaluated without --frames, was scored on the frames it holds
+    while the report said max_frames null and nothing else."""
+    Experiment(synth, "test", tmp_path / "res", tmp_path / "rep", max_frames=3).run(
+        TrackerSpec("kcf", "baseline"), quiet=True)
+    rep = Experiment(synth, "test", tmp_path / "res", tmp_path / "rep").report(["kcf+baseline"], plots=False)
+    short = [w for w in rep["warnings"] if "fewer result frames" in w]
+    assert len(short) == 1 and "--frames 3" in short[0]
+    same = Experiment(synth, "test", tmp_path / "res", tmp_path / "rep", max_frames=3).report(["kcf+baseline"],
+                                                                                             plots=False)
+    assert not [w for w in same["warnings"] if "fewer result frames" in w]
+
+
 def test_oracle_baseline_on_the_tiny_simulated_dataset(tiny_dataset, tmp_path):
     """The whole chain on the simulator's output: finite scores, consistent files, no crash."""
     exp = Experiment(tiny_dataset, "test", tmp_path / "res", tmp_path / "rep")

@@ -616,7 +616,18 @@ class Experiment:
         empty = [f"{n}: no frame to score (a scored frame is a present target's after the initialisation, "
                  f"and every result frame here is an initialisation or an absent target's)"
                  for n in names if overall[n].frames == 0]
-        report["warnings"] = label_warnings + _comparison_warnings(names, runs, lengths) + empty
+        # results shorter than the frames scored (a run made with --frames N, evaluated without)
+        # are scored on what they hold: say so, the report's max_frames says nothing of it
+        short = []
+        for n in names:
+            cut = [s.name for s in self.sequences if lengths[n][s.name] < self._frames(s)]
+            if cut:
+                made = (runs[n] or {}).get("max_frames")
+                how = f" (the run was made with --frames {made})" if made else ""
+                short.append(f"{n}: {len(cut)} of {len(self.sequences)} sequences hold fewer result frames than "
+                             f"are scored{how}: scored on the frames they hold; pass --frames to score the same "
+                             f"frames of every run")
+        report["warnings"] = label_warnings + _comparison_warnings(names, runs, lengths) + empty + short
         known = [(r["restart"], r["restart_skip"]) for r in runs.values() if r]
         if known and len(set(known)) == 1 and len(known) == len(names):
             report["restart"], report["restart_skip"] = known[0]
