@@ -55,7 +55,8 @@ def test_eval_warns_on_different_frames_and_restart_settings(synth, tmp_path, ca
     err = capsys.readouterr().err
     assert "different frames" in err and "different restart settings" in err
     report = json.loads((rep / "report.json").read_text())
-    assert report["restart_skip"] is None and len(report["warnings"]) == 2
+    assert report["restart_skip"] is None and len(report["warnings"]) == 3
+    assert "kcf+baseline: 2 of 2 sequences hold fewer result frames" in report["warnings"][2]
     assert report["trackers"]["kcf+baseline"]["overall"]["result_frames"] == 6
 
 
