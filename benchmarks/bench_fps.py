@@ -45,6 +45,8 @@ from track3d.trackers2d import TrackerUnavailable
 SIAMFC_STEMS = {"siamfc-edge": "siamfc_edge", "siamfc": "siamfc_faithful"}  # tracker name -> shipped stem
 RATIO_STAGES = ("net2d", "net3d", "end_to_end")
 UNAVAILABLE = (TrackerUnavailable, EstimatorUnavailable, ModelError)  # a missing model: skipped, not failed
+NETWORK_TRACKERS = ("edgetrack", "siamfc", "siamfc-edge", "nano")   # 2D trackers that run ONNX networks
+NETWORK_ESTIMATORS = ("a3boxnet",)
 
 
 def run_config(camera, sequences, cfg: dict, threads: int, frames: int, torch_nets: TorchNets | None = None) -> dict:
@@ -102,8 +104,12 @@ def make_configs(args, torch_nets: TorchNets | None) -> tuple[list[dict], list[d
         if estimator == "a3boxnet" and (model or args.boxnet_model is not None):
             eopt["model"] = model or str(args.boxnet_model)
         label = f"{tracker}:{estimator}" + (f"@{model}" if model else "")
-        base = {"label": label, "tracker": tracker, "estimator": estimator,
-                "tracker_options": topt, "estimator_options": eopt, "backend": "onnxruntime", "precision": "fp32"}
+        # a configuration without a network (OpenCV's trackers, the baseline box) runs no backend:
+        # "onnxruntime fp32" had been printed for kcf:baseline
+        nets = tracker in NETWORK_TRACKERS or estimator in NETWORK_ESTIMATORS
+        base = {"label": label, "tracker": tracker, "estimator": estimator, "tracker_options": topt,
+                "estimator_options": eopt, "backend": "onnxruntime" if nets else "none",
+                "precision": "fp32" if nets else "-"}
         # side by side: fp32, and every network in the variant precision="auto" picks on this CPU
         auto = {"precision": "auto", "engine": "auto"}
         bases = [base if p == "fp32" else {**base, "label": f"{label} auto", "precision": "auto",

@@ -624,3 +624,15 @@ def test_engine_rows_take_the_protocol_from_the_run_not_the_folder(tmp_path, cap
     assert rows == {"mosse-op": "onepass", "kcf": "restart", "old": "restart"}
     err = capsys.readouterr().err
     assert "mosse-op" not in err and "named 'restart'" in err and err.count("warning") == 1
+
+
+def test_a_configuration_without_a_network_names_no_backend():
+    """bench_fps printed kcf:baseline as 'onnxruntime fp32': it runs no network at all."""
+    import bench_fps
+
+    assert "kcf" not in bench_fps.NETWORK_TRACKERS
+    args = bench_fps.build_parser().parse_args(["--data", "unused", "--config", "kcf:baseline",
+                                                "--config", "edgetrack:a3boxnet"])
+    configs, _ = bench_fps.make_configs(args, None)
+    got = {c["label"]: (c["backend"], c["precision"]) for c in configs}
+    assert got["kcf:baseline"] == ("none", "-") and got["edgetrack:a3boxnet"] == ("onnxruntime", "fp32")
