@@ -82,6 +82,21 @@ def test_unknown_names_are_one_line_errors(capsys):
     assert "name=value" in capsys.readouterr().err
 
 
+def test_a_knob_value_of_the_wrong_type_is_refused_before_any_step(capsys):
+    """`--set minutes=abc` had been taken as text and failed only when its step was reached."""
+    from track3d_train.cli import main as train_main
+    from track3d_train.recipes import RECIPES, knob_values
+
+    r = RECIPES["edgetrack-engine"]
+    name = next(k for k, v in r.knobs.items() if type(v) is int)
+    assert train_main(["recipe", "show", r.name, "--set", f"{name}=abc"]) == 2
+    assert f"knob '{name}'" in capsys.readouterr().err
+    assert knob_values(r, overrides={name: "7"})[name] == 7
+    text = next((k for k, v in r.knobs.items() if type(v) is str), None)
+    if text is not None:
+        assert knob_values(r, overrides={text: "anything"})[text] == "anything"
+
+
 _STEP = """
 import pathlib, signal, sys, time
 out = pathlib.Path(sys.argv[1])

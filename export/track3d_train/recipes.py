@@ -477,8 +477,25 @@ def knob_values(r: Recipe, tiny: bool = False, overrides: dict | None = None) ->
     for name, value in (overrides or {}).items():
         if name not in r.knobs:
             raise ValueError(f"recipe {r.name!r} has no knob {name!r} (knobs: {', '.join(r.knobs)})")
-        k[name] = value
+        k[name] = _typed(r, name, value)
     return k
+
+
+def _typed(r: Recipe, name: str, value):
+    """An overriding value as its knob's type (a whole number, a number or text), checked before
+    any step runs: `minutes=abc` had failed only when the step using it was reached."""
+    kind = type(r.knobs[name])
+    if kind in (int, float) and not isinstance(value, bool):
+        try:
+            v = kind(value) if kind is float else int(str(value).strip())
+        except (TypeError, ValueError):
+            what = "a whole number" if kind is int else "a number"
+            raise ValueError(f"knob {name!r} of recipe {r.name!r} takes {what} like {r.knobs[name]!r}, "
+                             f"got {value!r}") from None
+        if v != v or v in (float("inf"), float("-inf")):
+            raise ValueError(f"knob {name!r} of recipe {r.name!r} takes a finite number, got {value!r}")
+        return v
+    return value
 
 
 def commands(r: Recipe, data: str | Path, runs: str | Path, tiny: bool = False,
