@@ -98,7 +98,15 @@ def joint_loss_of(terms: dict) -> float:
     return float(terms["total"])
 
 
-def plot_history(history: dict, path: str | Path, title: str = "A3BoxNet training") -> None:
+def _step_label(history: dict) -> str:
+    """The loss panel's x-label: the run's batch size from its recorded config (a run resumed
+    keeps its first session's config), or just "step" when the history has none."""
+    batch = (history.get("config") or {}).get("batch")
+    return f"step (batch {batch})" if batch else "step"
+
+
+def history_figure(history: dict, title: str = "A3BoxNet training"):
+    """The loss-curve figure of a training history (plot_history saves it)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -108,10 +116,12 @@ def plot_history(history: dict, path: str | Path, title: str = "A3BoxNet trainin
     if steps:
         s = np.array([x["step"] for x in steps])
         l = np.array([joint_loss_of(x) for x in steps])
-        ax[0].plot(s, l, lw=0.5, alpha=0.4, label="train (per logged step)")
         k = max(1, len(l) // 50)
-        if len(l) > k:
+        if k > 1:
+            ax[0].plot(s, l, lw=0.5, alpha=0.4, label="train (per logged step)")
             ax[0].plot(s[k - 1:], np.convolve(l, np.ones(k) / k, mode="valid"), label=f"train (mean of {k})")
+        else:   # too few logged steps to average: the steps themselves, one entry
+            ax[0].plot(s, l, label="train")
     ep = history.get("epochs", [])
     if ep:
         es = [e["step"] for e in ep]
@@ -126,7 +136,7 @@ def plot_history(history: dict, path: str | Path, title: str = "A3BoxNet trainin
             ax2.set_ylabel("ACE_3d (m)")
             ax2.legend(loc="center right")
     ax[0].set_yscale("log")
-    ax[0].set_xlabel("step (batch 32)")
+    ax[0].set_xlabel(_step_label(history))
     ax[0].set_ylabel("joint loss")
     ax[0].legend()
     ax[0].grid(alpha=0.3)
@@ -136,6 +146,13 @@ def plot_history(history: dict, path: str | Path, title: str = "A3BoxNet trainin
     ax[1].grid(alpha=0.3)
     fig.suptitle(title)
     fig.tight_layout()
+    return fig
+
+
+def plot_history(history: dict, path: str | Path, title: str = "A3BoxNet training") -> None:
+    fig = history_figure(history, title)   # (selects the Agg backend before pyplot)
+    import matplotlib.pyplot as plt
+
     fig.savefig(str(path), dpi=110)
     plt.close(fig)
 

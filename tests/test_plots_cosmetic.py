@@ -1,0 +1,61 @@
+"""Cosmetics of the project's plots that a user reported: labels and legend entries that said
+the wrong thing (checked on the figure objects, not on pixels)."""
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+
+
+def _legend_texts(ax):
+    leg = ax.get_legend()
+    return [t.get_text() for t in leg.get_texts()] if leg is not None else []
+
+
+def _history(n_steps, batch=16):
+    terms = {"center1": 1.0, "center2": 0.5, "size_cls": 0.3, "size_res": 0.2, "total": 2.0}
+    return {"config": {"batch": batch},
+            "steps": [{"step": 10 * (i + 1), **terms} for i in range(n_steps)],
+            "epochs": [{"epoch": 1, "step": 10 * n_steps, "train": terms,
+                        "val": {"loss": 2.1, "AO_3d": 0.4, "AO_bev": 0.45, "ACE_3d": 1.2}}]}
+
+
+def test_loss_curve_labels_the_runs_batch_and_no_mean_of_one():
+    from track3d_train.boxnet.train import history_figure
+
+    fig = history_figure(_history(5, batch=16))
+    try:
+        ax = fig.axes[0]
+        assert ax.get_xlabel() == "step (batch 16)"
+        texts = _legend_texts(ax)
+        assert "train" in texts and not any("mean of" in t for t in texts)
+        assert "train (per logged step)" not in texts      # one line for the steps, not two alike
+    finally:
+        plt.close(fig)
+
+
+def test_loss_curve_long_run_keeps_the_running_mean():
+    from track3d_train.boxnet.train import history_figure
+
+    fig = history_figure(_history(200, batch=32))
+    try:
+        ax = fig.axes[0]
+        assert ax.get_xlabel() == "step (batch 32)"
+        texts = _legend_texts(ax)
+        assert "train (per logged step)" in texts and "train (mean of 4)" in texts
+    finally:
+        plt.close(fig)
+
+
+def test_loss_curve_without_config_says_step():
+    from track3d_train.boxnet.train import history_figure
+
+    h = _history(3)
+    del h["config"]
+    fig = history_figure(h)
+    try:
+        assert fig.axes[0].get_xlabel() == "step"
+    finally:
+        plt.close(fig)
