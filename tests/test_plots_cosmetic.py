@@ -59,3 +59,35 @@ def test_loss_curve_without_config_says_step():
         assert fig.axes[0].get_xlabel() == "step"
     finally:
         plt.close(fig)
+
+
+def _stats(n_dn, n_seq=4, n_points_only=0):
+    import numpy as np
+
+    return {"object_dn": np.full(n_dn, 40.0), "irradiance": np.full(n_seq, 0.2), "n_seq": n_seq,
+            "n_points_only": n_points_only}
+
+
+def test_stats_panel_d_points_only_is_a_note_not_empty_axes():
+    from track3d_sim.stats import illumination_panel
+
+    fig, ax = plt.subplots()
+    try:
+        illumination_panel(ax, _stats(0, n_seq=4, n_points_only=4))
+        assert not ax.axison and ax.get_legend() is None and len(fig.axes) == 1   # no twin axis either
+        texts = [t.get_text() for t in ax.texts]
+        assert len(texts) == 1 and "no illumination data" in texts[0] and "points-only" in texts[0]
+    finally:
+        plt.close(fig)
+
+
+def test_stats_panel_d_with_images_keeps_its_histograms():
+    from track3d_sim.stats import illumination_panel
+
+    fig, ax = plt.subplots()
+    try:
+        illumination_panel(ax, _stats(100))
+        assert ax.axison and not ax.texts and len(fig.axes) == 2
+        assert _legend_texts(ax) == ["mean object value / frame"]
+    finally:
+        plt.close(fig)

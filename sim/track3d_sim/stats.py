@@ -33,6 +33,7 @@ def collect(root: str | Path, split: str = "all") -> dict:
     if not seqs:
         raise SimError(f"no sequences in {root} ({split})")
     sizes, speeds, vel, irr, dn = [], [], [], [], []
+    n_points_only = sum(bool(s.points_only) for s in seqs)
     for s in seqs:
         b = s.gt3d
         sizes.append(b[:, 3:])
@@ -50,7 +51,31 @@ def collect(root: str | Path, split: str = "all") -> dict:
             "speed": np.concatenate(speeds) if speeds else np.zeros(0),
             "velocity": np.concatenate(vel) if vel else np.zeros((0, 3)),
             "irradiance": np.array(irr), "object_dn": np.array(dn), "n_seq": len(seqs),
-            "n_frames": len(sizes)}
+            "n_frames": len(sizes), "n_points_only": n_points_only}
+
+
+def illumination_panel(ax, st: dict) -> None:
+    """Panel (d): the frames' mean object pixel values and the sequences' sun irradiance; without
+    images (points-only sequences, no mean object value in any frame) a note in the panel instead
+    of empty axes."""
+    ax.set_title("(d) illumination: mean object pixel value (0..255)")
+    if not len(st["object_dn"]):
+        po = st.get("n_points_only", 0)
+        why = ("points-only sequences (no images)" if po == st["n_seq"] else
+               f"no mean object value in any frame ({po} of {st['n_seq']} sequences points-only)" if po else
+               "no mean object value in any frame's meta")
+        ax.text(0.5, 0.5, f"no illumination data:\n{why}", ha="center", va="center", transform=ax.transAxes,
+                fontsize=10, color="0.3")
+        ax.set_axis_off()
+        return
+    ax.hist(st["object_dn"], bins=np.arange(0, 256, 4), color="tab:gray", label="mean object value / frame")
+    ax.set(xlabel="DN", ylabel="frames")
+    ax2 = ax.twinx()
+    ax2.hist(255 * 0.9 * st["irradiance"] * 0.5, bins=np.arange(0, 256, 8), histtype="step", color="tab:red",
+             label="sun irradiance x gain x 0.5 / seq")
+    ax2.set_ylabel("sequences", color="tab:red")
+    ax.legend(loc="upper right", fontsize=7)
+    ax2.legend(loc="center right", fontsize=7)
 
 
 def plot_stats(root: str | Path, out: str | Path, split: str = "all") -> dict:
@@ -81,14 +106,7 @@ def plot_stats(root: str | Path, out: str | Path, split: str = "all") -> dict:
         ax[1, 0].legend(fontsize=7)
     ax[1, 0].set(title=f"(c) translation velocity (mean speed {st['speed'].mean():.2f} m/s)",
                  xlabel="velocity component (m/s)", ylabel="frame pairs")
-    ax[1, 1].hist(st["object_dn"], bins=np.arange(0, 256, 4), color="tab:gray", label="mean object value / frame")
-    ax[1, 1].set(title="(d) illumination: mean object pixel value (0..255)", xlabel="DN", ylabel="frames")
-    ax2 = ax[1, 1].twinx()
-    ax2.hist(255 * 0.9 * st["irradiance"] * 0.5, bins=np.arange(0, 256, 8), histtype="step", color="tab:red",
-             label="sun irradiance x gain x 0.5 / seq")
-    ax2.set_ylabel("sequences", color="tab:red")
-    ax[1, 1].legend(loc="upper right", fontsize=7)
-    ax2.legend(loc="center right", fontsize=7)
+    illumination_panel(ax[1, 1], st)
     fig.suptitle(f"{Path(os.path.abspath(root)).name}: {st['n_seq']} sequences, {st['n_frames']} frames ({split})")
     fig.tight_layout()
     make_parent(out)
