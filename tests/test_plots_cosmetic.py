@@ -91,3 +91,42 @@ def test_stats_panel_d_with_images_keeps_its_histograms():
         assert _legend_texts(ax) == ["mean object value / frame"]
     finally:
         plt.close(fig)
+
+
+def test_conditions_label_is_the_tables_share_not_one_runs():
+    from track3d.evaluation.plots import condition_label
+
+    # the table prints each run's share with {:.2f}: one value when they agree there
+    assert condition_label("cut_by_image", [0.6149, 0.6101]) == "cut by image\nshare 0.61"
+    # runs whose scored frames differ (restarts): the range, neither the last nor the largest alone
+    assert condition_label("whole", [0.6149, 0.62, 0.66]) == "whole\nshare 0.61..0.66"
+    assert condition_label("whole", [None, float("nan")]) == "whole"
+
+
+def test_conditions_plot_ticks_agree_with_the_condition_table(tmp_path, monkeypatch):
+    from track3d.evaluation import plots
+    from track3d.evaluation.tables import condition_table
+
+    def cond(share_whole, share_cut):
+        return {"whole": {"frames": 60, "share": share_whole, "ao_2d": 0.9, "ao_3d": 0.8, "ace_3d": 0.3,
+                          "ao_3d_lost": 0.1},
+                "past_range": {"frames": 0, "share": 0.0, "ao_2d": None, "ao_3d": None, "ace_3d": None,
+                               "ao_3d_lost": 0.0},
+                "cut_by_image": {"frames": 40, "share": share_cut, "ao_2d": 0.9, "ao_3d": 0.7, "ace_3d": 0.4,
+                                 "ao_3d_lost": 0.1},
+                "cut_and_past_range": {"frames": 0, "share": 0.0, "ao_2d": None, "ao_3d": None, "ace_3d": None,
+                                       "ao_3d_lost": 0.0}}
+
+    conditions = {"base": cond(0.39, 0.61), "other": cond(0.39, 0.61)}
+    seen = {}
+    real_save = plots._save
+
+    def save(fig, path):
+        seen["ticks"] = [t.get_text() for t in fig.axes[0].get_xticklabels()]
+        return real_save(fig, path)
+
+    monkeypatch.setattr(plots, "_save", save)
+    assert plots.condition_plot(conditions, tmp_path).is_file()
+    assert seen["ticks"] == ["whole\nshare 0.39", "cut by image\nshare 0.61"]
+    table = condition_table({"trackers": {n: {"conditions": c} for n, c in conditions.items()}})
+    assert "0.61" in table and "0.39" in table

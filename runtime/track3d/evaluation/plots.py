@@ -262,12 +262,24 @@ def axis_error_plot(overall: dict[str, OverallScore], out_dir: str | Path) -> Pa
     return _save(fig, Path(out_dir) / "errors_3d.png")
 
 
+def condition_label(condition: str, shares) -> str:
+    """A conditions.png tick label: the condition and its share of the scored frames as the
+    condition table prints it ({:.2f}); a run's scored frames depend on its restarts, so runs whose
+    shares print differently get their range (lowest..highest), not one run's value."""
+    text = sorted({f"{float(v):.2f}" for v in shares if v is not None and np.isfinite(float(v))}, key=float)
+    name = condition.replace("_", " ")
+    if not text:
+        return name
+    return f"{name}\nshare {text[0] if len(text) == 1 else text[0] + '..' + text[-1]}"
+
+
 def condition_plot(conditions: dict[str, dict], out_dir: str | Path) -> Path | None:
     """conditions.png: where the loss is. Per frame condition (metrics.CONDITIONS, those some run
     has frames in) each run's AO_3d lost there (bars: the shares of 1 - IoU_3d over all frames,
     adding up to 1 - the pooled AO_3d) and its AO_3d over those frames (black ticks, right
-    axis); the condition's share of the frames under its name. `conditions`: {run: report.json's
-    "conditions"}. None when every frame is whole or no run has 3D boxes."""
+    axis); the condition's share of the scored frames under its name (condition_label).
+    `conditions`: {run: report.json's "conditions"}. None when every frame is whole or no run has
+    3D boxes."""
     runs = sorted(n for n, c in conditions.items() if all("ao_3d_lost" in v for v in c.values()))
     used = [k for k in CONDITIONS if any(conditions[n].get(k, {}).get("frames", 0) for n in runs)]
     if not runs or used in ([], ["whole"]):
@@ -284,10 +296,12 @@ def condition_plot(conditions: dict[str, dict], out_dir: str | Path) -> Path | N
         mean = np.array([np.nan if c[u]["ao_3d"] is None else c[u]["ao_3d"] for u in used], np.float64)
         ax.bar(xs, np.nan_to_num(lost), width=w, color=colour[name], label=name)
         ao.scatter(xs, mean, marker="_", s=200, color="black")
-    share = [max(float(conditions[n][u]["share"] or 0.0) for n in runs) for u in used]
-    ax.set_xticks(x, [f"{u.replace('_', ' ')}\n{100 * sh:.0f}% of frames" for u, sh in zip(used, share)], fontsize=7)
+    ticks = [condition_label(u, [conditions[n].get(u, {}).get("share") for n in runs]) for u in used]
+    ax.set_xticks(x, ticks, fontsize=7)
     ax.set(ylabel="AO_3d lost (share of all frames)", title="Where the loss is: frames by condition")
+    ax.set_xlabel("frame condition; share: of the scored frames"
+                  + (" (a range: the runs' shares differ)" if any(".." in t for t in ticks) else ""), fontsize=7)
     ao.set(ylim=(0, 1), ylabel="AO_3d over the condition's frames (ticks)")
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.24), ncol=2)
     return _save(fig, Path(out_dir) / "conditions.png")
