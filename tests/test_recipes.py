@@ -91,7 +91,8 @@ def test_a_knob_value_of_the_wrong_type_is_refused_before_any_step(capsys):
     name = next(k for k, v in r.knobs.items() if type(v) is int)
     assert train_main(["recipe", "show", r.name, "--set", f"{name}=abc"]) == 2
     assert f"knob '{name}'" in capsys.readouterr().err
-    assert knob_values(r, overrides={name: "7"})[name] == 7
+    assert knob_values(r, overrides={name: "7"})[name] == 7 and type(knob_values(r, overrides={name: "7"})[name]) is int
+    assert knob_values(r, overrides={name: "0.5"})[name] == 0.5       # e.g. minutes=0.5: the flag takes it
     text = next((k for k, v in r.knobs.items() if type(v) is str), None)
     if text is not None:
         assert knob_values(r, overrides={text: "anything"})[text] == "anything"

@@ -759,3 +759,21 @@ def test_the_outline_does_not_reach_a_lone_return_the_raster_skipped():
     for cloud in (pts, np.concatenate([pts, stray])):   # the stray last: the stride skips it
         out = silhouette_box(cloud, np.array([200.0, 100, 200, 200]), cam.M, (640, 480), (0.1, 100.0), 0.5)[0]
         np.testing.assert_allclose(out, [200, 100, 200, 200])
+
+
+def test_find_body_without_lone_out_is_the_search_before_the_false_alarm_rules():
+    """Track3D(drop_stray=False) promises the loop before the rules: the whole-view search passed
+    no lone_out and took a stride-skipped lone return into the body's box."""
+    from track3d.silhouette import find_body
+
+    cam = Camera.from_fov(640, 480, 45.0)
+    mask = np.zeros((480, 640), bool)
+    mask[200:300, 250:380] = True                       # 13,000 returns: a stride of 3
+    pts = cam.backproject_depth(np.where(mask, 10.0, 0.0).astype(np.float32))
+    lone = cam.backproject_depth(np.where((np.arange(640)[None, :] == 600) & (np.arange(480)[:, None] == 100),
+                                          10.0, 0.0).astype(np.float32))
+    cloud = np.concatenate([pts[:1], lone, pts[1:]])   # at index 1: the stride skips it
+    near = np.array([250.0, 200, 130, 100])
+    np.testing.assert_allclose(find_body(cloud, near, cam.M, (640, 480), (0.1, 100.0)), [250, 200, 130, 100])
+    old = find_body(cloud, near, cam.M, (640, 480), (0.1, 100.0), lone_out=False)
+    assert old[0] + old[2] > 600                        # as before the rules: out to the lone return

@@ -79,3 +79,16 @@ def test_the_loop_keeps_its_box_through_a_false_alarm_in_front():
         boxes[stray] = t.update(image, cam.backproject_depth(d)).box3d
     assert abs(boxes[True][2] - 20.0) < 0.5 and boxes[True][5] < 4.0
     assert boxes[False][5] > 6.0                # without the rule: the box reaches the alarm
+
+
+def test_a_sensor_grid_coarser_than_the_cells_is_kept_whole():
+    """A 128 x 128 flash LiDAR on a 1280 x 960 image lies 10 px apart: every return had counted as
+    lone and the whole body was dropped (no_points every frame). Many lone returns, most of the
+    frustum's, are a sparse grid, not false alarms."""
+    body = _patch(300, 200, 100, 80, 20.0, step=10.0)
+    assert len(body) >= 16
+    out, b = drop_stray(body, _bounds(body), CAM.M)
+    assert out is body
+    with_alarm = np.concatenate([body, _patch(320, 210, 1, 1, 8.0)])   # one in front stays a run apart
+    out, b = drop_stray(with_alarm, _bounds(with_alarm), CAM.M)
+    assert len(out) == len(body) and b[0, 2] == body[:, 2].min()

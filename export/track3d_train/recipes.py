@@ -486,15 +486,16 @@ def _typed(r: Recipe, name: str, value):
     any step runs: `minutes=abc` had failed only when the step using it was reached."""
     kind = type(r.knobs[name])
     if kind in (int, float) and not isinstance(value, bool):
+        # a number knob takes any number (minutes=0.5 for a knob of 105; the step's own flag judges
+        # whether it takes a fraction), kept whole when it is one, so the commands read as before
         try:
-            v = kind(value) if kind is float else int(str(value).strip())
+            v = float(str(value).strip())
         except (TypeError, ValueError):
-            what = "a whole number" if kind is int else "a number"
-            raise ValueError(f"knob {name!r} of recipe {r.name!r} takes {what} like {r.knobs[name]!r}, "
+            raise ValueError(f"knob {name!r} of recipe {r.name!r} takes a number like {r.knobs[name]!r}, "
                              f"got {value!r}") from None
         if v != v or v in (float("inf"), float("-inf")):
             raise ValueError(f"knob {name!r} of recipe {r.name!r} takes a finite number, got {value!r}")
-        return v
+        return int(v) if kind is int and v.is_integer() else v
     return value
 
 
@@ -636,8 +637,9 @@ def main(argv: list[str] | None = None) -> int:
     r = recipe(a.name)
     overrides = _parse_set(a.set)
     if a.cmd == "show":
+        knobs = knob_values(r, a.tiny, overrides)   # a bad --set is the one line, before any output
         print(f"# {r.name}: {r.description}")
-        print(f"# knobs: {knob_values(r, a.tiny, overrides)}")
+        print(f"# knobs: {knobs}")
         for note in r.notes:
             print(f"# note: {note}")
         for s, args, done in commands(r, a.data, a.runs, a.tiny, overrides):

@@ -190,11 +190,12 @@ def past_border(outline: np.ndarray, box2d: np.ndarray, image_size: tuple[int, i
 
 
 def find_body(points: np.ndarray, near: np.ndarray, M: np.ndarray, image_size: tuple[int, int],
-              z_range: tuple[float, float]) -> np.ndarray | None:
+              z_range: tuple[float, float], lone_out: bool = True) -> np.ndarray | None:
     """The box [x, y, w, h] of the body in the whole view: of the connected returns holding at
     least MIN_SHARE of the largest one's cells, the one nearest `near`'s centre (the last box);
     None without returns. For a frame whose 2D box holds none: a range sensor in space sees
-    only bodies, so the body that left the tracker's search is found in the depth."""
+    only bodies, so the body that left the tracker's search is found in the depth. lone_out: as
+    silhouette_box's (False: the loop before the false-alarm rules)."""
     W, H = image_size
     region = np.array([0.0, 0.0, float(W), float(H)])
     pts = extract_frustum(points, region, M, *z_range)
@@ -214,7 +215,7 @@ def find_body(points: np.ndarray, near: np.ndarray, M: np.ndarray, image_size: t
         big = big[[int(np.argmin(d))]]
     keep = np.zeros(r.n, bool)
     keep[big] = True
-    return r.box(keep, image_size)
+    return r.box(keep, image_size, lone_out)
 
 
 def contain(box2d: np.ndarray, outline: np.ndarray, slack: float = 0.0) -> np.ndarray:

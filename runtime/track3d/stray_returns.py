@@ -12,7 +12,8 @@ one part of the body hides another, each a patch of neighbouring pixels. A false
 neighbour: on the sky it has no other return near it in the image; over the body it has none
 near it in depth. `drop_stray` drops
 - each return with no other within the 3 x 3 cells of STRAY_CELL_PX pixels around its own (the
-  sky's false alarms; a flash LiDAR's returns lie ~5 px apart in a 640 x 480 image), then
+  sky's false alarms; a flash LiDAR's returns lie ~5 px apart in a 640 x 480 image), unless most
+  of the returns are lone and at least SPARSE_MIN (a sensor grid coarser than the cells), then
 - splitting the rest at every gap wider than `gap_m` in depth, besides the largest run each run
   of fewer than `min_count` returns, and each run of at most `max_check` returns most of which
   have no other return of their run within `near_px` pixels (false alarms over the body).
@@ -24,13 +25,17 @@ import numpy as np
 from .frustum import lone_scan
 from .silhouette import _project
 
-__all__ = ["STRAY_GAP_M", "STRAY_MIN_COUNT", "STRAY_NEAR_PX", "STRAY_MAX_CHECK", "STRAY_CELL_PX", "drop_stray"]
+__all__ = ["STRAY_GAP_M", "STRAY_MIN_COUNT", "STRAY_NEAR_PX", "STRAY_MAX_CHECK", "STRAY_CELL_PX", "SPARSE_MIN",
+           "drop_stray"]
 
 STRAY_GAP_M = 0.5
 STRAY_MIN_COUNT = 3
 STRAY_NEAR_PX = 8.0
 STRAY_MAX_CHECK = 256   # a run this large is no handful of false alarms (and the check is quadratic)
 STRAY_CELL_PX = 4.0
+# At least this many lone returns, half of the frustum's or more, are a sparse sensor grid, kept
+# whole: false alarms come a few at a time (1e-4 a pixel: about one in a 100 x 100 px frustum).
+SPARSE_MIN = 16
 
 
 def drop_stray(pts: np.ndarray, bounds: np.ndarray, M: np.ndarray, gap_m: float = STRAY_GAP_M,
@@ -44,8 +49,13 @@ def drop_stray(pts: np.ndarray, bounds: np.ndarray, M: np.ndarray, gap_m: float 
     if n < 2:
         return pts, bounds
     lone, one_run = lone_scan(pts, M, cell_px, gap_m / 2.0)
+    lonely = int(np.count_nonzero(lone))
+    if lonely >= SPARSE_MIN and 2 * lonely > n:
+        # most returns lone, and many: a sensor's grid coarser than the cells (a 128 x 128 flash
+        # LiDAR on a 1280 x 960 image lies 10 px apart), not false alarms, which are rare
+        lone, one_run = np.zeros(n, bool), False
     keep = ~lone
-    if not keep.any():   # nothing but lone returns: no body there (an empty frustum, as the loop judges it)
+    if not keep.any():   # nothing but a few lone returns: no body there (an empty frustum, as the loop judges it)
         return pts[:0], np.array([[np.inf] * 3, [-np.inf] * 3], dtype=bounds.dtype)
     if one_run:   # no two of the rest more than gap_m apart in depth: one run, nothing more to drop
         if not lone.any():

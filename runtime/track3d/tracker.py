@@ -1130,7 +1130,7 @@ class Track3D:
         FIND_DEPTH_SLACK of its range (another body in view is not the target). -> (its box
         [x, y, w, h], its frustum (points, bounds)), or (None, None). Without a 3D box yet the
         depth is not checked."""
-        body = find_body(points, near, self._M, self._size, self.z_range)
+        body = find_body(points, near, self._M, self._size, self.z_range, self.drop_stray)
         if body is None:
             return None, None
         cut = self._frustum(points, body)
