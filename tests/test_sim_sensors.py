@@ -373,3 +373,20 @@ def test_false_alarm_settings_are_checked():
             make_settings("tiny", false_alarms=bad)
     with pytest.raises(SimError, match="range sensor"):
         make_settings("tiny", sensors="stereo", false_alarms=1e-4)
+
+
+def test_flash_lidar_false_alarms_are_drawn_on_its_own_grid_before_the_surface():
+    """They had been drawn on the left image after reprojection: most body pixels there hold no
+    LiDAR sample, so alarms fell behind the surface (20 of 28 over a body), and the rate counted
+    image pixels (307,200), not the sensor's (16,384)."""
+    cam = Camera.from_fov(640, 480, 45.0)
+    yy, xx = np.mgrid[0:480, 0:640]
+    body = (xx - 320) ** 2 + (yy - 240) ** 2 < 100 ** 2
+    frame = RenderedFrame(np.where(body, 20.0, 0.0), np.where(body, 1.0, 0.0), np.where(body, 0.5, 0.0), None, None)
+    clean = measure_depth("flash-lidar", frame, cam, np.random.default_rng(0))
+    noisy = measure_depth("flash-lidar", frame, cam, np.random.default_rng(0),
+                          false_alarms=(0.01, np.random.default_rng(1)))
+    changed = noisy != clean
+    assert 0 < changed.sum() < 0.02 * 128 * 128 * 2        # about rate x the sensor's pixels, not the image's
+    assert (noisy[body & changed] <= 20.0 + 1e-9).all()     # over the body: before its surface
+    assert (noisy[changed] > 0).all()

@@ -27,9 +27,10 @@ The ToF signal model, per pixel (range r = |ray| * z, albedo a, cos of incidence
 
 The range error is applied along the pixel's ray (z scales with r).
 
-False alarms (`add_false_alarms`, `track3d-sim generate --false-alarms RATE`, any sensor but
-stereo): each pixel, with probability RATE, returns a range where there is no surface (a dark
-count, a solar photon, a dust grain), drawn uniformly in the sensor's range gate and before the
+False alarms (`measure_depth(..., false_alarms=)`, `track3d-sim generate --false-alarms RATE`,
+any sensor but stereo): each of the sensor's pixels (the flash LiDAR's own 128 x 128, before
+reprojection), with probability RATE, returns a range where there is no surface (a dark count, a
+solar photon, a dust grain), drawn uniformly in the sensor's range gate and before the rendered
 surface where the pixel sees one (the sensor reports the first return). The gate is the ToF
 models' [min_range_m, max_range_m], the paper's 1-45 m for ideal depth.
 """
@@ -180,8 +181,8 @@ def lidar_intrinsics(model: ToFModel, camera) -> tuple[int, int, float, float, f
 def _tof_lowres(model: ToFModel):
     """A sensor with its own grid: each of its pixels returns the nearest surface in its
     footprint (first return) along its centre ray; returns are reprojected into the left grid
-    with a z-buffer."""
-    def measure(frame: RenderedFrame, camera, rng: np.random.Generator) -> np.ndarray:
+    with a z-buffer. False alarms (rate, rng) are drawn on the sensor's own grid."""
+    def measure(frame: RenderedFrame, camera, rng: np.random.Generator, false_alarms=None) -> np.ndarray:
         z = np.asarray(frame.z, np.float64)
         H, W = z.shape
         w, h, f, cx, cy = lidar_intrinsics(model, camera)
@@ -203,7 +204,11 @@ def _tof_lowres(model: ToFModel):
         lc[cells] = np.asarray(frame.cos_incidence)[vv[src], uu[src]]
         jj, ii = np.divmod(np.arange(h * w), w)
         rx, ry = (ii + 0.5 - cx) / f, (jj + 0.5 - cy) / f
-        meas = _tof_returns(model, lz, np.sqrt(rx * rx + ry * ry + 1.0), la, lc, rng)
+        norm = np.sqrt(rx * rx + ry * ry + 1.0)
+        meas = _tof_returns(model, lz, norm, la, lc, rng)
+        if false_alarms is not None:
+            rate, arng = false_alarms
+            meas = _alarms(meas, lz, norm, rate, (float(model.min_range_m), float(model.max_range_m)), arng)
         # the sensor's returns, as points along its pixel centre rays, into the left grid
         k = np.flatnonzero(meas > 0)
         zk = meas[k]
@@ -236,6 +241,7 @@ SENSORS_NEEDING_IMAGES = frozenset({"stereo"})
 
 # sensors whose depth may carry false alarms (stereo's errors are the matcher's own)
 FALSE_ALARM_SENSORS = frozenset({"ideal", "tof", "flash-lidar"})
+LOWRES_SENSORS = frozenset({"flash-lidar"})   # with a pixel grid of their own (false alarms drawn there)
 IDEAL_GATE_M = (1.0, 45.0)   # the paper's working range (IV-A)
 
 
@@ -245,22 +251,32 @@ def false_alarm_gate(sensor: str) -> tuple[float, float]:
     return IDEAL_GATE_M if m is None else (float(m.min_range_m), float(m.max_range_m))
 
 
-def add_false_alarms(depth: np.ndarray, camera, rate: float, gate: tuple[float, float],
-                     rng: np.random.Generator) -> np.ndarray:
-    """`depth` (H, W) metres, 0 = no return, with each pixel's return replaced, with probability
-    `rate`, by a false alarm: a range uniform in the gate, before the pixel's surface when it
-    has one (the first return), as z along the pixel's ray. A new array; `rng` draws two values
-    per pixel whatever the scene, so the stream does not depend on it."""
+def _alarms(depth: np.ndarray, surface: np.ndarray, norm: np.ndarray, rate: float, gate: tuple[float, float],
+            rng: np.random.Generator) -> np.ndarray:
+    """`depth` (any grid, metres, 0 = no return) with false alarms: each pixel, with probability
+    `rate`, returns a range uniform in the gate and before the pixel's rendered `surface` z where
+    there is one, as z along its ray (`norm`: |ray| at z = 1). Two draws per pixel whatever the
+    scene, so the stream does not depend on it."""
     z = np.asarray(depth, np.float64)
-    norm = _ray_norm(camera)
     u = rng.random(z.shape)
     t = rng.random(z.shape)
     near, far = gate
-    stop = np.where(z > 0, np.minimum(z * norm, far), far)
+    sz = np.asarray(surface, np.float64)
+    stop = np.where(sz > 0, np.minimum(sz * norm, far), far)
     alarm = (u < rate) & (stop > near)
     out = z.copy()
     out[alarm] = (near + (stop[alarm] - near) * t[alarm]) / norm[alarm]
     return out
+
+
+def add_false_alarms(depth: np.ndarray, camera, rate: float, gate: tuple[float, float],
+                     rng: np.random.Generator, surface: np.ndarray | None = None) -> np.ndarray:
+    """`depth` (H, W) metres on the left camera's grid, 0 = no return, with each pixel's return
+    replaced, with probability `rate`, by a false alarm: a range uniform in the gate, before the
+    pixel's rendered surface (`surface`, (H, W) z; None: `depth` itself) when it has one (the
+    first return), as z along the pixel's ray. A new array. A sensor with its own grid (the flash
+    LiDAR) draws them there instead: `measure_depth(..., false_alarms=)`."""
+    return _alarms(depth, depth if surface is None else surface, _ray_norm(camera), rate, gate, rng)
 
 
 def sensor_info(sensor: str) -> dict:
@@ -280,9 +296,18 @@ def sensor_info(sensor: str) -> dict:
     return {"name": sensor}
 
 
-def measure_depth(sensor: str, frame: RenderedFrame, camera, rng: np.random.Generator) -> np.ndarray:
-    """The depth map (H, W) float64 metres (0 = no return) that `sensor` measures of `frame`."""
+def measure_depth(sensor: str, frame: RenderedFrame, camera, rng: np.random.Generator,
+                  false_alarms: tuple[float, np.random.Generator] | None = None) -> np.ndarray:
+    """The depth map (H, W) float64 metres (0 = no return) that `sensor` measures of `frame`;
+    false_alarms (rate, generator): a range sensor's false returns (FALSE_ALARM_SENSORS), drawn on
+    the sensor's own grid before the rendered surface, with their own generator."""
     f = DEPTH_SENSORS.get(sensor)
     if f is None:
         raise SimError(f"unknown depth sensor {sensor!r} (choose from {', '.join(DEPTH_SENSORS)})")
-    return f(frame, camera, rng)
+    if false_alarms is None or sensor not in FALSE_ALARM_SENSORS:
+        return f(frame, camera, rng)
+    if sensor in LOWRES_SENSORS:
+        return f(frame, camera, rng, false_alarms)
+    rate, arng = false_alarms
+    return add_false_alarms(f(frame, camera, rng), camera, rate, false_alarm_gate(sensor), arng,
+                            surface=np.asarray(frame.z, np.float64))

@@ -340,18 +340,20 @@ def render_sequence(spec: SeqSpec, settings: dict, camera, out_dir: Path | None 
             elif keep_right_depth:
                 right_depths.append(c["z"])
         depth = left["z"]
+        rate = float(settings.get("false_alarms") or 0.0)
+        alarms = None
+        if rate > 0.0 and spec.sensor in FALSE_ALARM_SENSORS:
+            # stream 3, drawn only in runs with false alarms: the other streams stay as they were
+            alarms = (rate, np.random.default_rng([int(settings["seed"]), SPLIT_IDS[spec.split], spec.index, i, 3]))
         if spec.sensor != "ideal":
             # the sensor's own noise stream per frame, like frng (1) but stream 2
             drng = np.random.default_rng([int(settings["seed"]), SPLIT_IDS[spec.split], spec.index, i, 2])
             depth = measure_depth(spec.sensor, RenderedFrame(left["z"], cos_inc, albedo,
                                                                 images[0] if images else None,
                                                                 images[1] if images else None),
-                                  camera, drng)
-        rate = float(settings.get("false_alarms") or 0.0)
-        if rate > 0.0 and spec.sensor in FALSE_ALARM_SENSORS:
-            # stream 3, drawn only in runs with false alarms: the other streams stay as they were
-            arng = np.random.default_rng([int(settings["seed"]), SPLIT_IDS[spec.split], spec.index, i, 3])
-            depth = add_false_alarms(depth, camera, rate, false_alarm_gate(spec.sensor), arng)
+                                  camera, drng, false_alarms=alarms)
+        elif alarms is not None:
+            depth = add_false_alarms(depth, camera, alarms[0], false_alarm_gate(spec.sensor), alarms[1])
         frames_meta["R"].append(np.round(R.reshape(-1), 7).tolist())
         frames_meta["T"].append(np.round(T, 6).tolist())
         if keep_depth:
