@@ -241,9 +241,48 @@ def _fit(x, y):
     return float(slope), float(icpt), float(r)
 
 
+def _ao_limits(v, pad: float = 0.05) -> tuple[float, float]:
+    """Axis limits of AO values (0..1): `pad` beyond the lowest and highest, so that a marker at
+    1.0 (or 0) is whole, not cut at the frame; (0, 1) without values."""
+    if not len(v):
+        return 0.0, 1.0
+    return max(-pad, float(np.min(v)) - pad), min(1.0 + pad, float(np.max(v)) + pad)
+
+
+def _dodge(points, xlim, ylim, near: float = 0.02, step: float = 8.0) -> list[float]:
+    """Horizontal offsets in points (1/72 inch) of markers: those that would lie on each other
+    (closer than `near` of the axes' span in x and in y, chained) are spread side by side, `step`
+    apart around their place, in drawing order; 0 for the others and for non-finite points."""
+    n = len(points)
+    xy = np.array(points, float).reshape(n, 2)
+    uv = (xy - [xlim[0], ylim[0]]) / [max(xlim[1] - xlim[0], 1e-12), max(ylim[1] - ylim[0], 1e-12)]
+    ok = np.isfinite(uv).all(axis=1)
+    root = list(range(n))
+
+    def find(i):
+        while root[i] != i:
+            root[i] = root[root[i]]
+            i = root[i]
+        return i
+
+    for i in range(n):
+        for j in range(i + 1, n):
+            if ok[i] and ok[j] and np.all(np.abs(uv[i] - uv[j]) < near):
+                root[find(j)] = find(i)
+    groups: dict[int, list[int]] = {}
+    for i in range(n):
+        groups.setdefault(find(i), []).append(i)
+    out = [0.0] * n
+    for members in groups.values():
+        for k, i in enumerate(members):
+            out[i] = (k - (len(members) - 1) / 2.0) * step if len(members) > 1 else 0.0
+    return out
+
+
 def sweep_plots(sweep_rows: list[dict], overall: dict, out: Path, subtitle: str) -> list[Path]:
     """fig15_sweep.png (3D success / precision curves, AO bars per tracker) and fig16_3d_vs_2d.png."""
     from matplotlib.lines import Line2D
+    from matplotlib.transforms import ScaledTranslation
     from track3d.evaluation.metrics import CE3D_THRESHOLDS, IOU_THRESHOLDS
     from track3d.evaluation.plots import pyplot
 
@@ -303,16 +342,13 @@ def sweep_plots(sweep_rows: list[dict], overall: dict, out: Path, subtitle: str)
     # Fig. 16: 3D accuracy against 2D accuracy, one colour per 2D tracker, a line fit per estimator.
     fig, ax = plt.subplots(figsize=(8.5, 5.8))
     markers = dict(zip(ests, ("o", "D", "^", "v")))
-    fits, allx, ally = [], [], []
+    fits, allx, ally, marks = [], [], [], []
     for e in ests:
         pts = [s for s in ok if s["estimator"] == e]
         x2 = [s["metrics"]["ao_2d"] for s in pts]
         for key, filled in (("ao_3d", True), ("ao_bev", False)):
             y = [s["metrics"][key] for s in pts]
-            for s, xv, yv in zip(pts, x2, y):
-                c = colour[s["tracker"]]
-                ax.scatter([xv], [yv], s=70 if filled else 45, marker=markers[e], edgecolors=c,
-                           facecolors=c if filled else "none", linewidths=1.5, zorder=3)
+            marks += [(xv, yv, colour[s["tracker"]], filled, markers[e]) for s, xv, yv in zip(pts, x2, y)]
             allx += x2
             ally += y
             fit = _fit(x2, y)
@@ -323,12 +359,20 @@ def sweep_plots(sweep_rows: list[dict], overall: dict, out: Path, subtitle: str)
                                    label=f"fit {key[3:].upper()} ({e}): slope {fit[0]:.2f}, r {fit[2]:.2f}"))
     fx, fy = np.asarray(allx, float), np.asarray(ally, float)
     fx, fy = fx[np.isfinite(fx)], fy[np.isfinite(fy)]
-    lo = max(0.0, min(fx.min(), fy.min()) - 0.05) if len(fx) and len(fy) else 0.0
-    hi = min(1.0, max(fx.max(), fy.max()) + 0.05) if len(fx) and len(fy) else 1.0
+    xlim, ylim = _ao_limits(fx), _ao_limits(np.concatenate([fx, fy]) if len(fy) else fy)
     ax.plot([0, 1], [0, 1], color="lightgrey", lw=1, zorder=0)
-    ax.set(xlim=(max(0.0, fx.min() - 0.05) if len(fx) else 0, min(1.0, fx.max() + 0.05) if len(fx) else 1),
-           ylim=(lo, hi), xlabel="AO_2d of the Track3D run (reported, fused box)", ylabel="3D accuracy (AO)",
-           title=f"3D accuracy against 2D accuracy (paper Fig. 16)\n{subtitle}")
+    ax.set(xlim=xlim, ylim=ylim)
+    for a, lim in ((ax.xaxis, xlim), (ax.yaxis, ylim)):   # no tick outside 0..1 in the margins
+        a.set_ticks([t for t in a.get_ticklocs() if max(0.0, lim[0]) - 1e-9 <= t <= min(1.0, lim[1]) + 1e-9])
+    shift = _dodge([(m[0], m[1]) for m in marks], xlim, ylim)
+    for (xv, yv, c, filled, mk), dx in zip(marks, shift):
+        # markers at one place (equal scores) side by side, dx points apart; never cut at the frame
+        ax.scatter([xv], [yv], s=70 if filled else 45, marker=mk, edgecolors=c, facecolors=c if filled else "none",
+                   linewidths=1.5, zorder=3, clip_on=False,
+                   transform=ax.transData + ScaledTranslation(dx / 72.0, 0.0, fig.dpi_scale_trans))
+    ax.set(xlabel="AO_2d of the Track3D run (reported, fused box)"
+                  + ("\n(markers of equal scores drawn side by side)" if any(shift) else ""),
+           ylabel="3D accuracy (AO)", title=f"3D accuracy against 2D accuracy (paper Fig. 16)\n{subtitle}")
     ax.grid(alpha=0.3)
     keys = [Line2D([], [], ls="", marker=markers[e], color="black", markerfacecolor=fc, label=f"{m}, {e}")
             for e in ests for m, fc in (("AO_3d", "black"), ("AO_bev", "none"))]
