@@ -299,8 +299,9 @@ def sweep_plots(sweep_rows: list[dict], overall: dict, out: Path, subtitle: str)
     files = []
 
     # Fig. 15: 3D success and precision curves per 2D tracker, and AO bars.
-    fig = plt.figure(figsize=(13, 9))
-    gs = fig.add_gridspec(2, 2, height_ratios=[1.15, 1])
+    rows_a = -(-len(ok) // 2)   # legend rows under (a) and (b)
+    fig = plt.figure(figsize=(13, 9 + 0.16 * rows_a))
+    gs = fig.add_gridspec(2, 2, height_ratios=[1.15 + 0.07 * rows_a, 1])
     a_s, a_p, a_b = fig.add_subplot(gs[0, 0]), fig.add_subplot(gs[0, 1]), fig.add_subplot(gs[1, :])
     for s in sorted(ok, key=lambda s: -np.nan_to_num(s["metrics"]["ao_3d"], nan=-1)):
         ov = overall[s["run"]]
@@ -316,8 +317,9 @@ def sweep_plots(sweep_rows: list[dict], overall: dict, out: Path, subtitle: str)
             ylim=(0, 1.02))
     a_p.set(xlabel="3D centre error threshold (m)", ylabel="precision", title="(b) 3D precision plot",
             xlim=(CE3D_THRESHOLDS[0], CE3D_THRESHOLDS[-1]), ylim=(0, 1.02))
-    a_s.legend(fontsize=7, loc="upper right")
-    a_p.legend(fontsize=7, loc="lower right")
+    # the legends under the panels: inside, any corner lies on some run's curve
+    for a in (a_s, a_p):
+        a.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, frameon=False)
     x = np.arange(len(ok))
     w = 0.26
     for k, (key, name, c) in enumerate((("ao_2d", "AO_2d (reported, fused)", "#9e9e9e"),

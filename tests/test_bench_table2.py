@@ -56,7 +56,8 @@ def test_fig16_equal_scores_side_by_side_and_nothing_cut_at_one():
 
 
 def test_fig15_16_layout(tmp_path, monkeypatch):
-    """Fig. 16's x axis reaches past 1.0 and its two equal markers are drawn apart."""
+    """Fig. 15 (a)'s legend lies outside the axes (not on the curves); Fig. 16's x axis reaches past
+    1.0 and its two equal markers are drawn apart."""
     import bench_table2
     from matplotlib.figure import Figure
 
@@ -74,6 +75,10 @@ def test_fig15_16_layout(tmp_path, monkeypatch):
     files = bench_table2.sweep_plots(rows, overall, tmp_path, "test")
     assert [f.name for f in files] == ["fig15_sweep.png", "fig16_3d_vs_2d.png"]
     (_, f15), (_, f16) = seen
+    a_s = f15.axes[0]
+    assert a_s.get_title() == "(a) 3D success plot"
+    leg, box = a_s.get_legend().get_window_extent(), a_s.get_window_extent()
+    assert leg.y1 <= box.y0   # under the panel
     ax = f16.axes[0]
     assert ax.get_xlim()[1] > 1.0 and ax.get_ylim()[1] > 0.913
     at = {}
