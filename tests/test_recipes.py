@@ -113,42 +113,55 @@ sys.exit(130)
 """
 
 
+_DRIVER = """
+import os, pathlib, signal, sys, threading, time
+from track3d_train.interrupt import Interrupted
+from track3d_train.recipes import _call
+
+tmp, sent = pathlib.Path(sys.argv[1]), getattr(signal, sys.argv[2])
+
+
+def unexpected(signum, frame):
+    raise AssertionError(f"{signum} reached the driver, not the recipe")
+
+
+old = {s: signal.signal(s, unexpected) for s in (signal.SIGTERM, signal.SIGHUP)}
+
+
+def send():
+    t0 = time.time()
+    while not (tmp / "ready").exists() and time.time() - t0 < 60:
+        time.sleep(0.01)
+    os.kill(os.getpid(), sent)
+
+
+threading.Thread(target=send, daemon=True).start()
+try:
+    _call([sys.executable, str(tmp / "step.py"), str(tmp)])
+    print("not interrupted")
+except Interrupted as e:
+    print("interrupted", e.signum, e.exit_code, all(signal.getsignal(s) is unexpected for s in old))
+print("plain", _call([sys.executable, "-c", "import sys; sys.exit(3)"]))
+"""
+
+
 @pytest.mark.parametrize("sent,passed", [("SIGINT", "SIGINT"), ("SIGTERM", "SIGTERM"), ("SIGHUP", "SIGTERM")])
 def test_a_signal_to_the_recipe_reaches_the_running_step_once_and_the_recipe_waits_for_it(tmp_path, sent, passed):
     """Ctrl-C in `recipe run` had printed a traceback, and subprocess.call had killed the step
     (a training writing its checkpoint) 0.25 s after it; a SIGTERM to the recipe never reached
     the step. Now the step gets the signal once (in a session of its own a terminal's Ctrl-C
-    does not reach it a second time) and the recipe ends after it, Interrupted."""
-    import os
+    does not reach it a second time) and the recipe ends after it, Interrupted. The recipe runs
+    in a process of its own: a signal sent to the test runner itself had crashed the whole suite
+    (exit 139) after the tests before it."""
     import signal
+    import subprocess
     import sys
-    import threading
-    import time
 
-    from track3d_train.interrupt import Interrupted
-    from track3d_train.recipes import _call
-
-    def unexpected(signum, frame):
-        raise AssertionError(f"{signum} reached the test, not the recipe")
-
-    old = {s: signal.signal(s, unexpected) for s in (signal.SIGTERM, signal.SIGHUP)}
-    script = tmp_path / "step.py"
-    script.write_text(_STEP)
-
-    def send():
-        t0 = time.time()
-        while not (tmp_path / "ready").exists() and time.time() - t0 < 60:
-            time.sleep(0.01)
-        os.kill(os.getpid(), getattr(signal, sent))
-
-    threading.Thread(target=send, daemon=True).start()
-    try:
-        with pytest.raises(Interrupted) as e:
-            _call([sys.executable, str(script), str(tmp_path)])
-        assert e.value.signum == getattr(signal, sent) and e.value.exit_code == 128 + e.value.signum
-        assert (tmp_path / "done").read_text() == str(int(getattr(signal, passed)))   # once, and not killed
-        assert all(signal.getsignal(s) is unexpected for s in old)                   # the handlers put back
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
-    assert _call([sys.executable, "-c", "import sys; sys.exit(3)"]) == 3
+    (tmp_path / "step.py").write_text(_STEP)
+    (tmp_path / "driver.py").write_text(_DRIVER)
+    r = subprocess.run([sys.executable, str(tmp_path / "driver.py"), str(tmp_path), sent], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    signum = int(getattr(signal, sent))
+    assert r.stdout.split() == ["interrupted", str(signum), str(128 + signum), "True", "plain", "3"], r.stdout
+    assert (tmp_path / "done").read_text() == str(int(getattr(signal, passed)))   # once, and not killed
