@@ -142,7 +142,10 @@ def history_figure(history: dict, title: str = "A3BoxNet training"):
     ax[0].grid(alpha=0.3)
     ax[1].set_xlabel("epoch")
     ax[1].set_ylabel("AO")
-    ax[1].legend(loc="lower right")
+    if ax[1].get_legend_handles_labels()[1]:
+        ax[1].legend(loc="lower right")
+    else:   # no validation yet (a run stopped inside its first epoch): say so, no empty legend
+        ax[1].text(0.5, 0.5, "no validation yet", ha="center", va="center", transform=ax[1].transAxes)
     ax[1].grid(alpha=0.3)
     fig.suptitle(title)
     fig.tight_layout()
