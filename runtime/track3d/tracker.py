@@ -526,10 +526,10 @@ class Track3D:
                tracker_options: dict | None = None, estimator_options: dict | None = None,
                **options) -> "Track3D":
         """Build from registry names; `options` go to Track3D (fusion, weight_3d, z_range,
-        min_points, lost_after, min_score, frustum_margin, depth_range_m, weight_2d, section_limbs, measured_faces,
-        depth_smoothing, evidence_points, reacquire_threshold, hold_cut_size, edge_pad, front_quantile,
-        front_filter, silhouette,
-        outline_share, outline_share_phase, outline_contain, texture_trim, resume_outline, dark_side, fusion_cover, body_views)."""
+        min_points, lost_after, min_score, frustum_margin, depth_range_m, weight_2d, section_limbs,
+        measured_faces, depth_smoothing, evidence_points, reacquire_threshold, hold_cut_size, edge_pad,
+        front_quantile, front_filter, silhouette, outline_share, outline_share_phase, outline_contain,
+        texture_trim, resume_outline, dark_side, fusion_cover, body_views, first_box_fade, drop_stray)."""
         t = cls(camera, create_tracker(tracker, **(tracker_options or {})),
                 create_estimator(estimator, **(estimator_options or {})), **options)
         t.tracker_name, t.estimator_name = str(tracker).lower(), str(estimator).lower()
