@@ -242,7 +242,13 @@ py::tuple lone_scan(FloatArray points, DoubleArray M, double cell, double bucket
     py::gil_scoped_release release;
     std::memset(o, 0, static_cast<size_t>(n));
     if (n >= 2) {
-      std::vector<float> u(static_cast<size_t>(n)), v(static_cast<size_t>(n));
+      // buffers kept from call to call (per thread): fresh ones of a large frustum cost page
+      // faults every frame, a latency spike of milliseconds now and then
+      thread_local std::vector<float> u, v;
+      thread_local std::vector<int32_t> cid, count, row;
+      thread_local std::vector<uint8_t> occ;
+      u.resize(static_cast<size_t>(n));
+      v.resize(static_cast<size_t>(n));
       project_f32(pts, n, m, u.data(), v.data());
       bool finite = true;
       float umin = INFINITY, vmin = INFINITY, zmin = INFINITY, zmax = -INFINITY;
@@ -254,7 +260,7 @@ py::tuple lone_scan(FloatArray points, DoubleArray M, double cell, double bucket
         zmin = std::min(zmin, z);
         zmax = std::max(zmax, z);
       }
-      std::vector<int32_t> cid(static_cast<size_t>(n));
+      cid.resize(static_cast<size_t>(n));
       const float inv = 1.0f / static_cast<float>(cell);
       int64_t nx = 0, ny = 0;
       bool small = finite;
@@ -271,7 +277,8 @@ py::tuple lone_scan(FloatArray points, DoubleArray M, double cell, double bucket
         v[i] = static_cast<float>(iv);
       }
       if (small && nx <= kMaxCells / std::max<int64_t>(ny, 1) && nx * ny <= kMaxCells) {
-        std::vector<int32_t> count(static_cast<size_t>(nx * ny), 0), row(static_cast<size_t>(nx * ny), 0);
+        count.assign(static_cast<size_t>(nx * ny), 0);
+        row.assign(static_cast<size_t>(nx * ny), 0);
         for (int64_t i = 0; i < n; ++i) {
           cid[i] = static_cast<int32_t>(static_cast<int64_t>(v[i]) * nx + static_cast<int64_t>(u[i]));
           ++count[static_cast<size_t>(cid[i])];
@@ -294,7 +301,7 @@ py::tuple lone_scan(FloatArray points, DoubleArray M, double cell, double bucket
       const double span = (static_cast<double>(zmax) - static_cast<double>(zmin)) * ib;
       if (finite && span < static_cast<double>(kMaxBuckets)) {
         const int64_t nb = static_cast<int64_t>(span) + 1;
-        std::vector<uint8_t> occ(static_cast<size_t>(nb), 0);
+        occ.assign(static_cast<size_t>(nb), 0);
         int64_t lo = nb, hi = -1;
         for (int64_t i = 0; i < n; ++i) {
           if (o[i]) continue;
@@ -307,6 +314,12 @@ py::tuple lone_scan(FloatArray points, DoubleArray M, double cell, double bucket
         one_run = hi >= lo;
         for (int64_t b = lo; one_run && b <= hi; ++b) one_run = occ[static_cast<size_t>(b)] != 0;
       }
+      // a rare huge call (a cloud spread over a vast grid) does not keep its memory: memory flat
+      constexpr size_t kKeep = size_t{1} << 22;
+      if (u.capacity() > kKeep) { std::vector<float>().swap(u); std::vector<float>().swap(v); }
+      if (cid.capacity() > kKeep) std::vector<int32_t>().swap(cid);
+      if (count.capacity() > kKeep) { std::vector<int32_t>().swap(count); std::vector<int32_t>().swap(row); }
+      if (occ.capacity() > kKeep) std::vector<uint8_t>().swap(occ);
     }
   }
   return py::make_tuple(out, one_run);

@@ -16,14 +16,14 @@ near it in depth. `drop_stray` drops
   of the returns are lone and at least SPARSE_MIN (a sensor grid coarser than the cells), then
 - splitting the rest at every gap wider than `gap_m` in depth, besides the largest run each run
   of fewer than `min_count` returns, and each run of at most `max_check` returns most of which
-  have no other return of their run within `near_px` pixels (false alarms over the body).
+  have no other return of their run in the 3 x 3 cells of `near_px` / 2 pixels around their own
+  (false alarms over the body).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from .frustum import lone_scan
-from .silhouette import _project
 
 __all__ = ["STRAY_GAP_M", "STRAY_MIN_COUNT", "STRAY_NEAR_PX", "STRAY_MAX_CHECK", "STRAY_CELL_PX", "SPARSE_MIN",
            "drop_stray"]
@@ -62,34 +62,26 @@ def drop_stray(pts: np.ndarray, bounds: np.ndarray, M: np.ndarray, gap_m: float 
             return pts, bounds
         kept = pts[keep]
         return kept, np.stack([kept.min(axis=0), kept.max(axis=0)]).astype(bounds.dtype, copy=False)
-    z = pts[:, 2]
-    idx = np.flatnonzero(keep) if not keep.all() else None
-    zk = z if idx is None else z[idx]
+    idx = np.flatnonzero(keep)                 # the returns left, into pts
+    zk = pts[idx, 2]
     zs = np.sort(zk)
     cuts = np.flatnonzero(np.diff(zs) > gap_m)
     if len(cuts):
         counts = np.diff(np.concatenate([[0], cuts + 1, [len(zs)]]))
-        main = int(np.argmax(counts))
-        run = np.searchsorted(zs[cuts + 1], zk, side="right")   # each kept return's run
-        drop = np.zeros(len(counts), bool)
-        for r in np.flatnonzero(counts <= max_check):
-            if r == main:
-                continue
-            if counts[r] < min_count:
-                drop[r] = True
-                continue
-            sel = run == r
-            ur, vr = _project((pts if idx is None else pts[idx])[sel], M)
-            ur, vr = ur.astype(np.float64), vr.astype(np.float64)
-            apart = np.maximum(np.abs(ur[:, None] - ur[None, :]), np.abs(vr[:, None] - vr[None, :]))
-            np.fill_diagonal(apart, np.inf)
-            drop[r] = np.mean(apart.min(axis=1) > near_px) > 0.5
-        if drop.any():
-            gone = drop[run]
-            if idx is None:
-                keep = ~gone
-            else:
-                keep[idx[gone]] = False
+        small = counts <= max_check
+        small[int(np.argmax(counts))] = False  # the largest run is the body
+        run = np.searchsorted(zs[cuts + 1], zk, side="right")   # each return's run
+        cand = np.flatnonzero(small[run])      # the returns of the small runs: few
+        cr = run[cand]
+        for r in np.unique(cr):
+            members = idx[cand[cr == r]]
+            if len(members) >= min_count:
+                # scattered (false alarms) or a patch (a part of the body seen apart): most of the
+                # run's returns without another of the run in the 3 x 3 cells around their own
+                alone = lone_scan(pts[members], M, near_px / 2.0, gap_m / 2.0)[0]
+                if 2 * int(np.count_nonzero(alone)) <= len(members):
+                    continue
+            keep[members] = False
     if keep.all():
         return pts, bounds
     kept = pts[keep]
