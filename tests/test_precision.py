@@ -389,4 +389,6 @@ def test_auto_times_each_call_after_other_work_as_the_loop_calls_it():
     assert back_to_back["warm"] < back_to_back["steady"]
     in_loop = measure({"warm": _BusySession(1.5, warm_ms=0.2), "steady": _BusySession(0.8)}, {}, budget_s=0.05)
     assert in_loop["steady"] < in_loop["warm"]
-    assert in_loop["warm"] == pytest.approx(1.5, abs=0.4) and in_loop["steady"] == pytest.approx(0.8, abs=0.4)
+    # each call's own time, not a share of a warm streak: at least the stand-ins' busy time (a
+    # loaded machine only adds to it; an upper bound failed CI with the other core busy, 2.38 ms)
+    assert in_loop["warm"] >= 1.1 and in_loop["steady"] >= 0.4
