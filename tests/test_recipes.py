@@ -105,7 +105,8 @@ got = []
 for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
     signal.signal(s, lambda signum, frame: got.append(signum))
 (out / "ready").write_text("")
-while not got:
+t0 = time.time()
+while not got and time.time() - t0 < 60:   # never an orphan waiting forever when a test fails
     time.sleep(0.01)
 time.sleep(1.0)                      # a checkpoint being written, longer than subprocess.call's 0.25 s
 (out / "done").write_text(" ".join(str(int(s)) for s in got))
