@@ -212,16 +212,78 @@ py::array_t<float> sample_points(FloatArray points, int64_t num, uint64_t seed) 
 constexpr int64_t kMaxCells = int64_t{1} << 24;
 constexpr int64_t kMaxBuckets = int64_t{1} << 20;
 
-// The projection, branch-free so that it vectorises (AVX2 where the CPU has it; the same IEEE
-// single-precision results either way: no FMA contraction, no fast-math).
+// The projection with the extents of u, v and z, branch-free so that it vectorises (AVX2 where
+// the CPU has it; the same IEEE single-precision results either way: no FMA contraction, no
+// fast-math). The extents are kept per lane (8 at a time) and folded at the end: a min / max
+// reduction in one variable does not vectorise without fast-math. NaN is passed over by the
+// extents; `finite` says whether any coordinate or projection was not finite.
 __attribute__((target_clones("avx2", "default")))
-void project_f32(const float* pts, int64_t n, const float* m, float* u, float* v) {
-  for (int64_t i = 0; i < n; ++i) {
+void project_extents_f32(const float* pts, int64_t n, const float* m, float* u, float* v, float ext[6],
+                         bool* finite) {
+  constexpr int kL = 8;
+  float lo_u[kL], hi_u[kL], lo_v[kL], hi_v[kL], lo_z[kL], hi_z[kL];
+  int ok[kL];
+  for (int k = 0; k < kL; ++k) {
+    lo_u[k] = lo_v[k] = lo_z[k] = INFINITY;
+    hi_u[k] = hi_v[k] = hi_z[k] = -INFINITY;
+    ok[k] = 1;
+  }
+  int64_t i = 0;
+  for (; i + kL <= n; i += kL) {
+    for (int k = 0; k < kL; ++k) {
+      const float x = pts[3 * (i + k)], y = pts[3 * (i + k) + 1], z = pts[3 * (i + k) + 2];
+      const float w = 1.0f / (m[8] * x + m[9] * y + m[10] * z + m[11]);
+      const float a = (m[0] * x + m[1] * y + m[2] * z + m[3]) * w;
+      const float b = (m[4] * x + m[5] * y + m[6] * z + m[7]) * w;
+      u[i + k] = a;
+      v[i + k] = b;
+      ok[k] &= ((a - a) == 0.0f) & ((b - b) == 0.0f) & ((z - z) == 0.0f);
+      lo_u[k] = a < lo_u[k] ? a : lo_u[k];
+      hi_u[k] = a > hi_u[k] ? a : hi_u[k];
+      lo_v[k] = b < lo_v[k] ? b : lo_v[k];
+      hi_v[k] = b > hi_v[k] ? b : hi_v[k];
+      lo_z[k] = z < lo_z[k] ? z : lo_z[k];
+      hi_z[k] = z > hi_z[k] ? z : hi_z[k];
+    }
+  }
+  for (; i < n; ++i) {   // the tail, into lane 0
     const float x = pts[3 * i], y = pts[3 * i + 1], z = pts[3 * i + 2];
     const float w = 1.0f / (m[8] * x + m[9] * y + m[10] * z + m[11]);
-    u[i] = (m[0] * x + m[1] * y + m[2] * z + m[3]) * w;
-    v[i] = (m[4] * x + m[5] * y + m[6] * z + m[7]) * w;
+    const float a = (m[0] * x + m[1] * y + m[2] * z + m[3]) * w;
+    const float b = (m[4] * x + m[5] * y + m[6] * z + m[7]) * w;
+    u[i] = a;
+    v[i] = b;
+    ok[0] &= ((a - a) == 0.0f) & ((b - b) == 0.0f) & ((z - z) == 0.0f);
+    lo_u[0] = a < lo_u[0] ? a : lo_u[0];
+    hi_u[0] = a > hi_u[0] ? a : hi_u[0];
+    lo_v[0] = b < lo_v[0] ? b : lo_v[0];
+    hi_v[0] = b > hi_v[0] ? b : hi_v[0];
+    lo_z[0] = z < lo_z[0] ? z : lo_z[0];
+    hi_z[0] = z > hi_z[0] ? z : hi_z[0];
   }
+  bool all_ok = true;
+  for (int k = 0; k < 6; k += 2) {
+    ext[k] = INFINITY;
+    ext[k + 1] = -INFINITY;
+  }
+  for (int k = 0; k < kL; ++k) {
+    all_ok &= ok[k] != 0;
+    ext[0] = std::min(ext[0], lo_u[k]);
+    ext[1] = std::max(ext[1], hi_u[k]);
+    ext[2] = std::min(ext[2], lo_v[k]);
+    ext[3] = std::max(ext[3], hi_v[k]);
+    ext[4] = std::min(ext[4], lo_z[k]);
+    ext[5] = std::max(ext[5], hi_z[k]);
+  }
+  *finite = all_ok;
+}
+
+// Each point's cell (row * nx + column) of `inv`-wide cells from (umin, vmin); vectorises.
+__attribute__((target_clones("avx2", "default")))
+void cells_f32(const float* u, const float* v, int64_t n, float umin, float vmin, float inv, int32_t nx,
+               int32_t* cid) {
+  for (int64_t i = 0; i < n; ++i)
+    cid[i] = static_cast<int32_t>((v[i] - vmin) * inv) * nx + static_cast<int32_t>((u[i] - umin) * inv);
 }
 
 py::tuple lone_scan(FloatArray points, DoubleArray M, double cell, double bucket) {
@@ -249,52 +311,36 @@ py::tuple lone_scan(FloatArray points, DoubleArray M, double cell, double bucket
       thread_local std::vector<uint8_t> occ;
       u.resize(static_cast<size_t>(n));
       v.resize(static_cast<size_t>(n));
-      project_f32(pts, n, m, u.data(), v.data());
-      bool finite = true;
-      float umin = INFINITY, vmin = INFINITY, zmin = INFINITY, zmax = -INFINITY;
-      for (int64_t i = 0; i < n; ++i) {
-        const float z = pts[3 * i + 2];
-        finite &= std::isfinite(u[i]) & std::isfinite(v[i]) & std::isfinite(z);
-        umin = std::min(umin, u[i]);
-        vmin = std::min(vmin, v[i]);
-        zmin = std::min(zmin, z);
-        zmax = std::max(zmax, z);
-      }
-      cid.resize(static_cast<size_t>(n));
+      float ext[6];
+      bool finite = false;
+      project_extents_f32(pts, n, m, u.data(), v.data(), ext, &finite);
+      const float umin = ext[0], vmin = ext[2], zmin = ext[4], zmax = ext[5];
       const float inv = 1.0f / static_cast<float>(cell);
-      int64_t nx = 0, ny = 0;
-      bool small = finite;
-      for (int64_t i = 0; small && i < n; ++i) {
-        const float fu = (u[i] - umin) * inv, fv = (v[i] - vmin) * inv;
-        if (!(fu < 1e9f && fv < 1e9f)) {
-          small = false;
-          break;
+      // (u - umin) * inv rises with u (IEEE rounding is monotone), so the largest cell index
+      // is the farthest point's: the grid's size and the 1e9 check need no pass of their own
+      const float fu_max = (ext[1] - umin) * inv, fv_max = (ext[3] - vmin) * inv;
+      if (finite && fu_max < 1e9f && fv_max < 1e9f) {
+        const int64_t nx = static_cast<int64_t>(static_cast<int32_t>(fu_max)) + 1;
+        const int64_t ny = static_cast<int64_t>(static_cast<int32_t>(fv_max)) + 1;
+        if (nx <= kMaxCells / std::max<int64_t>(ny, 1) && nx * ny <= kMaxCells) {
+          cid.resize(static_cast<size_t>(n));
+          cells_f32(u.data(), v.data(), n, umin, vmin, inv, static_cast<int32_t>(nx), cid.data());
+          count.assign(static_cast<size_t>(nx * ny), 0);
+          row.assign(static_cast<size_t>(nx * ny), 0);
+          for (int64_t i = 0; i < n; ++i) ++count[static_cast<size_t>(cid[i])];
+          // the 3 x 3 sums, separably: along each row, then down each column
+          for (int64_t r = 0; r < ny; ++r) {
+            const int32_t* c = count.data() + r * nx;
+            int32_t* w = row.data() + r * nx;
+            for (int64_t k = 0; k < nx; ++k) w[k] = c[k] + (k > 0 ? c[k - 1] : 0) + (k + 1 < nx ? c[k + 1] : 0);
+          }
+          for (int64_t r = 0; r < ny; ++r)
+            for (int64_t k = 0; k < nx; ++k)
+              count[static_cast<size_t>(r * nx + k)] = row[static_cast<size_t>(r * nx + k)] +
+                  (r > 0 ? row[static_cast<size_t>((r - 1) * nx + k)] : 0) +
+                  (r + 1 < ny ? row[static_cast<size_t>((r + 1) * nx + k)] : 0);
+          for (int64_t i = 0; i < n; ++i) o[i] = static_cast<uint8_t>(count[static_cast<size_t>(cid[i])] == 1);
         }
-        const int32_t iu = static_cast<int32_t>(fu), iv = static_cast<int32_t>(fv);
-        nx = std::max<int64_t>(nx, iu + 1);
-        ny = std::max<int64_t>(ny, iv + 1);
-        u[i] = static_cast<float>(iu);   // reused below as the cell's column and row (exact: < 2^24)
-        v[i] = static_cast<float>(iv);
-      }
-      if (small && nx <= kMaxCells / std::max<int64_t>(ny, 1) && nx * ny <= kMaxCells) {
-        count.assign(static_cast<size_t>(nx * ny), 0);
-        row.assign(static_cast<size_t>(nx * ny), 0);
-        for (int64_t i = 0; i < n; ++i) {
-          cid[i] = static_cast<int32_t>(static_cast<int64_t>(v[i]) * nx + static_cast<int64_t>(u[i]));
-          ++count[static_cast<size_t>(cid[i])];
-        }
-        // the 3 x 3 sums, separably: along each row, then down each column
-        for (int64_t r = 0; r < ny; ++r) {
-          const int32_t* c = count.data() + r * nx;
-          int32_t* w = row.data() + r * nx;
-          for (int64_t k = 0; k < nx; ++k) w[k] = c[k] + (k > 0 ? c[k - 1] : 0) + (k + 1 < nx ? c[k + 1] : 0);
-        }
-        for (int64_t r = 0; r < ny; ++r)
-          for (int64_t k = 0; k < nx; ++k)
-            count[static_cast<size_t>(r * nx + k)] = row[static_cast<size_t>(r * nx + k)] +
-                (r > 0 ? row[static_cast<size_t>((r - 1) * nx + k)] : 0) +
-                (r + 1 < ny ? row[static_cast<size_t>((r + 1) * nx + k)] : 0);
-        for (int64_t i = 0; i < n; ++i) o[i] = static_cast<uint8_t>(count[static_cast<size_t>(cid[i])] == 1);
       }
       // the depth buckets of the points kept
       const double ib = 1.0 / bucket;
@@ -302,15 +348,15 @@ py::tuple lone_scan(FloatArray points, DoubleArray M, double cell, double bucket
       if (finite && span < static_cast<double>(kMaxBuckets)) {
         const int64_t nb = static_cast<int64_t>(span) + 1;
         occ.assign(static_cast<size_t>(nb), 0);
-        int64_t lo = nb, hi = -1;
+        const double z0 = static_cast<double>(zmin);
         for (int64_t i = 0; i < n; ++i) {
-          if (o[i]) continue;
-          const double d = (static_cast<double>(pts[3 * i + 2]) - static_cast<double>(zmin)) * ib;
+          const double d = (static_cast<double>(pts[3 * i + 2]) - z0) * ib;
           const int64_t b = std::min(static_cast<int64_t>(d), nb - 1);
-          occ[static_cast<size_t>(b)] = 1;
-          lo = std::min(lo, b);
-          hi = std::max(hi, b);
+          occ[static_cast<size_t>(b)] |= static_cast<uint8_t>(o[i] == 0);
         }
+        int64_t lo = 0, hi = nb - 1;
+        while (lo < nb && !occ[static_cast<size_t>(lo)]) ++lo;
+        while (hi >= 0 && !occ[static_cast<size_t>(hi)]) --hi;
         one_run = hi >= lo;
         for (int64_t b = lo; one_run && b <= hi; ++b) one_run = occ[static_cast<size_t>(b)] != 0;
       }

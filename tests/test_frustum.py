@@ -248,3 +248,24 @@ def test_lone_scan_one_run_only_when_no_depth_gap_is_wider_than_two_buckets():
         if one_run:
             assert len(z) and np.all(np.diff(z) <= 0.5 + 1e-9)
     assert seen == ({True, False} if HAVE_EXTENSION else {False})
+
+
+def test_select_points_is_a_boolean_index_of_the_rows():
+    """track3d.frames.select_points: points[mask], row for row, for any layout and dtype."""
+    from track3d.frames import point_bounds, select_points
+
+    p = np.arange(15, dtype=np.float32).reshape(5, 3)
+    mask = np.array([True, False, True, True, False])
+    np.testing.assert_array_equal(select_points(p, mask), [[0, 1, 2], [6, 7, 8], [9, 10, 11]])
+    assert select_points(p, mask).dtype == np.float32
+    assert select_points(p, np.zeros(5, bool)).shape == (0, 3)
+    rng = np.random.default_rng(0)
+    for q in (rng.normal(size=(1000, 3)), rng.normal(size=(1000, 6)).astype(np.float32)[:, ::2],
+              np.asfortranarray(rng.normal(size=(1000, 3)))):
+        m = rng.random(len(q)) < 0.3
+        out = select_points(q, m)
+        np.testing.assert_array_equal(out, q[m])
+        assert out.dtype == q.dtype
+    lo, hi = point_bounds(p)
+    np.testing.assert_array_equal(lo, [0, 1, 2])
+    np.testing.assert_array_equal(hi, [12, 13, 14])

@@ -92,3 +92,33 @@ def test_a_sensor_grid_coarser_than_the_cells_is_kept_whole():
     with_alarm = np.concatenate([body, _patch(320, 210, 1, 1, 8.0)])   # one in front stays a run apart
     out, b = drop_stray(with_alarm, _bounds(with_alarm), CAM.M)
     assert len(out) == len(body) and b[0, 2] == body[:, 2].min()
+
+
+def test_the_bounds_of_what_is_kept_are_exact_and_in_the_frustums_dtype():
+    body = _patch(300, 200, 60, 40, 20.0, tilt=0.01)
+    front = _patch(320, 210, 1, 1, 8.0)
+    pts = np.concatenate([body, front])
+    out, b = drop_stray(pts, _bounds(pts), CAM.M)
+    assert b.dtype == np.float64 and b.shape == (2, 3)
+    np.testing.assert_array_equal(b, _bounds(out))
+
+
+def test_no_loop_module_reduces_a_point_array_along_axis_0():
+    """numpy's min / max / ptp(axis=0) over a (n, 3) array walks it 3 values at a time: 1-4 ms on
+    a near body's frustum against 0.05 ms column by column (track3d.frames.point_bounds). One in
+    drop_stray had made the loop's slowest frames (p99.9 6.1 ms against a 2.7 ms median)."""
+    import re
+    from pathlib import Path
+
+    import track3d
+    pattern = re.compile(r"(\.(min|max|ptp)\(\s*axis\s*=\s*0\s*\))|(np\.(amin|amax|min|max|ptp)\([^()]*axis\s*=\s*0)")
+    root = Path(track3d.__file__).parent
+    found = []
+    for f in sorted(root.rglob("*.py")):
+        if "evaluation" in f.parts:   # per-sequence tables, not per frame
+            continue
+        for k, line in enumerate(f.read_text().splitlines(), 1):
+            code = line.split("#")[0]
+            if pattern.search(code) and '"""' not in line and "``" not in line:
+                found.append(f"{f.relative_to(root)}:{k}: {line.strip()}")
+    assert not found, "use track3d.frames.point_bounds:\n" + "\n".join(found)

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .frames import point_bounds
+
 __all__ = [
     "SIZE_TEMPLATES", "NUM_SIZE_CLASSES",
     "iou_2d", "iou_3d", "iou_bev", "box3d_to_bev", "center_2d", "center_error_2d", "center_error_3d",
@@ -143,7 +145,7 @@ def box3d_from_points(points: np.ndarray) -> np.ndarray:
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(p) == 0:
         raise ValueError("no points to enclose")
-    lo, hi = p.min(axis=0), p.max(axis=0)
+    lo, hi = point_bounds(p)
     return np.concatenate([(lo + hi) / 2.0, hi - lo])
 
 

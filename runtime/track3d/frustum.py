@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .frames import check_cloud
+from .frames import check_cloud, point_bounds
 
 __all__ = [
     "Z_MIN", "Z_MAX", "extract_frustum", "extract_frustum_numpy", "frustum_mask_numpy",
@@ -142,7 +142,7 @@ def extract_frustum(points: np.ndarray, box2d: np.ndarray, M: np.ndarray,
 def _bounds_of(p: np.ndarray) -> np.ndarray:
     if len(p) == 0:
         return np.array([[np.inf] * 3, [-np.inf] * 3])
-    return np.stack([p.min(axis=0), p.max(axis=0)]).astype(np.float64)
+    return np.stack(point_bounds(p)).astype(np.float64)
 
 
 def extract_frustum_bounds_numpy(points: np.ndarray, box2d: np.ndarray, M: np.ndarray,
