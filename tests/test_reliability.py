@@ -454,14 +454,15 @@ def test_a_failing_cloud_callable_at_init_leaves_the_tracker_unstarted(cloud):
 
 # --- a second body in view: not taken for the target whose returns dropped out ---------------
 
-def _two_spheres(cam, ca, cb, radius: float, drop_a: bool):
-    """Image, cloud and the first sphere's 2D box of two lit spheres; `drop_a`: the first one's
-    returns missing from the cloud (a dropout on the target alone)."""
+def _two_spheres(cam, ca, cb, radius: float, drop_a: bool, radius_b: float | None = None):
+    """Image, cloud and the first sphere's 2D box of two lit spheres (the second of radius_b,
+    default radius); `drop_a`: the first one's returns missing from the cloud (a dropout on the
+    target alone)."""
     from track3d.synthetic import sphere_hits
 
     rays = cam.pixel_rays()
     ha, ta, na = sphere_hits(rays, np.asarray(ca, float), radius)
-    hb, tb, nb = sphere_hits(rays, np.asarray(cb, float), radius)
+    hb, tb, nb = sphere_hits(rays, np.asarray(cb, float), radius if radius_b is None else radius_b)
     a_front = np.where(ha, ta, np.inf) <= np.where(hb, tb, np.inf)
     hit = ha | hb
     shade = np.clip(np.where(a_front[..., None], na, nb) @ np.array([-0.5, -0.5, -0.7]), 0.05, 1.0)
@@ -498,6 +499,28 @@ def test_a_second_body_does_not_take_the_track(sensor):
         if out.status == "tracking":
             assert np.abs(out.box2d[:2] - box[:2]).max() < 6.0, (k, out.box2d, box)
     assert out.status == "tracking"   # back on the target once its returns are
+
+
+@pytest.mark.parametrize("sensor", ["ideal", "tof", "stereo"])
+@pytest.mark.parametrize("radii", [(1.5, 0.3), (0.4, 1.6)])
+def test_a_binarys_other_body_at_the_same_range_does_not_take_the_track(sensor, radii):
+    """A binary system: the other body at the target's own range (inside the depth gate), a fifth
+    of its size or four times it. The target's returns drop out for 8 frames: the whole view's
+    search had taken the other body (FIND_SIZE_RATIO: its size must be the last box's)."""
+    from track3d.camera import Camera
+
+    cam = Camera.from_fov(320, 240, 45.0)
+    ra, rb = radii
+    a0, b = np.array([-2.0, 0.0, 20.0]), np.array([3.5, 1.0, 20.5])
+    t = Track3D.from_default(cam, threads=1, depth_sensor=sensor)
+    image, cloud, box = _two_spheres(cam, a0, b, ra, False, rb)
+    t.init(image, box, -1, points=cloud)
+    for k in range(1, 21):
+        a = a0 + [0.05 * k, 0.0, 0.0]
+        image, cloud, box = _two_spheres(cam, a, b, ra, 8 <= k < 16, rb)
+        out = t.update(image, cloud)
+        assert abs(out.box3d[0] - a[0]) < 1.0 and abs(out.box3d[2] - a[2]) < 1.0, (k, out.status, out.box3d)
+    assert out.status == "tracking"
 
 
 @pytest.mark.parametrize("scale", [1000.0, 100.0, 0.001])

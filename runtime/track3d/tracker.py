@@ -57,7 +57,7 @@ from .frames import (MAX_COORD_M, check_category, check_cloud, check_image, chec
 from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
 from .sensor_options import (BODY_VIEWS, CONTAIN_SLACK_PX, DARK_SIDE, DROP_STRAY, EDGE_PAD, FIND_DEPTH_SLACK,
-                             FIND_MIN_RETURNS,
+                             FIND_MIN_RETURNS, FIND_SIZE_RATIO,
                              FRONT_FILTER,
                              FRONT_QUANTILE, FRUSTUM_MARGIN, FUSION_COVER, OUTLINE_SHARE, OUTLINE_SHARE_PHASE,
                              SECTION_LIMBS, SILHOUETTE, check_depth_sensor, sensor_options)
@@ -1127,7 +1127,8 @@ class Track3D:
         when it holds at least `min_returns` returns (None: FIND_MIN_RETURNS with `drop_stray`,
         else any; a few false alarms or stereo's stray matches are no body) and continues the
         track: the median depth of its returns within the last 3D box's depth span widened by
-        FIND_DEPTH_SLACK of its range (another body in view is not the target). -> (its box
+        FIND_DEPTH_SLACK of its range (another body in view is not the target), its size across
+        the line of sight the last box's within FIND_SIZE_RATIO (a binary's other body). -> (its box
         [x, y, w, h], its frustum (points, bounds)), or (None, None). Without a 3D box yet the
         depth is not checked."""
         body = find_body(points, near, self._M, self._size, self.z_range, self.drop_stray)
@@ -1144,7 +1145,22 @@ class Track3D:
             slack = FIND_DEPTH_SLACK * float(b[2])
             if not b[2] - b[5] / 2.0 - slack <= z <= b[2] + b[5] / 2.0 + slack:
                 return None, None
+            if not self._like_in_size(body, z):
+                return None, None
         return body, cut
+
+    def _like_in_size(self, body: np.ndarray, z: float) -> bool:
+        """Whether the body found at `body` [x, y, w, h] (median depth z m) is the size of the
+        last 3D box across the line of sight, within FIND_SIZE_RATIO (a smaller one cut by the
+        image border passes: part of the target coming back into view)."""
+        b = self.box3d
+        found = np.sqrt(max(float(body[2]) * z / self.camera.fx, 0.0) * max(float(body[3]) * z / self.camera.fy, 0.0))
+        last = np.sqrt(max(float(b[3]), 0.0) * max(float(b[4]), 0.0))
+        if not (np.isfinite(found) and np.isfinite(last)) or last <= 0.0:
+            return True
+        if found > FIND_SIZE_RATIO * last:
+            return False
+        return found * FIND_SIZE_RATIO >= last or any(self._border_sides(body))
 
     def _inside(self, box: np.ndarray) -> bool:
         """Whether `box` lies inside the image, off its border by more than half a pixel."""
