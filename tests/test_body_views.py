@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from track3d import Camera
-from track3d.body_views import (BodyViews, BodyViewsParams, carved_back, hold_back_face, projective_fit,
-                                surface_grid)
+from track3d.body_views import (BodyViews, BodyViewsParams, SurfaceGrid, carved_back, grid_record, hold_back_face,
+                                projective_fit, read_grid, surface_grid)
 from track3d.synthetic import ellipsoid_returns, rotation_y
 
 CAM = Camera.from_fov(160, 120, 40.0)
@@ -237,11 +237,114 @@ def test_state_continues_bit_identically():
     import json
 
     b.set_state(from_plain(json.loads(json.dumps(to_plain(a.get_state())))))
+    # every grid back to the bit (empty cells and normals recomputed from the points included),
+    # the grid the carving job shares with the last key frame written once
+    kept = [(a._grid, b._grid), (a._carve_job[0], b._carve_job[0])]
+    kept += [(ga, gb) for (ga, _), (gb, _) in zip(a._carved, b._carved)]
+    assert len(a._carved) == len(b._carved) and b._carve_job[0] is b._grid
+    for ga, gb in kept:
+        _same_grid(ga, gb)
+    assert len(a.get_state()["grids"]) == len({id(g) for g, _ in kept})
+    old = _old_format_state(a)                      # a checkpoint written before the compact grids
+    c = BodyViews(CAM, BodyViewsParams(every=2))
+    c.set_state(from_plain(json.loads(json.dumps(to_plain(old)))))
     for k in range(14, 24):
         view = _ellipsoid_view(_rot_y(4.0 * k))
-        assert a.update(*view) == b.update(*view)
-        assert a.limit == b.limit and a.limit is not None
-        assert np.array_equal(a.extent, b.extent) and a.extent is not None
+        assert a.update(*view) == b.update(*view) == c.update(*view)
+        assert a.limit == b.limit == c.limit and a.limit is not None
+        assert np.array_equal(a.extent, b.extent) and np.array_equal(a.extent, c.extent) and a.extent is not None
+
+
+def _same_grid(ga, gb):
+    """Two grids equal in every field, every cell, to the bit (-0.0 is not 0.0)."""
+    for name in ("points", "normals", "valid", "normal_ok"):
+        x, y = getattr(ga, name), getattr(gb, name)
+        assert x.dtype == y.dtype and np.array_equal(x, y) and x.tobytes() == y.tobytes(), name
+    assert np.array_equal(ga.near_z(), gb.near_z()) and ga.near_z().tobytes() == gb.near_z().tobytes()
+    assert (ga.x0, ga.y0, ga.step) == (gb.x0, gb.y0, gb.step)
+
+
+def _old_format_state(bv):
+    """What `BodyViews.get_state` wrote before the compact grids: each grid dense, in place."""
+    def dense(g):
+        return None if g is None else {"points": g.points.copy(), "normals": g.normals.copy(),
+                                       "valid": g.valid.copy(), "normal_ok": g.normal_ok.copy(), "x0": g.x0,
+                                       "y0": g.y0, "step": g.step, "near": g.near_z().copy()}
+
+    st = bv.get_state()
+    del st["grids"]
+    st["grid"] = dense(bv._grid)
+    for part, grid in ((st["pending"], bv._pending), (st["carve_job"], bv._carve_job)):
+        if part is not None:
+            part["grid"] = dense(grid[0])
+    for part, (grid, _) in zip(st["carved"], bv._carved):
+        part["grid"] = dense(grid)
+    return st
+
+
+def test_a_grid_record_gives_every_field_back():
+    """`grid_record` / `read_grid` on grids of the views and on grids made otherwise: the
+    normals set after the grid was made are kept (not recomputed), a grid without its least
+    depths (near None) reads back with them, one whose empty cells hold points is kept dense."""
+    from track3d.state import from_plain, to_plain
+    import json
+
+    def back(g):
+        return read_grid(from_plain(json.loads(json.dumps(to_plain(grid_record(g))))))
+
+    g = surface_grid(CAM, *_ellipsoid_view(_rot_y(20.0)), cells=48)
+    assert 0 < g.valid.sum() < g.valid.size and (g.points[~g.valid] == 0).all()
+    rec = grid_record(g)
+    assert "normals" not in rec and "valid" not in rec and len(rec["points"]) == g.valid.sum()
+    _same_grid(g, back(g))
+    tilted = SurfaceGrid(g.points, g.normals[:, ::-1].copy(), g.valid, g.normal_ok, g.x0, g.y0, g.step, g.near)
+    assert "normals" in grid_record(tilted)
+    _same_grid(tilted, back(tilted))
+    made = SurfaceGrid(g.points, g.normals, g.valid, g.valid.copy(), g.x0, g.y0, g.step)   # near None
+    _same_grid(made, back(made))
+    stray = SurfaceGrid(g.points.copy(), g.normals, g.valid, g.normal_ok, g.x0, g.y0, g.step, g.near)
+    stray.points[~g.valid] = -0.0
+    assert "valid" in grid_record(stray)
+    _same_grid(stray, back(stray))
+    tiny = surface_grid(CAM, *_plane_points(10.0), cells=1)      # 1 x 1: no normals at all
+    _same_grid(tiny, back(tiny))
+
+
+def test_a_damaged_grid_record_is_one_error_and_changes_nothing():
+    from track3d.state import from_plain, to_plain
+    import json
+
+    bv = BodyViews(CAM, BodyViewsParams(every=1))
+    for k in range(3):
+        bv.update(*_ellipsoid_view(_rot_y(4.0 * k)))
+    good = json.loads(json.dumps(to_plain(bv.get_state())))
+    before = json.dumps(to_plain(bv.get_state()), sort_keys=True)
+
+    def short(rec):   # a point fewer than the cells that hold points
+        return to_plain(from_plain(rec)[:-1])
+
+    damages = {   # each on the last key frame's grid record `g` or the views' state `s`
+        "a point short": lambda g, s: g.update(points=short(g["points"])),
+        "a depth short": lambda g, s: g.update(near=short(g["near"])),
+        "a byte of cells short": lambda g, s: g.update(cells=short(g["cells"])),
+        "a row more": lambda g, s: g.update(rows=g["rows"] + 1),
+        "cols a float": lambda g, s: g.update(cols=2.0),
+        "normals kept without normal_ok": lambda g, s: g.update(normals=to_plain(np.zeros((g["rows"], g["cols"], 3)))),
+        "an index past the grids": lambda g, s: s.update(grid=len(s["grids"])),
+        "an index a bool": lambda g, s: s.update(grid=True),
+        "grids not a list": lambda g, s: s.update(grids={}),
+    }
+    for name, damage in damages.items():
+        bad = json.loads(json.dumps(good))
+        damage(bad["grids"][bad["grid"]], bad)
+        with pytest.raises(ValueError, match="damaged body views state") as e:
+            bv.set_state(from_plain(bad))
+        assert "\n" not in str(e.value), name
+        assert json.dumps(to_plain(bv.get_state()), sort_keys=True) == before, name
+    bad = json.loads(json.dumps(good))
+    damages["a point short"](bad["grids"][bad["grid"]], bad)
+    with pytest.raises(ValueError, match=r"grid points of [0-9]+ cells has shape \([0-9]+, 3\)"):
+        bv.set_state(from_plain(bad))
 
 
 def test_the_loop_holds_the_back_face_at_the_views():
@@ -410,8 +513,7 @@ def test_the_views_stay_bounded_over_a_long_watch():
         assert len(bv._body) <= p.max_points and len(bv._carved) <= p.carve_views
         if k >= 120:
             st = bv.get_state()
-            sizes.append(sum(np.asarray(v).nbytes for g in [st["grid"], *[c["grid"] for c in st["carved"]]]
-                             if g is not None for v in g.values()) + st["body"].nbytes)
+            sizes.append(sum(np.asarray(v).nbytes for g in st["grids"] for v in g.values()) + st["body"].nbytes)
     assert bv.restarts == 0 and bv.views > p.max_points // p.view_points   # the cap was reached, not avoided
     assert max(sizes[-240:]) <= max(sizes[:240])
 

@@ -522,6 +522,17 @@ def _corrupt_b64(rec):
     return {**rec, "__ndarray__": "!!" + rec["__ndarray__"][2:]}
 
 
+def _views_grid(s):
+    """The record of the views' last key frame grid (the views' fields name their grids by index)."""
+    return s["body_views"]["grids"][s["body_views"]["grid"]]
+
+
+def _cut(rec):
+    from track3d.state import from_plain, to_plain
+
+    return to_plain(from_plain(rec)[:-1])
+
+
 DAMAGES = {
     "box3d of negative depth": lambda s: s.update(box3d=[0.1, 0.0, 20.0, 3.0, 3.0, -1.3]),
     "box2d half nan": lambda s: s.update(box2d=[10.0, float("nan"), 30.0, 30.0]),
@@ -542,7 +553,10 @@ DAMAGES = {
     "EdgeTrack's size negative": lambda s: s["tracker2d"].update(target_sz=[-4.0, 10.0]),
     "EdgeTrack's lost flag missing": lambda s: s["tracker2d"].pop("lost"),
     "the views' transform nan": lambda s: s["body_views"].update(G=[[float("nan")] * 4] * 4),
-    "the views' grid step 0": lambda s: s["body_views"]["grid"].update(step=0.0),
+    "the views' grid step 0": lambda s: _views_grid(s).update(step=0.0),
+    "the views' grid a point short of its cells": lambda s: _views_grid(s).update(
+        points=_cut(_views_grid(s)["points"])),
+    "the views' grid past the list": lambda s: s["body_views"].update(grid=len(s["body_views"]["grids"])),
     "the views' frames a float": lambda s: s["body_views"].update(frames=2.5),
 }
 
@@ -575,6 +589,36 @@ def test_a_damaged_state_is_refused_on_one_line_and_changes_nothing(checkpoint, 
     ref = _make("edgetrack", "a3boxnet", body_views=True)
     ref.set_state(checkpoint)
     _same(t.update(img, pts), ref.update(img, pts))
+
+
+def test_a_checkpoint_of_the_views_is_compact_and_one_of_before_still_loads():
+    """The views' grids are kept compact in a checkpoint (the cells that hold points, their
+    points and least depths; the rest recomputed on loading): the JSON is less than half the
+    size it had with dense grids, and a checkpoint of either kind, read back, continues
+    bit-identically with the loop that was not stopped."""
+    from test_body_views import _old_format_state
+    from track3d.state import to_plain
+
+    t = _make("edgetrack", "a3boxnet", body_views=True)
+    img, pts, box = _frame(0)
+    t.init(img, box, 0, points=pts)
+    for k in range(1, 8):
+        t.update(*_frame(k)[:2])
+    assert t._views._grid is not None and t._views._carved and t._views._pending is not None
+    new = json.dumps(t.get_state())
+    old = {**t.get_state(), "body_views": to_plain(_old_format_state(t._views))}
+    assert "grids" not in old["body_views"] and "valid" in old["body_views"]["grid"]
+    old = json.dumps(old)
+    assert 2 * len(new) <= len(old)
+    a, b = _make("edgetrack", "a3boxnet", body_views=True), _make("edgetrack", "a3boxnet", body_views=True)
+    a.set_state(json.loads(new))
+    b.set_state(json.loads(old))
+    assert json.dumps(a.get_state()) == json.dumps(b.get_state()) == new
+    for k in range(8, len(PATH)):
+        img, pts, _ = _frame(k)
+        want = t.update(img, pts)
+        _same(want, a.update(img, pts))
+        _same(want, b.update(img, pts))
 
 
 def test_a_refused_2d_state_puts_the_estimators_state_back():

@@ -45,8 +45,8 @@ from .state import damaged, read_array, read_flag, read_float, read_int
 DONE_RAD, DONE_M = 1e-4, 1e-4
 GRID_POINTS_PER_CELL = 4    # surface_grid bins at most this many points per cell on average
 
-__all__ = ["BodyViewsParams", "BodyViews", "SurfaceGrid", "surface_grid", "point_to_plane", "projective_fit",
-           "carved_back", "hold_back_face"]
+__all__ = ["BodyViewsParams", "BodyViews", "SurfaceGrid", "surface_grid", "grid_normals", "point_to_plane",
+           "projective_fit", "carved_back", "hold_back_face"]
 
 
 @dataclass(frozen=True)
@@ -150,16 +150,27 @@ def surface_grid(camera: Camera, points: np.ndarray, box2d: np.ndarray, cells: i
     near = np.full(rows * cols, np.inf)
     np.minimum.at(near, lin, p[:, 2])
     grid.near = near.reshape(rows, cols)
-    P, ok = grid.points, grid.valid
+    grid.normals, grid.normal_ok = grid_normals(grid.points, grid.valid)
+    return grid
+
+
+def grid_normals(points: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A grid's (rows, cols, 3) unit normals from the neighbouring cells' central differences and
+    (rows, cols) bool where they hold (the cell and its four neighbours have points). The one
+    formula for `surface_grid` and for a checkpoint's grid, which keeps the points only: the two
+    give the same bits."""
+    rows, cols = valid.shape
+    normals, normal_ok = np.zeros((rows, cols, 3)), np.zeros((rows, cols), bool)
+    P, ok = points, valid
     if rows >= 3 and cols >= 3:
         du = P[1:-1, 2:] - P[1:-1, :-2]
         dv = P[2:, 1:-1] - P[:-2, 1:-1]
         nrm = np.cross(du, dv)
         length = np.linalg.norm(nrm, axis=-1)
         good = ok[1:-1, 1:-1] & ok[1:-1, 2:] & ok[1:-1, :-2] & ok[2:, 1:-1] & ok[:-2, 1:-1] & (length > 0)
-        grid.normals[1:-1, 1:-1] = nrm / np.where(length > 0, length, 1.0)[..., None]
-        grid.normal_ok[1:-1, 1:-1] = good
-    return grid
+        normals[1:-1, 1:-1] = nrm / np.where(length > 0, length, 1.0)[..., None]
+        normal_ok[1:-1, 1:-1] = good
+    return normals, normal_ok
 
 
 def point_to_plane(src: np.ndarray, match, init: np.ndarray, iters: int, good_m: float,
@@ -450,44 +461,48 @@ class BodyViews:
             self._extent = np.array([x.max() - x.min(), y.max() - y.min(), z.max() - z.min()])
 
     def get_state(self) -> dict:
-        def grid_state(g):
-            return None if g is None else {"points": g.points.copy(), "normals": g.normals.copy(),
-                                           "valid": g.valid.copy(), "normal_ok": g.normal_ok.copy(), "x0": g.x0,
-                                           "y0": g.y0, "step": g.step, "near": g.near_z().copy()}
+        """Plain data (arrays and builtins) for `set_state`. Each grid is one record of ``grids``
+        (`grid_record`), which the views' fields name by its index: the last key frame's grid is
+        also the carving job's and often a carving view's."""
+        grids, index = [], {}
+
+        def ref(g):
+            if g is None:
+                return None
+            if id(g) not in index:
+                index[id(g)] = len(grids)
+                grids.append(grid_record(g))
+            return index[id(g)]
 
         pend, job = self._pending, self._carve_job
         return {"frames": self._frames, "G": self._G.copy(), "motion": self._motion.copy(),
                 "body": self._body.copy(), "offset": self._offset, "centroid": self._centroid.copy(),
-                "restarts": self.restarts, "views": self.views, "grid": grid_state(self._grid),
-                "pending": None if pend is None else {"grid": grid_state(pend[0]), "keep": pend[1].copy(),
+                "restarts": self.restarts, "views": self.views, "grid": ref(self._grid),
+                "pending": None if pend is None else {"grid": ref(pend[0]), "keep": pend[1].copy(),
                                                       "front": pend[2], "carve": pend[3], "whole": pend[4]},
                 "limit": self._limit, "whole": self._whole,
                 "extent": None if not np.all(np.isfinite(self._extent)) else self._extent.copy(),
-                "carve_job": None if job is None else {"grid": grid_state(job[0]), "G": job[1].copy(),
-                                                       "front": job[2]},
-                "carved": [{"grid": grid_state(g), "G": Gk.copy()} for g, Gk in self._carved]}
+                "carve_job": None if job is None else {"grid": ref(job[0]), "G": job[1].copy(), "front": job[2]},
+                "carved": [{"grid": ref(g), "G": Gk.copy()} for g, Gk in self._carved],
+                "grids": grids}
 
     def set_state(self, st: dict) -> None:
-        """Restore a `get_state()`; a damaged one raises ValueError (one line) and changes nothing."""
-        def grid_of(g):
-            if g is None:
-                return None
-            points = read_array(g["points"], "grid points", (-1, -1, 3))
-            rows, cols = points.shape[:2]
-            if rows < 1 or cols < 1:
-                raise ValueError(f"a grid of {rows} x {cols} cells")
-            near = g.get("near")
-            return SurfaceGrid(points, read_array(g["normals"], "grid normals", (rows, cols, 3)),
-                               read_array(g["valid"], "grid cells", (rows, cols), bool),
-                               read_array(g["normal_ok"], "grid normals' cells", (rows, cols), bool),
-                               read_float(g["x0"], "grid x0"), read_float(g["y0"], "grid y0"),
-                               read_float(g["step"], "grid step", lo=1.0),
-                               None if near is None else _read_near(near, rows, cols))
-
+        """Restore a `get_state()` (or one written before the compact grids, each grid a dense
+        record in place); a damaged one raises ValueError (one line) and changes nothing."""
         def transform(x, what):
             return read_array(x, what, (4, 4))
 
         with damaged("body views"):
+            records = st.get("grids", [])
+            if not isinstance(records, list):
+                raise ValueError(f"grids must be a list, got {type(records).__name__}")
+            shared = [read_grid(g) for g in records]
+
+            def grid_of(g):
+                if g is None or isinstance(g, dict):
+                    return None if g is None else read_grid(g)
+                return shared[read_int(g, "grid index")]
+
             grid = grid_of(st["grid"])
             pend = st.get("pending")
             pending = None if pend is None else (
@@ -515,6 +530,73 @@ class BodyViews:
         self._limit, self._carve_job, self._carved = limit, carve_job, carved
         self.limit = self.extent = None
         self._whole, self._extent = whole, extent
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal to the bit (-0.0 is not 0.0, a nan is itself): what a restored grid must be."""
+    return a.dtype == b.dtype and a.shape == b.shape and np.ascontiguousarray(a).tobytes() == b.tobytes()
+
+
+def grid_record(g: SurfaceGrid) -> dict:
+    """A grid as plain data for a checkpoint, compact: which cells hold points (bits), their
+    points and least depths. `surface_grid` makes the rest of those (empty cells' points 0.0 and
+    depths inf, the normals by `grid_normals`), so `read_grid` gives every array back to the bit.
+    A grid whose normals are not `grid_normals`' keeps them (and normal_ok) in the record; one
+    whose empty cells hold anything else is kept dense, as states were before."""
+    valid, points, near = g.valid, g.points, g.near_z()
+    compact = (valid.dtype == bool and points.dtype == np.float64 and near.dtype == np.float64
+               and valid.ndim == 2 and points.shape == (*valid.shape, 3) and near.shape == valid.shape)
+    # a -0.0 would come back 0.0: the empty cells' bits must all be zero
+    if not (compact and not points[~valid].view(np.uint64).any() and (near[~valid] == np.inf).all()
+            and np.isfinite(near[valid]).all()):
+        return {"points": points.copy(), "normals": g.normals.copy(), "valid": valid.copy(),
+                "normal_ok": g.normal_ok.copy(), "x0": g.x0, "y0": g.y0, "step": g.step, "near": near.copy()}
+    rows, cols = valid.shape
+    rec = {"rows": rows, "cols": cols, "x0": g.x0, "y0": g.y0, "step": g.step,
+           "cells": np.packbits(valid.reshape(-1)), "points": points[valid], "near": near[valid]}
+    normals, normal_ok = grid_normals(points, valid)
+    if not (_same_bits(g.normals, normals) and _same_bits(g.normal_ok, normal_ok)):
+        rec["normals"], rec["normal_ok"] = g.normals.copy(), g.normal_ok.copy()
+    return rec
+
+
+def read_grid(g: dict) -> SurfaceGrid:
+    """A `grid_record` back (or the dense record of states before it); ValueError if damaged."""
+    if not isinstance(g, dict):
+        raise ValueError(f"a grid must be a record, got {type(g).__name__}")
+    x0, y0 = read_float(g["x0"], "grid x0"), read_float(g["y0"], "grid y0")
+    step = read_float(g["step"], "grid step", lo=1.0)
+    if "cells" not in g:
+        points = read_array(g["points"], "grid points", (-1, -1, 3))
+        rows, cols = points.shape[:2]
+        if rows < 1 or cols < 1:
+            raise ValueError(f"a grid of {rows} x {cols} cells")
+        near = g.get("near")
+        return SurfaceGrid(points, read_array(g["normals"], "grid normals", (rows, cols, 3)),
+                           read_array(g["valid"], "grid cells", (rows, cols), bool),
+                           read_array(g["normal_ok"], "grid normals' cells", (rows, cols), bool),
+                           x0, y0, step, None if near is None else _read_near(near, rows, cols))
+    rows, cols = read_int(g["rows"], "grid rows", 1), read_int(g["cols"], "grid cols", 1)
+    bits = g["cells"]
+    if not (isinstance(bits, np.ndarray) and bits.dtype == np.uint8 and bits.ndim == 1):
+        raise ValueError("grid cells must be a uint8 array of bits")
+    if len(bits) != -(-rows * cols // 8):   # before anything of rows x cols is made
+        raise ValueError(f"grid cells: {len(bits)} bytes for {rows} x {cols} cells")
+    every = np.unpackbits(bits)
+    if every[rows * cols:].any():
+        raise ValueError("grid cells: bits set past the last cell")
+    valid = every[:rows * cols].astype(bool).reshape(rows, cols)
+    k = int(valid.sum())
+    held = read_array(g["points"], f"grid points of {k} cells", (k, 3))
+    least = read_array(g["near"], f"grid depths of {k} cells", (k,))
+    points, near = np.zeros((rows, cols, 3)), np.full((rows, cols), np.inf)
+    points[valid], near[valid] = held, least
+    if "normals" in g or "normal_ok" in g:
+        normals = read_array(g["normals"], "grid normals", (rows, cols, 3))
+        normal_ok = read_array(g["normal_ok"], "grid normals' cells", (rows, cols), bool)
+    else:
+        normals, normal_ok = grid_normals(points, valid)
+    return SurfaceGrid(points, normals, valid, normal_ok, x0, y0, step, near)
 
 
 def _read_near(x, rows: int, cols: int) -> np.ndarray:
