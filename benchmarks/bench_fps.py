@@ -33,7 +33,7 @@ from benchlib.output import add_out_argument
 from benchlib.record import finish_record, start_record
 from benchlib.torch_models import EquivalenceError, TorchNets
 
-from track3d.argparsing import ArgumentParser, bounded, run_main
+from track3d.argparsing import ArgumentParser, bounded, run_main, thread_count
 from track3d.estimators import EstimatorUnavailable
 from track3d.jsonable import write_json
 from track3d.machine import pin_threads
@@ -224,7 +224,7 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--frames", type=int, default=1000, help="measured frames per configuration (>= 1000 for p99)")
     ap.add_argument("--preload", type=int, default=400, help="frames kept in memory (looped over)")
     ap.add_argument("--sequences", type=bounded(int, 1), default=8, help="sequences preloaded")
-    ap.add_argument("--threads", type=bounded(int, 1), nargs="+", default=[1, 2], help="thread counts to time")
+    ap.add_argument("--threads", type=thread_count, nargs="+", default=[1, 2], help="thread counts to time")
     ap.add_argument("--config", action="append", default=None, metavar="TRACKER:ESTIMATOR[@MODEL]",
                     help="configurations to run (default: siamfc-edge:a3boxnet siamfc:a3boxnet kcf:baseline); "
                          "@MODEL: this configuration's A3BoxNet .onnx (e.g. two box nets side by side in one run)")

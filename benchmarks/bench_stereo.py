@@ -14,7 +14,7 @@ import time
 import cv2
 import numpy as np
 
-from track3d.argparsing import ArgumentParser, run_main
+from track3d.argparsing import ArgumentParser, run_main, thread_count
 from track3d.camera import Camera
 from track3d.stereo import StereoMatcher
 
@@ -22,7 +22,7 @@ from track3d.stereo import StereoMatcher
 def build_parser() -> ArgumentParser:
     ap = ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5, help="calls per configuration (default 5)")
-    ap.add_argument("--threads", type=int, default=1, help="OpenCV threads (default 1)")
+    ap.add_argument("--threads", type=thread_count, default=1, help="OpenCV threads (default 1)")
     return ap
 
 

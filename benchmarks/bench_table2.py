@@ -48,7 +48,7 @@ from benchlib.paper import TABLE2 as PAPER
 from benchlib.paper import fusion_gain
 from benchlib.record import finish_record, start_record
 
-from track3d.argparsing import ArgumentParser, bounded, hidden_alias, run_main
+from track3d.argparsing import ArgumentParser, bounded, hidden_alias, run_main, thread_count
 from track3d.evaluation.tables import columns
 from track3d.jsonable import write_json
 from track3d.machine import pin_threads
@@ -398,7 +398,7 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--data", required=True, help="dataset root (the folder with dataset.json)")
     ap.add_argument("--split", default="test", help="dataset split (default: test)")
     add_out_argument(ap, "table2", committed="benchmarks/results/table2")
-    ap.add_argument("--threads", type=bounded(int, 1), default=1,
+    ap.add_argument("--threads", type=thread_count, default=1,
                     help="CPU threads of the ONNX models and OpenCV (default 1: the process is pinned to one core)")
     ap.add_argument("--max-sequences", type=bounded(int, 0), default=0,
                     help="only the first N sequences of the split (0: all)")

@@ -528,3 +528,34 @@ def test_the_scripts_in_export_scripts_parse():
             assert not old, f"{where}: {cmd} {' '.join(argv)} uses the old spelling(s) {old}"
             seen += 1
     assert seen >= 20
+
+
+@pytest.mark.parametrize("name,parser", _all_parsers())
+def test_every_threads_flag_refuses_a_count_no_machine_runs(name, parser):
+    """`--threads 99999` had onnxruntime start 99,999 threads a session: it took every process
+    slot of the machine (nothing else could fork) before failing. Every --threads takes 1 to
+    track3d.threads.max_threads() (THREADS_PER_CPU per CPU)."""
+    from track3d.threads import max_threads
+
+    for p in _walk(parser):
+        for a in p._actions:
+            if "--threads" not in a.option_strings:
+                continue
+            assert a.type("1") == 1 and a.type(str(max_threads())) == max_threads()
+            for bad in ("0", "99999", str(max_threads() + 1), "x"):
+                with pytest.raises(argparse.ArgumentTypeError, match="expected an integer from 1 to"):
+                    a.type(bad)
+
+
+def test_the_api_refuses_a_thread_count_no_machine_runs():
+    from track3d.camera import Camera
+    from track3d.onnxmodel import OnnxModel, shipped_model
+    from track3d.threads import max_threads
+    from track3d.tracker import Track3D
+
+    cam = Camera.from_fov(320, 240, 45.0)
+    for bad in (0, max_threads() + 1, 99999, 2.5):
+        with pytest.raises(ValueError, match="threads must be an integer from 1 to"):
+            Track3D.from_default(cam, threads=bad)
+    with pytest.raises(ValueError, match="threads must be"):
+        OnnxModel(shipped_model("a3boxnet.onnx"), threads=99999)

@@ -14,7 +14,7 @@ import argparse
 import sys
 from typing import Callable
 
-__all__ = ["ArgumentParser", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS",
+__all__ = ["ArgumentParser", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS", "thread_count",
            "missing_extra", "exit_for_missing_extra", "package_version", "bounded"]
 
 
@@ -85,6 +85,16 @@ def bounded(kind: type = int, low: float | None = None, above: float | None = No
         return v
     parse.__name__ = f"{what} {rule}"
     return parse
+
+
+def thread_count(text: str) -> int:
+    """argparse type of every --threads: an integer from 1 to track3d.threads.max_threads()."""
+    from .threads import check_threads, threads_rule
+
+    try:
+        return check_threads(int(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {threads_rule()}, got {text!r}") from None
 
 
 def package_version() -> str:

@@ -30,6 +30,7 @@ from . import machine
 from .camera import Camera
 from .synthetic import sphere_hits
 from .table_text import cell
+from .threads import check_threads
 
 if TYPE_CHECKING:
     from .stereo import StereoParams
@@ -331,8 +332,10 @@ def run_bench(cfg: BenchConfig, log: Callable[[str], None] | None = None) -> dic
 
     if cfg.frames < 1:
         raise ValueError(f"frames must be >= 1, got {cfg.frames}")
-    if not cfg.threads or min(cfg.threads) < 1:
-        raise ValueError(f"threads must be >= 1, got {cfg.threads}")
+    if not cfg.threads:
+        raise ValueError("threads: give at least one thread count")
+    for n in cfg.threads:
+        check_threads(n)
     if cfg.depth not in ("map", "stereo"):
         raise ValueError(f"depth must be 'map' or 'stereo', got {cfg.depth!r}")
     stereo = cfg.depth == "stereo"

@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias, package_version
+from .argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias, package_version, thread_count
 
 __all__ = ["main"]
 
@@ -239,7 +239,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="ignore the depth sensor's maximum range recorded with each sequence (meta.json "
                         "depth_sensor.max_range_m); by default a body whose returns stop at that range is boxed from "
                         "the image and its front face (track3d.range_cut)")
-    t.add_argument("--threads", type=bounded(int, 1), default=1, help="CPU threads of the ONNX models (default 1)")
+    t.add_argument("--threads", type=thread_count, default=1, help="CPU threads of the ONNX models (default 1)")
     t.add_argument("--precision", choices=("fp32", "int8", "bf16", "auto"), default=None,
                    help="arithmetic of the networks (EdgeTrack, SiamFC, A3BoxNet); int8: every network the run "
                         "uses needs its int8 file beside it (shipped: a3boxnet_int8.onnx only, for "
@@ -314,7 +314,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="<dir>/<name> prefix of the tracker's ONNX pair (EdgeTrack: <name>_template.onnx / _search.onnx; SiamFC: _exemplar / _search) (default: shipped)")
     b.add_argument("--boxnet-model", metavar="ONNX", help="an A3BoxNet ONNX file (default: shipped)")
     b.add_argument("--frames", type=bounded(int, 1), default=1000, help="timed frames per thread count (after 20 warm-up)")
-    b.add_argument("--threads", type=bounded(int, 1), nargs="+", default=[1, 2], help="thread counts to time (default: 1 2)")
+    b.add_argument("--threads", type=thread_count, nargs="+", default=[1, 2], help="thread counts to time (default: 1 2)")
     b.add_argument("--data", help="time on this dataset's first sequences instead of synthetic frames")
     b.add_argument("--split", default="test", help="dataset split with --data")
     b.add_argument("--sequence", "--sequences", dest="sequences", nargs="+", metavar="NAME",
@@ -372,8 +372,6 @@ def _cmd_bench(a) -> int:
 def _cmd_track(a) -> int:
     from .evaluation import Experiment, TrackerSpec
 
-    if a.threads < 1:
-        raise ValueError("--threads must be >= 1")
     set_threads(a.threads)
     video = _video_format(a.video)
     topts, eopts = _options(a.tracker_option), _options(a.estimator_option)

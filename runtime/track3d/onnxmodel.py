@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 
+from .threads import check_threads
+
 __all__ = ["META_KEY", "MODELS_DIR", "OnnxModel", "ModelError", "EngineUnavailable", "shipped_model", "model_path",
            "model_pair", "is_model", "load_model", "models_of",
            "ENGINES", "PRECISIONS", "PARITY_TOLERANCE", "variant_path", "open_session"]
@@ -106,8 +108,7 @@ def model_pair(model, first, search, parts: tuple[str, str], shipped) -> tuple[P
 def session_options(threads: int = 1) -> ort.SessionOptions:
     """ORT options tuned for a small CPU: full graph optimisation, fixed intra-op threads,
     no spinning (two sessions with spinning pools fight over 2 cores, measured up to 2x)."""
-    if int(threads) < 1:
-        raise ValueError(f"threads must be >= 1, got {threads}")
+    threads = check_threads(threads)
     so = ort.SessionOptions()
     so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
     so.intra_op_num_threads = int(threads)
@@ -221,9 +222,7 @@ class OnnxModel:
         self.path = Path(path)
         if not self.path.is_file():
             raise ModelError(f"model file {self.path} does not exist")
-        if int(threads) < 1:
-            raise ValueError(f"threads must be >= 1, got {threads}")
-        self.threads = int(threads)
+        self.threads = check_threads(threads)
         if precision == "auto" or engine == "auto":
             from .variant_choice import choose
 

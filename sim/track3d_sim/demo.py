@@ -27,7 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="simulator preset for camera and scenes (default small)")
     p.add_argument("--sequences", type=int, default=2, help="test sequences to simulate (default 2)")
     p.add_argument("--frames", type=int, default=40, help="frames per sequence (default 40)")
-    p.add_argument("--threads", type=int, default=1, help="CPU threads of the models (default 1)")
+    from track3d.argparsing import thread_count
+
+    p.add_argument("--threads", type=thread_count, default=1, help="CPU threads of the models (default 1)")
     p.add_argument("--tracker", help="2D tracker (default: the shipped EdgeTrack, else csrt)")
     p.add_argument("--estimator", help="3D box estimator (default: the shipped A3BoxNet, else baseline)")
     p.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
@@ -101,8 +103,6 @@ def run_demo(a) -> int:
 
     if a.sequences < 1 or a.frames < 2:
         raise ValueError("--sequences must be >= 1 and --frames >= 2")
-    if a.threads < 1:
-        raise ValueError("--threads must be >= 1")
     set_threads(a.threads)
     out = Path(a.out)
     data = out / "data"

@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from track3d.argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias
+from track3d.argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias, thread_count
 from track3d.size_coding import SIZE_CODINGS
 
 
@@ -192,7 +192,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default 0: the paper's loss alone); not with --size-norm paper")
     t.add_argument("--val-every", type=bounded(int, 0), default=8, help="every k-th train sequence is validation (0: none)")
     t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
-    t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
+    t.add_argument("--threads", type=thread_count, default=1, help="torch threads")
     t.add_argument("--time-budget-min", dest="max_minutes", type=bounded(float, 0), default=0.0, metavar="MINUTES",
                    help="time budget in minutes (0: none): the cosine LR spans it and training stops when it "
                         "is spent (resume-aware)")
@@ -229,7 +229,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--num-points", type=bounded(int, 1), default=None,
                    help="N, the points sampled from each frustum as the model's input (default: the model's own, "
                         "from its metadata)")
-    v.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
+    v.add_argument("--threads", type=thread_count, default=1, help="onnxruntime threads")
     v.add_argument("--seed", type=bounded(int, 0), default=0, help="sampling seed")
     v.add_argument("--out", default=None, help="also write the result to this JSON file")
     hidden_alias(v, "--json", "out")

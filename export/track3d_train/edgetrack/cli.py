@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from track3d.argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias
+from track3d.argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias, thread_count
 
 
 def _prepare(a) -> int:
@@ -255,7 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--val-every", type=bounded(int, 1), default=200, help="steps between validations")
     t.add_argument("--ckpt-every-min", type=bounded(float, above=0), default=3.0, help="minutes between atomic checkpoints (SIGTERM / Ctrl-C writes one too)")
     t.add_argument("--seed", type=bounded(int, 0), default=0, help="random seed")
-    t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
+    t.add_argument("--threads", type=thread_count, default=1, help="torch threads")
     t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None,
                    help="stop (and checkpoint) after this many minutes of training, summed over resumed runs "
                         "(default: none, only --max-steps)")
@@ -291,7 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--compare", nargs="*", default=[], help="registered 2D trackers to run on the same frames")
     v.add_argument("--max-sequences", type=bounded(int, 0), default=0, help="only the first N sequences (0: all)")
     hidden_alias(v, "--max-seqs", "max_sequences", type=bounded(int, 0))
-    v.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
+    v.add_argument("--threads", type=thread_count, default=1, help="onnxruntime threads")
     v.add_argument("--out", help="also write the numbers to this JSON file")
     v.add_argument("--quiet", action="store_true", help="no progress bar")
     v.set_defaults(fn=_eval)
@@ -312,7 +312,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "take a candidate; at least the lost threshold), fitted after it by the same F1 "
                         "(default: keep the model's)")
     f.add_argument("--max-sequences", type=bounded(int, 0), default=0, help="only the first N sequences (0: all)")
-    f.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
+    f.add_argument("--threads", type=thread_count, default=1, help="onnxruntime threads")
     f.add_argument("--write", action="store_true", help="write the best threshold (and motion, re-acquisition threshold) into the model's metadata")
     f.add_argument("--force", action="store_true", help="allow --write on the shipped models in track3d/models")
     f.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -320,7 +320,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     m = sub.add_parser("time", help="median ms of the nets and crops vs SiamFC-edge, interleaved", formatter_class=d)
     m.add_argument("--model", required=True, help="prefix of <name>_template/_search.onnx")
-    m.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
+    m.add_argument("--threads", type=thread_count, default=1, help="onnxruntime threads")
     m.add_argument("--repeats", type=bounded(int, 4), default=200, help="calls of each, interleaved (>= 4: the first 3 are warm-up)")
     m.add_argument("--pin", action="store_true", help="pin the process to one core")
     m.set_defaults(fn=_time)

@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from track3d.argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias
+from track3d.argparsing import ArgumentParser, apply_formatter, bounded, hidden_alias, thread_count
 
 
 def _prepare(a) -> int:
@@ -162,7 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
         t.add_argument("--ckpt-every-min", type=bounded(float, above=0), default=1.0,
                        help="minutes between atomic checkpoints (SIGTERM / Ctrl-C writes one too)")
         t.add_argument("--seed", type=bounded(int, 0), default=0, help="seed")
-        t.add_argument("--threads", type=bounded(int, 1), default=1, help="torch threads")
+        t.add_argument("--threads", type=thread_count, default=1, help="torch threads")
         t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None,
                        help="stop (and checkpoint) after this many minutes of training (default: none, "
                             "only --max-steps)")
@@ -193,7 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--split", default="test", help="split name")
     v.add_argument("--max-sequences", type=bounded(int, 0), default=0, help="only the first N sequences (0: all)")
     hidden_alias(v, "--max-seqs", "max_sequences", type=bounded(int, 0))
-    v.add_argument("--threads", type=bounded(int, 1), default=1, help="onnxruntime threads")
+    v.add_argument("--threads", type=thread_count, default=1, help="onnxruntime threads")
     for k, ty in (("instance-size", bounded(int, 1)), ("scale-num", bounded(int, 1)), ("window-influence", unit),
                   ("scale-lr", unit)):
         v.add_argument(f"--{k}", type=ty, default=None, help="override the model's tracking default")
