@@ -782,7 +782,7 @@ def t_cli(rng, env):
             ["--estimator-option", str(rng.choice(["foo=1", "threads=1", "threads=0"]))],
             ["--results", str(rng.choice([str(afile), str(env.tmp / "res")]))],
             ["--split", str(rng.choice(["test", "train", ""]))], ["--sequence", str(rng.choice(["a", "zzz"]))],
-            ["--weight-3d", str(rng.choice(["0.3", "nan", "2", "-1"]))], ["--threads", str(rng.choice(["1", "0"]))],
+            ["--weight-3d", str(rng.choice(["0.3", "nan", "2", "-1"]))], ["--threads", str(rng.choice(["1", "0", "99999"]))],
             ["--restart-skip", str(rng.choice(["1", "0", "-3"]))], ["--no-fusion"], ["--no-restart"]]
     argv = ["track", "--data", str(rng.choice([str(data), str(env.tmp / "missing"), str(afile)])),
             "--quiet", "--video", "none", "--frames", "2"]
