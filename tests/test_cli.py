@@ -221,3 +221,29 @@ def test_track_passes_outline_share_phase_to_the_loop_and_records_it_when_on(syn
     with pytest.raises(SystemExit) as e:
         main(["track", "--data", str(synth), "--outline-share-phase", "200", "--results", str(res)])
     assert e.value.code == 2
+
+
+def test_bench_times_the_arithmetic_asked_for(capsys):
+    """`track3d bench --precision/--engine` (the wheel-only benchmark could not time auto, int8 or
+    bf16: "unrecognized arguments"); the table names each model's engine and precision."""
+    from track3d.bench import BenchConfig, _build
+    from track3d.camera import Camera
+
+    t3d = _build(BenchConfig(frames=5, threads=(1,), precision="auto"), Camera.from_fov(320, 240, 45.0), 1)
+    models = t3d.describe()["models"]
+    assert models and all(m["precision"] in ("fp32", "int8", "bf16") and m["reason"] for m in models)
+    assert main(["bench", "--threads", "1", "--frames", "3", "--precision", "fp32", "--quiet"]) == 0
+    assert "onnxruntime fp32)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["--split", "test_unseen"], "needs --data"),
+    (["--tracker-model", "/nonexistent-folder/x"], "no folder"),
+    (["--boxnet-model", "/nonexistent.onnx"], "no such file"),
+])
+def test_bench_mistakes_are_named_before_any_timing(argv, needle, capsys):
+    """--split without --data had been ignored (synthetic frames timed); a missing model path
+    named only its parent folder."""
+    assert main(["bench", "--threads", "1", "--frames", "3", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0], err

@@ -60,6 +60,8 @@ class BenchConfig:
     depth: str = "map"          # "map": clouds given (depth maps); "stereo": matched from the pair in the loop
     stereo: StereoParams | None = None   # depth "stereo": the matcher's settings (None: the defaults)
     busy_seconds: float = 0.5
+    precision: str | None = None   # of the networks: fp32 / int8 / bf16 / auto (None: each model's default, fp32)
+    engine: str | None = None      # onnxruntime / openvino / auto (None: onnxruntime)
     extra: dict = field(default_factory=dict)
 
 
@@ -222,12 +224,15 @@ def _build(cfg: BenchConfig, camera: Camera, threads: int):
     stereo = cfg.depth == "stereo"
     if stereo and cfg.estimator == "a3boxnet" and not cfg.boxnet_model:
         eopt.setdefault("depth_sensor", "stereo")   # the stereo model (track3d.boxnet.SENSOR_MODELS)
+    arith = {k: v for k, v in (("precision", cfg.precision), ("engine", cfg.engine)) if v is not None}
     if cfg.tracker in NETWORK_TRACKERS or cfg.tracker_model:  # EdgeTrack was timed at 1 thread in every row
         topt["threads"] = threads
+        topt.update(arith)
         if cfg.tracker_model:
             topt["model"] = cfg.tracker_model
     if cfg.estimator == "a3boxnet" or cfg.boxnet_model:
         eopt["threads"] = threads
+        eopt.update(arith)
         if cfg.boxnet_model:
             eopt["model"] = cfg.boxnet_model
     return Track3D.create(camera, cfg.tracker, cfg.estimator, tracker_options=topt, estimator_options=eopt,
@@ -449,7 +454,9 @@ def format_table(report: dict) -> str:
              + (f", sequences {' '.join(report['source']['sequences'])}" if report["source"].get("sequences") else "")
              + (f"; depth: {report['source']['depth']}" if report["source"].get("depth") else "")]
     d = report.get("track3d") or {}
-    models = ", ".join(f"{x['file']} ({x['sha256'][:12]})" for x in d.get("models", []))
+    models = ", ".join(f"{x['file']} ({x['sha256'][:12]}"
+                       + (f", {x['engine']} {x['precision']}" if x.get("engine") and x.get("precision") else "") + ")"
+                       for x in d.get("models", []))
     lines.append(f"tracker: {d.get('tracker')} + {d.get('estimator')}" + (f"; models: {models}" if models else ""))
     for r in report["results"]:
         lines.append("")

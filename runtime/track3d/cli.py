@@ -330,6 +330,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="with --depth stereo, a setting of the matcher (track3d.stereo.StereoParams, e.g. "
                         "max_match_px=16384: a large window's rows averaged in bands, faster; max_match_cost=12000000: "
                         "a matching budget per update, only the dearest windows binned: a bounded frame time)")
+    b.add_argument("--precision", choices=("fp32", "int8", "bf16", "auto"), default=None,
+                   help="arithmetic of the networks, as `track3d track --precision` (default: fp32); auto: "
+                        "the fastest this CPU allows, measured; the report's `track3d` record says what ran and why")
+    b.add_argument("--engine", choices=("onnxruntime", "openvino", "auto"), default=None,
+                   help="inference engine of the networks, as `track3d track --engine` (default: onnxruntime)")
     b.add_argument("--out", metavar="JSON", help="also write the report as JSON here")
     b.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
     b.add_argument("--quiet", action="store_true", help="no progress messages on stderr")
@@ -342,16 +347,20 @@ def _cmd_bench(a) -> int:
     import json
 
     from .bench import BenchConfig, format_table, run_bench
-    from .jsonable import write_json
+    from .jsonable import jsonable, write_json
 
     cfg = BenchConfig(tracker=a.tracker, estimator=a.estimator, tracker_model=a.tracker_model,
                       boxnet_model=a.boxnet_model, frames=a.frames, threads=tuple(a.threads), data=a.data,
                       split=a.split, sequences=tuple(a.sequences) if a.sequences else None,
                       models_only=a.models_only, depth=a.depth,
-                      stereo=_stereo_params(_options(a.stereo_option), a.depth))
-    for p in (a.tracker_model and Path(a.tracker_model).parent, a.boxnet_model):
-        if p and not Path(p).exists():
-            raise FileNotFoundError(f"no such model path: {p}")
+                      stereo=_stereo_params(_options(a.stereo_option), a.depth),
+                      precision=a.precision, engine=a.engine)
+    if a.split != "test" and not a.data:
+        raise ValueError(f"--split {a.split} needs --data (without it the frames are synthetic)")
+    if a.tracker_model and not Path(a.tracker_model).parent.is_dir():
+        raise FileNotFoundError(f"--tracker-model {a.tracker_model}: no folder {Path(a.tracker_model).parent}")
+    if a.boxnet_model and not Path(a.boxnet_model).is_file():
+        raise FileNotFoundError(f"--boxnet-model {a.boxnet_model}: no such file")
     from .estimators import available_estimators, create_estimator
     from .trackers2d import available_trackers, create_tracker
 
@@ -363,7 +372,7 @@ def _cmd_bench(a) -> int:
     if a.out and Path(a.out).is_dir():  # before the timing, not after minutes of it
         raise ValueError(f"--out {a.out} is a folder: give the JSON file to write")
     report = run_bench(cfg, log=None if a.quiet else (lambda s: print(f"[bench] {s}", file=sys.stderr)))
-    print(json.dumps(report, indent=1) if a.json else format_table(report))
+    print(json.dumps(jsonable(report), indent=1) if a.json else format_table(report))
     if a.out:
         print(f"report: {write_json(a.out, report)}", file=sys.stderr)
     return 0
