@@ -17,7 +17,7 @@ import os
 from functools import lru_cache
 from pathlib import Path
 
-__all__ = ["isa_flags", "parse_cpuinfo", "cpu_model", "with_derived", "INT8_DOT", "BF16_DOT"]
+__all__ = ["isa_flags", "forced_isa_flags", "parse_cpuinfo", "cpu_model", "with_derived", "INT8_DOT", "BF16_DOT"]
 
 _X86 = {"avx2": "avx2", "avx512f": "avx512", "avx512_vnni": "vnni", "avx512vnni": "vnni", "avx_vnni": "vnni",
         "avx512_bf16": "avx512_bf16", "amx_int8": "amx_int8", "amx_bf16": "amx_bf16"}
@@ -49,11 +49,18 @@ def isa_flags() -> frozenset[str]:
     """This CPU's arithmetic instruction sets (see the module doc for the names).
 
     ``TRACK3D_ISA_FLAGS`` (comma-separated portable names, e.g. ``avx2``) replaces them: to see
-    what precision="auto" does on a CPU that lacks this one's instructions."""
+    what precision="auto" does on a CPU that lacks this one's instructions (``forced_isa_flags``)."""
+    forced = forced_isa_flags()
+    return parse_cpuinfo(_cpuinfo()) if forced is None else forced
+
+
+def forced_isa_flags() -> frozenset[str] | None:
+    """The flags ``TRACK3D_ISA_FLAGS`` forces (what ``isa_flags`` then returns), or None when it is
+    unset. A record of the machine lists the CPU's real flags; this says what auto believed."""
     forced = os.environ.get("TRACK3D_ISA_FLAGS")
-    if forced is not None:
-        return with_derived(f.strip() for f in forced.split(",") if f.strip())
-    return parse_cpuinfo(_cpuinfo())
+    if forced is None:
+        return None
+    return with_derived(f.strip() for f in forced.split(",") if f.strip())
 
 
 def with_derived(names) -> frozenset[str]:

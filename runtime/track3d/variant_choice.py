@@ -10,9 +10,14 @@ Two steps (docs/models.md, "Arithmetic"):
 2. When more than one variant is allowed, a short measurement (each candidate run round-robin
    on fixed random inputs for at most ``BUDGET_S`` seconds in all, each call after ``GAP_S`` of
    other work, as the loop calls it) picks the fastest; a variant must beat the reference by
-   ``MIN_GAIN`` to be picked, so auto never picks a loser. The result is
-   cached per machine (CPU model + flags + package and engine versions + model hashes) in
-   ``$TRACK3D_CACHE_DIR``, else ``$XDG_CACHE_HOME/track3d``, else ``~/.cache/track3d``.
+   ``MIN_GAIN`` to be picked, so auto never picks a loser (``pick_fastest``). The timings are
+   cached per machine (CPU model + flags + package and engine versions + model name and hashes)
+   in ``variants.json`` in ``$TRACK3D_CACHE_DIR``, else ``$XDG_CACHE_HOME/track3d``, else
+   ``~/.cache/track3d``. A cached entry is used only if it is exactly what the writer writes,
+   its pick re-derived from its timings by the same rule; otherwise (or when the file is not a
+   JSON object) one warning line names the file and the model is measured again and the entry
+   rewritten. To measure again on purpose, delete that file (or point ``TRACK3D_CACHE_DIR`` at
+   an empty folder); ``choose(..., use_cache=False)`` skips reading it.
 
 Given a choice, the outputs are deterministic: the choice only selects the session.
 """
@@ -20,6 +25,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import sys
 import time
@@ -32,7 +38,7 @@ from .cpu_features import BF16_DOT, INT8_DOT, cpu_model, isa_flags
 from .onnxmodel import (ENGINES, PRECISIONS, EngineUnavailable, ModelError, _OrtSession, open_session,
                         openvino_version, variant_path)
 
-__all__ = ["choose", "candidates", "cache_dir", "BUDGET_S", "MIN_GAIN", "GAP_S", "example_feeds"]
+__all__ = ["choose", "candidates", "cache_dir", "pick_fastest", "BUDGET_S", "MIN_GAIN", "GAP_S", "example_feeds"]
 
 BUDGET_S = 0.5          # seconds of measurement per model (all candidates together)
 MIN_GAIN = 1.05         # a variant must be 5% faster than fp32 onnxruntime to replace it
@@ -46,7 +52,12 @@ MIN_GAIN = 1.05         # a variant must be 5% faster than fp32 onnxruntime to r
 GAP_S = 0.003
 CACHE_FILE = "variants.json"
 VERDICTS_FILE = "accuracy.json"  # beside the models: which variants passed the accuracy rule
-CACHE_VERSION = 2       # 2: measured with GAP_S before each call (1: back to back)
+# 3: entries record the variants that failed to load, so a cached reason names them as a fresh
+# one does, and the key holds the model's name; 2: measured with GAP_S before each call (1: back
+# to back)
+CACHE_VERSION = 3
+_ENTRY_KEYS = frozenset({"pick", "ms", "failed", "cpu", "flags", "model", "measured"})
+_STAMP = "%Y-%m-%dT%H:%M:%SZ"
 
 
 def cache_dir() -> Path:
@@ -170,18 +181,93 @@ def _key(path: Path, threads: int, cands: list, flags: frozenset[str]) -> str:
 
     from . import __version__
 
+    # the name too: a copy of a model under another name would share the entry and, its "model"
+    # field then not matching, be measured again each time the other one loads
     k = {"v": CACHE_VERSION, "cpu": cpu_model(), "flags": sorted(flags), "track3d": __version__,
          "onnxruntime": onnxruntime.__version__, "openvino": openvino_version(), "threads": threads,
-         "candidates": [list(c) for c in cands], "model": _file_digest(path),
+         "candidates": [list(c) for c in cands], "name": path.name, "model": _file_digest(path),
          "int8": _file_digest(variant_path(path, "int8"))}
     return hashlib.sha256(json.dumps(k, sort_keys=True).encode()).hexdigest()
 
 
-def _cache_read(key: str) -> dict | None:
+def _one_line(text) -> str:
+    return " ".join(str(text).split())
+
+
+def _cache_load() -> tuple[dict, str | None]:
+    """(the cache's entries, why the file is unusable or None). No file is an empty cache."""
     try:
-        return json.loads((cache_dir() / CACHE_FILE).read_text()).get(key)
-    except (OSError, ValueError, AttributeError):
+        data = json.loads((cache_dir() / CACHE_FILE).read_text())
+    except FileNotFoundError:
+        return {}, None
+    except (OSError, ValueError, RecursionError) as e:  # ValueError: not JSON, not UTF-8
+        return {}, f"cannot be read ({_one_line(e)[:120] or type(e).__name__})"
+    if not isinstance(data, dict):
+        return {}, f"is a JSON {type(data).__name__}, not an object"
+    return data, None
+
+
+def _warn(what: str) -> None:
+    print(f"track3d: warning: {cache_dir() / CACHE_FILE} {what}; measuring again", file=sys.stderr)
+
+
+def pick_fastest(ms: dict[str, float], cands: list) -> tuple[str, str]:
+    """The variant auto runs, given the median ms per "engine/precision" label: the fastest
+    timed candidate (the first in `cands` order among equal times), unless it beats the reference
+    (``cands[0]``) by less than ``MIN_GAIN``. The one rule for a fresh and a cached measurement."""
+    timed = [c for c in cands if _label(c) in ms]
+    best = min(timed, key=lambda c: ms[_label(c)])
+    ref = cands[0]
+    if _label(ref) in ms and best != ref and ms[_label(best)] * MIN_GAIN > ms[_label(ref)]:
+        return ref
+    return best
+
+
+def _entry_problem(entry, path: Path, cands: list, flags: frozenset[str]) -> str | None:
+    """Why `entry` is not what ``choose`` writes for this key (None: it is). Hand edits, a
+    truncated write or another tool's output all land here: a cache is never trusted past it."""
+    if not isinstance(entry, dict):
+        return f"is a JSON {type(entry).__name__}, not an object"
+    if set(entry) != _ENTRY_KEYS:
+        odd = ([f"lacks {k!r}" for k in sorted(_ENTRY_KEYS - set(entry))]
+               + [f"has the unknown key {k!r}" for k in sorted(set(entry) - _ENTRY_KEYS)])
+        return _one_line(", ".join(odd))[:160]
+    labels = [_label(c) for c in cands]
+    ms, failed = entry["ms"], entry["failed"]
+    # float only: the writer writes floats, and a bool is an int to Python
+    if not (isinstance(ms, dict) and ms and all(
+            k in labels and type(v) is float and math.isfinite(v) and v > 0 for k, v in ms.items())):
+        return f"has 'ms' {_one_line(json.dumps(ms))[:120]}, not a finite positive time per candidate"
+    if not (isinstance(failed, dict) and all(k in labels and k not in ms and isinstance(v, str)
+                                             for k, v in failed.items()) and len(ms) + len(failed) == len(labels)):
+        return "has 'ms' and 'failed' that do not cover each candidate once"
+    for field, want in (("cpu", cpu_model()), ("flags", sorted(flags)), ("model", path.name)):
+        if entry[field] != want:   # all three are in the key: only an edit makes them differ
+            return f"has '{field}' {_one_line(json.dumps(entry[field]))[:60]}, not {json.dumps(want)}"
+    try:
+        time.strptime(entry["measured"], _STAMP)
+    except (TypeError, ValueError):
+        return f"has 'measured' {_one_line(json.dumps(entry['measured']))[:40]}, not a UTC time"
+    derived = pick_fastest(ms, cands)
+    if entry["pick"] != list(derived):
+        return (f"picks {_one_line(json.dumps(entry['pick']))[:60]} against its own timings "
+                f"(they give {_label(derived)})")
+    return None
+
+
+def _cache_read(key: str, path: Path, cands: list, flags: frozenset[str]) -> dict | None:
+    """The valid entry of `key`, or None (missing, or damaged: then one warning line)."""
+    data, problem = _cache_load()
+    if problem:
+        _warn(problem)
         return None
+    if key not in data:
+        return None
+    problem = _entry_problem(data[key], path, cands, flags)
+    if problem:
+        _warn(f"holds an entry for {path.name} that {problem}")
+        return None
+    return data[key]
 
 
 def _cache_write(key: str, entry: dict) -> None:
@@ -189,12 +275,7 @@ def _cache_write(key: str, entry: dict) -> None:
     try:
         d.mkdir(parents=True, exist_ok=True)
         f = d / CACHE_FILE
-        try:
-            data = json.loads(f.read_text())
-            if not isinstance(data, dict):
-                data = {}
-        except (OSError, ValueError):
-            data = {}
+        data, _ = _cache_load()  # an unusable file was warned of on reading: replaced whole
         data[key] = entry
         tmp = f.with_name(f"{CACHE_FILE}.{os.getpid()}.tmp")
         tmp.write_text(json.dumps(data, indent=1, sort_keys=True))
@@ -240,7 +321,8 @@ def _label(c) -> str:
 def choose(path: Path, threads: int, precision: str = "auto", engine: str = "auto",
            flags: frozenset[str] | None = None, use_cache: bool = True):
     """(choice dict, open session) of the fastest allowed variant of the fp32 model `path`.
-    flags: the CPU's ISA names (default: this CPU's; tests inject a smaller set)."""
+    flags: the CPU's ISA names (default: this CPU's; tests inject a smaller set). use_cache=False
+    measures again without reading the cache, and writes the new timings to it."""
     flags = isa_flags() if flags is None else frozenset(flags)
     cands, notes = candidates(path, precision, engine, flags)
     if not cands:
@@ -253,36 +335,42 @@ def choose(path: Path, threads: int, precision: str = "auto", engine: str = "aut
                  "reason": f"{why} (CPU flags: {shown})"},
                 open_session(variant_path(path, p), threads, e, p))
     key = _key(path, threads, cands, flags)
-    hit = _cache_read(key) if use_cache else None
-    if hit and tuple(hit.get("pick", ())) in cands:
-        e, p = hit["pick"]
-        ms = ", ".join(f"{k} {v:.2f} ms" for k, v in hit["ms"].items())
-        return ({"engine": e, "precision": p, "file": variant_path(path, p).name,
-                 "reason": f"fastest allowed, measured earlier on this machine (cached): {ms} "
-                           f"(CPU flags: {shown})", "measured_ms": hit["ms"]},
-                open_session(variant_path(path, p), threads, e, p))
-    sessions = {}
-    for c in cands:
-        try:
-            sessions[c] = open_session(variant_path(path, c[1]), threads, c[0], c[1])
-        except ModelError as err:  # e.g. an engine that cannot compile this graph: not a candidate
-            notes.append(f"{_label(c)} failed to load ({err})")
-    if not sessions:
-        raise ModelError(f"no variant of {path.name} loads: {'; '.join(notes)}")
-    meta = json.loads(_OrtSession(path, 1, "fp32").metadata() or "{}")
-    t0 = time.perf_counter()
-    ms = measure(sessions, example_feeds(path, meta))
-    spent = time.perf_counter() - t0
-    ref = cands[0]
-    pick = min(ms, key=ms.get)
-    if ref in ms and pick != ref and ms[pick] * MIN_GAIN > ms[ref]:
-        pick = ref  # not clearly faster: keep the reference
-    shown_ms = {_label(c): round(v, 3) for c, v in ms.items()}
-    _cache_write(key, {"pick": list(pick), "ms": shown_ms, "cpu": cpu_model(), "flags": sorted(flags),
-                       "model": path.name, "measured": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
+    hit = _cache_read(key, path, cands, flags) if use_cache else None
+    if hit:
+        ms, failed = hit["ms"], hit["failed"]
+        source = f"timings cached in {CACHE_FILE}, measured {hit['measured']}"
+    else:
+        sessions, failed = {}, {}
+        for c in cands:
+            try:
+                sessions[c] = open_session(variant_path(path, c[1]), threads, c[0], c[1])
+            except ModelError as err:  # e.g. an engine that cannot compile this graph: not a candidate
+                failed[_label(c)] = _one_line(err)
+        if not sessions:
+            raise ModelError(f"no variant of {path.name} loads: "
+                             + "; ".join(notes + [f"{k} failed to load ({v})" for k, v in failed.items()]))
+        meta = json.loads(_OrtSession(path, 1, "fp32").metadata() or "{}")
+        t0 = time.perf_counter()
+        timed = measure(sessions, example_feeds(path, meta))
+        spent = time.perf_counter() - t0
+        # 4 significant digits: the file stays readable and no time rounds to 0 (the reader
+        # takes only positive times); the pick is made from the times as written, so a
+        # cached entry gives the same pick by the same rule
+        ms = {_label(c): float(f"{v:.4g}") for c, v in timed.items()}
+        source = f"measured now in {spent:.2f} s"
+    pick = pick_fastest(ms, cands)
+    if not hit:
+        _cache_write(key, {"pick": list(pick), "ms": ms, "failed": failed, "cpu": cpu_model(),
+                           "flags": sorted(flags), "model": path.name,
+                           "measured": time.strftime(_STAMP, time.gmtime())})
+    # cands order, not the file's (sorted) order: the cached reason reads as the fresh one did
+    shown_ms = {_label(c): ms[_label(c)] for c in cands if _label(c) in ms}
+    notes = notes + [f"{_label(c)} failed to load ({failed[_label(c)]})" for c in cands if _label(c) in failed]
     listing = ", ".join(f"{k} {v:.2f} ms" for k, v in shown_ms.items())
     choice = {"engine": pick[0], "precision": pick[1], "file": variant_path(path, pick[1]).name,
-              "reason": f"fastest allowed, measured now in {spent:.2f} s: {listing}"
+              "reason": f"fastest allowed, {source}: {listing}"
                         + (f"; {'; '.join(notes)}" if notes else "") + f" (CPU flags: {shown})",
               "measured_ms": shown_ms}
+    if hit:
+        return choice, open_session(variant_path(path, pick[1]), threads, pick[0], pick[1])
     return choice, sessions[pick]
