@@ -15,8 +15,15 @@ executed by torch eager (torch.inference_mode, torch.set_num_threads(threads)); 
 outputs are checked against onnxruntime on the first call of each network (1e-3 relative),
 and each torch row reports ORT/torch FPS for net2d, net3d and end to end. torch is imported
 only here and only with --torch: the runtime never imports it.
---int8: also the configurations whose SiamFC uses the int8 graphs (<prefix>_int8_*.onnx),
-labelled e.g. siamfc-edge-int8.
+--int8: also the configurations whose SiamFC runs its int8 graphs, the files beside its fp32
+ones named as the runtime finds them (track3d.onnxmodel.variant_path: <file>_int8.onnx, e.g.
+siamfc_edge_exemplar_int8.onnx; none ship, `track3d-train quantize` makes them), labelled e.g.
+siamfc-edge-int8.
+--precision auto: each network in the engine / precision track3d.variant_choice picks. A row's
+backend and precision are what its networks RAN in ("mixed: ..." per network when they differ),
+"asked" what was asked for; the record names OpenVINO's version when OpenVINO ran.
+
+Every argument is checked before any frame is loaded or timed (one line, exit 2).
 
 Writes <out-dir>/fps_<tag>.json (machine, CPU model, versions, every configuration) and
 fps_<tag>.md (the summary table, also printed).
@@ -28,25 +35,106 @@ import platform
 import sys
 from pathlib import Path
 
-from benchlib.loop_timing import STAGES, build, load_frames, time_loop
-from benchlib.output import add_out_argument
+from benchlib.loop_timing import STAGES, build, load_frames, require_trackable, time_loop
+from benchlib.output import add_out_argument, out_dir_problem
 from benchlib.record import finish_record, start_record
 from benchlib.torch_models import EquivalenceError, TorchNets
 
+from track3d import machine
 from track3d.argparsing import ArgumentParser, bounded, run_main, thread_count
-from track3d.estimators import EstimatorUnavailable
+from track3d.estimators import EstimatorUnavailable, available_estimators
 from track3d.jsonable import write_json
 from track3d.machine import pin_threads
-from track3d.onnxmodel import MODELS_DIR, ModelError
+from track3d.onnxmodel import MODELS_DIR, ModelError, model_pair, model_path, openvino_version, variant_path
 from track3d.stereo import StereoCloud, StereoParams
 from track3d.table_text import cell
-from track3d.trackers2d import TrackerUnavailable
+from track3d.trackers2d import TrackerUnavailable, available_trackers
 
 SIAMFC_STEMS = {"siamfc-edge": "siamfc_edge", "siamfc": "siamfc_faithful"}  # tracker name -> shipped stem
 RATIO_STAGES = ("net2d", "net3d", "end_to_end")
 UNAVAILABLE = (TrackerUnavailable, EstimatorUnavailable, ModelError)  # a missing model: skipped, not failed
 NETWORK_TRACKERS = ("edgetrack", "siamfc", "siamfc-edge", "nano")   # 2D trackers that run ONNX networks
 NETWORK_ESTIMATORS = ("a3boxnet",)
+ONNX_TRACKERS = ("edgetrack", "siamfc", "siamfc-edge")   # 2D trackers of track3d's ONNX models (precision=, engine=)
+DEFAULT_CONFIGS = ("siamfc-edge:a3boxnet", "siamfc:a3boxnet", "kcf:baseline")
+SIAMFC_PARTS = ("exemplar", "search")
+INT8_RULE = ("looked for <file>_int8.onnx beside each fp32 file (track3d.onnxmodel.variant_path); "
+             "make them with track3d-train quantize")
+
+
+def parse_config(text: str) -> tuple[str, str, str]:
+    """TRACKER:ESTIMATOR[@MODEL] -> (tracker, estimator, model or ""); ValueError (one line) for a
+    malformed text, a name no registry has, @MODEL with an estimator that takes no A3BoxNet file,
+    or a model file that is not there."""
+    pair = str(text).split(":")
+    if len(pair) != 2 or not all(pair):
+        raise ValueError(f"takes TRACKER:ESTIMATOR[@MODEL], got {text!r}")
+    tracker, (estimator, at, model) = pair[0].lower(), pair[1].partition("@")
+    estimator = estimator.lower()
+    if tracker not in available_trackers():
+        raise ValueError(f"unknown 2D tracker {pair[0]!r} in {text!r} (available: {', '.join(available_trackers())})")
+    if estimator not in available_estimators():
+        raise ValueError(f"unknown 3D box estimator {estimator!r} in {text!r} "
+                         f"(available: {', '.join(available_estimators())})")
+    if at and estimator not in NETWORK_ESTIMATORS:
+        raise ValueError(f"{text!r}: @MODEL is an A3BoxNet .onnx, for {' / '.join(NETWORK_ESTIMATORS)} only")
+    if at and not model_path(model).is_file():
+        raise ValueError(f"{text!r}: no A3BoxNet file {model!r} (neither a file nor a shipped model)")
+    return tracker, estimator, model
+
+
+def check_args(ap: ArgumentParser, args) -> None:
+    """Every mistake in the arguments as the parser's one-line error (exit 2), before any frame is
+    loaded or timed: a bad configuration or model path had been timed around (then "FAILED" or
+    "skipped" with result files written), a file as --out-dir failed after all the timing."""
+    for text in args.config or ():
+        try:
+            parse_config(text)
+        except ValueError as e:
+            ap.error(f"argument --config: {e}")
+    if args.boxnet_model is not None and not model_path(args.boxnet_model).is_file():
+        ap.error(f"argument --boxnet-model: no A3BoxNet file {str(args.boxnet_model)!r} "
+                 "(neither a file nor a shipped model)")
+    for flag, prefix in (("--siamfc-edge-model", args.siamfc_edge_model), ("--siamfc-model", args.siamfc_model)):
+        if prefix is not None:
+            missing = [str(f) for f in model_pair(prefix, None, None, SIAMFC_PARTS, None) if not f.is_file()]
+            if missing:
+                ap.error(f"argument {flag}: no {' and no '.join(missing)} (PREFIX <dir>/<name> names the pair "
+                         "<name>_exemplar.onnx / <name>_search.onnx)")
+    if (args.depth == "stereo" or args.precision != ["fp32"]) and (args.torch or args.int8):
+        ap.error("--depth stereo and --precision auto run the ONNX configurations only (not with --torch "
+                 "or --int8)")
+    problem = out_dir_problem(args.out_dir)
+    if problem:
+        ap.error(f"argument --out-dir: {problem}")
+
+
+def cpu_shortfall(threads: list[int]) -> str | None:
+    """The warning when a thread count exceeds the CPUs this process may run on (`taskset`), as
+    `track3d bench` notes it: those rows run on fewer CPUs than threads; None when all fit."""
+    cpus = machine.START_CPUS
+    over = [t for t in threads if t > len(cpus)]
+    if not over:
+        return None
+    return (f"warning: --threads {' '.join(map(str, over))}: only {len(cpus)} CPU(s) allowed to this process "
+            f"(CPU {', '.join(map(str, cpus))}): those rows run their threads on {len(cpus)} CPU(s)")
+
+
+def ran_as(networks: list[dict]) -> tuple[str, str]:
+    """(backend, precision) a row's networks RAN in: one engine / precision as is, several as
+    "mixed: openvino (a.onnx), onnxruntime (b.onnx, c.onnx)"; no network: ("none", "-")."""
+    if not networks:
+        return "none", "-"
+
+    def label(key: str) -> str:
+        groups: dict[str, list[str]] = {}
+        for n in networks:
+            groups.setdefault(str(n.get(key)), []).append(str(n.get("file")))
+        if len(groups) == 1:
+            return next(iter(groups))
+        return "mixed: " + ", ".join(f"{k} ({', '.join(v)})" for k, v in groups.items())
+
+    return label("engine"), label("precision")
 
 
 def run_config(camera, sequences, cfg: dict, threads: int, frames: int, torch_nets: TorchNets | None = None) -> dict:
@@ -72,8 +160,12 @@ def run_config(camera, sequences, cfg: dict, threads: int, frames: int, torch_ne
     unchecked = [m.meta.get("kind") for m in stand_ins if m.check is None]
     if unchecked:
         raise EquivalenceError(f"torch model(s) {unchecked} never ran during warm-up: equivalence not checked")
+    # what ran, not what was asked: precision="auto" may run some networks on OpenVINO (torch
+    # stand-ins are not files: a torch row keeps its label)
+    backend, precision = (cfg["backend"], cfg["precision"]) if cfg["backend"] == "torch" else ran_as(networks)
     out = {"config": cfg["label"], "tracker": cfg["tracker"], "estimator": cfg["estimator"],
-           "backend": cfg["backend"], "precision": cfg["precision"], "threads": threads, "fusion": True, **r,
+           "backend": backend, "precision": precision,
+           "asked": {"engine": cfg["backend"], "precision": cfg["precision"]}, "threads": threads, "fusion": True, **r,
            **({"depth": "stereo from the pair", "stereo_follow": cfg["stereo_follow"],
                "stereo_max_match_px": cfg["stereo_max_match_px"],
                "stereo_max_match_cost": cfg["stereo_max_match_cost"]} if stereo is not None else {}),
@@ -91,13 +183,9 @@ def make_configs(args, torch_nets: TorchNets | None) -> tuple[list[dict], list[d
     """(configurations to run, skipped {config, reason}) in run order: each ORT fp32
     configuration, then its torch twin, then its int8 twin."""
     prefixes = {"siamfc-edge": args.siamfc_edge_model, "siamfc": args.siamfc_model}
-    pairs = [c.split(":") for c in (args.config or ["siamfc-edge:a3boxnet", "siamfc:a3boxnet", "kcf:baseline"])]
     configs, skipped = [], []
-    for pair in pairs:
-        if len(pair) != 2:
-            raise SystemExit(f"--config takes TRACKER:ESTIMATOR[@MODEL], got {':'.join(pair)!r}")
-        tracker, estimator = pair
-        estimator, _, model = estimator.partition("@")
+    for text in args.config or DEFAULT_CONFIGS:
+        tracker, estimator, model = parse_config(text)
         topt, eopt = {}, {}
         if tracker in prefixes and prefixes[tracker] is not None:
             topt["model"] = str(prefixes[tracker])
@@ -111,10 +199,16 @@ def make_configs(args, torch_nets: TorchNets | None) -> tuple[list[dict], list[d
                 "estimator_options": eopt, "backend": "onnxruntime" if nets else "none",
                 "precision": "fp32" if nets else "-"}
         # side by side: fp32, and every network in the variant precision="auto" picks on this CPU
+        # (backend / precision here: what is asked; each row records what ran)
+        # only to the parts that run track3d's ONNX models (kcf had been given precision= and failed);
+        # a configuration without any gets no auto twin: it would run the same thing
         auto = {"precision": "auto", "engine": "auto"}
-        bases = [base if p == "fp32" else {**base, "label": f"{label} auto", "precision": "auto",
-                                            "tracker_options": {**topt, **auto}, "estimator_options": {**eopt, **auto}}
-                 for p in args.precision]
+        auto_topt = {**topt, **auto} if tracker in ONNX_TRACKERS else topt
+        auto_eopt = {**eopt, **auto} if estimator in NETWORK_ESTIMATORS else eopt
+        precisions = args.precision if (auto_topt, auto_eopt) != (topt, eopt) else ["fp32"]
+        bases = [base if p == "fp32" else {**base, "label": f"{label} auto", "backend": "auto", "precision": "auto",
+                                            "tracker_options": auto_topt, "estimator_options": auto_eopt}
+                 for p in precisions]
         if args.depth == "stereo":
             # one row per depth-following and row-binning setting, side by side in this run
             configs += [{**b, "label": f"{b['label']} stereo follow {k:g}" + (f" rows past {px}" if px else "")
@@ -139,21 +233,19 @@ def make_configs(args, torch_nets: TorchNets | None) -> tuple[list[dict], list[d
             else:
                 configs.append({**base, "backend": "torch", "checkpoints": need})
         if args.int8 and tracker in SIAMFC_STEMS:
-            fp32 = Path(prefixes[tracker]) if prefixes[tracker] is not None else MODELS_DIR / SIAMFC_STEMS[tracker]
-            stem = fp32.name
-            for suffix in ("_exemplar.onnx", "_search.onnx", ".onnx"):  # as track3d.siamfc.create
-                if stem.endswith(suffix):
-                    stem = stem[: -len(suffix)]
-                    break
-            q = fp32.parent / f"{stem}_int8"
-            files = [q.parent / f"{q.name}_exemplar.onnx", q.parent / f"{q.name}_search.onnx"]
-            label = f"{tracker}-int8:{estimator}"
+            # the int8 twins as the runtime finds them (the one naming rule, also track3d-train
+            # quantize's): <file>_int8.onnx beside each fp32 file; SiamFCTracker(precision="int8")
+            # loads exactly those
+            prefix = prefixes[tracker] if prefixes[tracker] is not None else MODELS_DIR / SIAMFC_STEMS[tracker]
+            files = [variant_path(f, "int8") for f in model_pair(prefix, None, None, SIAMFC_PARTS, None)]
+            label = f"{tracker}-int8:{estimator}" + (f"@{model}" if model else "")
             missing = [str(f) for f in files if not f.is_file()]
             if missing:
-                skipped.append({"config": label, "backend": "onnxruntime", "reason": "missing " + ", ".join(missing)})
+                skipped.append({"config": label, "backend": "onnxruntime", "int8_of": base["label"],
+                                "missing_int8": missing, "reason": "no int8 file: " + ", ".join(missing)})
             else:
                 configs.append({**base, "label": label, "precision": "int8",
-                                "tracker_options": {**topt, "model": str(q)}})
+                                "tracker_options": {**topt, "precision": "int8"}})
     return configs, skipped
 
 
@@ -161,13 +253,14 @@ def add_ratios(results: list[dict]) -> None:
     """torch rows: ORT/torch FPS (= torch ms / ORT ms, medians) of the matching ORT fp32 row;
     int8 rows: fp32/int8 ms (the int8 speed-up) of the matching fp32 ORT row."""
     ort = {(r["config"], r["threads"]): r for r in results
-           if r["backend"] == "onnxruntime" and r["precision"] == "fp32"}
+           if r["asked"] == {"engine": "onnxruntime", "precision": "fp32"}}
     for r in results:
-        if r["backend"] == "torch":
+        torch_row = r["asked"]["engine"] == "torch"
+        if torch_row:
             ref = ort.get((r["config"], r["threads"]))
             key = "ort_over_torch_fps"
-        elif r["precision"] == "int8":
-            ref = ort.get((f"{r['tracker']}:{r['estimator']}", r["threads"]))
+        elif r["asked"]["precision"] == "int8":
+            ref = ort.get((r["config"].replace("-int8:", ":", 1), r["threads"]))
             key = "int8_speedup_vs_fp32"
         else:
             continue
@@ -177,7 +270,7 @@ def add_ratios(results: list[dict]) -> None:
         ratio = {}
         for k in RATIO_STAGES:
             mine, theirs = r["stages"][k]["median_ms"], ref["stages"][k]["median_ms"]
-            num, den = (mine, theirs) if r["backend"] == "torch" else (theirs, mine)
+            num, den = (mine, theirs) if torch_row else (theirs, mine)
             ratio[k] = num / den if den > 0 else None
         r[key] = ratio
 
@@ -189,7 +282,8 @@ def _f(v, fmt="{:.2f}") -> str:
 def markdown(out: dict) -> str:
     m = out["machine"]
     lines = [f"FPS benchmark, {out['cpu']} ({m['logical_cpus']} logical CPUs), onnxruntime "
-             f"{m['versions']['onnxruntime']}" + (f", torch {out['torch']}" if out.get("torch") else "")
+             f"{m['versions']['onnxruntime']}" + (f", OpenVINO {out['openvino']}" if out.get("openvino") else "")
+             + (f", torch {out['torch']}" if out.get("torch") else "")
              + f"; medians over {out['frames_requested']} frames; ms",
              "",
              "| config | backend | precision | threads | e2e median ms | p99 | FPS | net2d | net3d | ratio |",
@@ -207,8 +301,10 @@ def markdown(out: dict) -> str:
         lines.append(f"| {r['config']} | {r['backend']} | {r['precision']} | {r['threads']} | "
                      f"{s['end_to_end']['median_ms']:.2f} | {s['end_to_end']['p99_ms']:.2f} | {r['fps_median']:.1f} | "
                      f"{s['net2d']['median_ms']:.2f} | {s['net3d']['median_ms']:.2f} | {ratio} |")
-    if out["skipped"] or out["failed"]:
+    notes = [f"- {r['config']} at {r['threads']} threads: {r['note']}" for r in out["results"] if r.get("note")]
+    if out["skipped"] or out["failed"] or notes:
         lines.append("")
+    lines += notes
     for r in out["skipped"]:
         at = f", {r['threads']} threads" if "threads" in r else ""
         lines.append(f"- skipped {r['config']} ({r['backend']}{at}): {r['reason']}")
@@ -221,13 +317,18 @@ def build_parser() -> ArgumentParser:
     ap = ArgumentParser(description=__doc__)
     ap.add_argument("--data", type=Path, required=True, help="dataset root (track3d-sim output)")
     ap.add_argument("--split", default="test", help="dataset split")
-    ap.add_argument("--frames", type=int, default=1000, help="measured frames per configuration (>= 1000 for p99)")
-    ap.add_argument("--preload", type=int, default=400, help="frames kept in memory (looped over)")
+    ap.add_argument("--frames", type=bounded(int, 1), default=1000,
+                    help="measured frames per configuration (>= 1000 for p99; default 1000)")
+    ap.add_argument("--preload", type=bounded(int, 2), default=400,
+                    help="frames kept in memory (looped over; at least a first frame and one to track; default 400)")
     ap.add_argument("--sequences", type=bounded(int, 1), default=8, help="sequences preloaded")
-    ap.add_argument("--threads", type=thread_count, nargs="+", default=[1, 2], help="thread counts to time")
+    ap.add_argument("--threads", type=thread_count, nargs="+", default=[1, 2],
+                    help="thread counts to time, one row each (a count above the CPUs this process may run on "
+                         "is warned about and noted in its row; default 1 2)")
     ap.add_argument("--config", action="append", default=None, metavar="TRACKER:ESTIMATOR[@MODEL]",
-                    help="configurations to run (default: siamfc-edge:a3boxnet siamfc:a3boxnet kcf:baseline); "
-                         "@MODEL: this configuration's A3BoxNet .onnx (e.g. two box nets side by side in one run)")
+                    help=f"configurations to run (default: {' '.join(DEFAULT_CONFIGS)}); "
+                         "@MODEL: this configuration's A3BoxNet .onnx (e.g. two box nets side by side in one run); "
+                         "names and files are checked before anything runs")
     ap.add_argument("--depth", choices=("map", "stereo"), default="map",
                     help="map: clouds from the stored depth maps; stereo: matched from the pair inside each "
                          "update, around the 2D box (track3d.stereo.StereoCloud), with the stereo loop options "
@@ -255,7 +356,9 @@ def build_parser() -> ArgumentParser:
                     help="the same for siamfc (faithful)")
     ap.add_argument("--boxnet-model", type=Path, default=None, metavar="ONNX", help="a non-shipped A3BoxNet ONNX")
     ap.add_argument("--int8", action="store_true",
-                    help="also run SiamFC from <prefix>_int8_exemplar/_search.onnx (shipped: models/siamfc_edge_int8_*)")
+                    help="also run each SiamFC configuration with its int8 files: <file>_int8.onnx beside each fp32 "
+                         "file, e.g. siamfc_edge_exemplar_int8.onnx (track3d.onnxmodel.variant_path; none ship: "
+                         "make them with track3d-train quantize); configurations without them are named in one line")
     ap.add_argument("--torch", action="store_true",
                     help="also run every SiamFC / A3BoxNet configuration in torch eager")
     ap.add_argument("--torch-siamfc-edge", type=Path, default=Path("runs/siamfc_edge/ckpt.pt"), metavar="CKPT",
@@ -268,17 +371,28 @@ def build_parser() -> ArgumentParser:
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    check_args(ap, args)
     torch_nets = None
     if args.torch:
         torch_nets = TorchNets({"siamfc-edge": args.torch_siamfc_edge, "siamfc": args.torch_siamfc}, args.torch_boxnet)
     configs, skipped = make_configs(args, torch_nets)
-    for s in skipped:
-        print(f"skip {s['config']} ({s['backend']}): {s['reason']}", file=sys.stderr)
-    if (args.depth == "stereo" or args.precision != ["fp32"]) and (args.torch or args.int8):
-        raise SystemExit("--depth stereo and --precision auto run the ONNX configurations only (not with --torch "
-                         "or --int8)")
     camera, seqs = load_frames(args.data, args.split, args.preload, args.sequences, depth=args.depth)
+    require_trackable(seqs, f"{args.data} split {args.split!r}, first {args.preload} frames")
+    # notes and warnings once the data is known good (a mistake stays the one line on stderr)
+    short = cpu_shortfall(args.threads)
+    if short:
+        print(short, file=sys.stderr)
+    no_int8 = [s for s in skipped if "missing_int8" in s]
+    for s in skipped:
+        if s not in no_int8:
+            print(f"skip {s['config']} ({s['backend']}): {s['reason']}", file=sys.stderr)
+    if args.int8 and not any(c["tracker"] in SIAMFC_STEMS for c in configs):
+        print("--int8: no configuration runs SiamFC: no int8 row", file=sys.stderr)
+    elif no_int8:
+        print(f"--int8: no int8 file for {', '.join(s['int8_of'] for s in no_int8)} (no int8 row; "
+              f"{INT8_RULE}): {', '.join(f for s in no_int8 for f in s['missing_int8'])}", file=sys.stderr)
     print(f"preloaded {sum(len(f) for _, f in seqs)} frames of {len(seqs)} sequences", file=sys.stderr)
     rec = start_record("track3d end-to-end FPS", data=str(args.data), split=args.split, frames_requested=args.frames)
     results, failed = [], []
@@ -297,15 +411,19 @@ def main(argv=None) -> int:
                 continue
             finally:
                 gc.collect()  # free the configuration's sessions before the next one loads its own
+            if threads > len(machine.START_CPUS):
+                r["note"] = f"only {len(machine.START_CPUS)} CPU(s) allowed"   # as track3d bench notes it
             results.append(r)
             s = r["stages"]
-            print(f"{cfg['label']:24s} {cfg['backend']:11s} {cfg['precision']} threads={threads} "
+            print(f"{cfg['label']:24s} {r['backend']:11s} {r['precision']} threads={threads} "
                   f"fps(median)={r['fps_median']:7.1f} e2e median={s['end_to_end']['median_ms']:.2f} "
                   f"p99={s['end_to_end']['p99_ms']:.2f} ms | "
                   + " ".join(f"{k}={s[k]['median_ms']:.2f}" for k in STAGES[:-1]), flush=True)
     pin_threads(max(args.threads))
     add_ratios(results)
+    ran_openvino = any(n.get("engine") == "openvino" for r in results for n in r["networks"])
     out = finish_record({**rec, "torch": torch_nets.torch.__version__ if torch_nets else None,
+                         "openvino": openvino_version() if ran_openvino else None,
                          "note": "I/O excluded; threads=1 runs pinned to one core (every thread); "
                                  "ort_over_torch_fps = torch median ms / onnxruntime median ms of the same "
                                  "configuration (> 1: onnxruntime faster); int8_speedup_vs_fp32 = fp32 median ms / "

@@ -20,19 +20,22 @@ matching cost of each update (StereoCloud.last_cost), the tail's against the med
 latency by cost quartile and the updates left without a cloud (StereoCloud.last_dropped: the
 followed search's retry past the budget). --stereo-max-cost / --stereo-max-match set the matcher's caps.
 
-Writes JSON only with --out (nothing is written into the repository by default).
+Writes JSON only with --out (nothing is written into the repository by default): the run record of
+benchlib/record.py (machine, ISA, versions, date, load), "pinned_cpus" (the affinity of the
+process's threads read back after pinning), then the report; "config" names the model files
+with their sha256.
 """
 from __future__ import annotations
 
+import argparse
 import gc
-import json
 import os
-import platform
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from benchlib.record import finish_record, model_files, start_record
 
 from track3d import machine
 from track3d.argparsing import ArgumentParser, bounded, run_main
@@ -68,6 +71,16 @@ def stats(v: np.ndarray) -> dict:
     return out
 
 
+def allowed_cpu(text: str) -> int:
+    """argparse type of --cpu: one of the CPUs the process was started on (machine.START_CPUS;
+    `taskset` chooses them). Another CPU used to be taken silently: the run left its taskset or,
+    for a CPU that does not exist, ran unpinned while its record said pinned."""
+    allowed = ", ".join(map(str, machine.START_CPUS))
+    if not text.strip().isdigit() or int(text) not in machine.START_CPUS:
+        raise argparse.ArgumentTypeError(f"CPU {text} is not allowed: this process may run on {allowed}")
+    return int(text)
+
+
 def build_parser() -> ArgumentParser:
     ap = ArgumentParser(description=__doc__)
     ap.add_argument("--data", type=Path, required=True, help="dataset root (track3d-sim output)")
@@ -75,7 +88,9 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--frames", type=bounded(int, 1), default=10_000, help="measured updates (default 10000)")
     ap.add_argument("--warmup", type=bounded(int, 0), default=50, help="updates before measuring (default 50)")
     ap.add_argument("--preload", type=int, default=400, help="frames kept in memory, looped over (default 400)")
-    ap.add_argument("--cpu", type=int, default=None, help="pin every thread to this CPU (default: the lowest allowed)")
+    ap.add_argument("--cpu", type=allowed_cpu, metavar="CPU", default=None,
+                    help="pin every thread to this CPU, one of those the process may run on: "
+                         f"{', '.join(map(str, machine.START_CPUS))} (default: the lowest)")
     ap.add_argument("--gc-freeze", action="store_true", help="gc.freeze() after warm-up (objects alive then are never scanned)")
     ap.add_argument("--depth", choices=("map", "stereo"), default="map",
                     help="map: clouds from the stored depth maps; stereo: matched from the pair inside each "
@@ -94,18 +109,18 @@ def main(argv=None) -> int:
     stereo = a.depth == "stereo"
     if not stereo and (a.stereo_max_cost != StereoParams().max_match_cost
                        or a.stereo_max_match != StereoParams().max_match_px):
-        print("--stereo-max-cost / --stereo-max-match set the matcher of --depth stereo: add --depth stereo",
-              file=sys.stderr)
-        return 2
+        raise ValueError("--stereo-max-cost / --stereo-max-match set the matcher of --depth stereo: add --depth stereo")
+    if a.out and a.out.is_dir():   # before the run, not after it
+        raise ValueError(f"--out {a.out} is a folder: give the JSON file to write")
+    rec = start_record("latency", pinned_cpus=None)
     camera, seqs = load(a.data, a.split, a.preload, a.depth)
     if not seqs:
-        print(f"no trackable sequence in {a.data}/{a.split}", file=sys.stderr)
-        return 2
+        raise ValueError(f"no trackable sequence in {a.data}/{a.split}")
     t3d = Track3D.from_default(camera, threads=1, depth_sensor="stereo" if stereo else None)
     cloud = (StereoCloud(camera, max_match_cost=a.stereo_max_cost, max_match_px=a.stereo_max_match)
              if stereo else None)
-    cpu = min(machine.START_CPUS) if a.cpu is None else a.cpu
-    machine.pin_threads(1, [cpu])
+    machine.pin_threads(1, [min(machine.START_CPUS) if a.cpu is None else a.cpu])
+    rec["pinned_cpus"] = machine.affinity_of_all_threads()   # read back: what is in force, not what was asked
 
     gc_events: list[float] = []
     gc.callbacks.append(lambda phase, info: gc_events.append(time.perf_counter()) if phase == "start" else None)
@@ -151,10 +166,11 @@ def main(argv=None) -> int:
     gaps = np.diff(p99)
     q = np.percentile(npts_a, [25, 50, 75])
     bins = np.digitize(npts_a, q)
+    described = t3d.describe()
     report = {
-        "machine": {"cpu": machine.cpu_name(), "isa_flags": machine.isa_flags(), "pinned_cpu": cpu,
-                    "loadavg": os.getloadavg(), "python": platform.python_version()},
-        "config": {"tracker": t3d.describe()["tracker"], "estimator": t3d.describe()["estimator"], "threads": 1,
+        **rec,
+        "config": {"tracker": described["tracker"], "estimator": described["estimator"],
+                   "models": model_files(described), "threads": 1, "cpu_requested": a.cpu,
                    "frames": len(total),
                    "gc_freeze": a.gc_freeze, "data": Path(a.data).name, "split": a.split, "depth": a.depth,
                    **({"stereo": {"max_match_cost": a.stereo_max_cost, "max_match_px": a.stereo_max_match}}
@@ -185,6 +201,7 @@ def main(argv=None) -> int:
             "by_cost_quartile": [{"cost_upto": float(cq[i]) if i < 3 else float(c.max()),
                                   "median_ms": float(np.median(total_a[cbins == i])) if np.any(cbins == i) else None}
                                  for i in range(4)]}
+    finish_record(report)
     t = report["total"]
     print(f"{len(total)} updates: median {t['median_ms']:.2f} ms, p99 {t['p99_ms']:.2f} ({t['p99/median']:.2f}x), "
           f"p99.9 {t['p99.9_ms']:.2f} ({t['p99.9/median']:.2f}x), max {t['max_ms']:.2f} ({t['max/median']:.2f}x); "

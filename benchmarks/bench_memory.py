@@ -1,7 +1,6 @@
 """One endless watch: does the loop's memory stay flat and its latency bounded over a long run?
 
-    python benchmarks/bench_memory.py --data data/long17 --split test --sequence 0001 --updates 50000 \
-        --out memory.json
+    python benchmarks/bench_memory.py --data data/long17 --split test --sequence 0001 --updates 50000 --out memory.json
 
 A spacecraft runs one Track3D for hours and never restarts it. This runs the default tracker
 as `track3d track` builds it for the sequence (EdgeTrack + A3BoxNet, the depth sensor's options and
@@ -20,10 +19,16 @@ records
 It reports the growth of each after warm-up (the last reading minus the first, and a least-squares
 slope per 10,000 updates), the windows' latency drift (last window's median over the first's), and
 the statuses the loop gave (a watch that turned "lost" exercises less of the loop: read them).
-Writes JSON only with --out (nothing is written into the repository by default).
+The growth needs at least 3 readings (--updates >= 2 x --every). Each reading is also one line on
+stderr (redrawn in place on a terminal).
+Writes JSON only with --out (nothing is written into the repository by default): the run record of
+benchlib/record.py (machine, ISA, versions, date, load), "pinned_cpus" (the affinity of the
+process's threads read back after pinning), then the report; "config" names the model files
+with their sha256.
 """
 from __future__ import annotations
 
+import argparse
 import gc
 import json
 import os
@@ -33,6 +38,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from benchlib.record import finish_record, model_files, start_record
 
 from track3d import machine
 from track3d.argparsing import ArgumentParser, bounded, run_main
@@ -81,10 +87,21 @@ def ping_pong(n: int):
 
 
 def growth(x: np.ndarray, y: np.ndarray) -> dict:
-    """First, last, min, max of y and its least-squares slope per 10,000 of x."""
-    slope = float(np.polyfit(x, y, 1)[0]) * 1e4 if len(x) >= 2 else 0.0
+    """First, last, min, max of y and its least-squares slope per 10,000 of x (None from fewer
+    than 2 points: no slope, not a flat one)."""
+    slope = float(np.polyfit(x, y, 1)[0]) * 1e4 if len(x) >= 2 else None
     return {"first": float(y[0]), "last": float(y[-1]), "min": float(y.min()), "max": float(y.max()),
             "last_minus_first": float(y[-1] - y[0]), "slope_per_10k_updates": slope}
+
+
+def allowed_cpu(text: str) -> int:
+    """argparse type of --cpu: one of the CPUs the process was started on (machine.START_CPUS;
+    `taskset` chooses them). Another CPU used to be taken silently: the run left its taskset or,
+    for a CPU that does not exist, ran unpinned while its record said pinned."""
+    allowed = ", ".join(map(str, machine.START_CPUS))
+    if not text.strip().isdigit() or int(text) not in machine.START_CPUS:
+        raise argparse.ArgumentTypeError(f"CPU {text} is not allowed: this process may run on {allowed}")
+    return int(text)
 
 
 def build_parser() -> ArgumentParser:
@@ -102,7 +119,9 @@ def build_parser() -> ArgumentParser:
                     help="at each reading also collect garbage and return the C heap's free pages (glibc "
                          "malloc_trim), then read the resident memory again: what the process holds but "
                          "no longer uses")
-    ap.add_argument("--cpu", type=int, default=None, help="pin every thread to this CPU (default: the lowest allowed)")
+    ap.add_argument("--cpu", type=allowed_cpu, metavar="CPU", default=None,
+                    help="pin every thread to this CPU, one of those the process may run on: "
+                         f"{', '.join(map(str, machine.START_CPUS))} (default: the lowest)")
     ap.add_argument("--depth", choices=("map", "stereo"), default="map",
                     help="map: clouds from the stored depth maps; stereo: a stereo camera's watch, each "
                          "update's cloud matched from the left/right pair around the 2D box (as `track3d track "
@@ -117,34 +136,35 @@ def main(argv=None) -> int:
     a = build_parser().parse_args(argv)
     stereo = a.depth == "stereo"
     if not stereo and a.stereo_max_cost != StereoParams().max_match_cost:
-        print("bench_memory.py: --stereo-max-cost sets the matcher of --depth stereo: add --depth stereo",
-              file=sys.stderr)
-        return 2
+        raise ValueError("--stereo-max-cost sets the matcher of --depth stereo: add --depth stereo")
+    if a.updates < 2 * a.every:
+        raise ValueError(f"--updates {a.updates} with --every {a.every} gives {a.updates // a.every + 1} reading(s): "
+                         "the growth and drift need at least 3 readings (--updates >= 2 x --every)")
+    if a.out and a.out.is_dir():   # before the run, not after it
+        raise ValueError(f"--out {a.out} is a folder: give the JSON file to write")
+    rec = start_record("memory", pinned_cpus=None)
     ds = Dataset(a.data)
     seqs = ds.sequences(a.split)
     seq = next((s for s in seqs if a.sequence in (None, s.name)), None)
     if seq is None:
-        print(f"bench_memory.py: no sequence {a.sequence!r} in {a.data}/{a.split}", file=sys.stderr)
-        return 2
+        raise ValueError(f"no sequence {a.sequence!r} in {a.data}/{a.split}")
     # the frames from the first one with the body in view up to the first absence: played back
     # and forth, the body never leaves
     present = [i for i in range(len(seq)) if not seq.absent[i] and seq.gt2d[i][2] > 0]
     if len(present) < 2:
-        print(f"bench_memory.py: sequence {seq.name} has fewer than 2 frames with the body in view", file=sys.stderr)
-        return 2
+        raise ValueError(f"sequence {seq.name} has fewer than 2 frames with the body in view")
     idx = [present[0]]
     while len(idx) < a.frames and idx[-1] + 1 < len(seq) and not seq.absent[idx[-1] + 1]:
         idx.append(idx[-1] + 1)
     if len(idx) < 2:
-        print(f"bench_memory.py: sequence {seq.name} has no two frames in a row with the body in view", file=sys.stderr)
-        return 2
+        raise ValueError(f"sequence {seq.name} has no two frames in a row with the body in view")
     # depth stereo: the right image in place of the cloud (the pair is matched inside each update)
     frames = [(seq.image(i), seq.right_image(i) if stereo else seq.points(i)) for i in idx]
     cloud = StereoCloud(seq.camera, max_match_cost=a.stereo_max_cost) if stereo else None
     sensor = seq.depth_sensor
     t3d = TrackerSpec("edgetrack", "a3boxnet", threads=1).build(seq)   # the loop `track3d track` runs
-    cpu = min(machine.START_CPUS) if a.cpu is None else a.cpu
-    machine.pin_threads(1, [cpu])
+    machine.pin_threads(1, [min(machine.START_CPUS) if a.cpu is None else a.cpu])
+    rec["pinned_cpus"] = machine.affinity_of_all_threads()   # read back: what is in force, not what was asked
     first = frames[0][1] if cloud is None else cloud.bind(*frames[0])
     t3d.init(frames[0][0], seq.gt2d[idx[0]], seq.category, points=first)
 
@@ -155,15 +175,18 @@ def main(argv=None) -> int:
     window: list[float] = []
     total = a.warmup + a.updates
     rss_loaded = resident_mb()
-    for done in range(1, total + 1):
-        img, pts = frames[next(order)]
-        if cloud is not None:
-            pts = cloud.bind(img, pts)   # a callable: the matching runs inside the update
-        t = time.perf_counter()
-        res = t3d.update(img, pts)
-        window.append((time.perf_counter() - t) * 1e3)
-        if done > a.warmup:
-            statuses[res.status] += 1
+    redraw = sys.stderr.isatty()   # piped: one plain line per reading
+    start, end = ("\r", "") if redraw else ("", "\n")
+    for done in range(total + 1):   # done 0: no update yet (the first reading when --warmup is 0)
+        if done:
+            img, pts = frames[next(order)]
+            if cloud is not None:
+                pts = cloud.bind(img, pts)   # a callable: the matching runs inside the update
+            t = time.perf_counter()
+            res = t3d.update(img, pts)
+            window.append((time.perf_counter() - t) * 1e3)
+            if done > a.warmup:
+                statuses[res.status] += 1
         if done >= a.warmup and (done - a.warmup) % a.every == 0:
             if done > a.warmup:
                 w = np.asarray(window)
@@ -176,15 +199,17 @@ def main(argv=None) -> int:
             if a.trim:
                 trim_heap()
                 rss_trimmed.append(resident_mb())
-            print(f"\r{done - a.warmup}/{a.updates} updates: RSS {rss[-1]:.1f} MB, state {state_kb[-1]:.0f} kB",
-                  end="", file=sys.stderr, flush=True)
-    print(file=sys.stderr)
+            print(f"{start}{done - a.warmup}/{a.updates} updates: RSS {rss[-1]:.1f} MB, state {state_kb[-1]:.0f} kB",
+                  end=end, file=sys.stderr, flush=True)
+    if redraw:
+        print(file=sys.stderr)
     x = np.asarray(at, np.float64)
-    report = {
-        "machine": {"cpu": machine.cpu_name(), "isa_flags": machine.isa_flags(), "pinned_cpu": cpu,
-                    "loadavg": os.getloadavg()},
-        "config": {"tracker": t3d.describe()["tracker"], "estimator": t3d.describe()["estimator"],
-                   "depth_sensor": sensor, "threads": 1, "data": Path(a.data).name, "split": a.split,
+    described = t3d.describe()
+    report = finish_record({
+        **rec,
+        "config": {"tracker": described["tracker"], "estimator": described["estimator"],
+                   "models": model_files(described), "depth_sensor": sensor, "threads": 1, "cpu_requested": a.cpu,
+                   "data": Path(a.data).name, "split": a.split,
                    "sequence": seq.name, "frames": len(frames), "updates": a.updates, "warmup": a.warmup,
                    "every": a.every, "trim": a.trim, "depth": a.depth,
                    **({"stereo": {"max_match_cost": a.stereo_max_cost}} if stereo else {})},
@@ -198,7 +223,7 @@ def main(argv=None) -> int:
         "statuses": statuses,
         "readings": {"updates": at, "rss_mb": rss, "rss_mb_after_trim": rss_trimmed, "state_kb": state_kb, "window_median_ms": win_med,
                      "window_p99_ms": win_p99},
-    }
+    })
     r, s = report["rss_mb"], report["state_kb"]
     print(f"{a.updates} updates of {seq.name} ({len(frames)} frames back and forth, {sensor or 'unknown'} depth"
           f"{', matched from the pair' if stereo else ''}): "

@@ -16,6 +16,10 @@ engine / precision) plus precision=auto / engine=auto, interleaved: --rounds rou
 running every configuration for frames/rounds frames; the reported ms is the median of the
 rounds' medians. Ratios are to onnxruntime fp32 of the same run (> 1: faster).
 
+Each network row names the file timed (e.g. "a3boxnet (a3boxnet_views.onnx)", --boxnet-model).
+Every argument, --data and --accuracy-data included, is checked before any timing (one line,
+exit 2).
+
 Writes <out-dir>/precision_<tag>.json (CPU name, ISA flags, versions, every number) and .md.
 """
 from __future__ import annotations
@@ -27,8 +31,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from benchlib.loop_timing import build, load_frames, time_loop
-from benchlib.output import add_out_argument
+from benchlib.loop_timing import build, load_frames, require_trackable, time_loop
+from benchlib.output import add_out_argument, out_dir_problem
 from benchlib.record import finish_record, start_record
 
 from track3d.argparsing import ArgumentParser, bounded, hidden_alias, run_main
@@ -83,14 +87,21 @@ def bench_networks(seconds: float, boxnet: str = DEFAULT_MODEL) -> dict:
                            for g, w in zip(got, want))
         ms = measure(models, feeds, seconds)
         base = ms[("onnxruntime", "fp32")]
-        out[name] = {"inputs": {k: list(v.shape) for k, v in feeds.items()}, "skipped": skipped,
+        out[name] = {"file": path.name, "inputs": {k: list(v.shape) for k, v in feeds.items()}, "skipped": skipped,
                      "variants": {label(v): {"median_ms": ms[v], "speedup_vs_ort_fp32": base / ms[v],
                                              "max_rel_diff_vs_ort_fp32": diffs[v]} for v in models}}
-        print(f"{name}: " + ", ".join(f"{label(v)} {ms[v]:.2f} ms (x{base / ms[v]:.2f}, rel {diffs[v]:.1e})"
+        print(f"{network_label(name, path.name)}: " + ", ".join(f"{label(v)} {ms[v]:.2f} ms (x{base / ms[v]:.2f}, rel {diffs[v]:.1e})"
                                       for v in models), flush=True)
         del models
         gc.collect()
     return out
+
+
+def network_label(name: str, file: str | None) -> str:
+    """A network row's name with the file timed when the name does not say it: always for the box
+    network ("a3boxnet" is the views model by default, the full-width one with --boxnet-model
+    a3boxnet.onnx, ...)."""
+    return f"{name} ({file})" if file and (name == "a3boxnet" or Path(file).stem != name) else name
 
 
 def loop_configs(tracker: str = "edgetrack", boxnet: str = DEFAULT_MODEL) -> list[dict]:
@@ -113,9 +124,19 @@ def loop_configs(tracker: str = "edgetrack", boxnet: str = DEFAULT_MODEL) -> lis
     return cfgs
 
 
-def bench_loop(data: Path, split: str, frames: int, rounds: int, preload: int, sequences: int,
-               tracker: str = "edgetrack", boxnet: str = DEFAULT_MODEL) -> dict:
+def preload_loop_frames(data: Path, split: str, preload: int, sequences: int):
+    """load_frames for the whole-loop rows, refusing (ValueError, one line) a split with no frame to
+    track: checked before any timing (it had been found after the per-network timing, and every
+    loop row then said "skipped")."""
     camera, seqs = load_frames(data, split, preload, sequences)
+    require_trackable(seqs, f"{data} split {split!r}, first {preload} frames")
+    return camera, seqs
+
+
+def bench_loop(data: Path, split: str, frames: int, rounds: int, preload: int, sequences: int,
+               tracker: str = "edgetrack", boxnet: str = DEFAULT_MODEL, preloaded=None) -> dict:
+    """preloaded: (camera, sequences) of preload_loop_frames (else loaded here)."""
+    camera, seqs = preloaded or preload_loop_frames(data, split, preload, sequences)
     per = max(frames // rounds, 20)
     runs: dict[str, list[dict]] = {}
     skipped = {}
@@ -265,9 +286,10 @@ def markdown(res: dict) -> str:
             c = r["variants"].get(label(v))
             cells.append("—" if c is None else f"{c['median_ms']:.2f} (x{c['speedup_vs_ort_fp32']:.2f}, "
                                                f"rel {c['max_rel_diff_vs_ort_fp32']:.1e})")
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines.append(f"| {network_label(name, r.get('file'))} | " + " | ".join(cells) + " |")
     if res.get("loop"):
-        lines += ["", "| whole loop config | end-to-end ms | x | net2d ms | net3d ms |", "|---|---|---|---|---|"]
+        lines += ["", f"| whole loop config ({res['loop']['tracker']} + {res['loop']['boxnet']}) | end-to-end ms | x | "
+                      "net2d ms | net3d ms |", "|---|---|---|---|---|"]
         for lab, r in res["loop"]["configs"].items():
             m, x = r["median_ms"], r["speedup_vs_ort_fp32"]
             lines.append(f"| {lab} | {m['end_to_end']:.2f} | x{x['end_to_end']:.2f} | {m['net2d']:.2f} | "
@@ -298,9 +320,11 @@ def build_parser() -> ArgumentParser:
     ap.add_argument("--split", default="test", help="dataset split (default test)")
     ap.add_argument("--frames", type=bounded(int, 1), default=300, help="measured loop frames per configuration (default 300)")
     ap.add_argument("--rounds", type=bounded(int, 1), default=3, help="interleaved rounds of the loop configurations (default 3)")
-    ap.add_argument("--preload", type=int, default=200, help="frames kept in memory (default 200)")
-    ap.add_argument("--sequences", type=int, default=6, help="sequences preloaded (default 6)")
-    ap.add_argument("--net-seconds", type=float, default=3.0, help="round-robin seconds per network (default 3)")
+    ap.add_argument("--preload", type=bounded(int, 2), default=200,
+                    help="frames kept in memory (at least a first frame and one to track; default 200)")
+    ap.add_argument("--sequences", type=bounded(int, 1), default=6, help="sequences preloaded (default 6)")
+    ap.add_argument("--net-seconds", type=bounded(float, above=0), default=3.0,
+                    help="round-robin seconds per network (default 3)")
     ap.add_argument("--accuracy-data", type=Path, default=None,
                     help="dataset root: also Track3D's AO_3d / ACE_3d per variant (restart and one-pass) "
                          "and the shipping rule (default: not measured)")
@@ -315,7 +339,8 @@ def build_parser() -> ArgumentParser:
                     help=f"the shipped A3BoxNet file whose variants are measured (default {DEFAULT_MODEL}; "
                          "e.g. a3boxnet_narrow.onnx)")
     ap.add_argument("--write-verdicts", action="store_true",
-                    help="merge the accuracy verdicts into runtime/track3d/models/accuracy.json (read by auto)")
+                    help="merge the accuracy verdicts into runtime/track3d/models/accuracy.json (read by auto); "
+                         "needs --accuracy-data (refused without it)")
     ap.add_argument("--no-speed", action="store_true", help="skip the speed rows (accuracy only)")
     ap.add_argument("--tag", default=None, help="result file tag (default: the host name)")
     add_out_argument(ap, flag="--out-dir")
@@ -323,15 +348,34 @@ def build_parser() -> ArgumentParser:
 
 
 def main(argv=None) -> int:
-    a = build_parser().parse_args(argv)
-    pin_threads(1)  # one thread, one core (as bench_fps --threads 1)
-    res = start_record("track3d precision x engine", openvino=openvino_version(), threads=1)
+    ap = build_parser()
+    a = ap.parse_args(argv)
+    # every argument before any timing: a bad --data had been found after the per-network timing,
+    # --write-verdicts without --accuracy-data silently did nothing, a file as --out-dir failed at the end
+    if a.write_verdicts and a.accuracy_data is None:
+        ap.error("argument --write-verdicts: needs --accuracy-data (the verdicts come from its accuracy rows)")
+    problem = out_dir_problem(a.out_dir)
+    if problem:
+        ap.error(f"argument --out-dir: {problem}")
     if not (MODELS_DIR / a.boxnet_model).is_file():
         raise ValueError(f"--boxnet-model {a.boxnet_model}: no such shipped model in {MODELS_DIR.name}/")
-    res["networks"] = {} if a.no_speed else bench_networks(a.net_seconds, a.boxnet_model)
+    from track3d.dataset import Dataset
+
+    # DatasetError (one line) for a folder that is no dataset or a split it does not have
+    for data, splits in ((a.data if not a.no_speed else None, [a.split]), (a.accuracy_data, a.accuracy_split)):
+        if data is not None:
+            ds = Dataset(data)
+            for split in splits:
+                ds.sequences(split)
+    loaded = None
     if a.data is not None and not a.no_speed:
+        loaded = preload_loop_frames(a.data, a.split, a.preload, a.sequences)
+    pin_threads(1)  # one thread, one core (as bench_fps --threads 1)
+    res = start_record("track3d precision x engine", openvino=openvino_version(), threads=1)
+    res["networks"] = {} if a.no_speed else bench_networks(a.net_seconds, a.boxnet_model)
+    if loaded is not None:
         res["loop"] = bench_loop(a.data, a.split, a.frames, a.rounds, a.preload, a.sequences, a.tracker,
-                                 a.boxnet_model)
+                                 a.boxnet_model, preloaded=loaded)
         res["data_split"] = a.split
     if a.accuracy_data is not None:
         a.out_dir.mkdir(parents=True, exist_ok=True)

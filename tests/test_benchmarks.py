@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from track3d.argparsing import run_main
+
 
 def test_bench_2d_scores_are_the_toolkits(tiny_dataset, tmp_path):
     import bench_2d
@@ -94,8 +96,9 @@ def test_bench_fps_matches_the_pair_inside_the_loop_with_depth_stereo(tiny_datas
     for (k, px, c), r in zip(want, rows.values()):
         assert r["stereo_follow"] == k and r["stereo_max_match_px"] == px and r["stereo_max_match_cost"] == c
         assert r["depth"] == "stereo from the pair" and r["frames"] == 5
-    with pytest.raises(SystemExit, match="--depth stereo"):
+    with pytest.raises(SystemExit) as e:   # the parser's one-line error, exit 2 (was exit 1, no "error:")
         bench_fps.main(["--data", str(tiny_dataset), "--depth", "stereo", "--int8", "--out-dir", str(out)])
+    assert e.value.code == 2
 
 
 def test_bench_fps_puts_auto_beside_fp32_and_records_the_picks(tiny_dataset, tmp_path, monkeypatch):
@@ -115,7 +118,7 @@ def test_bench_fps_puts_auto_beside_fp32_and_records_the_picks(tiny_dataset, tmp
 
     assert {n["file"] for n in fp32} >= {"edgetrack_search.onnx", DEFAULT_MODEL}
     assert all((n["engine"], n["precision"]) == ("onnxruntime", "fp32") for n in fp32)
-    assert rows["edgetrack:a3boxnet auto"]["precision"] == "auto"
+    assert rows["edgetrack:a3boxnet auto"]["asked"]["precision"] == "auto"   # its precision: what ran
     assert all(n["precision"] in ("fp32", "int8", "bf16") for n in rows["edgetrack:a3boxnet auto"]["networks"])
 
 
@@ -328,8 +331,9 @@ def test_latency_of_a_stereo_camera_s_loop_reports_what_the_matcher_did(tiny_dat
     assert 0 < m["cost_median"] <= m["cost_p99"] <= m["cost_max"]
     assert 0 <= m["dropped"] <= 12
     assert len(m["by_cost_quartile"]) == 4 and "without a cloud" in capsys.readouterr().out
-    assert bench_latency.main(["--data", str(tiny_dataset), "--stereo-max-cost", "5"]) == 2
-    assert "add --depth stereo" in capsys.readouterr().err
+    assert run_main(lambda: bench_latency.main(["--data", str(tiny_dataset), "--stereo-max-cost", "5"]),
+                    "bench_latency.py") == 2
+    assert "error: --stereo-max-cost" in capsys.readouterr().err
 
 
 def test_memory_bench_plays_one_watch_back_and_forth_and_records_each_window(tmp_path, capsys):
@@ -355,8 +359,8 @@ def test_memory_bench_plays_one_watch_back_and_forth_and_records_each_window(tmp
     assert sum(rec["statuses"].values()) == 40 and rec["config"]["frames"] == 8
     assert rec["rss_mb"]["max"] >= rec["rss_mb"]["min"] > 0 and rec["state_kb"]["min"] > 0
     capsys.readouterr()
-    assert bench_memory.main(["--data", str(data), "--sequence", "nope"]) == 2
-    assert "no sequence 'nope'" in capsys.readouterr().err
+    assert run_main(lambda: bench_memory.main(["--data", str(data), "--sequence", "nope"]), "bench_memory.py") == 2
+    assert "error: no sequence 'nope'" in capsys.readouterr().err
 
 
 def test_memory_bench_of_a_stereo_camera_s_watch(tiny_dataset, tmp_path, capsys):
@@ -371,7 +375,8 @@ def test_memory_bench_of_a_stereo_camera_s_watch(tiny_dataset, tmp_path, capsys)
     assert rec["config"]["depth"] == "stereo" and rec["config"]["stereo"] == {"max_match_cost": 1000000}
     assert sum(rec["statuses"].values()) == 20 and len(rec["readings"]["window_median_ms"]) == 2
     assert "matched from the pair" in capsys.readouterr().out
-    assert bench_memory.main(["--data", str(tiny_dataset), "--stereo-max-cost", "5"]) == 2
+    assert run_main(lambda: bench_memory.main(["--data", str(tiny_dataset), "--stereo-max-cost", "5"]),
+                    "bench_memory.py") == 2
     assert "add --depth stereo" in capsys.readouterr().err
 
 
@@ -636,3 +641,203 @@ def test_a_configuration_without_a_network_names_no_backend():
     configs, _ = bench_fps.make_configs(args, None)
     got = {c["label"]: (c["backend"], c["precision"]) for c in configs}
     assert got["kcf:baseline"] == ("none", "-") and got["edgetrack:a3boxnet"] == ("onnxruntime", "fp32")
+
+
+# --- bench_fps / bench_precision: refusals before any work, honest labels (a user walkthrough) ---
+
+class _WorkStarted(AssertionError):
+    """A benchmark started loading frames or timing before its arguments were checked."""
+
+
+def _no_work(monkeypatch, *modules):
+    def stop(*args, **kwargs):
+        raise _WorkStarted("work started before the arguments were checked")
+
+    for mod in modules:
+        for name in ("load_frames", "time_loop", "bench_networks", "bench_loop", "bench_accuracy"):
+            if hasattr(mod, name):
+                monkeypatch.setattr(mod, name, stop)
+
+
+def _up_to_the_timing(monkeypatch, bench_fps):
+    """bench_fps up to its first timed configuration (frames "loaded" without a dataset)."""
+    def stop(*args, **kwargs):
+        raise _WorkStarted("timing started")
+
+    monkeypatch.setattr(bench_fps, "load_frames", lambda *args, **kwargs: (None, []))
+    monkeypatch.setattr(bench_fps, "require_trackable", lambda *args, **kwargs: None, raising=False)
+    monkeypatch.setattr(bench_fps, "pin_threads", stop)   # the first thing each thread count's timing does
+
+
+def _run_script(module, argv, capsys):
+    """(exit code, stderr lines) of a benchmark's main() run as its __main__ runs it (run_main)."""
+    from track3d.argparsing import run_main
+
+    try:
+        code = run_main(lambda: module.main(argv), f"{module.__name__}.py")
+    except SystemExit as e:
+        code = e.code
+    return code, capsys.readouterr().err.strip().splitlines()
+
+
+@pytest.mark.parametrize("argv", [
+    ["--frames", "0"], ["--frames", "-5"], ["--preload", "0"], ["--preload", "-3"],
+    ["--config", "foo:bar"], ["--config", "edgetrack:bar"], ["--config", "edgetrack"],
+    ["--config", "kcf:a3boxnet@/nonexist.onnx"], ["--config", "kcf:baseline@a3boxnet.onnx"],
+    ["--boxnet-model", "/nonexist.onnx"], ["--siamfc-edge-model", "/nonexist/x"], ["--siamfc-model", "/nonexist/x"],
+    ["--depth", "stereo", "--int8"], ["--precision", "auto", "--torch"], ["--out-dir", "{file}"],
+])
+def test_bench_fps_refuses_a_bad_argument_in_one_line_before_any_work(argv, tmp_path, capsys, monkeypatch):
+    """--frames 0 reported FPS over 0 frames (exit 0); --preload 0 and --config foo:bar failed
+    after timing everything (exit 1, result files written); --config edgetrack exited 1 without
+    "error:"; a wrong ONNX path was only "skipped" (exit 0, empty table); --out-dir naming a file
+    ended in FileExistsError after the timing."""
+    import bench_fps
+
+    _no_work(monkeypatch, bench_fps)
+    (tmp_path / "file").write_text("x")
+    out = tmp_path / "out"
+    argv = [a.replace("{file}", str(tmp_path / "file")) for a in argv]
+    code, err = _run_script(bench_fps, ["--data", str(tmp_path / "d"), "--out-dir", str(out), *argv], capsys)
+    assert code == 2 and len(err) == 1 and "error: " in err[0], err
+    assert not out.exists() or not any(out.iterdir())
+
+
+@pytest.mark.parametrize("argv", [
+    ["--sequences", "0"], ["--preload", "0"], ["--net-seconds", "0"], ["--net-seconds", "-5"],
+    ["--net-seconds", "nan"], ["--write-verdicts"], ["--data", "{tmp}/no_dataset"], ["--out-dir", "{tmp}/file"],
+])
+def test_bench_precision_refuses_a_bad_argument_in_one_line_before_any_timing(argv, tmp_path, capsys, monkeypatch):
+    """--sequences 0 / --preload 0 marked every loop row skipped (exit 0); --net-seconds 0, -5,
+    nan ran; --write-verdicts without --accuracy-data was silently ignored; a bad --data was
+    reported only after the per-network timing."""
+    import bench_precision
+
+    _no_work(monkeypatch, bench_precision)
+    (tmp_path / "file").write_text("x")
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    code, err = _run_script(bench_precision, ["--out-dir", str(tmp_path / "out"), *argv], capsys)
+    assert code == 2 and len(err) == 1 and "error: " in err[0], err
+
+
+def test_bench_precision_checks_its_data_before_the_network_timing(tiny_dataset, tmp_path, capsys, monkeypatch):
+    import bench_precision
+
+    _no_work(monkeypatch, bench_precision)
+    monkeypatch.setattr(bench_precision, "load_frames", __import__("benchlib.loop_timing").loop_timing.load_frames)
+    code, err = _run_script(bench_precision, ["--data", str(tiny_dataset), "--split", "nosuch",
+                                              "--out-dir", str(tmp_path / "out")], capsys)
+    assert code == 2 and len(err) == 1 and "nosuch" in err[0], err
+
+
+def test_precision_network_rows_name_the_file_timed(monkeypatch):
+    """The row "a3boxnet" did not say which file was timed (the views model or the full-width one)."""
+    import bench_precision
+
+    monkeypatch.setattr(bench_precision, "NETWORKS_2D", {})
+    monkeypatch.setattr(bench_precision, "VARIANTS", (("onnxruntime", "fp32"),))
+    monkeypatch.setattr(bench_precision, "measure", lambda models, feeds, seconds: {v: 1.0 for v in models})
+    nets = bench_precision.bench_networks(0.01, "a3boxnet_narrow.onnx")
+    assert nets["a3boxnet"]["file"] == "a3boxnet_narrow.onnx"
+    res = {"cpu": "c", "machine": {"isa": [], "versions": {"onnxruntime": "1"}}, "openvino": None, "networks": nets}
+    assert "| a3boxnet (a3boxnet_narrow.onnx) |" in bench_precision.markdown(res)
+
+
+def test_bench_fps_labels_each_row_by_what_ran(tiny_dataset, tmp_path, monkeypatch):
+    """--precision auto rows said backend "onnxruntime" while OpenVINO bf16 ran some networks:
+    a row's backend / precision are those its networks ran in (per network when they differ),
+    and the record names OpenVINO's version when it ran."""
+    import bench_fps
+
+    from track3d.onnxmodel import openvino_version
+
+    assert bench_fps.ran_as([]) == ("none", "-")
+    ort = {"engine": "onnxruntime", "precision": "fp32"}
+    assert bench_fps.ran_as([{"file": "a.onnx", **ort}, {"file": "b.onnx", **ort}]) == ("onnxruntime", "fp32")
+    backend, precision = bench_fps.ran_as([{"file": "siamfc_edge_exemplar.onnx", "engine": "openvino",
+                                            "precision": "bf16"}, {"file": "a3boxnet_views.onnx", **ort}])
+    assert backend.startswith("mixed") and "openvino (siamfc_edge_exemplar.onnx)" in backend
+    assert "onnxruntime (a3boxnet_views.onnx)" in backend
+    assert precision.startswith("mixed") and "bf16 (siamfc_edge_exemplar.onnx)" in precision
+
+    monkeypatch.setenv("TRACK3D_CACHE_DIR", str(tmp_path / "cache"))
+    out = tmp_path / "fps"
+    assert bench_fps.main(["--data", str(tiny_dataset), "--frames", "3", "--preload", "20", "--threads", "1",
+                           "--config", "siamfc-edge:a3boxnet", "--precision", "fp32", "auto", "--tag", "l",
+                           "--out-dir", str(out)]) == 0
+    rec = json.loads((out / "fps_l.json").read_text())
+    md = (out / "fps_l.md").read_text()
+    for r in rec["results"]:
+        assert (r["backend"], r["precision"]) == bench_fps.ran_as(r["networks"])
+        assert f"| {r['config']} | {r['backend']} | {r['precision']} |" in md
+    rows = {r["config"]: r for r in rec["results"]}
+    assert rows["siamfc-edge:a3boxnet auto"]["asked"] == {"engine": "auto", "precision": "auto"}
+    assert rows["siamfc-edge:a3boxnet"]["asked"] == {"engine": "onnxruntime", "precision": "fp32"}
+    ran_openvino = any(n["engine"] == "openvino" for r in rec["results"] for n in r["networks"])
+    assert rec["openvino"] == (openvino_version() if ran_openvino else None)
+    assert (f"OpenVINO {openvino_version()}" in md) == ran_openvino
+
+
+def test_bench_fps_int8_files_are_found_by_the_runtimes_naming_rule(tmp_path, capsys, monkeypatch):
+    """bench_fps looked for <prefix>_int8_exemplar.onnx while track3d-train quantize and the
+    runtime (track3d.onnxmodel.variant_path) name them <file>_int8.onnx: an int8 pair a user
+    made was never found; configurations without one are named in one line."""
+    import shutil
+
+    import bench_fps
+
+    from track3d.onnxmodel import MODELS_DIR, variant_path
+
+    d = tmp_path / "m"
+    d.mkdir()
+    for part in ("exemplar", "search"):
+        fp32 = d / f"x_{part}.onnx"
+        shutil.copy(MODELS_DIR / f"siamfc_edge_{part}.onnx", fp32)
+        shutil.copy(fp32, variant_path(fp32, "int8"))
+    args = bench_fps.build_parser().parse_args(["--data", "unused", "--config", "siamfc-edge:a3boxnet",
+                                                "--siamfc-edge-model", str(d / "x"), "--int8"])
+    configs, skipped = bench_fps.make_configs(args, None)
+    int8 = [c for c in configs if c["precision"] == "int8"]
+    assert [c["label"] for c in int8] == ["siamfc-edge-int8:a3boxnet"] and not skipped
+    assert int8[0]["tracker_options"] == {"model": str(d / "x"), "precision": "int8"}
+
+    if variant_path(MODELS_DIR / "siamfc_faithful_search.onnx", "int8").is_file():
+        pytest.skip("an int8 SiamFC (faithful) ships now")
+    _up_to_the_timing(monkeypatch, bench_fps)
+    with pytest.raises(_WorkStarted):
+        bench_fps.main(["--data", "unused", "--config", "siamfc:a3boxnet", "--config", "kcf:baseline",
+                        "--int8", "--out-dir", str(tmp_path / "o")])
+    said = [line for line in capsys.readouterr().err.splitlines() if "int8" in line]
+    assert len(said) == 1 and "siamfc:a3boxnet" in said[0] and "_int8.onnx" in said[0], said
+    text = bench_fps.build_parser().format_help() + (Path(bench_fps.__file__).parent / "README.md").read_text()
+    assert "siamfc_edge_int8_" not in text and "_int8_exemplar" not in text
+
+
+def test_bench_fps_warns_when_fewer_cpus_are_allowed_than_threads(tmp_path, capsys, monkeypatch):
+    """--threads 2 under `taskset -c 0` gave no warning (track3d bench warns); the help showed
+    "(default: [1, 2])"."""
+    import bench_fps
+
+    from track3d import machine
+
+    monkeypatch.setattr(machine, "START_CPUS", [0])
+    _up_to_the_timing(monkeypatch, bench_fps)
+    with pytest.raises(_WorkStarted):
+        bench_fps.main(["--data", "unused", "--config", "kcf:baseline", "--threads", "1", "2",
+                        "--out-dir", str(tmp_path / "o")])
+    said = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert len(said) == 1 and "--threads 2" in said[0] and "1 CPU" in said[0], said
+    assert "[1, 2]" not in bench_fps.build_parser().format_help()
+
+
+def test_bench_fps_auto_row_only_for_configurations_with_networks():
+    """--precision fp32 auto gave kcf:baseline (no network) an auto twin whose tracker got
+    precision= and failed (ValueError: kcf takes no 'precision'), exit 1."""
+    import bench_fps
+
+    args = bench_fps.build_parser().parse_args(["--data", "unused", "--config", "kcf:baseline", "--config",
+                                                "kcf:a3boxnet", "--precision", "fp32", "auto"])
+    configs, _ = bench_fps.make_configs(args, None)
+    got = {c["label"]: (c["tracker_options"], c["estimator_options"]) for c in configs}
+    assert list(got) == ["kcf:baseline", "kcf:a3boxnet", "kcf:a3boxnet auto"]
+    assert got["kcf:baseline"] == ({}, {}) and got["kcf:a3boxnet auto"] == ({}, {"precision": "auto", "engine": "auto"})

@@ -21,7 +21,7 @@ from track3d.stereo import StereoCloud
 from track3d.tracker import Track3D
 from track3d.sensor_options import sensor_options
 
-__all__ = ["STAGES", "load_frames", "build", "time_loop"]
+__all__ = ["STAGES", "load_frames", "build", "time_loop", "trackable_frames", "require_trackable"]
 
 STAGES = ("crop", "net2d", "post2d", "frustum", "boxnet_other", "net3d", "fusion", "overhead", "end_to_end")
 
@@ -42,6 +42,28 @@ def load_frames(data: Path, split: str, max_frames: int, max_sequences: int, dep
         if total >= max_frames:
             break
     return ds.camera, out
+
+
+def trackable_frames(sequences) -> int:
+    """How many preloaded frames time_loop can update on: those after each sequence's first
+    visible frame (its init). 0: time_loop would end in "no sequence has a frame to track" after
+    the configurations before it had run; check it before timing."""
+    n = 0
+    for seq, fr in sequences:
+        first = next((k for k in range(len(fr)) if not seq.absent[k] and fr[k][2][2] > 0), None)
+        if first is not None:
+            n += len(fr) - first - 1
+    return n
+
+
+def require_trackable(sequences, source: str) -> None:
+    """ValueError (one line) when time_loop could not run on these preloaded frames; `source`
+    says where they came from (e.g. "data/x split 'test', first 400 frames")."""
+    if not sequences:
+        raise ValueError(f"{source}: no sequence to track (an empty split?)")
+    if not trackable_frames(sequences):
+        raise ValueError(f"{source}: no frame to track in {len(sequences)} sequence(s) (each needs a frame "
+                         "after its first visible one: raise --preload or --sequences)")
 
 
 def build(camera, cfg: dict, threads: int, fusion: bool = True) -> Track3D:

@@ -75,14 +75,25 @@ def _thread_ids() -> list[int]:
 
 def pin(cpus) -> bool:
     """Set the affinity of EVERY thread of the process (os.sched_setaffinity(0) sets only the
-    calling thread's; pools started earlier would keep the old set). False where unsupported."""
+    calling thread's; pools started earlier would keep the old set). False where unsupported.
+
+    A CPU the process may not run on is a ValueError naming those it may (START_CPUS, the set it
+    was started on, or any its threads run on now), raised before any thread is touched: the
+    kernel would move the process out of its `taskset` onto any online CPU, and refuses a CPU
+    that does not exist (that refusal used to be swallowed, the process left unpinned)."""
     cpus = set(int(c) for c in cpus)
+    if not cpus:
+        raise ValueError("no CPU to pin to")
     if not hasattr(os, "sched_setaffinity"):
         return False
+    allowed = set(START_CPUS) | set(affinity_of_all_threads())
+    if not cpus <= allowed:
+        raise ValueError(f"CPU(s) {', '.join(map(str, sorted(cpus - allowed)))} not allowed: this process may run on: "
+                         f"{', '.join(map(str, sorted(allowed)))}")
     for tid in _thread_ids():
         try:
             os.sched_setaffinity(tid, cpus)
-        except OSError:  # a thread that just exited
+        except ProcessLookupError:  # a thread that just exited
             pass
     return True
 
