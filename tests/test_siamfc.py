@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -243,8 +244,14 @@ def test_cli_prepare_train_export_eval_on_tiny_data(tiny_dataset, tmp_path, caps
     assert main(args + ["--steps", "5"]) == 0  # resumes at step 3
     assert json.loads((run / "summary.json").read_text())["step"] == 5
     assert "resumed from" in capsys.readouterr().out
-    assert main(["siamfc", "export", "--checkpoint", str(run / "ckpt.pt"), "--out", str(prefix)]) == 0
+    assert main(["siamfc", "export", "--checkpoint", str(run / "ckpt.pt"), "--out", str(prefix),
+                 "--int8", str(cache)]) == 0
     meta = OnnxModel(str(prefix) + "_search.onnx", 1, "siamfc-search").meta
+    # the int8 twin where precision="int8" / "auto" look for it (it had been <prefix>_int8_search.onnx)
+    from track3d.onnxmodel import variant_path
+    twin = variant_path(str(prefix) + "_search.onnx", "int8")
+    assert twin.is_file() and not Path(str(prefix) + "_int8_search.onnx").exists()
+    assert OnnxModel(str(prefix) + "_search.onnx", 1, "siamfc-search", precision="int8").file == twin
     assert meta["training"]["steps"] == 5 and meta["width"] == 0.125
     # the last checkpoint (written after the loop) still names the data it was trained on
     index = json.loads((cache / "index.json").read_text())

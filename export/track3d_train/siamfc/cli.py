@@ -74,8 +74,13 @@ def _export(a) -> int:
 
     if not a.checkpoint:
         raise ValueError("give --checkpoint CKPT (a SiamFC ckpt.pt)")
+    from track3d.onnxmodel import variant_path
+
+    # the int8 twin where the runtime looks for it (variant_path: <prefix>_search_int8.onnx); it
+    # had been written as <prefix>_int8_search.onnx, which precision="int8" / "auto" never found
+    int8_search = variant_path(Path(str(a.out) + "_search.onnx"), "int8")
     refuse_shipped([Path(str(a.out) + "_exemplar.onnx"), Path(str(a.out) + "_search.onnx")]
-                   + ([Path(str(a.out) + "_int8_search.onnx")] if a.int8 else []), a.force)
+                   + ([int8_search] if a.int8 else []), a.force)
     net, ck = load_checkpoint(a.checkpoint)
     over = {k: getattr(a, k) for k in ("instance_size", "scale_num", "window_influence", "scale_lr",
                                        "scale_step", "scale_penalty") if getattr(a, k) is not None}
@@ -103,10 +108,9 @@ def _export(a) -> int:
         e0 = (cache.crops.shape[1] - net.cfg.exemplar_size) // 2
         z = np.ascontiguousarray(cache.crops[ids[0]][e0:e0 + 127, e0:e0 + 127][None])
         feat = OnnxModel(pz, 1).run({"exemplar": z})[0]
-        q = quantize_search(px, Path(str(a.out) + "_int8_search.onnx"), calib, feat)
-        import shutil
-        shutil.copy(pz, Path(str(a.out) + "_int8_exemplar.onnx"))
-        print(f"wrote {q} ({q.stat().st_size / 1e6:.2f} MB)")
+        q = quantize_search(px, int8_search, calib, feat)
+        print(f"wrote {q} ({q.stat().st_size / 1e6:.2f} MB): the search network's int8 twin, run by "
+              f"precision='auto' where it is faster (the exemplar, run once per init, stays fp32)")
     return 0
 
 
@@ -178,7 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--out", required=True, help="path prefix")
     e.add_argument("--force", action="store_true", help="overwrite the shipped models in track3d/models")
     e.add_argument("--data-note", default=None, help="what the model was trained on (metadata)")
-    e.add_argument("--int8", metavar="CACHE", help="also write an int8 search graph calibrated on CACHE")
+    e.add_argument("--int8", metavar="CACHE",
+                   help="also write the search graph's int8 twin (<out>_search_int8.onnx), calibrated on CACHE")
     # bounds: a value the runtime cannot use must not be written into a model file
     unit = bounded(float, 0, high=1)
     for k, ty in (("instance-size", bounded(int, 1)), ("scale-num", bounded(int, 1)), ("window-influence", unit),
