@@ -333,7 +333,7 @@ def build_parser() -> ArgumentParser:
                     help="map: clouds from the stored depth maps; stereo: matched from the pair inside each "
                          "update, around the 2D box (track3d.stereo.StereoCloud), with the stereo loop options "
                          "and A3BoxNet model (default map)")
-    ap.add_argument("--stereo-follow", type=float, nargs="+", default=[1.5], metavar="K",
+    ap.add_argument("--stereo-follow", type=bounded(float, 0.0), nargs="+", default=[1.5], metavar="K",
                     help="with --depth stereo: StereoParams.follow_depth values, one row each (0: the full "
                          "disparity range every frame; default 1.5)")
     ap.add_argument("--stereo-max-match", type=bounded(int, 0), nargs="+", default=[StereoParams().max_match_px],

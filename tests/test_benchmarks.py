@@ -686,6 +686,7 @@ def _run_script(module, argv, capsys):
     ["--config", "kcf:a3boxnet@/nonexist.onnx"], ["--config", "kcf:baseline@a3boxnet.onnx"],
     ["--boxnet-model", "/nonexist.onnx"], ["--siamfc-edge-model", "/nonexist/x"], ["--siamfc-model", "/nonexist/x"],
     ["--depth", "stereo", "--int8"], ["--precision", "auto", "--torch"], ["--out-dir", "{file}"],
+    ["--depth", "stereo", "--stereo-follow", "-1"], ["--depth", "stereo", "--stereo-follow", "nan"],
 ])
 def test_bench_fps_refuses_a_bad_argument_in_one_line_before_any_work(argv, tmp_path, capsys, monkeypatch):
     """--frames 0 reported FPS over 0 frames (exit 0); --preload 0 and --config foo:bar failed
