@@ -17,6 +17,7 @@ import base64
 import binascii
 import contextlib
 import math
+import re
 
 import numpy as np
 
@@ -24,6 +25,7 @@ __all__ = ["to_plain", "from_plain", "damaged", "read_flag", "read_int", "read_f
            "read_kernel"]
 
 _ARRAY = "__ndarray__"
+_DTYPE = re.compile(r"[<>|=][biuf][1248]")
 
 
 def to_plain(x):
@@ -59,9 +61,11 @@ def from_plain(x):
 def _array_of(x: dict) -> np.ndarray:
     """One array record back; ValueError if it is not one `to_plain` wrote."""
     try:
+        # the form to_plain writes (a.dtype.str: '<f8', '|b1', ...), checked before numpy parses
+        # it: a damaged one such as ',' or 'i4,(' made np.dtype raise SyntaxError
+        if not (isinstance(x["dtype"], str) and _DTYPE.fullmatch(x["dtype"])):
+            raise ValueError(f"dtype {x['dtype']!r:.40} is not a number type")
         dtype = np.dtype(x["dtype"])
-        if dtype.kind not in "biuf" or dtype.fields is not None:   # what a tracker state holds
-            raise ValueError(f"dtype {x['dtype']!r} is not a number type")
         shape = x["shape"]
         if not isinstance(shape, list) or any(isinstance(v, bool) or not isinstance(v, int) or v < 0 for v in shape):
             raise ValueError(f"shape {shape!r:.40}")
