@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import math
 import os
 import shutil
 import sys
@@ -28,11 +29,12 @@ from track3d.dataset import GENERATE_RUN_FILE
 from . import __version__
 from .errors import SimError
 from .generators import GENERATORS
+from .motion import radius_range
 from .scenes import SCENES
-from .sequence import (SPLITS, USER, body_sources, fine_name, plan, resolve_pool, resolve_unseen, split_categories,
-                       write_sequence)
+from .sequence import (SAMPLED_VOLUME_RANGE, SPLITS, USER, body_sources, fine_name, plan, resolve_pool,
+                       resolve_unseen, split_categories, write_sequence)
 from .sensors import DEPTH_SENSORS, FALSE_ALARM_SENSORS, SENSORS_NEEDING_IMAGES
-from .shapes import FAMILIES, load_user_mesh
+from .shapes import FAMILIES, load_user_mesh, mean_box_volume, user_mesh_warnings
 from .textures import TEXTURES
 
 RUN_FILE = GENERATE_RUN_FILE   # stated once, beside the layout it belongs to (track3d.dataset)
@@ -63,13 +65,39 @@ def _mesh_files(folder: Path) -> list[Path]:
     return files
 
 
-def _user_mesh(path, size_m) -> dict:
-    """A validated user mesh: path (in memory only, for loading), file name, sha256, size."""
-    path = Path(path)
+def _round(x: float, up: bool) -> float:
+    """x to 3 significant digits, rounded inward so a bound the user copies is inside the range."""
+    e = 10.0 ** (math.floor(math.log10(x)) - 2)
+    return (math.ceil(x / e - 1e-9) if up else math.floor(x / e + 1e-9)) * e
+
+
+def _user_mesh(path, size_m, camera) -> dict:
+    """A validated user mesh: path (in memory only, for loading), file name, sha256, size, and the
+    warnings its run logs (`shapes.user_mesh_warnings`; never written). Refused when the body's
+    bounding radius (at its size, or at every sampled volume without one) is outside what the
+    scenes hold at this camera (`motion.radius_range`)."""
+    path = Path(path)  # as the user gave it: the messages name it so
     size = float(size_m) if size_m else None
-    load_user_mesh(path, size or 1.0)  # validates: raises SimError naming the file
+    shape = load_user_mesh(path, size or 1.0)  # validates: raises SimError naming the file
+    r_lo, r_hi = radius_range(camera.tan_half)
+    if size:
+        radii = (shape.radius, shape.radius)
+        how = f"at {size:g} m (its largest extent) has a bounding radius of {shape.radius:.3g} m"
+    else:
+        # scaled like sequence.make_shape: vertices * (volume / mean box volume) ** (1/3)
+        k = [(v / mean_box_volume(shape.vertices)) ** (1.0 / 3.0) for v in SAMPLED_VOLUME_RANGE]
+        radii = (shape.radius * k[0], shape.radius * k[1])
+        how = (f"scaled to the sampled box volumes ({SAMPLED_VOLUME_RANGE[0]:g}-{SAMPLED_VOLUME_RANGE[1]:g} m^3, "
+               f"no :SIZE) gets bounding radii of {radii[0]:.3g}-{radii[1]:.3g} m")
+    if radii[0] < r_lo or radii[1] > r_hi:
+        per_m = shape.radius / (size or 1.0)  # bounding radius per metre of largest extent
+        fov = [math.degrees(2 * math.atan(t)) for t in camera.tan_half]
+        raise SimError(f"user mesh {path} {how}, outside the {_round(r_lo, True):g}-{_round(r_hi, False):g} m "
+                       f"the scenes hold at this camera ({camera.width}x{camera.height}, {fov[0]:.3g} x {fov[1]:.3g} "
+                       f"deg: the body in view, its far side within 45 m): give it a size, --mesh {path}:SIZE "
+                       f"with SIZE in {_round(r_lo / per_m, True):g}-{_round(r_hi / per_m, False):g} m for this shape")
     return {"path": str(path.resolve()), "name": path.name, "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
-            "size_m": size}
+            "size_m": size, "warnings": user_mesh_warnings(shape, str(path))}
 
 
 def _names(value) -> list[str]:
@@ -140,12 +168,14 @@ def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
                        f"{', '.join(sorted(SENSORS_NEEDING_IMAGES & set(sensors)))} measure depth from them")
 
     meshes = []
-    for m in s.get("meshes") or []:
-        m = dict(m) if isinstance(m, dict) else {"path": str(m)}
-        meshes.append(_user_mesh(m["path"], m.get("size_m")))
     mesh_dir = s.pop("mesh_dir", None)
-    if mesh_dir is not None:
-        meshes += [_user_mesh(p, None) for p in _mesh_files(Path(mesh_dir))]
+    if s.get("meshes") or mesh_dir is not None:
+        cam = camera_of(s)
+        for m in s.get("meshes") or []:
+            m = dict(m) if isinstance(m, dict) else {"path": str(m)}
+            meshes.append(_user_mesh(m["path"], m.get("size_m"), cam))
+        if mesh_dir is not None:
+            meshes += [_user_mesh(p, None, cam) for p in _mesh_files(Path(mesh_dir))]
     s["meshes"] = meshes
     pool = resolve_pool(_names(s.get("shape_generators")))
     if pool is not None and meshes:
@@ -188,8 +218,11 @@ def _identity(settings: dict) -> dict:
     # the registry is part of the plan: a run resumed after a generator was added is refused
     # (an opt-in generator is part of it only in the runs that name it)
     pool = settings.get("shape_generators")
-    return {"generator_version": __version__,
-            "generators": body_sources(False, pool, settings.get("unseen_generators") or ()),
+    # a user-mesh run draws no generator: its bodies are the meshes (listed by name and hash), and
+    # a generator added later leaves its plan as it was
+    generators = {} if settings.get("meshes") else \
+        {"generators": body_sources(False, pool, settings.get("unseen_generators") or ())}
+    return {"generator_version": __version__, **generators,
             "meshes": _public_meshes(settings), **{k: settings[k] for k in keys},
             **({"shape_generators": list(pool)} if pool is not None else {}),
             **({"sun_phase": list(settings["sun_phase"])} if settings.get("sun_phase") is not None else {}),
@@ -428,6 +461,9 @@ def _generate(settings, out: Path, workers, overwrite, progress, log, ray, ray_m
     state = prepare_output(out, settings, overwrite)
     if settings["unseen_generators"]:
         log(f"test_unseen: {', '.join(settings['unseen_generators'])} ({settings['unseen_note']})")
+    for mesh in settings.get("meshes") or []:
+        for w in mesh.get("warnings") or ():
+            log(f"warning: {w}")
     if state == "complete":
         missing = [f"{s.split}/{s.name}" for s in specs if not (out / s.split / s.name).is_dir()]
         if not missing:

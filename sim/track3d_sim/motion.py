@@ -28,6 +28,35 @@ from track3d.frustum import Z_MAX as Z_FAR, Z_MIN as Z_NEAR  # stated once
 
 FPS = 10.0          # frames per second of the simulated cameras
 
+# Depth rules of the centre path (make_motion), named because `radius_range` derives the body
+# sizes the scenes can hold from the same numbers.
+DEPTH_MARGIN = 0.5  # m between the bounding sphere and the frustum's near / far limits
+FIT_HEIGHT = 0.75   # nearest base depth: the body spans at most this fraction of the image height
+CLOSE_FIT = 1.3     # ... or this much for a close-up
+MIN_SPAN = 0.06     # farthest base depth: the body's radius spans at least this fraction of the half-width
+MIN_DEPTH_RATIO = 1.2  # the base-depth range is at least this wide (farthest / nearest)
+
+
+def radius_range(tan_half: tuple[float, float]) -> tuple[float, float]:
+    """(lo, hi): the bounding radii (m, about the body origin) of the bodies the scenes can hold
+    for a camera with these (tan(ax/2), tan(ay/2)).
+
+    hi: the bounding sphere fits the image height at the farthest depth the path may reach
+    (Z_FAR - R - DEPTH_MARGIN), which also keeps the far side within Z_FAR - DEPTH_MARGIN. A larger
+    body never fits in the image (a round one fills it), and beyond R = (Z_FAR - Z_NEAR - 2
+    DEPTH_MARGIN - 1) / 2 = 21 m the depth range collapses to [zmin, zmin + 1] and the far side
+    passes Z_FAR (then the 16-bit depth maps' 65.5 m). Presets (45 deg, 4:3): 10.5 m; the
+    procedural bodies reach about 9.7 m.
+    lo: the farthest base depth still shows the body at the smallest planned size (its radius
+    MIN_SPAN of the half-width, as the smallest procedural bodies far away). A smaller body is held
+    near Z_NEAR + R + DEPTH_MARGIN and only shrinks in the image, to nothing at millimetre sizes.
+    Presets: 0.046 m."""
+    tx, ty = float(tan_half[0]), float(tan_half[1])
+    near = Z_NEAR + DEPTH_MARGIN
+    lo = MIN_DEPTH_RATIO * near * MIN_SPAN * tx / (1.0 - MIN_DEPTH_RATIO * MIN_SPAN * tx)
+    hi = (Z_FAR - DEPTH_MARGIN) * ty / (1.0 + ty)
+    return lo, hi
+
 
 def rotvec_to_matrix(rv: np.ndarray) -> np.ndarray:
     """Rodrigues: (..., 3) rotation vectors -> (..., 3, 3)."""
@@ -166,13 +195,13 @@ def make_motion(rng: np.random.Generator, n_frames: int, radius: float, tan_half
     speed = rng.lognormal(0.0, 0.35) * (2.5 if fast else 1.0)
     # frequencies in cycles per second; a few periods per 30 s sequence at normal speed
     fmin, fmax = 0.01 * speed, 0.06 * speed
-    zmin = Z_NEAR + radius + 0.5
-    zmax = max(Z_FAR - radius - 0.5, zmin + 1.0)
+    zmin = Z_NEAR + radius + DEPTH_MARGIN
+    zmax = max(Z_FAR - radius - DEPTH_MARGIN, zmin + 1.0)
     # base depth: log-uniform, the body spans a sensible part of the image on average
     # (mostly the body spans at most ~3/4 of the image height; 20% of sequences are close-ups)
     close = bool(rng.random() < 0.2)
-    zlo = min(max(zmin, radius / ((1.3 if close else 0.75) * tan_half[1])), zmax)
-    zhi = min(zmax, max(zlo * 1.2, radius / (0.06 * tan_half[0])))
+    zlo = min(max(zmin, radius / ((CLOSE_FIT if close else FIT_HEIGHT) * tan_half[1])), zmax)
+    zhi = min(zmax, max(zlo * MIN_DEPTH_RATIO, radius / (MIN_SPAN * tan_half[0])))
     z0 = math.exp(rng.uniform(math.log(zlo), math.log(zhi)))
     lz = math.log(z0) + _sines(rng, t, 3, 0.2 * speed ** 0.5, fmin, fmax)
     lz += rng.normal(0, 0.25) * (t / dur)  # approach / recede trend (scale change)

@@ -222,11 +222,16 @@ def _sun(rng: np.random.Generator, phase_range: tuple[float, float] | None = Non
     return {"direction": d.tolist(), "phase_deg": phase, "irradiance": E}
 
 
+# The box volumes (m^3) a sequence's body is drawn from (log-uniform), inside the paper's
+# VOLUME_RANGE; user meshes without a size are scaled to them too.
+SAMPLED_VOLUME_RANGE = (VOLUME_RANGE[0] * 1.25, VOLUME_RANGE[1] / 1.25)
+
+
 def make_shape(spec: SeqSpec, rng: np.random.Generator, subdivisions: int, user_mesh: dict | None) -> Shape:
     """The body of a sequence: from its generator, or (generator USER) the user mesh, whose
     params name the file by name and sha256 only (never a path of the machine)."""
-    lo, hi = VOLUME_RANGE
-    volume = math.exp(rng.uniform(math.log(lo * 1.25), math.log(hi / 1.25)))
+    lo, hi = SAMPLED_VOLUME_RANGE
+    volume = math.exp(rng.uniform(math.log(lo), math.log(hi)))
     if spec.generator == USER:
         if user_mesh is None:
             raise SimError(f"sequence {spec.split}/{spec.name} needs a user mesh but the settings hold none")
@@ -234,6 +239,9 @@ def make_shape(spec: SeqSpec, rng: np.random.Generator, subdivisions: int, user_
         shape.params.update(source=user_mesh["name"], sha256=user_mesh["sha256"])
         if not user_mesh.get("size_m"):
             shape.vertices = scale_to_volume(shape.vertices, volume)
+            # size_m keeps the meaning of --mesh FILE:SIZE_M, the largest extent: the volume
+            # rescale made it what it is, not the 1.0 the mesh was loaded at
+            shape.params["size_m"] = float(shape.extent.max())
             shape.params["target_volume_m3"] = volume
         return shape
     return make_body(spec.generator, rng, volume, subdivisions)

@@ -34,6 +34,9 @@ class Shape:
     faces: np.ndarray             # (F, 3) int32
     family: str
     params: dict = field(default_factory=dict)
+    # a closed, consistently wound surface (every procedural body; a user mesh when trimesh finds
+    # it watertight and consistently wound): only then is its volume integral an inertia tensor
+    closed: bool = True
 
     @property
     def radius(self) -> float:
@@ -49,7 +52,10 @@ class Shape:
 
     def inertia(self) -> np.ndarray | None:
         """(3, 3) inertia tensor about the centre of mass, body axes, unit density (kg m^2 per
-        kg/m^3); None when the mesh is not a closed outward solid (an open user mesh)."""
+        kg/m^3); None when the mesh is not a closed outward solid (an open or inconsistently wound
+        user mesh)."""
+        if not self.closed:  # through holes the signed tetrahedra sum to a number, not the body's
+            return None
         try:
             I = mesh_inertia(self.vertices, self.faces)[2]
         except SimError:
@@ -254,32 +260,88 @@ def procedural_shape(family: int, rng: np.random.Generator, volume: float, subdi
     return Shape(v, faces, FAMILIES[int(family)], params)
 
 
+def _mesh_formats() -> set[str]:
+    import trimesh
+    return {f.lower() for f in trimesh.available_formats()}
+
+
 def load_user_mesh(path: str | Path, size_m: float) -> Shape:
     """Load a user mesh (any format trimesh reads: OBJ, PLY, STL, GLB ...), centre it at its box
     centre and scale it so its largest extent is `size_m` metres. Raises SimError naming the
-    problem for a missing file, a file that is not a mesh, or a degenerate mesh."""
+    problem (and the file as `path` names it) for a missing file, a folder, an extension trimesh
+    does not read, a file that is not a mesh, a non-finite vertex, or a degenerate mesh.
+
+    A closed mesh wound inside out (negative signed volume, common in published models) has its
+    faces flipped (params winding_flipped); `user_mesh_warnings` says so and flags open meshes."""
     import trimesh
     path = Path(path)
+    if path.is_dir():
+        raise SimError(f"user mesh {path} is a folder, not a mesh file (--mesh-dir {path} uses every mesh file "
+                       f"in a folder)")
     if not path.is_file():
         raise SimError(f"user mesh {path} does not exist")
     if not (np.isfinite(size_m) and size_m > 0):
         raise SimError(f"user mesh size must be a positive number of metres, got {size_m}")
+    formats = _mesh_formats()
+    suffix = path.suffix.lower().lstrip(".")
+    if suffix not in formats:
+        # trimesh picks its reader by the extension; its own message names the absolute path
+        what = f"extension .{suffix} is not a mesh format trimesh reads" if suffix else "has no file extension"
+        raise SimError(f"user mesh {path} {what} (the reader is chosen by it: "
+                       f"{', '.join(sorted(formats & {'obj', 'ply', 'stl', 'glb', 'gltf', 'off'}))}, ...)")
     try:
+        # unprocessed first: trimesh's processing drops a NaN / inf vertex with its faces, which
+        # would punch a hole in the body without a word
+        raw = trimesh.load(str(path), force="mesh", process=False)
         m = trimesh.load(str(path), force="mesh", process=True)
     except Exception as e:  # trimesh raises many types for unreadable input
-        raise SimError(f"user mesh {path} could not be read as a mesh: {type(e).__name__}: {e}") from None
+        msg = str(e).replace(str(path.resolve()), str(path))
+        raise SimError(f"user mesh {path} could not be read as a mesh: {type(e).__name__}: {msg}") from None
     if not isinstance(m, trimesh.Trimesh) or len(getattr(m, "faces", [])) == 0:
         raise SimError(f"user mesh {path} is not a triangle mesh (no faces found)")
+    bad = int(np.count_nonzero(~np.all(np.isfinite(np.asarray(getattr(raw, "vertices", np.zeros((0, 3))),
+                                                              dtype=np.float64)), axis=1)))
     v = np.asarray(m.vertices, dtype=np.float64)
     f = np.asarray(m.faces, dtype=np.int32)
-    if not np.all(np.isfinite(v)):
-        raise SimError(f"user mesh {path} has non-finite vertex coordinates")
+    if bad or not np.all(np.isfinite(v)):
+        what = "1 vertex with a non-finite coordinate" if bad == 1 else \
+            f"{bad or 'some'} vertices with non-finite coordinates"
+        raise SimError(f"user mesh {path} has {what} (NaN or inf): the file is damaged; repair or re-export it")
     area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
     ext = v.max(0) - v.min(0)
     if len(f) < 4 or np.count_nonzero(area > 1e-12 * max(ext.max(), 1e-30) ** 2) < 4 \
             or np.any(ext <= 1e-9 * max(ext.max(), 1e-30)):
         raise SimError(f"user mesh {path} is degenerate (flat or without area: extents {ext.tolist()}, "
                        f"{len(f)} faces)")
+    watertight = bool(m.is_watertight)
+    closed = watertight and bool(m.is_winding_consistent)
+    params = {"source": str(path), "size_m": float(size_m), "watertight": watertight}
+    if watertight and not closed:
+        params["winding_consistent"] = False
+    if closed and float(m.volume) < 0:
+        # wound inward: seen from outside every face is a back face (never lit, no depth sensor
+        # return, a negative volume for the inertia); reversing each face's vertex order turns it out
+        f = np.ascontiguousarray(f[:, ::-1])
+        params["winding_flipped"] = True
+    if not watertight:  # edges used by one face only: the rims of the holes
+        params["open_edges"] = int(np.count_nonzero(np.unique(m.edges_sorted, axis=0, return_counts=True)[1] == 1))
     v = v - (v.max(0) + v.min(0)) / 2.0
     v = v * (size_m / ext.max())
-    return Shape(v, f, "user", {"source": str(path), "size_m": float(size_m), "watertight": bool(m.is_watertight)})
+    return Shape(v, f, "user", params, closed=closed)
+
+
+def user_mesh_warnings(shape: Shape, name: str) -> list[str]:
+    """One-line warnings (without the "warning: " prefix) about a loaded user mesh `name`."""
+    p = shape.params
+    out = []
+    if p.get("winding_flipped"):
+        out.append(f"user mesh {name} is wound inside out (its faces face inward: negative volume); its faces "
+                   f"were flipped (meta.json shape.winding_flipped)")
+    if not p.get("watertight", True):
+        out.append(f"user mesh {name} is not closed ({p.get('open_edges', 0)} open edges: holes, or a damaged or "
+                   f"truncated file): it spins with a random inertia tensor, not its own, and rays through a hole "
+                   f"see the inside (depth and images show the far wall there)")
+    elif p.get("winding_consistent") is False:
+        out.append(f"user mesh {name} is closed but not consistently wound: faces wound inward are never lit and "
+                   f"give depth sensors no return, and it spins with a random inertia tensor")
+    return out
