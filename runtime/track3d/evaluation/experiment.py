@@ -52,6 +52,12 @@ from .results import (INIT, SKIPPED, SequenceResult, config_differences, read_re
 __all__ = ["TrackerSpec", "Experiment", "run_sequence", "evaluate_2d", "cpu_name", "DEPTH_SOURCES", "labels_digest"]
 
 DEPTH_SOURCES = ("map", "stereo")   # where the point clouds come from (run_sequence's depth)
+# Reading results (Experiment._check_protocol): an init row's box is the ground truth's within
+# these (2D pixels, 3D metres: the files' 4 / 6 decimals and a script's rounding), and the frame a
+# restart follows has an overlap no larger than FAILED_OVERLAP (0 in memory; boxes that touch can
+# overlap by a rounding error once written).
+INIT_TOLERANCE = (0.05, 1e-3)
+FAILED_OVERLAP = 1e-3
 
 
 @dataclass
@@ -454,11 +460,14 @@ class Experiment:
         if not rec:
             return []
         had = rec.get("labels")
+        here = Path(self.dataset.root).resolve().name
+        if rec.get("dataset") and rec["dataset"] != here:
+            # two datasets may hold the same label files (the same scenes seen by other depth
+            # sensors): the digests match, the depth does not; the name is what tells them apart
+            raise ValueError(f"the results of {name} were made on another dataset, {rec['dataset']!r}, this is "
+                             f"{here!r}: pass the --data they were made on (the same dataset under another "
+                             f"folder name: set \"dataset\" in its run.json to {here!r})")
         if had is None:
-            here = Path(self.dataset.root).resolve().name
-            if rec.get("dataset") and rec["dataset"] != here:
-                return [f"{name} was made on a dataset named {rec['dataset']!r}, this is {here!r} "
-                        "(its record keeps no label digests to check)"]
             return []
         other = [s.name for s in self.sequences if s.name in had and had[s.name] != labels_digest(s)]
         if other:
@@ -494,25 +503,120 @@ class Experiment:
                 **({"stereo": asdict(self.stereo_params or StereoParams())} if self.depth == "stereo" else {})}
 
     # --- evaluation ----------------------------------------------------------------------------
-    def _read(self, name: str, seq: Sequence):
-        """The results of `name` on `seq`, cut to the first max_frames frames when that is set."""
+    def _read_rows(self, name: str, seq: Sequence) -> SequenceResult:
+        """The result files of `name` on `seq` as written, cut to the first max_frames frames when
+        that is set; refused when they hold more rows than the sequence has frames, or fewer than
+        are scored (unless the run record says the run was made over those fewer frames: --frames)."""
         res = read_result(self.folder(name, seq.name), seq.name)
         if len(res) > len(seq):
             raise ValueError(f"{name}/{seq.name}: {len(res)} result rows for a {len(seq)}-frame sequence")
+        need = self._frames(seq)
+        if len(res) < need:
+            rec = read_run_record(self.result_dir, self.split, name) or {}
+            if (rec.get("frames") or {}).get(seq.name) != len(res):   # not a recorded --frames run
+                raise ValueError(f"{name}/{seq.name}: {len(res)} result rows, the labels have {need} frames"
+                                 f"{' (--frames)' if self.max_frames is not None else ''}: every frame needs a "
+                                 "row (nan for no output); --frames N scores the first N frames of every run")
         return res if self.max_frames is None else res.head(self.max_frames)
+
+    def _run_3d(self, name: str) -> bool:
+        """Whether `name` is a 3D run: some sequence has a 3D box (decided per run: a sequence of a 3D
+        run without any 3D box has no output, it is not a 2D-only sequence)."""
+        return any(np.isfinite(self._read_rows(name, seq).box3d).any() for seq in self.sequences)
+
+    def _read(self, name: str, seq: Sequence, run_3d: bool | None = None) -> SequenceResult:
+        """The results of `name` on `seq` (_read_rows), checked against the protocol (_check_protocol);
+        frames marked skipped have no output (their boxes read as nan: IoU 0, no centre error)."""
+        res = self._read_rows(name, seq)
+        if run_3d is None:
+            run_3d = self._run_3d(name)
+        self._check_protocol(name, seq, res, read_run_record(self.result_dir, self.split, name), run_3d)
+        skipped = res.status == SKIPPED
+        if skipped.any():
+            for k in ("box2d", "box2d_raw", "box3d"):
+                a = getattr(res, k).copy()
+                a[skipped] = np.nan
+                setattr(res, k, a)
+        return res
+
+    def _check_protocol(self, name: str, seq: Sequence, res: SequenceResult, rec: dict | None,
+                        run_3d: bool) -> None:
+        """ValueError naming the sequence and frame when the status file breaks the protocol (results
+        of another tracker than run_sequence's, written by hand or by a script): the first frame with the
+        target in view is not 'init'; an 'init' with no target, or whose box is not the ground truth's
+        (within INIT_TOLERANCE); an 'init' after the first in a run whose record says one pass; under
+        restarts, an 'init' that does not follow a failure (the last frame with output before it has a
+        present target and overlap <= FAILED_OVERLAP) and, when the record says restart_skip, is not
+        the first frame with the target in view restart_skip frames after it."""
+        st = res.status
+        n = len(res)
+        where = f"{name}/{seq.name}"
+        ok = np.array([_gt_ok(seq, i) for i in range(n)], dtype=bool)
+        inits = np.nonzero(st == INIT)[0]
+        for j in inits:
+            if not ok[j]:
+                raise ValueError(f"{where}: frame {j + 1} is 'init' on a frame without the target to start from")
+            b3 = res.box3d[j]
+            if not (np.allclose(res.box2d[j], seq.gt2d[j], rtol=0, atol=INIT_TOLERANCE[0])
+                    and (np.isnan(b3).all() or np.allclose(b3, seq.gt3d[j], rtol=0, atol=INIT_TOLERANCE[1]))):
+                raise ValueError(f"{where}: frame {j + 1} is 'init' but its box is not the ground truth's "
+                                 f"(an initialisation reports the ground truth; within {INIT_TOLERANCE[0]:g} px, "
+                                 f"{INIT_TOLERANCE[1]:g} m)")
+        if not ok.any():
+            return
+        first = int(np.argmax(ok))
+        if st[first] != INIT:
+            raise ValueError(f"{where}: frame {first + 1}, the first with the target in view, is {st[first]!r}, "
+                             "not 'init' (the tracker starts there from the ground truth; frames before it "
+                             "are 'skipped')")
+        rec = rec or {}
+        later = inits[inits > first]
+        if not len(later):
+            return
+        if rec.get("restart") is False:
+            raise ValueError(f"{where}: frame {later[0] + 1} is 'init' but the run record says one pass "
+                             "(restart false): no re-initialisation")
+        skip = rec.get("restart_skip")
+        for j in later:
+            k = j - 1
+            while k > first and st[k] == SKIPPED:
+                k -= 1
+            if run_3d:
+                overlap = iou_3d(res.box3d[k], seq.gt3d[k])
+            elif rec.get("restart") and not rec.get("restart_overlap"):   # the old 2D-only rule: any frame
+                overlap = 0.0
+            else:
+                overlap = iou_2d(res.box2d[k], seq.gt2d[k])
+            if st[k] == INIT or seq.absent[k] or overlap > FAILED_OVERLAP:
+                raise ValueError(f"{where}: frame {j + 1} is 'init' but does not follow a failure (frame {k + 1}, "
+                                 f"the last with output before it, has {'no target' if seq.absent[k] else f'overlap {overlap:.3f}'}"
+                                 f"{', is an init' if st[k] == INIT else ''}): a restart follows a frame of "
+                                 "zero overlap")
+            if skip is not None:
+                due = k + int(skip)
+                expect = due + int(np.argmax(ok[due:])) if due < n and ok[due:].any() else None
+                if expect != j:
+                    raise ValueError(f"{where}: frame {j + 1} is 'init', but after the failure on frame {k + 1} "
+                                     f"the restart (restart_skip {skip}) is due on frame "
+                                     f"{'-' if expect is None else expect + 1}")
 
     def score(self, name: str, raw: bool = False) -> list[SequenceScore]:
         """Scores of one tracker's results against the ground truth, per sequence.
 
         raw: score the 2D tracker's own boxes (before fusion) instead of the reported ones.
-        Results without any 3D box (a 2D-only run) are scored in 2D only."""
+        A run without any 3D box in any sequence (a 2D-only run) is scored in 2D only; in a run
+        with 3D boxes a sequence without any scores IoU 0 on each of its scored frames."""
         scores = []
+        run_3d = self._run_3d(name)
         for seq in self.sequences:
-            res = self._read(name, seq)
+            res = self._read(name, seq, run_3d)
+            if raw and "raw_001" in res.missing:
+                raise ValueError(f"{name}/{seq.name}: no {seq.name}_raw_001.txt: the 2D tracker's own boxes "
+                                 "were not written, there is nothing to score")
             n = len(res)
             scored = ~seq.absent[:n] & (res.status != INIT)
             timed = res.tracked
-            pred3d = None if np.isnan(res.box3d).all() else res.box3d
+            pred3d = res.box3d if run_3d else None
             scores.append(score_sequence(
                 seq.name, res.box2d_raw if raw else res.box2d, pred3d, seq.gt2d[:n], seq.gt3d[:n], scored,
                 res.restarts,
@@ -525,11 +629,12 @@ class Experiment:
         from the ground truth's cut_by_image.label and the depth sensor's range; a sequence whose
         sensor has no range is never past it)."""
         total = {k: ConditionScore() for k in CONDITIONS}
+        run_3d = self._run_3d(name)
         for seq in self.sequences:
-            res = self._read(name, seq)
+            res = self._read(name, seq, run_3d)
             n = len(res)
             scored = ~seq.absent[:n] & (res.status != INIT)
-            pred3d = None if np.isnan(res.box3d).all() else res.box3d
+            pred3d = res.box3d if run_3d else None
             cond = frame_conditions(seq.gt3d[:n], seq.cut[:n], seq.depth_range_m)
             got = score_conditions(res.box2d, pred3d, seq.gt2d[:n], seq.gt3d[:n], scored, cond)
             total = {k: total[k] + got[k] for k in CONDITIONS}
@@ -628,8 +733,8 @@ class Experiment:
                              f"are scored{how}: scored on the frames they hold; pass --frames to score the same "
                              f"frames of every run")
         report["warnings"] = label_warnings + _comparison_warnings(names, runs, lengths) + empty + short
-        known = [(r["restart"], r["restart_skip"]) for r in runs.values() if r]
-        if known and len(set(known)) == 1 and len(known) == len(names):
+        known = [(r.get("restart"), r.get("restart_skip")) for r in runs.values() if r]
+        if known and len(set(known)) == 1 and len(known) == len(names) and None not in known[0]:
             report["restart"], report["restart_skip"] = known[0]
         else:   # unknown (results without a record) or mixed: say so, never a made-up value
             report["restart"] = report["restart_skip"] = None

@@ -233,6 +233,9 @@ class OverallScore:
 def average_scores(scores: list[SequenceScore]) -> OverallScore:
     """Mean over the sequences that have scored frames; restarts and times are summed."""
     used = [s for s in scores if s.frames > 0]
+    if len({s.two_d_only for s in used}) > 1:   # their curves differ: a mean of such would be no one's
+        raise ValueError("cannot average 2D-only and 3D sequence scores together: a sequence of a 3D run "
+                         "without a 3D box is scored with nan boxes (IoU 0), not 2D only")
     values = {}
     for k in SCALARS:
         v = np.array([getattr(s, k) for s in used], dtype=np.float64)

@@ -9,7 +9,8 @@ One folder per tracker and sequence: ``<result_dir>/<split>/<tracker>/<sequence>
     <seq>_time.txt      tracker seconds per frame (I/O excluded; init frames: the init call)
     <seq>_e2e_time.txt  seconds per frame end to end (reading image + depth, back-projection, tracker)
     <seq>_stages.txt    per-stage milliseconds, a commented header names the columns
-    (the status file is written last: a sequence without it is unfinished)
+    (the status file is written last: a sequence without it is unfinished; `track3d eval` needs
+    only _001 and _status, the others are optional: read_result)
 
 One file per tracker folder, ``<result_dir>/<split>/<tracker>/run.json``, records the run
 that made the results (:func:`write_run_record`): tracker and estimator names and options,
@@ -29,9 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..frames import MAX_COORD_M
 from ..tracker import STAGES, STATUSES
 
-__all__ = ["SequenceResult", "INIT", "SKIPPED", "RUN_FILE", "config_differences", "write_result", "read_result", "result_folder",
+__all__ = ["SequenceResult", "INIT", "SKIPPED", "RUN_FILE", "OPTIONAL_FILES", "MAX_BOX_VALUE", "config_differences", "write_result", "read_result", "result_folder",
            "write_run_record", "read_run_record", "run_config_key"]
 
 RUN_FILE = "run.json"
@@ -53,6 +55,7 @@ class SequenceResult:
     seconds: np.ndarray
     e2e_seconds: np.ndarray
     stage_ms: np.ndarray
+    missing: tuple = ()     # the optional files (OPTIONAL_FILES) read_result did not find
 
     def __len__(self) -> int:
         return len(self.status)
@@ -61,7 +64,7 @@ class SequenceResult:
         """The first n frames (all of them when there are fewer)."""
         n = max(int(n), 0)
         return SequenceResult(self.name, self.box2d[:n], self.box2d_raw[:n], self.box3d[:n], self.status[:n],
-                              self.seconds[:n], self.e2e_seconds[:n], self.stage_ms[:n])
+                              self.seconds[:n], self.e2e_seconds[:n], self.stage_ms[:n], self.missing)
 
     @property
     def restarts(self) -> int:
@@ -98,7 +101,24 @@ def write_result(folder: str | Path, r: SequenceResult) -> None:
     (folder / f"{n}_status.txt").write_text("".join(f"{s}\n" for s in r.status))
 
 
-def _load(path: Path, cols: int) -> np.ndarray:
+# The largest magnitude a box value may have (metres for 3D boxes, pixels for 2D ones): the
+# coordinate bound of the rest of the package (track3d.frames.MAX_COORD_M); beyond it a value is a
+# writer's bug, not a box (1e200 had been scored as no output and printed as a 200-digit error).
+MAX_BOX_VALUE = MAX_COORD_M
+
+
+def _data_lines(path: Path) -> list[int]:
+    """The 1-based line numbers of the rows numpy reads (not blank, not # comments)."""
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError):
+        return []
+    return [k + 1 for k, line in enumerate(text.splitlines()) if line.strip() and not line.lstrip().startswith("#")]
+
+
+def _load(path: Path, cols: int, bound: float | None = None) -> np.ndarray:
+    """The rows of a result file, (T, cols) float64. nan is "no output"; inf, and with `bound` a
+    magnitude beyond it, is refused naming the file and line."""
     if not path.is_file():
         raise FileNotFoundError(f"missing result file {path}")
     try:
@@ -111,11 +131,29 @@ def _load(path: Path, cols: int) -> np.ndarray:
         return a.reshape(0, cols)
     if a.shape[1] != cols:
         raise ValueError(f"{path} has {a.shape[1]} columns, expected {cols}")
+    with np.errstate(invalid="ignore"):
+        bad = np.isinf(a) if bound is None else (np.isinf(a) | (np.abs(a) > bound))
+    if bad.any():
+        row = int(np.nonzero(bad.any(axis=1))[0][0])
+        lines = _data_lines(path)
+        line = lines[row] if row < len(lines) else row + 1
+        value = a[row][bad[row]][0]
+        what = "not finite" if np.isinf(value) else f"beyond {bound:g} in magnitude"
+        raise ValueError(f"malformed result file {path} line {line}: {value:g} is {what} "
+                         "(nan is the one way to write no output)")
     return a
 
 
+OPTIONAL_FILES = ("raw_001", "3d_001", "time", "e2e_time", "stages")   # read_result's: missing -> nan
+
+
 def read_result(folder: str | Path, name: str | None = None) -> SequenceResult:
-    """Read the files written by :func:`write_result` (the sequence name defaults to the folder's)."""
+    """Read the files written by :func:`write_result` (the sequence name defaults to the folder's).
+
+    Needed: ``<seq>_001.txt`` and ``<seq>_status.txt``. Optional (OPTIONAL_FILES; its name in
+    SequenceResult.missing when absent): ``_3d_001`` (absent: no 3D box, nan rows), ``_raw_001``
+    (absent: nan rows; score(raw=True) refuses such results), ``_time``, ``_e2e_time``, ``_stages``
+    (absent: nan, so the speed and latency values are nan)."""
     folder = Path(folder)
     n = name or folder.name
     status_file = folder / f"{n}_status.txt"
@@ -130,15 +168,26 @@ def read_result(folder: str | Path, name: str | None = None) -> SequenceResult:
         raise ValueError(f"malformed result file {status_file}: unknown status {unknown[0]!r:.40} "
                          f"(one of {', '.join(STATUS_WORDS)} a line)")
     status = np.array(words, dtype=object)
+    t = len(status)
+    missing = tuple(k for k in OPTIONAL_FILES if not (folder / f"{n}_{k}.txt").is_file())
+
+    def opt(kind: str, cols: int, bound: float | None = None) -> np.ndarray:
+        if kind in missing:
+            return np.full((t, cols), np.nan)
+        return _load(folder / f"{n}_{kind}.txt", cols, bound)
+
     r = SequenceResult(
-        n, _load(folder / f"{n}_001.txt", 4), _load(folder / f"{n}_raw_001.txt", 4),
-        _load(folder / f"{n}_3d_001.txt", 6), status,
-        _load(folder / f"{n}_time.txt", 1)[:, 0], _load(folder / f"{n}_e2e_time.txt", 1)[:, 0],
-        _load(folder / f"{n}_stages.txt", len(STAGES)))
+        n, _load(folder / f"{n}_001.txt", 4, MAX_BOX_VALUE), opt("raw_001", 4, MAX_BOX_VALUE),
+        opt("3d_001", 6, MAX_BOX_VALUE), status,
+        opt("time", 1)[:, 0], opt("e2e_time", 1)[:, 0], opt("stages", len(STAGES)), missing)
     lengths = {len(r.box2d), len(r.box2d_raw), len(r.box3d), len(r.status), len(r.seconds),
                len(r.e2e_seconds), len(r.stage_ms)}
     if len(lengths) != 1:
-        raise ValueError(f"result files of {n} in {folder} differ in length")
+        got = ", ".join(f"{k} {len(v)}" for k, v in (("_001", r.box2d), ("_raw_001", r.box2d_raw),
+                                                      ("_3d_001", r.box3d), ("_status", r.status),
+                                                      ("_time", r.seconds), ("_e2e_time", r.e2e_seconds),
+                                                      ("_stages", r.stage_ms)))
+        raise ValueError(f"result files of {n} in {folder} differ in length (rows: {got})")
     return r
 
 
@@ -157,7 +206,35 @@ def read_run_record(result_dir: str | Path, split: str, tracker: str) -> dict | 
         raise ValueError(f"{p} is not a readable run record ({e})") from None
     if not isinstance(rec, dict):
         raise ValueError(f"{p} is not a run record (not a JSON object)")
+    bad = _record_problem(rec)
+    if bad:
+        raise ValueError(f"{p} is not a run record: {bad} (a field left out is read as unknown)")
     return rec
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _record_problem(rec: dict) -> str | None:
+    """Why a field `track3d eval` reads is of the wrong type, or None. Missing fields are
+    unknown (records written before a field existed lack it)."""
+    checks = (("restart", lambda v: isinstance(v, bool), "true or false"),
+              ("restart_skip", lambda v: _is_int(v) and v >= 1, "an integer >= 1"),
+              ("max_frames", lambda v: v is None or (_is_int(v) and v >= 1), "null or an integer >= 1"),
+              ("dataset", lambda v: v is None or isinstance(v, str), "a name"),
+              ("split", lambda v: v is None or isinstance(v, str), "a name"),
+              ("frames", lambda v: isinstance(v, dict) and all(_is_int(x) and x >= 0 for x in v.values()),
+               "an object of sequence: frame count"),
+              ("labels", lambda v: isinstance(v, dict) and all(isinstance(x, str) for x in v.values()),
+               "an object of sequence: label digest"),
+              ("init_3d", lambda v: isinstance(v, bool), "true or false"),
+              ("restart_overlap", lambda v: v is None or isinstance(v, str), "a word"),
+              ("track3d", lambda v: isinstance(v, dict), "an object"))
+    for key, ok, want in checks:
+        if key in rec and not ok(rec[key]):
+            return f"{key!r} is {json.dumps(rec[key])[:40]}, expected {want}"
+    return None
 
 
 def run_config_key(rec: dict) -> dict:

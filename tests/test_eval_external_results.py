@@ -1,0 +1,244 @@
+"""Result folders written by another tracker than ours (a researcher's own scripts): what `track3d
+eval` scores, and what it refuses in one line instead of a silently wrong number."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from track3d.cli import main
+from track3d.dataset import Dataset
+from track3d.evaluation import Experiment, TrackerSpec
+from track3d.evaluation.experiment import labels_digest
+from track3d.evaluation.results import SequenceResult, read_result, write_result
+from track3d.synthetic import make_synthetic_dataset
+
+
+@pytest.fixture(scope="module")
+def synth(tmp_path_factory):
+    return make_synthetic_dataset(tmp_path_factory.mktemp("ext") / "ds", {"s0001": 8, "s0002": 6},
+                                  absent={"s0001": [3]})
+
+
+def _seqs(synth):
+    return Dataset(synth).sequences("test")
+
+
+def _exact(synth, res, name="mine", record=None, change=None):
+    """Exact ground-truth results, init on the first frame, the rest 'tracking'; change(seq, r)
+    damages them; record: the run.json to write (None: none)."""
+    for seq in _seqs(synth):
+        n = len(seq)
+        st = np.array(["init"] + ["tracking"] * (n - 1), dtype=object)
+        r = SequenceResult(seq.name, seq.gt2d.copy(), seq.gt2d.copy(), seq.gt3d.copy(), st,
+                           np.full(n, 0.001), np.full(n, 0.002), np.tile([0.2, 0.2, 0.4, 0.2, 1.0], (n, 1)))
+        if change is not None:
+            change(seq, r)
+        write_result(Path(res) / "test" / name / seq.name, r)
+    if record is not None:
+        (Path(res) / "test" / name / "run.json").write_text(json.dumps(record))
+
+
+def _report(synth, tmp_path, name="mine", **kw):
+    return Experiment(synth, "test", tmp_path / "res", tmp_path / "rep", **kw).report([name], plots=False)
+
+
+def _eval_cli(synth, tmp_path, capsys):
+    capsys.readouterr()
+    rc = main(["eval", "--data", str(synth), "--results", str(tmp_path / "res"), "--out", str(tmp_path / "rep"),
+               "--no-plots"])
+    return rc, capsys.readouterr().err
+
+
+# 1 ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("empty", ["s0001", "s0002"])
+def test_a_sequence_without_3d_in_a_3d_run_scores_zero(synth, tmp_path, empty):
+    """A sequence whose 3D file is all nan had been scored 2D only and left out of AO_3d (1.000
+    instead of 0.5 here), or crashed the mean (KeyError 'success_bev')."""
+    def no3d(seq, r):
+        if seq.name == empty:
+            r.box3d[:] = np.nan
+    _exact(synth, tmp_path / "res", change=no3d)
+    rep = _report(synth, tmp_path)
+    ov = rep["trackers"]["mine"]["overall"]
+    assert ov["sequences"] == 2 and ov["ao_3d"] == pytest.approx(0.5)   # hand: (1 + 0) / 2
+    assert rep["trackers"]["mine"]["sequences"][empty]["ao_3d"] == 0.0
+    cond = rep["trackers"]["mine"]["conditions"]
+    frames = {"s0001": 6, "s0002": 5}   # scored: 8 - init - 1 absent; 6 - init
+    pooled = sum(c["ao_3d"] * c["frames"] for c in cond.values() if c["frames"])
+    assert pooled == pytest.approx(frames["s0001" if empty == "s0002" else "s0002"])
+
+
+def test_a_run_without_any_3d_box_is_2d_only(synth, tmp_path):
+    def no3d(seq, r):
+        r.box3d[:] = np.nan
+    _exact(synth, tmp_path / "res", change=no3d)
+    ov = _report(synth, tmp_path)["trackers"]["mine"]["overall"]
+    assert "ao_3d" not in ov and ov["ao_2d"] == pytest.approx(1.0)
+
+
+# 2 ---------------------------------------------------------------------------------------------
+def test_results_of_a_dataset_of_another_name_are_refused(synth, tmp_path):
+    """The labels' digests matched (identical ground truth files), so a run made on another
+    dataset was scored as this one's, without a word."""
+    labels = {s.name: labels_digest(s) for s in _seqs(synth)}
+    _exact(synth, tmp_path / "res", record={"dataset": "engine-ideal", "labels": labels})
+    with pytest.raises(ValueError, match=r"'engine-ideal'.*'ds'"):
+        _report(synth, tmp_path)
+    _exact(synth, tmp_path / "res", record={"dataset": "ds", "labels": labels})
+    assert _report(synth, tmp_path)["trackers"]["mine"]["overall"]["ao_3d"] == pytest.approx(1.0)
+
+
+# 3 ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("row", ["inf,0,10,1,1,1", "1e200,0,10,1,1,1", "0,0,-inf,1,1,1"])
+def test_inf_or_absurd_values_are_refused_naming_file_and_line(synth, tmp_path, capsys, row):
+    _exact(synth, tmp_path / "res")
+    f = tmp_path / "res" / "test" / "mine" / "s0002" / "s0002_3d_001.txt"
+    lines = f.read_text().splitlines()
+    lines[3] = row
+    f.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match=r"s0002_3d_001.txt line 4"):
+        read_result(f.parent)
+    rc, err = _eval_cli(synth, tmp_path, capsys)
+    assert rc == 2 and "Traceback" not in err and "RuntimeWarning" not in err
+    assert err.startswith("track3d eval: error:") and "s0002_3d_001.txt line 4" in err and len(err.splitlines()) == 1
+
+
+def test_nan_stays_no_output(synth, tmp_path):
+    def half(seq, r):
+        if seq.name == "s0002":
+            r.box3d[1::2] = np.nan
+    _exact(synth, tmp_path / "res", change=half)
+    seq2 = _report(synth, tmp_path)["trackers"]["mine"]["sequences"]["s0002"]
+    assert seq2["ao_3d"] == pytest.approx(2 / 5)   # scored 1..5; nan on 1, 3, 5
+
+
+# 4 ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("keep", [0, 3])
+def test_results_shorter_than_the_labels_are_refused(synth, tmp_path, capsys, keep):
+    """Empty files left the sequence out of the mean; short ones were scored on what they hold."""
+    def cut(seq, r):
+        if seq.name == "s0002":
+            for k in ("box2d", "box2d_raw", "box3d", "status", "seconds", "e2e_seconds", "stage_ms"):
+                setattr(r, k, getattr(r, k)[:keep])
+    _exact(synth, tmp_path / "res", change=cut)
+    with pytest.raises(ValueError, match=rf"mine/s0002: {keep} result rows, the labels have 6 frames"):
+        _report(synth, tmp_path)
+    rc, err = _eval_cli(synth, tmp_path, capsys)
+    assert rc == 2 and len(err.splitlines()) == 1
+    # with --frames the first frames are scored
+    if keep:
+        assert _report(synth, tmp_path, max_frames=keep)["trackers"]["mine"]["overall"]["ao_3d"] == 1.0
+
+
+# 5 ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("rec", [{"restart": False}, {}, {"restart": True, "restart_skip": 1}])
+def test_a_run_record_missing_fields_reads_them_as_unknown(synth, tmp_path, rec):
+    _exact(synth, tmp_path / "res", record=rec)
+    assert _report(synth, tmp_path)["trackers"]["mine"]["overall"]["ao_3d"] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("rec", [{"frames": 3}, {"labels": "abc"}, {"restart": "no"}, {"restart_skip": 0},
+                                 {"dataset": 5}, {"max_frames": "x"}, {"frames": {"s0001": "a"}}])
+def test_a_run_record_of_wrong_types_is_one_line(synth, tmp_path, capsys, rec):
+    _exact(synth, tmp_path / "res", record=rec)
+    rc, err = _eval_cli(synth, tmp_path, capsys)
+    assert rc == 2 and "Traceback" not in err and len(err.splitlines()) == 1 and "run.json" in err
+
+
+# 6 ---------------------------------------------------------------------------------------------
+def test_an_init_after_the_first_frame_of_a_one_pass_run_is_refused(synth, tmp_path):
+    def reinit(seq, r):
+        if seq.name == "s0002":
+            r.status[3] = "init"
+            r.box3d[3, 0] += 50.0
+    _exact(synth, tmp_path / "res", record={"restart": False}, change=reinit)
+    with pytest.raises(ValueError, match=r"mine/s0002.* frame 4"):
+        _report(synth, tmp_path)
+
+
+def test_an_init_not_after_a_failure_or_off_the_ground_truth_is_refused(synth, tmp_path):
+    # garbage at frame 4 (index 3) marked init: neither after a failure nor the ground truth
+    def garbage(seq, r):
+        if seq.name == "s0002":
+            r.status[3] = "init"
+            r.box3d[3, 0] += 50.0
+    _exact(synth, tmp_path / "res", record={"restart": True, "restart_skip": 1}, change=garbage)
+    with pytest.raises(ValueError, match=r"mine/s0002.* frame 4"):
+        _report(synth, tmp_path)
+
+    # the ground truth marked init with no failure before it: a free restart
+    def free(seq, r):
+        if seq.name == "s0002":
+            r.status[3] = "init"
+    _exact(synth, tmp_path / "res", record={"restart": True, "restart_skip": 1}, change=free)
+    with pytest.raises(ValueError, match=r"mine/s0002.* frame 4"):
+        _report(synth, tmp_path)
+
+    # after a failure at index 2 (box far away), one skipped frame (skip 2), init on the ground truth: fine
+    def restart(seq, r):
+        if seq.name == "s0002":
+            r.box3d[2, 0] += 50.0
+            r.box2d[2, 0] += 500.0
+            r.status[3] = "skipped"
+            r.box2d[3] = r.box3d[3] = np.nan
+            r.status[4] = "init"
+    _exact(synth, tmp_path / "res", record={"restart": True, "restart_skip": 2}, change=restart)
+    s2 = _report(synth, tmp_path)["trackers"]["mine"]["sequences"]["s0002"]
+    assert s2["restarts"] == 1 and s2["frames"] == 4 and s2["ao_3d"] == pytest.approx(2 / 4)   # 1, 2 (0), 3 (0), 5
+    # the same under skip 1: the init should have come one frame earlier
+    _exact(synth, tmp_path / "res", record={"restart": True, "restart_skip": 1}, change=restart)
+    with pytest.raises(ValueError, match=r"mine/s0002.* frame 5"):
+        _report(synth, tmp_path)
+
+
+def test_skipped_frames_score_zero_whatever_box_they_hold(synth, tmp_path):
+    def skip(seq, r):
+        if seq.name == "s0002":
+            r.status[2] = "skipped"     # its box stays the ground truth
+    _exact(synth, tmp_path / "res", record={"restart": False}, change=skip)
+    s2 = _report(synth, tmp_path)["trackers"]["mine"]["sequences"]["s0002"]
+    assert s2["frames"] == 5 and s2["ao_3d"] == pytest.approx(4 / 5)
+
+
+# 7 ---------------------------------------------------------------------------------------------
+def test_a_status_file_without_init_is_refused(synth, tmp_path):
+    """No init: lost scoring was skipped ('-') and the first frame scored."""
+    def noinit(seq, r):
+        if seq.name == "s0001":
+            r.status[0] = "tracking"
+    _exact(synth, tmp_path / "res", change=noinit)
+    with pytest.raises(ValueError, match=r"mine/s0001.* frame 1.*init"):
+        _report(synth, tmp_path)
+
+
+# 8 ---------------------------------------------------------------------------------------------
+def test_only_boxes_and_status_are_needed(synth, tmp_path, capsys):
+    _exact(synth, tmp_path / "res")
+    for seq in _seqs(synth):
+        for k in ("raw_001", "time", "e2e_time", "stages"):
+            (tmp_path / "res" / "test" / "mine" / seq.name / f"{seq.name}_{k}.txt").unlink()
+    rep = _report(synth, tmp_path)
+    ov = rep["trackers"]["mine"]["overall"]
+    assert ov["ao_3d"] == pytest.approx(1.0) and np.isnan(ov["fps"]) and np.isnan(ov["ms_p99"])
+    exp = Experiment(synth, "test", tmp_path / "res", tmp_path / "rep")
+    with pytest.raises(ValueError, match="raw_001"):
+        exp.score("mine", raw=True)
+    rc, err = _eval_cli(synth, tmp_path, capsys)
+    assert rc == 0
+    # a 2D-only run: no 3D file at all
+    for seq in _seqs(synth):
+        (tmp_path / "res" / "test" / "mine" / seq.name / f"{seq.name}_3d_001.txt").unlink()
+    ov = _report(synth, tmp_path)["trackers"]["mine"]["overall"]
+    assert "ao_3d" not in ov and ov["ao_2d"] == pytest.approx(1.0)
+
+
+def test_the_shipped_loop_still_scores(synth, tmp_path):
+    """Our own results (restarts and one pass) pass every check above."""
+    for restart in (True, False):
+        exp = Experiment(synth, "test", tmp_path / f"res{restart}", tmp_path / "rep", restart=restart)
+        exp.run(TrackerSpec("kcf", "baseline"), quiet=True)
+        rep = exp.report(["kcf+baseline"], plots=False)
+        assert rep["trackers"]["kcf+baseline"]["overall"]["frames"] == 11
