@@ -523,6 +523,51 @@ def test_a_binarys_other_body_at_the_same_range_does_not_take_the_track(sensor, 
     assert out.status == "tracking"
 
 
+def _ellipsoid(cam, centre, R, axes):
+    """Image, cloud and 2D box of a lit ellipsoid (semi-axes `axes`, turned by R) at `centre`."""
+    A = R @ np.diag(1.0 / np.asarray(axes, float) ** 2) @ R.T
+    d = cam.pixel_rays().reshape(-1, 3)
+    oc = -np.asarray(centre, float)
+    a, b, c = np.einsum("ij,jk,ik->i", d, A, d), 2.0 * d @ (A @ oc), oc @ A @ oc - 1.0
+    disc = b * b - 4.0 * a * c
+    hit = disc >= 0
+    t = np.where(hit, (-b - np.sqrt(np.where(hit, disc, 0.0))) / (2.0 * a), 0.0)
+    n = (d * t[:, None] - centre) @ A
+    n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-12
+    H, W = cam.height, cam.width
+    hit, t = hit.reshape(H, W), t.reshape(H, W)
+    shade = np.clip(n.reshape(H, W, 3) @ np.array([-0.5, -0.5, -0.7]), 0.05, 1.0)
+    u, v = np.arange(W)[None, :], np.arange(H)[:, None]
+    val = (255 * shade * (0.75 + 0.25 * (((u // 6) + (v // 6)) % 2))).astype(np.uint8)
+    image = np.zeros((H, W, 3), np.uint8)
+    image[hit] = val[hit][:, None]
+    vv, uu = np.nonzero(hit)
+    box = np.array([uu.min(), vv.min(), uu.max() + 1 - uu.min(), vv.max() + 1 - vv.min()], np.float64)
+    return image, cam.backproject_depth(np.where(hit, t, 0.0).astype(np.float32)), box
+
+
+@pytest.mark.parametrize("sensor", ["ideal", "tof", "stereo"])
+def test_an_elongated_target_found_turned_is_still_the_target(sensor):
+    """A 3:1 body seen end-on, then found by the whole view's search turned side-on: its outline is
+    three times the box's x-y size, and the size gate had refused the target itself (a review).
+    The box's depth extent holds the long axis."""
+    from track3d.camera import Camera
+
+    cam = Camera.from_fov(320, 240, 45.0)
+    axes, c0 = (0.5, 0.5, 1.5), np.array([-1.0, 0.0, 15.0])
+    c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+    end_on = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    side_on = end_on @ np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+    t = Track3D.from_default(cam, threads=1, depth_sensor=sensor)
+    image, cloud, box = _ellipsoid(cam, c0, end_on, axes)
+    t.init(image, box, -1, points=cloud)
+    for _ in range(3):
+        out = t.update(image, cloud)
+    _, cloud2, box2 = _ellipsoid(cam, c0 + [2.5, 1.0, 0.0], side_on, axes)
+    found = t._find_body(cloud2, out.box2d)[0]
+    assert found is not None and np.abs(found - box2).max() <= 2.0, (t.box3d, found, box2)
+
+
 @pytest.mark.parametrize("scale", [1000.0, 100.0, 0.001])
 def test_a_cloud_in_other_units_is_named_at_init(scale):
     """A cloud in millimetres (or cm, km) had left the first 3D box NaN and every frame

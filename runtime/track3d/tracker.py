@@ -57,7 +57,7 @@ from .frames import (MAX_COORD_M, check_category, check_cloud, check_image, chec
 from .frustum import Z_MAX, Z_MIN, extract_frustum_bounds
 from .boxes import clip_box2d, fit_measured_faces, hold_cut_extent
 from .sensor_options import (BODY_VIEWS, CONTAIN_SLACK_PX, DARK_SIDE, DROP_STRAY, EDGE_PAD, FIND_DEPTH_SLACK,
-                             FIND_MIN_RETURNS, FIND_SIZE_RATIO,
+                             FIND_DEPTH_SIZE, FIND_MIN_RETURNS, FIND_SIZE_RATIO,
                              FRONT_FILTER,
                              FRONT_QUANTILE, FRUSTUM_MARGIN, FUSION_COVER, OUTLINE_SHARE, OUTLINE_SHARE_PHASE,
                              SECTION_LIMBS, SILHOUETTE, check_depth_sensor, sensor_options)
@@ -1150,17 +1150,21 @@ class Track3D:
         return body, cut
 
     def _like_in_size(self, body: np.ndarray, z: float) -> bool:
-        """Whether the body found at `body` [x, y, w, h] (median depth z m) is the size of the
-        last 3D box across the line of sight, within FIND_SIZE_RATIO (a smaller one cut by the
-        image border passes: part of the target coming back into view)."""
+        """Whether the body found at `body` [x, y, w, h] (median depth z m) can be the body of the
+        last 3D box: its larger side at that depth at most FIND_SIZE_RATIO times the box's larger
+        side across the line of sight, or FIND_DEPTH_SIZE times its depth extent (a 3:1 body lost
+        end-on and found side-on shows the long axis the box held along the line of sight; that
+        extent is the box network's guess, so it gets a tighter factor), and at least the box's
+        middle extent over FIND_SIZE_RATIO (a smaller one cut by the image border passes: part of
+        the target coming back into view)."""
         b = self.box3d
-        found = np.sqrt(max(float(body[2]) * z / self.camera.fx, 0.0) * max(float(body[3]) * z / self.camera.fy, 0.0))
-        last = np.sqrt(max(float(b[3]), 0.0) * max(float(b[4]), 0.0))
-        if not (np.isfinite(found) and np.isfinite(last)) or last <= 0.0:
+        found = max(float(body[2]) * z / self.camera.fx, float(body[3]) * z / self.camera.fy)
+        ext = np.asarray(b[3:6], dtype=np.float64)
+        if not (np.isfinite(found) and np.all(np.isfinite(ext))) or max(ext) <= 0.0:
             return True
-        if found > FIND_SIZE_RATIO * last:
+        if found > FIND_SIZE_RATIO * max(ext[0], ext[1]) and found > FIND_DEPTH_SIZE * ext[2]:
             return False
-        return found * FIND_SIZE_RATIO >= last or any(self._border_sides(body))
+        return found * FIND_SIZE_RATIO >= float(np.median(ext)) or any(self._border_sides(body))
 
     def _inside(self, box: np.ndarray) -> bool:
         """Whether `box` lies inside the image, off its border by more than half a pixel."""
