@@ -554,8 +554,14 @@ def test_the_api_refuses_a_thread_count_no_machine_runs():
     from track3d.tracker import Track3D
 
     cam = Camera.from_fov(320, 240, 45.0)
-    for bad in (0, max_threads() + 1, 99999, 2.5):
+    for bad in (0, max_threads() + 1, 99999, 2.5, float("inf"), float("nan"), "2"):
         with pytest.raises(ValueError, match="threads must be an integer from 1 to"):
             Track3D.from_default(cam, threads=bad)
     with pytest.raises(ValueError, match="threads must be"):
         OnnxModel(shipped_model("a3boxnet.onnx"), threads=99999)
+    # every way a count reaches an engine (a review: open_session took 0 and 2.7 for OpenVINO)
+    from track3d.onnxmodel import open_session
+    for engine in ("onnxruntime", "openvino"):
+        for bad in (0, 2.7, float("inf")):
+            with pytest.raises(ValueError, match="threads must be"):
+                open_session(shipped_model("a3boxnet.onnx"), bad, engine)

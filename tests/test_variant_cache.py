@@ -206,3 +206,36 @@ def test_forced_isa_flags_are_reported(monkeypatch):
     assert forced_isa_flags() == {"avx2", "vnni", "int8_dot"} == isa_flags()
     monkeypatch.setenv("TRACK3D_ISA_FLAGS", "")
     assert forced_isa_flags() == frozenset() == isa_flags()   # forced to none: fp32 only
+
+
+def test_threads_writing_the_cache_never_leave_it_torn(tmp_path, monkeypatch):
+    """A review: threads of one process wrote through one temp file named by the pid, and a torn
+    file was renamed into place (reads found variants.json unreadable 185-276 times a run)."""
+    import threading
+
+    from track3d import variant_choice as vc
+
+    monkeypatch.setenv("TRACK3D_CACHE_DIR", str(tmp_path))
+    problems, stop = [], threading.Event()
+
+    def write(k):
+        for i in range(40):
+            vc._cache_write(f"key{k}-{i}", {"x": "y" * 2000})
+
+    def read():
+        while not stop.is_set():
+            problem = vc._cache_load()[1]
+            if problem:
+                problems.append(problem)
+
+    readers = [threading.Thread(target=read) for _ in range(2)]
+    writers = [threading.Thread(target=write, args=(k,)) for k in range(6)]
+    for t in readers + writers:
+        t.start()
+    for t in writers:
+        t.join()
+    stop.set()
+    for t in readers:
+        t.join()
+    assert not problems, problems[:3]
+    assert not list(tmp_path.glob("*.tmp"))

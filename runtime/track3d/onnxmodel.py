@@ -206,7 +206,7 @@ def open_session(path: str | Path, threads: int = 1, engine: str = "onnxruntime"
         raise ValueError(f"engine must be one of {', '.join(ENGINES)} or auto, got {engine!r}")
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {', '.join(PRECISIONS)} or auto, got {precision!r}")
-    return (_OrtSession if engine == "onnxruntime" else _OvSession)(Path(path), int(threads), precision)
+    return (_OrtSession if engine == "onnxruntime" else _OvSession)(Path(path), check_threads(threads), precision)
 
 
 class OnnxModel:

@@ -26,7 +26,7 @@ def check_threads(threads) -> int:
     """`threads` as an int in 1 .. max_threads(); ValueError (one line) otherwise."""
     try:
         n = int(threads)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):   # inf: OverflowError
         n = None
     if n is None or n != threads or not 1 <= n <= max_threads():
         raise ValueError(f"threads must be {threads_rule()}, got {threads!r}")

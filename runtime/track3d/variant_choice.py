@@ -23,11 +23,13 @@ Given a choice, the outputs are deterministic: the choice only selects the sessi
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
 import os
 import sys
+import tempfile
 import time
 from importlib.util import find_spec
 from pathlib import Path
@@ -277,9 +279,17 @@ def _cache_write(key: str, entry: dict) -> None:
         f = d / CACHE_FILE
         data, _ = _cache_load()  # an unusable file was warned of on reading: replaced whole
         data[key] = entry
-        tmp = f.with_name(f"{CACHE_FILE}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(data, indent=1, sort_keys=True))
-        tmp.replace(f)
+        # a file of its own per write (threads of one process shared the pid's name, and a torn
+        # file was renamed into place), then one atomic rename
+        fd, tmp = tempfile.mkstemp(dir=d, prefix=f"{CACHE_FILE}.", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "w") as out:
+                out.write(json.dumps(data, indent=1, sort_keys=True))
+            os.replace(tmp, f)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
     except OSError:
         pass  # a read-only home: measure again next time, never fail a load
 

@@ -13,6 +13,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+from track3d.threads import check_threads
 
 __all__ = ["TrainConfig", "train", "load_checkpoint", "plot_history"]
 
@@ -249,7 +250,7 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
     if cfg.iou_weight > 0 and cfg.size_norm == "paper":
         # the paper's labels are scaled by max(size), its decoding by L: the label's box cannot be decoded
         raise ValueError("iou_weight needs a box coding whose labels decode as its outputs do: not 'paper'")
-    torch.set_num_threads(int(cfg.threads))
+    torch.set_num_threads(check_threads(cfg.threads))
     out = Path(cfg.out)
     cache = PointCache.concat(cfg.train_cache)   # first: a wrong cache leaves no empty run folder behind
     out.mkdir(parents=True, exist_ok=True)

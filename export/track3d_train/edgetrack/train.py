@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from track3d.threads import check_threads
 
 from ..checkpoint import random_state, restore_random_state, save_checkpoint
 from ..interrupt import StopOnSignal
@@ -165,7 +166,7 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
     border (`data.cut_at_border`; validation pairs the same). Returns a summary dict."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    torch.set_num_threads(int(threads))
+    torch.set_num_threads(check_threads(threads))
     torch.manual_seed(seed)
     ck_path, log_path = out / "ckpt.pt", out / "log.jsonl"
     ck = torch.load(str(ck_path), map_location="cpu", weights_only=False) if resume and ck_path.is_file() else None

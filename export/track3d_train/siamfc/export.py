@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn as nn
+from track3d.threads import check_threads
 
 from ..onnx_meta import attach_metadata
 from .model import SiamFC, SiamFCConfig, xcorr_matmul
@@ -160,7 +161,7 @@ def time_backbone(net: SiamFC, px: str | Path, scales: int, size: int, threads: 
     from track3d.onnxmodel import OnnxModel
 
     cfg = net.cfg
-    torch.set_num_threads(threads)
+    torch.set_num_threads(check_threads(threads))
     x = torch.randint(0, 256, (scales, size, size, 3), dtype=torch.uint8)
     net = net.eval()
     with torch.no_grad():

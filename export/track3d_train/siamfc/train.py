@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from track3d.threads import check_threads
 
 from ..checkpoint import random_state, restore_random_state, save_checkpoint
 from ..interrupt import StopOnSignal
@@ -60,7 +61,7 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
     """Train (or resume) into out_dir: ckpt.pt (latest), log.jsonl, loss.png. Returns a summary."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    torch.set_num_threads(int(threads))
+    torch.set_num_threads(check_threads(threads))
     torch.manual_seed(seed)
     ck_path, log_path = out / "ckpt.pt", out / "log.jsonl"
     net = SiamFC(cfg)
