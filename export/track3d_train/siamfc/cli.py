@@ -109,8 +109,10 @@ def _export(a) -> int:
         z = np.ascontiguousarray(cache.crops[ids[0]][e0:e0 + 127, e0:e0 + 127][None])
         feat = OnnxModel(pz, 1).run({"exemplar": z})[0]
         q = quantize_search(px, int8_search, calib, feat)
-        print(f"wrote {q} ({q.stat().st_size / 1e6:.2f} MB): the search network's int8 twin, run by "
-              f"precision='auto' where it is faster (the exemplar, run once per init, stays fp32)")
+        print(f"wrote {q} ({q.stat().st_size / 1e6:.2f} MB): the search network's int8 twin. "
+              f"precision='int8' needs the exemplar's twin too, and precision='auto' runs a twin only "
+              f"with an accuracy verdict: `track3d-train quantize` makes both twins, "
+              f"`benchmarks/bench_precision.py --write-verdicts` the verdicts")
     return 0
 
 
@@ -183,7 +185,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--force", action="store_true", help="overwrite the shipped models in track3d/models")
     e.add_argument("--data-note", default=None, help="what the model was trained on (metadata)")
     e.add_argument("--int8", metavar="CACHE",
-                   help="also write the search graph's int8 twin (<out>_search_int8.onnx), calibrated on CACHE")
+                   help="also write the search graph's int8 twin (<out>_search_int8.onnx), calibrated on CACHE "
+                        "(the exemplar's twin and the accuracy verdict auto needs: track3d-train quantize, "
+                        "benchmarks/bench_precision.py --write-verdicts)")
     # bounds: a value the runtime cannot use must not be written into a model file
     unit = bounded(float, 0, high=1)
     for k, ty in (("instance-size", bounded(int, 1)), ("scale-num", bounded(int, 1)), ("window-influence", unit),
