@@ -11,12 +11,12 @@ import pytest
 pytest.importorskip("embreex")
 trimesh = pytest.importorskip("trimesh")
 
-from track3d.dataset import DATASET_JSON, Dataset  # noqa: E402
+from track3d.dataset import DATASET_JSON, GENERATE_RUN_FILE, Dataset  # noqa: E402
 
 from track3d_sim import SimError  # noqa: E402
 from track3d_sim.cli import main  # noqa: E402
 from track3d_sim.generate import camera_of, generate, make_settings  # noqa: E402
-from track3d_sim.motion import radius_range  # noqa: E402
+from track3d_sim.motion import DEPTH_RADIUS_MAX, radius_range  # noqa: E402
 from track3d_sim.shapes import load_user_mesh  # noqa: E402
 
 
@@ -113,16 +113,17 @@ def test_body_size_outside_the_scenes_is_refused(tmp_path, capsys, size):
     assert not (tmp_path / "o").exists()
 
 
-def test_volume_scaled_needle_outside_the_scenes_is_refused(tmp_path, capsys):
+def test_volume_scaled_needle_past_the_view_warns(tmp_path, capsys):
+    """A needle scaled to the sampled volumes reaches a bounding radius of 14.6 m: within the
+    depth the scenes hold (DEPTH_RADIUS_MAX), past what the view holds whole: a warning."""
     d = tmp_path / "meshes"
     d.mkdir()
     _ball(d / "ball.obj")
-    trimesh.creation.box(extents=(40.0, 1.0, 1.0)).export(d / "needle.ply")
+    trimesh.creation.box(extents=(400.0, 1.0, 1.0)).export(d / "needle.ply")
     assert main(["generate", "--preset", "tiny", "--test", "1", "--train", "0", "--frames", "3", "--quiet",
-                 "--mesh-dir", str(d), "--out", str(tmp_path / "o")]) == 2
-    err = _one_error(capsys)
-    assert "needle.ply" in err and "--mesh" in err and ":SIZE" in err
-    assert not (tmp_path / "o").exists()
+                 "--mesh-dir", str(d), "--out", str(tmp_path / "o")]) == 0
+    warn = _warnings(capsys)
+    assert any("needle.ply" in w and "fills this camera's view" in w for w in warn), warn
 
 
 @pytest.mark.parametrize("end", ["lo", "hi"])
@@ -141,9 +142,35 @@ def test_bodies_at_the_size_bounds_are_in_view_and_within_45_m(tmp_path, end):
     assert min(pixels) >= 100, pixels  # about the smallest procedural bodies' far end, not a speck
     for i in range(3):
         assert seq.points(i)[:, 2].max() <= 45.0
-    for bad in (lo * 0.99, hi * 1.01):
+    for bad in (lo * 0.99, DEPTH_RADIUS_MAX * 1.01):
         with pytest.raises(SimError, match="SIZE"):
             make_settings("small", meshes=[{"path": str(mesh), "size_m": 2 * bad}], **kw)
+    # past the view but within the depth: held, with a warning (a narrow camera's procedural
+    # bodies are that large too)
+    s = make_settings("small", meshes=[{"path": str(mesh), "size_m": 2 * hi * 1.01}], **kw)
+    assert any("fills this camera's view" in w for w in s["meshes"][0]["warnings"])
+
+
+def test_a_volume_scaled_mesh_is_held_at_a_narrow_camera_as_procedural_bodies_are(tmp_path):
+    """A review: at 30 degrees a mesh without :SIZE was refused (radii 2.1-8.4 m against 7.4 m)
+    where procedural bodies of the same volumes (up to 9.7 m) are generated."""
+    mesh = _ball(tmp_path / "ball.obj")
+    s = make_settings("tiny", meshes=[{"path": str(mesh)}], fov_x_deg=30.0, width=640, height=480)
+    assert s["meshes"][0]["name"] == "ball.obj"
+
+
+def test_a_user_mesh_run_written_before_resumes(tmp_path, capsys):
+    """Its run file still lists the procedural registry (dropped from a user-mesh run's identity
+    since): the same run, resumed, not refused."""
+    mesh = _ball(tmp_path / "ball.obj")
+    out = tmp_path / "o"
+    assert _gen(f"{mesh}:6", out) == 0
+    run = out / GENERATE_RUN_FILE
+    old = json.loads(run.read_text())
+    old["generators"] = ["aggregate", "contact_binary"]
+    run.write_text(json.dumps(old))
+    (out / DATASET_JSON).unlink()
+    assert _gen(f"{mesh}:6", out) == 0
 
 
 def test_volume_scaled_mesh_records_its_size(tmp_path):

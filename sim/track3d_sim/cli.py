@@ -112,8 +112,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--mesh", action="append", type=_mesh, default=[], metavar="PATH[:SIZE_M]",
                    help="use a user mesh (OBJ/PLY/STL...) as the shape of the sequences (repeat to cycle "
                         "through several); SIZE_M = largest extent in metres (default: the sampled box volume; "
-                        "the file's own units are ignored); a size the scenes cannot hold (about 0.1-20 m for a "
-                        "round body at the small preset's camera) is refused with the range for that shape")
+                        "the file's own units are ignored); a size the scenes cannot hold (about 0.1-42 m for a "
+                        "round body; past ~21 m it fills the view: a warning) is refused with the range for "
+                        "that shape")
     g.add_argument("--mesh-dir", dest="mesh_dir", metavar="DIR",
                    help="use every mesh file of DIR that trimesh reads (cycled over the sequences, in name order) "
                         "as the bodies, scaled to the sampled box volume (default: procedural generators)")

@@ -29,7 +29,7 @@ from track3d.dataset import GENERATE_RUN_FILE
 from . import __version__
 from .errors import SimError
 from .generators import GENERATORS
-from .motion import radius_range
+from .motion import DEPTH_RADIUS_MAX, radius_range
 from .scenes import SCENES
 from .sequence import (SAMPLED_VOLUME_RANGE, SPLITS, USER, body_sources, fine_name, plan, resolve_pool,
                        resolve_unseen, split_categories, write_sequence)
@@ -89,15 +89,23 @@ def _user_mesh(path, size_m, camera) -> dict:
         radii = (shape.radius * k[0], shape.radius * k[1])
         how = (f"scaled to the sampled box volumes ({SAMPLED_VOLUME_RANGE[0]:g}-{SAMPLED_VOLUME_RANGE[1]:g} m^3, "
                f"no :SIZE) gets bounding radii of {radii[0]:.3g}-{radii[1]:.3g} m")
-    if radii[0] < r_lo or radii[1] > r_hi:
-        per_m = shape.radius / (size or 1.0)  # bounding radius per metre of largest extent
-        fov = [math.degrees(2 * math.atan(t)) for t in camera.tan_half]
-        raise SimError(f"user mesh {path} {how}, outside the {_round(r_lo, True):g}-{_round(r_hi, False):g} m "
+    per_m = shape.radius / (size or 1.0)  # bounding radius per metre of largest extent
+    fov = [math.degrees(2 * math.atan(t)) for t in camera.tan_half]
+    if radii[0] < r_lo or radii[1] > DEPTH_RADIUS_MAX:
+        raise SimError(f"user mesh {path} {how}, outside the {_round(r_lo, True):g}-{_round(DEPTH_RADIUS_MAX, False):g} m "
                        f"the scenes hold at this camera ({camera.width}x{camera.height}, {fov[0]:.3g} x {fov[1]:.3g} "
                        f"deg: the body in view, its far side within 45 m): give it a size, --mesh {path}:SIZE "
-                       f"with SIZE in {_round(r_lo / per_m, True):g}-{_round(r_hi / per_m, False):g} m for this shape")
+                       f"with SIZE in {_round(r_lo / per_m, True):g}-{_round(DEPTH_RADIUS_MAX / per_m, False):g} m "
+                       f"for this shape")
+    warnings = user_mesh_warnings(shape, str(path))
+    if radii[1] > r_hi:
+        # as large as the largest procedural bodies at a narrow camera: held, but no longer whole in view
+        warnings.append(f"{path}: a bounding radius of up to {radii[1]:.3g} m fills this camera's view "
+                        f"(above {r_hi:.3g} m at {fov[0]:.3g} x {fov[1]:.3g} deg): the body is cut by the image "
+                        f"border in most frames; --mesh {path}:SIZE with SIZE below "
+                        f"{_round(r_hi / per_m, False):g} m keeps it whole")
     return {"path": str(path.resolve()), "name": path.name, "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
-            "size_m": size, "warnings": user_mesh_warnings(shape, str(path))}
+            "size_m": size, "warnings": warnings}
 
 
 def _names(value) -> list[str]:
@@ -312,6 +320,10 @@ def prepare_output(out: Path, settings: dict, overwrite: bool = False) -> str:
             old = json.loads(run.read_text())
         except json.JSONDecodeError:
             raise SimError(f"{run} is corrupt; delete {out} or pass --overwrite") from None
+        if isinstance(old, dict) and settings.get("meshes") and "generators" not in ident:
+            # a user-mesh run written before its identity left out the procedural registry
+            # (it draws no generator): the same run, resumable
+            old = {k: v for k, v in old.items() if k != "generators"}
         if old != ident:
             diff = sorted(k for k in set(old) | set(ident) if old.get(k) != ident.get(k))
             raise SimError(f"output folder {out} holds a run with different settings ({', '.join(diff)}); "

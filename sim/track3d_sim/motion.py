@@ -31,6 +31,10 @@ FPS = 10.0          # frames per second of the simulated cameras
 # Depth rules of the centre path (make_motion), named because `radius_range` derives the body
 # sizes the scenes can hold from the same numbers.
 DEPTH_MARGIN = 0.5  # m between the bounding sphere and the frustum's near / far limits
+# Past this bounding radius the depth range collapses to [zmin, zmin + 1] and the far side passes
+# Z_FAR, then the 16-bit depth maps' 65.5 m (a user mesh of 300 m had crashed the depth writer):
+# the largest body a scene holds at all (radius_range's hi is the largest one whole in the view)
+DEPTH_RADIUS_MAX = (Z_FAR - Z_NEAR - 2.0 * DEPTH_MARGIN - 1.0) / 2.0
 FIT_HEIGHT = 0.75   # nearest base depth: the body spans at most this fraction of the image height
 CLOSE_FIT = 1.3     # ... or this much for a close-up
 MIN_SPAN = 0.06     # farthest base depth: the body's radius spans at least this fraction of the half-width
