@@ -242,3 +242,21 @@ def test_the_shipped_loop_still_scores(synth, tmp_path):
         exp.run(TrackerSpec("kcf", "baseline"), quiet=True)
         rep = exp.report(["kcf+baseline"], plots=False)
         assert rep["trackers"]["kcf+baseline"]["overall"]["frames"] == 11
+
+
+@pytest.mark.parametrize("text,needle", [("init\ntracking lost\ntracking\n", "line 2 holds 2 words"),
+                                         ("init\n\ntracking\n", "line 2 holds no status")])
+def test_a_status_file_is_one_status_a_line(tmp_path, text, needle):
+    """The statuses were read with split() over the whole file: "tracking lost" on one line was
+    two frames and every later status one frame late; a blank line in the middle gave a
+    misleading "differ in length"."""
+    from track3d.evaluation.results import read_result
+
+    d = tmp_path / "0001"
+    d.mkdir()
+    (d / "0001_001.txt").write_text("1,1,2,2\n" * 3)
+    (d / "0001_status.txt").write_text(text)
+    with pytest.raises(ValueError, match=needle):
+        read_result(d)
+    (d / "0001_status.txt").write_text("init\r\ntracking\r\nlost\r\n\n")   # CRLF, a blank line at the end: fine
+    assert list(read_result(d).status) == ["init", "tracking", "lost"]

@@ -160,9 +160,18 @@ def read_result(folder: str | Path, name: str | None = None) -> SequenceResult:
     if not status_file.is_file():
         raise FileNotFoundError(f"no results for sequence {n} in {folder}")
     try:
-        words = status_file.read_text().split()
+        lines = status_file.read_text().splitlines()
     except UnicodeDecodeError:
         raise ValueError(f"malformed result file {status_file}: not text") from None
+    while lines and not lines[-1].strip():
+        lines.pop()
+    # one word a line, each line a frame: split() on the whole file had read "tracking lost" on
+    # one line as two frames, every later status one frame late
+    words = [line.strip() for line in lines]
+    for k, w in enumerate(words):
+        if not w or len(w.split()) != 1:
+            raise ValueError(f"malformed result file {status_file}: line {k + 1} holds "
+                             f"{'no status' if not w else f'{len(w.split())} words'} (one status a line)")
     unknown = sorted(set(words) - set(STATUS_WORDS))
     if unknown:   # a misspelt word would be scored as a tracked frame, or a loss missed
         raise ValueError(f"malformed result file {status_file}: unknown status {unknown[0]!r:.40} "
