@@ -262,3 +262,17 @@ def test_score_conditions_hand_case():
     assert set(two_d) == {"frames", "share", "ao_2d"} and two_d["ao_2d"] == pytest.approx(1 / 3)
     with pytest.raises(ValueError):
         score_conditions(pred2d, pred3d, gt2d, gt3d, scored, cond[:3])
+
+
+def test_a_2d_only_and_a_3d_sequence_are_not_averaged_together():
+    """Their curves differ (a 2D-only score has no 3D curves): a KeyError ('success_bev') when the
+    2D-only one came first. A sequence of a 3D run without a 3D box is scored with nan boxes."""
+    b2 = np.array([[3, 4, 5, 6]] * 2, float)
+    b3 = np.array([[0, 0, 10, 2, 2, 2]] * 2, float)
+    two_d = score_sequence("2d", b2, None, b2, b3, np.ones(2, bool))
+    three_d = score_sequence("3d", b2, b3, b2, b3, np.ones(2, bool))
+    with pytest.raises(ValueError, match="2D-only and 3D"):
+        average_scores([two_d, three_d])
+    none = score_sequence("none", b2, np.full((2, 6), np.nan), b2, b3, np.ones(2, bool))
+    ov = average_scores([none, three_d])          # a 3D run's sequence without a box: IoU 0 there
+    assert ov.values["ao_3d"] == pytest.approx(0.5) and ov.sequences == 2
