@@ -106,6 +106,22 @@ def test_inf_or_absurd_values_are_refused_naming_file_and_line(synth, tmp_path, 
     assert err.startswith("track3d eval: error:") and "s0002_3d_001.txt line 4" in err and len(err.splitlines()) == 1
 
 
+def test_a_2d_box_far_off_the_image_is_a_box_not_a_malformed_file(synth, tmp_path):
+    """A review: `track3d track` writes a drifting 2D tracker's box 2e5 px off the image, and the
+    1e5 bound (metres, for 3D boxes) had made the whole run unscoreable; it scores IoU 0 there.
+    1e200 px is still refused (its squared centre error overflows)."""
+    _exact(synth, tmp_path / "res")
+    f = tmp_path / "res" / "test" / "mine" / "s0002" / "s0002_001.txt"
+    lines = f.read_text().splitlines()
+    lines[3] = "200160,10,20,20"
+    f.write_text("\n".join(lines) + "\n")
+    assert read_result(f.parent).box2d[3, 0] == 200160.0
+    lines[3] = "1e200,10,20,20"
+    f.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match=r"s0002_001.txt line 4"):
+        read_result(f.parent)
+
+
 def test_nan_stays_no_output(synth, tmp_path):
     def half(seq, r):
         if seq.name == "s0002":

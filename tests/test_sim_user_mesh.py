@@ -220,3 +220,15 @@ def test_closed_but_inconsistently_wound_mesh_warns_and_gets_a_random_inertia(tm
     assert "winding_flipped" not in shape.params and shape.inertia() is None
     warn = user_mesh_warnings(shape, "patchy.obj")
     assert len(warn) == 1 and "not consistently wound" in warn[0]
+
+
+def test_a_mesh_is_held_at_a_wide_camera_as_procedural_bodies_are(tmp_path):
+    """A review: at 160-170 degrees the view's lower bound reaches 1-7 m and a mesh of a
+    procedural body's size was refused; it is held, with a warning when small in the view."""
+    mesh = _ball(tmp_path / "ball.obj")
+    for fov, size in ((170.0, None), (160.0, 2.0)):
+        m = {"path": str(mesh), **({"size_m": size} if size else {})}
+        s = make_settings("tiny", meshes=[m], fov_x_deg=fov)
+        assert s["meshes"][0]["name"] == "ball.obj"
+    with pytest.raises(SimError, match="SIZE"):
+        make_settings("tiny", meshes=[{"path": str(mesh), "size_m": 0.5}], fov_x_deg=170.0)

@@ -71,6 +71,11 @@ def _round(x: float, up: bool) -> float:
     return (math.ceil(x / e - 1e-9) if up else math.floor(x / e + 1e-9)) * e
 
 
+# A bounding radius this small or more is held at any camera (the smallest procedural bodies are
+# 1.5 m); below it, and below the view's lower bound (motion.radius_range), a body is refused
+SMALL_RADIUS_OK = 1.0
+
+
 def _user_mesh(path, size_m, camera) -> dict:
     """A validated user mesh: path (in memory only, for loading), file name, sha256, size, and the
     warnings its run logs (`shapes.user_mesh_warnings`; never written). Refused when the body's
@@ -91,13 +96,22 @@ def _user_mesh(path, size_m, camera) -> dict:
                f"no :SIZE) gets bounding radii of {radii[0]:.3g}-{radii[1]:.3g} m")
     per_m = shape.radius / (size or 1.0)  # bounding radius per metre of largest extent
     fov = [math.degrees(2 * math.atan(t)) for t in camera.tan_half]
-    if radii[0] < r_lo or radii[1] > DEPTH_RADIUS_MAX:
+    # below the view's lower bound a body is small in the image; refused only below it AND below
+    # SMALL_RADIUS_OK: the lower bound grows without limit as the field of view nears 180 degrees
+    # (7 m at 170), where procedural bodies from 1.5 m are made (a review)
+    r_min = min(r_lo, SMALL_RADIUS_OK)
+    if radii[0] < r_min or radii[1] > DEPTH_RADIUS_MAX:
+        r_lo = r_min
         raise SimError(f"user mesh {path} {how}, outside the {_round(r_lo, True):g}-{_round(DEPTH_RADIUS_MAX, False):g} m "
                        f"the scenes hold at this camera ({camera.width}x{camera.height}, {fov[0]:.3g} x {fov[1]:.3g} "
                        f"deg: the body in view, its far side within 45 m): give it a size, --mesh {path}:SIZE "
                        f"with SIZE in {_round(r_lo / per_m, True):g}-{_round(DEPTH_RADIUS_MAX / per_m, False):g} m "
                        f"for this shape")
     warnings = user_mesh_warnings(shape, str(path))
+    if radii[0] < r_lo:
+        warnings.append(f"{path}: a bounding radius of {radii[0]:.3g} m is small in this camera's view (below "
+                        f"{r_lo:.3g} m at {fov[0]:.3g} x {fov[1]:.3g} deg): a few pixels when far; --mesh "
+                        f"{path}:SIZE with SIZE above {_round(r_lo / per_m, True):g} m shows it larger")
     if radii[1] > r_hi:
         # as large as the largest procedural bodies at a narrow camera: held, but no longer whole in view
         warnings.append(f"{path}: a bounding radius of up to {radii[1]:.3g} m fills this camera's view "

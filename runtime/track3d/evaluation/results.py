@@ -33,7 +33,7 @@ import numpy as np
 from ..frames import MAX_COORD_M
 from ..tracker import STAGES, STATUSES
 
-__all__ = ["SequenceResult", "INIT", "SKIPPED", "RUN_FILE", "OPTIONAL_FILES", "MAX_BOX_VALUE", "config_differences", "write_result", "read_result", "result_folder",
+__all__ = ["SequenceResult", "INIT", "SKIPPED", "RUN_FILE", "OPTIONAL_FILES", "MAX_BOX_VALUE", "MAX_PIXEL_VALUE", "config_differences", "write_result", "read_result", "result_folder",
            "write_run_record", "read_run_record", "run_config_key"]
 
 RUN_FILE = "run.json"
@@ -101,10 +101,14 @@ def write_result(folder: str | Path, r: SequenceResult) -> None:
     (folder / f"{n}_status.txt").write_text("".join(f"{s}\n" for s in r.status))
 
 
-# The largest magnitude a box value may have (metres for 3D boxes, pixels for 2D ones): the
-# coordinate bound of the rest of the package (track3d.frames.MAX_COORD_M); beyond it a value is a
-# writer's bug, not a box (1e200 had been scored as no output and printed as a 200-digit error).
+# The largest magnitude a 3D box value may have (metres): the coordinate bound of the rest of the
+# package (track3d.frames.MAX_COORD_M); beyond it a value is a writer's bug, not a box (1e200 had
+# been scored as no output and printed as a 200-digit error).
 MAX_BOX_VALUE = MAX_COORD_M
+# ... and a 2D box value (pixels): a 2D tracker that drifts off the image is reported there, and
+# `track3d track` writes it (a review: a box 2e5 px off made the whole run unscoreable at 1e5);
+# this bound only keeps squares of centre errors far from float overflow (1e154)
+MAX_PIXEL_VALUE = 1e15
 
 
 def _data_lines(path: Path) -> list[int]:
@@ -186,7 +190,7 @@ def read_result(folder: str | Path, name: str | None = None) -> SequenceResult:
         return _load(folder / f"{n}_{kind}.txt", cols, bound)
 
     r = SequenceResult(
-        n, _load(folder / f"{n}_001.txt", 4, MAX_BOX_VALUE), opt("raw_001", 4, MAX_BOX_VALUE),
+        n, _load(folder / f"{n}_001.txt", 4, MAX_PIXEL_VALUE), opt("raw_001", 4, MAX_PIXEL_VALUE),
         opt("3d_001", 6, MAX_BOX_VALUE), status,
         opt("time", 1)[:, 0], opt("e2e_time", 1)[:, 0], opt("stages", len(STAGES)), missing)
     lengths = {len(r.box2d), len(r.box2d_raw), len(r.box3d), len(r.status), len(r.seconds),
