@@ -27,7 +27,6 @@ with their sha256.
 """
 from __future__ import annotations
 
-import argparse
 import gc
 import os
 import sys
@@ -38,7 +37,7 @@ import numpy as np
 from benchlib.record import finish_record, model_files, start_record
 
 from track3d import machine
-from track3d.argparsing import ArgumentParser, bounded, run_main
+from track3d.argparsing import ArgumentParser, allowed_cpu, bounded, run_main
 from track3d.dataset import Dataset
 from track3d.jsonable import write_json
 from track3d.stereo import StereoCloud, StereoParams
@@ -69,16 +68,6 @@ def stats(v: np.ndarray) -> dict:
     for k in ("p99", "p99.9", "max"):
         out[f"{k}/median"] = out[f"{k}_ms"] / med
     return out
-
-
-def allowed_cpu(text: str) -> int:
-    """argparse type of --cpu: one of the CPUs the process was started on (machine.START_CPUS;
-    `taskset` chooses them). Another CPU used to be taken silently: the run left its taskset or,
-    for a CPU that does not exist, ran unpinned while its record said pinned."""
-    allowed = ", ".join(map(str, machine.START_CPUS))
-    if not text.strip().isdigit() or int(text) not in machine.START_CPUS:
-        raise argparse.ArgumentTypeError(f"CPU {text} is not allowed: this process may run on {allowed}")
-    return int(text)
 
 
 def build_parser() -> ArgumentParser:

@@ -28,7 +28,6 @@ with their sha256.
 """
 from __future__ import annotations
 
-import argparse
 import gc
 import json
 import os
@@ -41,7 +40,7 @@ import numpy as np
 from benchlib.record import finish_record, model_files, start_record
 
 from track3d import machine
-from track3d.argparsing import ArgumentParser, bounded, run_main
+from track3d.argparsing import ArgumentParser, allowed_cpu, bounded, run_main
 from track3d.dataset import Dataset
 from track3d.jsonable import write_json
 from track3d.evaluation.experiment import TrackerSpec
@@ -92,16 +91,6 @@ def growth(x: np.ndarray, y: np.ndarray) -> dict:
     slope = float(np.polyfit(x, y, 1)[0]) * 1e4 if len(x) >= 2 else None
     return {"first": float(y[0]), "last": float(y[-1]), "min": float(y.min()), "max": float(y.max()),
             "last_minus_first": float(y[-1] - y[0]), "slope_per_10k_updates": slope}
-
-
-def allowed_cpu(text: str) -> int:
-    """argparse type of --cpu: one of the CPUs the process was started on (machine.START_CPUS;
-    `taskset` chooses them). Another CPU used to be taken silently: the run left its taskset or,
-    for a CPU that does not exist, ran unpinned while its record said pinned."""
-    allowed = ", ".join(map(str, machine.START_CPUS))
-    if not text.strip().isdigit() or int(text) not in machine.START_CPUS:
-        raise argparse.ArgumentTypeError(f"CPU {text} is not allowed: this process may run on {allowed}")
-    return int(text)
 
 
 def build_parser() -> ArgumentParser:

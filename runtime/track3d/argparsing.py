@@ -14,7 +14,7 @@ import argparse
 import sys
 from typing import Callable
 
-__all__ = ["ArgumentParser", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS", "thread_count",
+__all__ = ["ArgumentParser", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS", "thread_count", "allowed_cpu",
            "missing_extra", "exit_for_missing_extra", "package_version", "bounded"]
 
 
@@ -95,6 +95,19 @@ def thread_count(text: str) -> int:
         return check_threads(int(text))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected {threads_rule()}, got {text!r}") from None
+
+
+def allowed_cpu(text: str) -> int:
+    """argparse type of a benchmark's --cpu: one of the CPUs the process was started on
+    (track3d.machine.START_CPUS; `taskset` chooses them). Another CPU used to be taken silently:
+    the run left its taskset or, for a CPU that does not exist, ran unpinned while its record
+    said pinned."""
+    from .machine import START_CPUS
+
+    allowed = ", ".join(map(str, START_CPUS))
+    if not text.strip().isdigit() or int(text) not in START_CPUS:
+        raise argparse.ArgumentTypeError(f"CPU {text} is not allowed: this process may run on {allowed}")
+    return int(text)
 
 
 def package_version() -> str:
