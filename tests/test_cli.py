@@ -56,6 +56,24 @@ def test_track_then_eval(synth, tmp_path, capsys):
     assert "--baseline nope is not one of the compared runs" in err and "Traceback" not in err
 
 
+def test_eval_without_matplotlib_scores_and_says_no_plots(synth, tmp_path, capsys, monkeypatch):
+    """The lean install (no `plot` extra) failed its default `track3d eval` with exit 2 (a wheel
+    walkthrough): the scores come first, the plots are skipped with one warning."""
+    import sys
+
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert main(["track", "--data", str(synth), "--tracker", "oracle", "--sequence", "a", "--results", str(res),
+                 "--video", "none", "--quiet"]) == 0
+    capsys.readouterr()
+    monkeypatch.setitem(sys.modules, "matplotlib", None)   # `import matplotlib` now fails
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--quiet"]) == 0
+    out = capsys.readouterr()
+    assert "AO_3d" in out.out and "plot:" not in out.out
+    assert sum("no plots: matplotlib is not installed" in x for x in out.err.splitlines()) == 1
+    report = json.loads((rep / "report.json").read_text())
+    assert any("no plots" in w for w in report["warnings"]) and not list(rep.glob("*.png"))
+
+
 @pytest.mark.parametrize("argv, message", [
     (["track", "--data", "{missing}"], "no dataset"),
     (["track", "--data", "{synth}", "--sequence", "zzz"], "zzz"),
@@ -119,6 +137,13 @@ def test_runtime_demo_points_to_the_simulator(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "track3d-sim demo" in err and err.count("\n") == 1
     assert not (tmp_path / "d").exists()
+
+
+def test_runtime_demo_help_is_that_line(capsys):
+    """`track3d demo --help` gave the error and exit 2 (a wheel walkthrough): help is not an error."""
+    assert main(["demo", "--help"]) == 0
+    out = capsys.readouterr()
+    assert "track3d-sim demo" in out.out and out.err == ""
 
 
 def test_runtime_never_imports_the_simulator_or_torch():

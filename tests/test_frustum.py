@@ -269,3 +269,43 @@ def test_select_points_is_a_boolean_index_of_the_rows():
     lo, hi = point_bounds(p)
     np.testing.assert_array_equal(lo, [0, 1, 2])
     np.testing.assert_array_equal(hi, [12, 13, 14])
+
+
+_BLOCK_EXTENSIONS = """
+import importlib.abc, sys, warnings
+class Block(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name in ("track3d._frustum", "track3d._resample"):
+            raise ImportError("libstdc++.so.6: version GLIBCXX_3.4.99 not found (simulated)")
+        return None
+sys.meta_path.insert(0, Block())
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    from track3d import frustum, resample, machine
+print("HAVE", frustum.HAVE_EXTENSION, resample.HAVE_EXTENSION)
+print("EXT", machine.versions()["extension"])
+for w in caught:
+    print("WARN", w.category.__name__, str(w.message))
+"""
+
+
+def test_a_missing_extension_is_said_not_silent():
+    """A wheel built for another machine (newer glibc / libstdc++) loads without its C++ and ran
+    3x slower on the frustum with no word (a wheel-install walkthrough): it now warns once per
+    extension, and the machine record every benchmark writes says which code ran."""
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-c", _BLOCK_EXTENSIONS], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert "HAVE False False" in lines
+    assert any(x.startswith("EXT missing") for x in lines)
+    warns = [x for x in lines if x.startswith("WARN RuntimeWarning")]
+    assert len(warns) == 2
+    assert any("track3d._frustum did not load" in w and "GLIBCXX" in w for w in warns)
+    assert any("track3d._resample did not load" in w for w in warns)
+
+
+def test_the_machine_record_names_the_compiled_extension():
+    from track3d import machine
+    assert machine.versions()["extension"] == "compiled"

@@ -300,6 +300,11 @@ def _parser() -> argparse.ArgumentParser:
     # runtime never imports the simulator. This entry only says where it went.
     sub.add_parser("demo", help="moved: run `track3d-sim demo` (needs pip install 'track3d[sim]')")
 
+    dc = sub.add_parser("docs", help="the documents help texts name (docs/runtime.md, ...), shipped with the "
+                                     "package: list them, or print one")
+    dc.add_argument("name", nargs="?", help="the document to print: runtime, models, results, simulator, "
+                                            "dataset or readme (default: list them with their paths)")
+
     tr = sub.add_parser("trackers", help="list the registered 2D trackers and 3D box estimators (plug-ins included)")
     _add_plugin_arg(tr)
     _add_plugin_arg(t)
@@ -559,7 +564,12 @@ def _cmd_eval(a) -> int:
         exp.sequences = have
     if a.baseline is not None and a.baseline not in names:
         raise ValueError(f"--baseline {a.baseline} is not one of the compared runs: {', '.join(names)}")
-    report = exp.report(names, plots=not a.no_plots, trajectories=a.trajectories,
+    plots = not a.no_plots
+    if plots and not _have_module("matplotlib"):   # the lean install: scores first, plots optional
+        plots = False
+        notes.append("no plots: matplotlib is not installed (pip install 'track3d[plot]'; --no-plots "
+                     "says this is meant)")
+    report = exp.report(names, plots=plots, trajectories=a.trajectories,
                         worst_first=a.trajectories_of == "worst", baseline=a.baseline)
     if notes:   # into report.json as well
         report["warnings"] = notes + report.get("warnings", [])
@@ -589,6 +599,29 @@ def _cmd_eval(a) -> int:
     return 0
 
 
+def _cmd_docs(a) -> int:
+    from .manual import doc_paths, doc_text
+
+    if a.name is not None:
+        sys.stdout.write(doc_text(a.name))
+        return 0
+    paths = doc_paths()
+    if not paths:
+        raise ValueError("no documents installed with this track3d (a wheel built without them)")
+    for name, path in paths.items():
+        print(f"{name:10s} {path}")
+    return 0
+
+
+def _have_module(name: str) -> bool:
+    """Whether `import name` would find it (None in sys.modules counts as absent, as import does)."""
+    import importlib.util
+
+    if name in sys.modules:
+        return sys.modules[name] is not None
+    return importlib.util.find_spec(name) is not None
+
+
 def _cmd_trackers(a) -> int:
     from .estimators import available_estimators
     from .trackers2d import TRACKER_NEEDS, available_trackers
@@ -609,6 +642,9 @@ DEMO_MOVED = ("the demo simulates its data and lives with the simulator: run `tr
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["demo"]:  # whatever its flags: one line saying where the demo went
+        if any(a in ("-h", "--help") for a in argv[1:]):   # asked for help: that line is the help
+            print(f"track3d demo: {DEMO_MOVED}")
+            return 0
         print(f"track3d demo: error: {DEMO_MOVED}", file=sys.stderr)
         return 2
     args = _parser().parse_args(argv)
@@ -630,6 +666,8 @@ def main(argv: list[str] | None = None) -> int:
             return _cmd_bench(args)
         if args.command == "demo":
             raise RuntimeError(DEMO_MOVED)
+        if args.command == "docs":
+            return _cmd_docs(args)
         return _cmd_trackers(args)
     except (DatasetError, TrackerUnavailable, EstimatorUnavailable, ModelError, OSError,
             ValueError, RuntimeError) as e:

@@ -36,6 +36,8 @@ shuffle of ``arange(n)``: for ``i in 0..num-1`` swap ``idx[i]`` with ``idx[i + r
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from .frames import check_cloud, point_bounds
@@ -52,8 +54,12 @@ Z_MAX = 45.0
 
 try:  # the compiled extension; the numpy reference stands in only if it lacks a function
     from . import _frustum as _ext
-except ImportError:  # pragma: no cover - the package is always built with it
+except ImportError as _err:  # a wheel built for another machine (its glibc / libstdc++), a broken build
     _ext = None
+    # same results, about 3x the frustum's time: say so once rather than run slow in silence
+    warnings.warn(f"track3d: its compiled extension track3d._frustum did not load ({_err}); the numpy "
+                  "reference runs instead: the same results, slower (reinstall track3d built for this "
+                  "machine; `track3d bench` shows which runs)", RuntimeWarning, stacklevel=2)
 
 # Per function: an older build of the extension may lack one; numpy then stands in for it.
 _ext_extract = getattr(_ext, "extract_frustum", None)
@@ -61,6 +67,14 @@ _ext_sample = getattr(_ext, "sample_points", None)
 _ext_bounds = getattr(_ext, "extract_frustum_bounds", None)
 _ext_lone = getattr(_ext, "lone_scan", None)
 HAVE_EXTENSION = _ext_extract is not None and _ext_sample is not None
+if _ext is not None and None in (_ext_extract, _ext_sample, _ext_bounds, _ext_lone):
+    # an editable install whose C++ was not rebuilt after a pull: right, but slower
+    warnings.warn("track3d: its compiled extension track3d._frustum is older than this code (it lacks "
+                  + ", ".join(n for n, f in (("extract_frustum", _ext_extract), ("sample_points", _ext_sample),
+                                             ("extract_frustum_bounds", _ext_bounds), ("lone_scan", _ext_lone))
+                              if f is None)
+                  + "); the numpy reference stands in for those: rebuild it (pip install -e . --no-deps)",
+                  RuntimeWarning, stacklevel=2)
 
 _MASK64 = (1 << 64) - 1
 

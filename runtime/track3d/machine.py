@@ -170,6 +170,10 @@ def versions() -> dict:
         out["opencv"] = cv2.__version__
     except ImportError:
         out["opencv"] = None
+    # a missing or stale C++ extension gives the same results more slowly: a timing says which ran
+    from . import frustum, resample
+    out["extension"] = ("compiled" if frustum.HAVE_EXTENSION and resample.HAVE_EXTENSION
+                        else "missing: the numpy reference ran (slower)")
     try:
         from importlib.metadata import version
         out["track3d"] = version("track3d")

@@ -27,6 +27,8 @@ committed as a fixture).
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 __all__ = ["warp_axis_aligned", "warp_axis_aligned_numpy", "warp_affine_gray_numpy", "inverse_map", "fma32",
@@ -34,8 +36,11 @@ __all__ = ["warp_axis_aligned", "warp_axis_aligned_numpy", "warp_affine_gray_num
 
 try:  # the compiled kernel; the numpy reference stands in only where it is missing
     from . import _resample as _ext
-except ImportError:  # pragma: no cover - the package is always built with it
+except ImportError as _err:  # a wheel built for another machine (its glibc / libstdc++), a broken build
     _ext = None
+    warnings.warn(f"track3d: its compiled extension track3d._resample did not load ({_err}); the numpy "
+                  "reference runs instead: the same results, slower (reinstall track3d built for this "
+                  "machine; `track3d bench` shows which runs)", RuntimeWarning, stacklevel=2)
 HAVE_EXTENSION = _ext is not None
 
 # the width of the SIMD body of the build whose arithmetic is fixed here (2 x 8 float32 lanes)
