@@ -25,6 +25,17 @@ def test_iou_3d_and_bev_hand_cases():
     np.testing.assert_allclose(B.box3d_to_bev(a), [0, 10, 2, 2])
 
 
+@pytest.mark.parametrize("bad", [[0, np.nan, 10, 2, 2, 2], [0, 0, 10, 2, np.nan, 2], [0, 0, 10, 2, 0, 2],
+                                 [0, 0, 10, 2, -1, 2], [0, 0, 10, 2, np.inf, 2], [0, np.inf, 10, 2, 2, 2]])
+def test_bev_iou_of_a_box_broken_in_y_is_zero(bad):
+    """A result row with a NaN / zero / negative height scored BEV IoU 1 (only x and z were read)
+    while its 3D IoU was 0 (a metrics review): not a box, IoU 0 with everything, as in 2D and 3D."""
+    good = np.array([0, 0, 10, 2, 2, 2.0])
+    assert B.iou_bev(bad, good) == 0.0 and B.iou_bev(good, bad) == 0.0
+    assert B.iou_3d(bad, good) == 0.0
+    np.testing.assert_allclose(B.iou_bev(np.stack([good, np.array(bad, float)]), good), [1.0, 0.0])
+
+
 def test_center_errors():
     assert B.center_error_2d([0, 0, 2, 2], [3, 4, 2, 2]) == pytest.approx(5.0)
     assert B.center_error_3d([0, 0, 0, 1, 1, 1], [1, 2, 2, 5, 5, 5]) == pytest.approx(3.0)

@@ -96,6 +96,40 @@ def test_restart_protocol_counts_and_reinitialises(synth, tmp_path):
     assert s.sr50_3d <= 0.75
 
 
+class _TouchingAt(BaselineEstimator):
+    """The ground truth's box moved along x until it touches the true one face to face (an overlap
+    of a rounding error, ~1e-16) on chosen calls; the baseline's box on the others."""
+
+    def __init__(self, gt3d, bad_calls):
+        self.gt3d, self.calls, self.bad = gt3d, 0, set(bad_calls)
+
+    def estimate(self, points, category=-1):
+        self.calls += 1
+        if self.calls not in self.bad:
+            return super().estimate(points, category)
+        b = np.array(self.gt3d[self.calls - 1], dtype=np.float64)
+        b[0] = np.nextafter(b[0] + b[3], -np.inf)   # a hair inside: the overlap is rounding, not body
+        return b
+
+
+def test_a_box_that_only_touches_the_truth_has_failed(synth, tmp_path):
+    """The paper restarts at zero overlap; a box touching the truth face to face overlaps by a
+    rounding error (7e-17) and was not restarted (a metrics review)."""
+    seq = [s for s in Experiment(synth, "test", tmp_path / "r0", tmp_path / "p0").sequences if s.name == "s0002"][0]
+    probe = np.array(seq.gt3d[3], dtype=np.float64)
+    probe[0] = np.nextafter(probe[0] + probe[3], -np.inf)
+    assert 0.0 < iou_3d(probe, seq.gt3d[3]) < 1e-12      # the case: positive, but only rounding
+
+    def factory(seq):
+        return Track3D(seq.camera, OracleTracker(seq.gt2d, seq.absent), _TouchingAt(seq.gt3d, {4}), fusion=False)
+
+    exp = Experiment(synth, "test", tmp_path / "res", tmp_path / "rep", sequences=["s0002"])
+    exp.run(factory, "touching", quiet=True)
+    r = read_result(exp.folder("touching", "s0002"))
+    assert list(r.status) == ["init", "tracking", "tracking", "tracking", "init", "tracking"]
+    assert r.restarts == 1
+
+
 class _Oracle2DWrongAt(OracleTracker):
     """The oracle, except a 2D box far off the target on chosen frames (0-based)."""
 

@@ -69,6 +69,11 @@ def test_a_sequence_without_3d_in_a_3d_run_scores_zero(synth, tmp_path, empty):
     frames = {"s0001": 6, "s0002": 5}   # scored: 8 - init - 1 absent; 6 - init
     pooled = sum(c["ao_3d"] * c["frames"] for c in cond.values() if c["frames"])
     assert pooled == pytest.approx(frames["s0001" if empty == "s0002" else "s0002"])
+    # ACE_3d had been the other sequence's alone (0 m here: outputting nothing lowered it); it is
+    # undefined when a sequence has no centre, and the report says which (a metrics review)
+    assert np.isnan(ov["ace_3d"]) and ov["ace_2d"] == pytest.approx(0.0)
+    assert any(w.startswith(f"mine: ACE_3D undefined: 1 sequence(s) without a 3D box") and empty in w
+               for w in rep["warnings"])
 
 
 def test_a_run_without_any_3d_box_is_2d_only(synth, tmp_path):
@@ -276,3 +281,20 @@ def test_a_status_file_is_one_status_a_line(tmp_path, text, needle):
         read_result(d)
     (d / "0001_status.txt").write_text("init\r\ntracking\r\nlost\r\n\n")   # CRLF, a blank line at the end: fine
     assert list(read_result(d).status) == ["init", "tracking", "lost"]
+
+
+def test_a_2d_box_past_the_border_is_scored_on_its_part_in_the_image(synth, tmp_path):
+    """The labels are clipped to the image; a box reaching past it lost IoU for the part no label
+    can hold (the GOT-10k toolkit clips to the image; a metrics review). Hand case: a box grown
+    1000 px to the left scores w / (x + w), the part of it in the image, not w / (w + 1000)."""
+    def grow_left(seq, r):
+        r.box2d[1:, 0] -= 1000.0      # every frame but the init, which is the ground truth's
+        r.box2d[1:, 2] += 1000.0
+    _exact(synth, tmp_path / "res", change=grow_left)
+    rep = _report(synth, tmp_path)
+    for seq in _seqs(synth):
+        scored = ~seq.absent & (np.arange(len(seq)) > 0)
+        g = seq.gt2d[scored]
+        assert g[:, 0].min() > 0          # the case: the true box off the left border
+        want = float(np.mean(g[:, 2] / (g[:, 0] + g[:, 2])))
+        assert rep["trackers"]["mine"]["sequences"][seq.name]["ao_2d"] == pytest.approx(want)

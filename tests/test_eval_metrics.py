@@ -276,3 +276,16 @@ def test_a_2d_only_and_a_3d_sequence_are_not_averaged_together():
     none = score_sequence("none", b2, np.full((2, 6), np.nan), b2, b3, np.ones(2, bool))
     ov = average_scores([none, three_d])          # a 3D run's sequence without a box: IoU 0 there
     assert ov.values["ao_3d"] == pytest.approx(0.5) and ov.sequences == 2
+    assert np.isnan(ov.values["ace_3d"]) and ov.values["ace_2d"] == 0.0   # no centre there: undefined
+
+
+def test_ace_over_sequences_is_undefined_when_one_has_no_box():
+    """The paper's ACE averages every sequence; one without any box had been left out, so a run
+    that output nothing on a hard sequence scored a better ACE (0 px here; a metrics review)."""
+    gt = np.array([[0, 0, 10, 10]] * 10, float)
+    good = score_sequence("B", gt, None, gt, None, np.ones(10, bool))
+    off = score_sequence("C", gt + [3, 4, 0, 0], None, gt, None, np.ones(10, bool))
+    none = score_sequence("D", np.full((10, 4), np.nan), None, gt, None, np.ones(10, bool))
+    assert average_scores([good, off]).values["ace_2d"] == pytest.approx(2.5)    # hand: (0 + 5) / 2
+    ov = average_scores([good, none])
+    assert np.isnan(ov.values["ace_2d"]) and ov.values["ao_2d"] == pytest.approx(0.5)

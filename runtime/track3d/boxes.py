@@ -39,8 +39,8 @@ def _iou_from(inter, va, vb):
     union = va + vb - inter
     with np.errstate(divide="ignore", invalid="ignore"):
         iou = np.where((va > 0) & (vb > 0) & (union > 0), inter / union, 0.0)
-    # inter / union of a box with itself can round to 1 + 4e-16: clamp, so that IoU = 1 exactly
-    # and never counts above the success threshold 1.0
+    # inter / union of a box with itself can round to 1 + 4e-16 (or below 1 by 1e-14): clamp, so
+    # that an IoU never exceeds 1 and never counts above the success threshold 1.0
     return np.clip(np.nan_to_num(iou, nan=0.0), 0.0, 1.0)
 
 
@@ -86,8 +86,18 @@ def box3d_to_bev(box3d: np.ndarray) -> np.ndarray:
 
 
 def iou_bev(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Bird's-eye-view IoU of two 3D boxes (..., 6), in the x-z plane."""
-    return _iou_axis_aligned(box3d_to_bev(a), box3d_to_bev(b), 2)
+    """Bird's-eye-view IoU of two 3D boxes (..., 6), in the x-z plane; 0 where either is not a
+    box (a non-finite value or a size <= 0 in any axis, y included: a result row with a NaN
+    height scored a perfect BEV overlap while its 3D IoU was 0)."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    ok = _whole_box(a) & _whole_box(b)
+    return np.where(ok, _iou_axis_aligned(box3d_to_bev(a), box3d_to_bev(b), 2), 0.0)
+
+
+def _whole_box(box: np.ndarray) -> np.ndarray:
+    """(..., 6) -> (...): every value finite and every size > 0."""
+    return np.all(np.isfinite(box), axis=-1) & np.all(box[..., 3:6] > 0, axis=-1)
 
 
 def center_2d(box2d: np.ndarray) -> np.ndarray:

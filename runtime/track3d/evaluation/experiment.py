@@ -34,7 +34,7 @@ from typing import Callable
 import numpy as np
 
 from ..body_views import BodyViewsParams
-from ..boxes import iou_2d, iou_3d
+from ..boxes import clip_box2d, iou_2d, iou_3d
 from ..jsonable import write_json
 from ..dataset import Dataset, DatasetError, Sequence
 from ..machine import cpu_name
@@ -54,10 +54,13 @@ __all__ = ["TrackerSpec", "Experiment", "run_sequence", "evaluate_2d", "cpu_name
 DEPTH_SOURCES = ("map", "stereo")   # where the point clouds come from (run_sequence's depth)
 # Reading results (Experiment._check_protocol): an init row's box is the ground truth's within
 # these (2D pixels, 3D metres: the files' 4 / 6 decimals and a script's rounding), and the frame a
-# restart follows has an overlap no larger than FAILED_OVERLAP (0 in memory; boxes that touch can
-# overlap by a rounding error once written).
+# restart follows has an overlap no larger than FAILED_OVERLAP (boxes that touch can overlap by a
+# rounding error once written). In memory a frame has failed at an overlap of at most
+# ROUNDING_OVERLAP: two boxes that touch face to face give 7e-17, not 0 (the paper restarts at
+# zero overlap; a metrics review).
 INIT_TOLERANCE = (0.05, 1e-3)
 FAILED_OVERLAP = 1e-3
+ROUNDING_OVERLAP = 1e-9
 
 
 @dataclass
@@ -290,7 +293,7 @@ def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, ma
             # a 2D-only run has no 3D box: its overlap is the 2D one (a 3D IoU of nan had
             # restarted every other frame)
             overlap = iou_3d(out.box3d, seq.gt3d[i]) if needs_points else iou_2d(out.box2d, seq.gt2d[i])
-            if restart and not seq.absent[i] and overlap <= 0.0:
+            if restart and not seq.absent[i] and overlap <= ROUNDING_OVERLAP:
                 pending = i + restart_skip
         if overlay is not None:
             overlay.add(draw_overlay(image, seq.camera, box2d[i], raw[i], box3d[i], seq.gt2d[i], seq.gt3d[i],
@@ -298,6 +301,13 @@ def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, ma
         if bar:
             bar.update(note=str(status[i]))
     return SequenceResult(seq.name, box2d, raw, box3d, status, seconds, e2e, stage_ms)
+
+
+def _in_image(box2d: np.ndarray, seq) -> np.ndarray:
+    """(..., 4) predicted 2D boxes clipped to the sequence's image, as its labels are: a box is
+    scored on what of it lies in the image (the GOT-10k toolkit's bound; a tracker's box reaching
+    past the border had lost IoU for the part no label can hold). nan rows stay nan."""
+    return clip_box2d(box2d, seq.camera.width, seq.camera.height)
 
 
 def _comparison_warnings(names: list[str], runs: dict, lengths: dict) -> list[str]:
@@ -586,7 +596,7 @@ class Experiment:
             elif rec.get("restart") and not rec.get("restart_overlap"):   # the old 2D-only rule: any frame
                 overlap = 0.0
             else:
-                overlap = iou_2d(res.box2d[k], seq.gt2d[k])
+                overlap = iou_2d(_in_image(res.box2d[k], seq), seq.gt2d[k])
             if st[k] == INIT or seq.absent[k] or overlap > FAILED_OVERLAP:
                 raise ValueError(f"{where}: frame {j + 1} is 'init' but does not follow a failure (frame {k + 1}, "
                                  f"the last with output before it, has {'no target' if seq.absent[k] else f'overlap {overlap:.3f}'}"
@@ -618,7 +628,8 @@ class Experiment:
             timed = res.tracked
             pred3d = res.box3d if run_3d else None
             scores.append(score_sequence(
-                seq.name, res.box2d_raw if raw else res.box2d, pred3d, seq.gt2d[:n], seq.gt3d[:n], scored,
+                seq.name, _in_image(res.box2d_raw if raw else res.box2d, seq), pred3d, seq.gt2d[:n], seq.gt3d[:n],
+                scored,
                 res.restarts,
                 tracker_seconds=float(res.seconds[timed].sum()), e2e_seconds=float(res.e2e_seconds[timed].sum()),
                 timed_frames=int(timed.sum())))
@@ -636,7 +647,7 @@ class Experiment:
             scored = ~seq.absent[:n] & (res.status != INIT)
             pred3d = res.box3d if run_3d else None
             cond = frame_conditions(seq.gt3d[:n], seq.cut[:n], seq.depth_range_m)
-            got = score_conditions(res.box2d, pred3d, seq.gt2d[:n], seq.gt3d[:n], scored, cond)
+            got = score_conditions(_in_image(res.box2d, seq), pred3d, seq.gt2d[:n], seq.gt3d[:n], scored, cond)
             total = {k: total[k] + got[k] for k in CONDITIONS}
         return total
 
@@ -650,7 +661,7 @@ class Experiment:
             if not len(inits):
                 continue
             sl = slice(int(inits[0]) + 1, len(res))
-            total = total + score_lost(res.status[sl] == LOST, seq.absent[sl], res.box2d[sl], seq.gt2d[sl],
+            total = total + score_lost(res.status[sl] == LOST, seq.absent[sl], _in_image(res.box2d[sl], seq), seq.gt2d[sl],
                                        reacquire_frames)
         return total
 
@@ -732,7 +743,18 @@ class Experiment:
                 short.append(f"{n}: {len(cut)} of {len(self.sequences)} sequences hold fewer result frames than "
                              f"are scored{how}: scored on the frames they hold; pass --frames to score the same "
                              f"frames of every run")
-        report["warnings"] = label_warnings + _comparison_warnings(names, runs, lengths) + empty + short
+        # a sequence without a box on any scored frame leaves ACE undefined: name them
+        no_centre = []
+        for n in names:
+            for k, what in (("ace_2d", "2D"), ("ace_3d", "3D")):
+                if k == "ace_3d" and overall[n].two_d_only:
+                    continue
+                seqs = [sc.name for sc in per_sequence[n] if sc.frames > 0 and not np.isfinite(getattr(sc, k))]
+                if seqs:
+                    no_centre.append(f"{n}: {k.upper()} undefined: {len(seqs)} sequence(s) without a {what} box on "
+                                     f"any scored frame ({', '.join(seqs[:4])}{', ...' if len(seqs) > 4 else ''})")
+        report["warnings"] = (label_warnings + _comparison_warnings(names, runs, lengths) + empty + short
+                              + no_centre)
         known = [(r.get("restart"), r.get("restart_skip")) for r in runs.values() if r]
         if known and len(set(known)) == 1 and len(known) == len(names) and None not in known[0]:
             report["restart"], report["restart_skip"] = known[0]

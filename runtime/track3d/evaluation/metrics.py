@@ -6,7 +6,8 @@ initialisation frame, whose result is the ground truth itself):
 - AO (2D, BEV, 3D): mean IoU; SR@0.5 / SR@0.75: fraction of frames with IoU > threshold
   (strictly greater, as the GOT-10k toolkit);
 - ACE_2d (pixels) / ACE_3d (metres): mean centre distance over the scored frames that have a
-  prediction (frames skipped after a restart have none: IoU 0, no centre error);
+  prediction (frames skipped after a restart have none: IoU 0, no centre error); over sequences
+  it is undefined (nan) when a sequence has no prediction on any scored frame;
 - success curve: SR at IoU thresholds 0..1; precision curve: fraction of scored frames with
   centre error <= threshold (a frame without prediction counts as a miss).
 
@@ -207,6 +208,7 @@ def score_sequence(name: str, pred2d: np.ndarray, pred3d: np.ndarray | None, gt2
 SCALARS_2D = ("ao_2d", "sr50_2d", "sr75_2d", "ace_2d")
 _SCALARS_3D = ("ao_bev", "sr50_bev", "sr75_bev", "ao_3d", "sr50_3d", "sr75_3d", "ace_3d")
 SCALARS = SCALARS_2D + _SCALARS_3D
+ACE_KEYS = ("ace_2d", "ace_3d")
 _AXES = ("bias_3d", "mae_3d")   # per-coordinate values (lists in AXES_3D order)
 
 
@@ -239,7 +241,10 @@ def average_scores(scores: list[SequenceScore]) -> OverallScore:
     values = {}
     for k in SCALARS:
         v = np.array([getattr(s, k) for s in used], dtype=np.float64)
-        values[k] = _mean_or_nan(v)
+        # a centre error is a mean over the sequences that all have one: a sequence without a box
+        # on any scored frame would otherwise leave the mean, and outputting nothing on a hard
+        # sequence would lower ACE (the paper averages every sequence); undefined then (nan)
+        values[k] = (float("nan") if k in ACE_KEYS and not np.all(np.isfinite(v)) else _mean_or_nan(v))
     for k in _AXES:   # per coordinate, the mean over the sequences that have one
         a = np.array([getattr(s, k) for s in used], dtype=np.float64).reshape(-1, 6)
         values[k] = [_mean_or_nan(a[:, j]) for j in range(6)]
