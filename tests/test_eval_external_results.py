@@ -72,7 +72,7 @@ def test_a_sequence_without_3d_in_a_3d_run_scores_zero(synth, tmp_path, empty):
     # ACE_3d had been the other sequence's alone (0 m here: outputting nothing lowered it); it is
     # undefined when a sequence has no centre, and the report says which (a metrics review)
     assert np.isnan(ov["ace_3d"]) and ov["ace_2d"] == pytest.approx(0.0)
-    assert any(w.startswith(f"mine: ACE_3D undefined: 1 sequence(s) without a 3D box") and empty in w
+    assert any(w.startswith("mine: ACE_3D undefined: 1 sequence(s) without a 3D box") and empty in w
                for w in rep["warnings"])
 
 
