@@ -4,16 +4,19 @@
    ground-truth 2D box of every test frame where the target is present, next to the
    baseline estimator (minimum enclosing box of the whole frustum) on the SAME frustums:
    AO_bev, AO_3d, ACE_3d (per sequence, averaged over sequences; track3d.evaluation).
-2. Speed: the estimator behind the loop's seam (sampling in the C++ ext + normalise + ONNX +
-   decode) on real full-size frustums, onnxruntime at 1 thread (process pinned to one core)
+2. Speed: the estimator behind the loop's seam (sampling in the C++ ext + the model's size
+   coding, track3d.size_coding, normalising + ONNX + decode) on real full-size frustums, onnxruntime at 1 thread (process pinned to one core)
    and 2 threads; the network alone; the frustum crop; the baseline estimator.
 3. onnxruntime vs torch eager on the same inputs (batch 1, 1 thread): the speed ratio.
 4. Ablations (paper Fig. 13 / Table 3): any number of `name=model.onnx` models evaluated on the
    same oracle frustums (points 512..4096, with / without category, paper / points size
    coding, width), plus a test-time sweep of N for the shipped model: a table and a plot.
 
-    python benchmarks/bench_boxnet.py --data data/small --cache runs/boxnet/cache/boxnet_test_*.npz \
-        --checkpoint runs/boxnet/main/best.pt --ablation p512=runs/boxnet/abl/p512.onnx ...
+    python benchmarks/bench_boxnet.py --data data/med --cache runs/boxnet/cache/test.npz \
+        --model runtime/track3d/models/a3boxnet.onnx --checkpoint runs/boxnet-engine/more/best.pt \
+        --ablation p512=runs/boxnet/ablation/p512.onnx ...
+
+(the cache: export/scripts/ablation_boxnet.sh; the checkpoint: `track3d-train recipe run a3boxnet-engine`)
 
 Writes <out>/boxnet.json, boxnet.md (tables) and boxnet_ablation.png.
 """
@@ -94,13 +97,19 @@ def full_frustums(data: str, split: str, cache, count: int, seed: int = 0):
 
 
 def speed(model: str, frustums, clouds, M, threads: int) -> dict:
-    from track3d.boxnet import A3BoxNetEstimator, normalise
+    from track3d.boxnet import A3BoxNetEstimator
     from track3d.estimators import create_estimator
+    from track3d.frames import point_bounds
     from track3d.frustum import extract_frustum
 
     est = A3BoxNetEstimator(model, threads=threads)
     base = create_estimator("baseline")
-    samp = [normalise(est.sample(p))[0][None] for p, _ in frustums]
+
+    def centred(p):   # the network's input as estimate() makes it: the model's size coding normalises
+        bounds = np.stack(point_bounds(p))[None] if est.coding.needs_bounds else None
+        return est.coding.normalise(est.sample(p)[None], bounds)[0]
+
+    samp = [centred(p) for p, _ in frustums]
     cats = [c for _, c in frustums]
     r = {"threads": threads, "mean_frustum_points": float(np.mean([len(p) for p, _ in frustums])),
          "estimator": _timeit(lambda x: est.estimate(*x), frustums, repeat=2),

@@ -129,7 +129,8 @@ def test_factory_errors_name_the_accepted_options():
         create_estimator("a3boxnet", nope=1)
 
 
-@pytest.mark.parametrize("returned", ["notabox", (True, "notabox"), (True, [1, 2, 3, 4], "extra"), None])
+@pytest.mark.parametrize("returned", ["notabox", (True, "notabox"), (True, [1, 2, 3, 4], "extra"), None,
+                                      ("no", [1, 2, 3, 4]), (True, np.ones((2, 2))), (2, [1, 2, 3, 4])])
 def test_a_tracker_breaking_the_protocol_is_named(returned):
     """A plug-in returning something other than (ok, box) ended in numpy's "could not convert
     string to float" or an unpacking error, not naming the tracker or the protocol."""
@@ -166,3 +167,164 @@ def test_example_tracker_crops_a_box_past_the_image_to_its_visible_part(clean_re
     np.testing.assert_array_equal(t.box, [0, 100, 80, 20])
     t.init(image, [10, -5, 30, 25])
     np.testing.assert_array_equal(t.box, [10, 0, 30, 20])
+
+
+def _loop(tracker, estimator="baseline"):
+    from track3d.estimators import create_estimator
+    from track3d.tracker import Track3D
+
+    cam = Camera.from_fov(64, 48, 45.0)
+    t = Track3D(cam, tracker, create_estimator(estimator) if isinstance(estimator, str) else estimator)
+    img = np.zeros((48, 64, 3), np.uint8)
+    t.init(img, [10, 10, 8, 8])
+    return t, img
+
+
+class _Still:
+    def __init__(self, **kw):
+        self.box = None
+
+    def init(self, image, box):
+        self.box = np.array(box, np.float64)
+
+    def update(self, image):
+        return True, self.box
+
+
+@pytest.mark.parametrize("name", ["edgetrack", "EdgeTrack", "oracle", "kcf"])
+def test_a_built_in_name_is_not_replaced_silently(name):
+    """A plug-in registering "EdgeTrack" had run in the built-in's place and written its results
+    under the built-in's name (a plug-in walkthrough); refused unless asked for knowingly."""
+    with pytest.raises(ValueError, match="is a built-in tracker of track3d: register yours under another name"):
+        trackers2d.register_tracker(name, _Still)
+    with pytest.raises(ValueError, match="is a built-in estimator"):
+        estimators.register_estimator("baseline", lambda **kw: None)
+    trackers2d.register_tracker(name, _Still, replace=True)
+    assert isinstance(trackers2d.create_tracker(name), _Still)
+
+
+@pytest.mark.parametrize("made", ["none", "typo"])
+def test_a_factory_that_builds_no_tracker_is_one_line(made, synth, tmp_path, capsys):
+    """A factory without `return`, a class with `upate`: they passed the up-front build and ended
+    in an AttributeError traceback mid-run."""
+    class Typo:
+        def init(self, image, box):
+            pass
+
+        def upate(self, image):
+            return True, [1, 2, 3, 4]
+
+    trackers2d.register_tracker("mine", (lambda **kw: None) if made == "none" else Typo)
+    with pytest.raises(ValueError, match="has no .*update\\(\\)"):
+        trackers2d.create_tracker("mine")
+    estimators.register_estimator("mybox", lambda **kw: object())
+    with pytest.raises(ValueError, match="built object, which has no estimate\\(\\)"):
+        estimators.create_estimator("mybox")
+    assert main(["track", "--data", str(synth), "--tracker", "mine", "--results", str(tmp_path / "r"),
+                 "--video", "none", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the 2D tracker 'mine' built" in err
+
+
+def test_a_plug_ins_own_error_is_one_line_naming_its_place(synth, tmp_path, capsys):
+    """An IndexError in a plug-in's update ended in a traceback, a RuntimeError of its own read as
+    track3d's; both now name the plug-in's file, line and function."""
+    plug = tmp_path / "oops_plugin.py"
+    plug.write_text(textwrap.dedent('''
+        from track3d.trackers2d import register_tracker
+
+        class Oops:
+            def __init__(self, kind="index"):
+                self.kind = kind
+            def init(self, image, box):
+                self.box = list(box)
+            def update(self, image):
+                if self.kind == "index":
+                    return True, self.box[7]
+                raise RuntimeError("boom in my update")
+
+        register_tracker("oops", Oops)
+    '''))
+    for kind, name in (("index", "IndexError"), ("runtime", "RuntimeError")):
+        capsys.readouterr()
+        assert main(["track", "--plugin", str(plug), "--data", str(synth), "--tracker", "oops",
+                     "--tracker-option", f"kind={kind}", "--results", str(tmp_path / f"r{kind}"),
+                     "--video", "none", "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"the plug-in raised {name} at oops_plugin.py:" in err
+        assert " in update: " in err and "Traceback" not in err
+
+
+def test_a_plug_in_cannot_draw_into_the_callers_frame():
+    """A tracker that wrote into the image changed the caller's array and the overlay."""
+    class Painter(_Still):
+        def update(self, image):
+            image[:, :10] = 255
+            return True, self.box
+
+    t, img = _loop(Painter())
+    with pytest.raises(ValueError, match="read-only"):
+        t.update(img, np.zeros((0, 3), np.float32))
+    assert not img.any()
+
+
+def test_the_trackers_own_box_is_recorded_before_the_loop_corrects_it():
+    """A tracker that returns its own array and moves it in correct() had its fused box recorded
+    as its own (box2d_raw)."""
+    class Aliased(_Still):
+        def correct(self, box):
+            self.box[:] = box      # moves the very array update() returned
+
+    from track3d.bench import synthetic_frames
+
+    cam = Camera.from_fov(320, 240, 45.0)
+    frames = synthetic_frames(cam, n=3)
+    from track3d.estimators import create_estimator
+    from track3d.tracker import Track3D
+
+    tr = Aliased()
+    t = Track3D(cam, tr, create_estimator("baseline"))
+    t.init(frames[0][0], frames[0][2] + np.array([3.0, 2.0, 0.0, 0.0]), 0)
+    own = tr.box.copy()
+    out = t.update(frames[1][0], frames[1][1])
+    assert not np.allclose(out.box2d, own)                   # the case: the loop moved the box
+    np.testing.assert_array_equal(out.box2d_raw, own)
+
+
+def test_protocol_breaks_the_loop_survives_are_said_once():
+    """A 2D box that is no box, a score outside 0..1, a 3D box that is no box: taken as lost /
+    clamped / no estimate, each with one warning per tracker (they had been silent)."""
+    import warnings
+
+    class Scored(_Still):
+        score = 2.5
+
+    class NanBox:
+        amodal = False
+
+        def estimate(self, points, category=-1):
+            return [np.nan] * 6
+
+    t, img = _loop(Scored(), NanBox())
+    pts = np.array([[0.0, 0.0, 10.0], [0.3, 0.2, 10.2], [-0.2, 0.1, 10.4]] * 30, np.float32)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(3):
+            out = t.update(img, pts)
+    said = [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)]
+    assert out.score == 1.0
+    assert sum("has score 2.5, not a number in 0..1" in m for m in said) == 1
+    t2, img = _loop(type("Bad", (_Still,), {"update": lambda self, image: (True, [1.0, 1.0, -3.0, 4.0])})())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(3):
+            assert t2.update(img, pts).status == "lost"
+    assert sum("not a box (a non-finite value or a size <= 0): taken as lost" in str(w.message)
+               for w in caught) == 1
+
+
+def test_option_values_that_are_names_stay_names():
+    from track3d.cli import _options
+
+    got = _options(["a=1", "b=-2.5", "c=1e-3", "d=nan", "e=inf", "f=1_000", "g=true", "h=.5"])
+    assert got == {"a": 1, "b": -2.5, "c": 1e-3, "d": "nan", "e": "inf", "f": "1_000", "g": True, "h": 0.5}

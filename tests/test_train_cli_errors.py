@@ -115,6 +115,24 @@ def test_a_prepare_killed_while_writing_leaves_no_cache_behind(tmp_path, monkeyp
     assert len(data.PointCache(out)) > 0 and [p.name for p in tmp_path.iterdir() if p.is_file()] == ["c.npz"]
 
 
+def test_boxnet_train_init_from_an_exported_model_takes_its_flags_or_names_them(tmp_path, capsys):
+    """--init-from X.onnx with flags other than its metadata's is one line naming the flags: with
+    --no-category alone the shipped extent-coded model had been fine-tuned as "points" in silence."""
+    from track3d.synthetic import make_synthetic_dataset
+    from track3d_train.boxnet.data import prepare_split
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 3})
+    cache = prepare_split(root, "test", tmp_path / "c.npz", jitters=0, min_points=4, progress=False)
+    run = ["boxnet", "train", "--cache", str(cache), "--out", str(tmp_path / "run"), "--num-points", "512",
+           "--batch", "2", "--max-steps", "1", "--val-every", "0", "--init-from", BOXNET_MODEL, "--quiet"]
+    assert train_main([*run, "--no-category", "--width", "0.5"]) == 2
+    _one_line(capsys, "a3boxnet_narrow.onnx was trained with other flags than this run's: pass --size-norm extent")
+    assert train_main([*run, "--no-category"]) == 2
+    _one_line(capsys, "pass --width 0.5 --size-norm extent")
+    assert train_main([*run, "--size-norm", "extent", "--width", "0.5"]) == 2
+    _one_line(capsys, "pass --no-category")
+
+
 def test_siamfc_and_edgetrack_train_name_a_path_that_is_not_a_crop_cache(tmp_path, capsys):
     from track3d_train.siamfc.data import build_cache, synthetic_sequences
 

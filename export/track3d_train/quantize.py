@@ -13,7 +13,8 @@ reduce_range is not needed), calibrated (MinMax) on the TRAIN split of DATASET w
 runtime's own input preparation:
 
 - A3BoxNet: frustum proposals of the ground-truth 2D boxes (``track3d.frustum.extract_frustum``),
-  sampled and centred with ``A3BoxNetEstimator.sample`` / ``track3d.boxnet.normalise``;
+  sampled and centred with ``A3BoxNetEstimator.sample`` and the model's size coding
+  (``A3BoxNetEstimator.coding.normalise``, ``track3d.size_coding``);
   Conv + Gemm are quantised except the heads (the layers producing the outputs, ``head_nodes``);
 - EdgeTrack: template and search crops cut as the tracker cuts them (normal and lost search
   sizes), each search crop with its sequence's template kernel; Conv quantised except the

@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -41,19 +42,23 @@ def _stereo_params(opts: dict, depth: str):
         raise ValueError(f"bad --stereo-option: {e}") from None
 
 
+_INT = re.compile(r"[+-]?\d+")
+_FLOAT = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+
+
 def _options(pairs: list[str] | None) -> dict:
-    """key=value pairs -> dict, values parsed as int / float / bool when they look like one."""
+    """key=value pairs -> dict, values parsed as int / float / bool when they are written as one.
+    Only plain decimal numbers are numbers: "nan", "inf" or "1_000" reached a plug-in's factory
+    as floats (Python's float() takes them) where it meant a name (a plug-in walkthrough)."""
     out = {}
     for p in pairs or []:
         if "=" not in p:
             raise ValueError(f"option {p!r} is not key=value")
         k, v = p.split("=", 1)
-        for conv in (int, float):
-            try:
-                out[k] = conv(v)
-                break
-            except ValueError:
-                continue
+        if _INT.fullmatch(v):
+            out[k] = int(v)
+        elif _FLOAT.fullmatch(v):
+            out[k] = float(v)
         else:
             out[k] = {"true": True, "false": False}.get(v.lower(), v)
     return out
@@ -669,13 +674,33 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "docs":
             return _cmd_docs(args)
         return _cmd_trackers(args)
+    except BrokenPipeError:   # `track3d eval ... | head`: the reader left, nothing went wrong here
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # no second error at exit's flush
+        return 0
     except (DatasetError, TrackerUnavailable, EstimatorUnavailable, ModelError, OSError,
             ValueError, RuntimeError) as e:
-        print(f"track3d {args.command}: error: {e}", file=sys.stderr)
+        print(f"track3d {args.command}: error: {_plugin_said(e) or e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except Exception as e:   # a plug-in's own bug: named in one line; track3d's own keeps its traceback
+        said = _plugin_said(e)
+        if said is None:
+            raise
+        print(f"track3d {args.command}: error: {said}", file=sys.stderr)
+        return 2
+
+
+def _plugin_said(e: BaseException) -> str | None:
+    """'the plug-in raised <Type> at file.py:LINE in FUNC: <message>' when `e` came out of a
+    plug-in's code (a RuntimeError of its own had read as track3d's), else None."""
+    from .plugins import plugin_frame
+
+    where = plugin_frame(e)
+    return None if where is None else f"the plug-in raised {type(e).__name__} at {where}: {e}"
 
 
 if __name__ == "__main__":

@@ -107,12 +107,15 @@ _REGISTRY: dict[str, Callable[..., BoxEstimator]] = {"baseline": BaselineEstimat
                                                          "none": NoEstimator}
 
 
-def register_estimator(name: str, factory: Callable[..., BoxEstimator]) -> None:
-    """Add (or replace) an estimator: ``factory(**options)`` returns a :class:`BoxEstimator`."""
-    if not name or not isinstance(name, str):
-        raise ValueError("an estimator name is a non-empty string")
-    if not callable(factory):
-        raise TypeError("factory must be callable")
+_BUILT_IN = frozenset(_REGISTRY)
+
+
+def register_estimator(name: str, factory: Callable[..., BoxEstimator], replace: bool = False) -> None:
+    """Add an estimator: ``factory(**options)`` returns a :class:`BoxEstimator`. A built-in name
+    is refused unless `replace` (track3d.trackers2d.register_tracker says why)."""
+    from .plugins import check_registration
+
+    check_registration("estimator", name, factory, _BUILT_IN, replace)
     _REGISTRY[name.lower()] = factory
 
 
@@ -130,7 +133,7 @@ def available_estimators() -> list[str]:
 
 def create_estimator(name: str, **options) -> BoxEstimator:
     """Build the estimator registered as `name` (e.g. ``create_estimator("a3boxnet", threads=1)``)."""
-    from .plugins import call_factory
+    from .plugins import call_factory, check_built
 
     factory = _REGISTRY.get(str(name).lower())
     if factory is None:
@@ -139,4 +142,5 @@ def create_estimator(name: str, **options) -> BoxEstimator:
     if factory is None:
         raise ValueError(f"unknown 3D box estimator {name!r}; available: {', '.join(available_estimators())} "
                          "(a plug-in: --plugin MODULE or an entry point in the track3d.estimators group)")
-    return call_factory("3D box estimator", name, factory, options)
+    return check_built("3D box estimator", name, call_factory("3D box estimator", name, factory, options),
+                       ("estimate",))

@@ -25,11 +25,13 @@ import warnings
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["TRACKER_GROUP", "ESTIMATOR_GROUP", "load_entry_points", "import_plugin", "call_factory"]
+__all__ = ["TRACKER_GROUP", "ESTIMATOR_GROUP", "load_entry_points", "import_plugin", "call_factory", "check_built",
+           "check_registration", "plugin_frame"]
 
 TRACKER_GROUP = "track3d.trackers"
 ESTIMATOR_GROUP = "track3d.estimators"
 _loaded: set[str] = set()
+_imported: set[str] = set()   # plug-in modules imported by dotted name (files: track3d_plugin_<stem>)
 
 
 def _entry_points(group: str):
@@ -50,6 +52,7 @@ def load_entry_points(group: str, register, force: bool = False) -> list[str]:
         try:
             factory = ep.load()
             register(ep.name, factory)
+            _imported.add(getattr(factory, "__module__", "") or "")
             names.append(ep.name)
         except Exception as e:  # a broken plug-in must not take the registry down
             warnings.warn(f"track3d plug-in {ep.name!r} ({ep.value}) of {group} cannot be loaded: "
@@ -72,11 +75,16 @@ def import_plugin(spec: str):
             sys.modules[name] = module
             mod_spec.loader.exec_module(module)
             return module
-        return importlib.import_module(spec)
+        module = importlib.import_module(spec)
+        _imported.add(module.__name__)
+        return module
     except ValueError:
         raise
     except Exception as e:
-        raise ValueError(f"plug-in {spec!r} cannot be imported: {type(e).__name__}: {e}") from None
+        hint = ""
+        if isinstance(e, ModuleNotFoundError) and e.name == spec and Path(f"{spec}.py").is_file():
+            hint = f" (the file {spec}.py is here: give its path, --plugin ./{spec}.py)"
+        raise ValueError(f"plug-in {spec!r} cannot be imported: {type(e).__name__}: {e}{hint}") from None
 
 
 def call_factory(kind: str, name: str, factory: Callable, options: dict):
@@ -100,3 +108,46 @@ def call_factory(kind: str, name: str, factory: Callable, options: dict):
         return factory(**options)
     except TypeError as e:
         raise ValueError(f"bad option for the {kind} {name!r}: {e}") from None
+
+
+def check_registration(kind: str, name, factory, built_in: frozenset, replace: bool) -> None:
+    """A registration's name and factory, or one ValueError / TypeError line."""
+    if not name or not isinstance(name, str):
+        raise ValueError(f"a {kind} name is a non-empty string")
+    if not callable(factory):
+        raise TypeError("factory must be callable")
+    if name.lower() in built_in and not replace:
+        raise ValueError(f"{name!r} is a built-in {kind} of track3d: register yours under another name "
+                         f"(or pass replace=True to run it in the built-in's place)")
+
+
+def check_built(kind: str, name: str, obj, methods: tuple[str, ...]):
+    """`obj` as a factory built it, or one ValueError line when it lacks the protocol's methods
+    (a factory without `return`, a class with `upate`: they had failed mid-run with a traceback)."""
+    missing = [m for m in methods if not callable(getattr(obj, m, None))]
+    if obj is None or missing:
+        got = "None (does the factory return what it builds?)" if obj is None else type(obj).__name__
+        raise ValueError(f"the {kind} {name!r} built {got}, which has no "
+                         f"{', '.join(m + '()' for m in (missing or methods))}: the protocol of a {kind} "
+                         f"is {', '.join(m + '()' for m in methods)} (docs/runtime.md, \"Plug-ins\")")
+    return obj
+
+
+def plugin_frame(exc: BaseException) -> str | None:
+    """'file.py:LINE in FUNCTION' of the innermost frame of `exc`'s traceback that lies in a
+    plug-in module's file (imported by import_plugin or an entry point outside track3d), or None
+    when the error did not pass through one: the CLI names the plug-in instead of a traceback."""
+    import traceback
+
+    package = Path(__file__).resolve().parent
+    files = {}
+    for mod in list(sys.modules.values()):
+        f = getattr(mod, "__file__", None)
+        if f and (getattr(mod, "__name__", "").startswith("track3d_plugin_") or mod.__name__ in _imported):
+            files[str(Path(f).resolve())] = mod.__name__
+    found = None
+    for fr in traceback.extract_tb(exc.__traceback__):
+        path = str(Path(fr.filename).resolve())
+        if path in files and not path.startswith(str(package)):
+            found = f"{Path(fr.filename).name}:{fr.lineno} in {fr.name}"
+    return found

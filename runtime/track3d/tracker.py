@@ -42,6 +42,7 @@ finite, has no positive size, does not overlap the image or is more than 10x the
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import asdict, dataclass, field
 from typing import Callable
 
@@ -326,6 +327,19 @@ class TrackResult:
 
 def _valid_box2d(b: np.ndarray) -> bool:
     return bool(np.all(np.isfinite(b)) and b[2] > 0 and b[3] > 0)
+
+
+def _is_flag(ok) -> bool:
+    """A 2D tracker's `ok`: a bool (numpy's too) or the integers 0 / 1."""
+    return isinstance(ok, (bool, np.bool_)) or (isinstance(ok, (int, np.integer)) and int(ok) in (0, 1))
+
+
+def _read_only(image: np.ndarray) -> np.ndarray:
+    """A read-only view of `image` for the 2D tracker: a plug-in that drew into the frame had
+    changed the caller's array and the overlay (a plug-in walkthrough); writing now raises."""
+    view = image.view()
+    view.flags.writeable = False
+    return view
 
 
 class Track3D:
@@ -618,6 +632,10 @@ class Track3D:
         # [0, 0, -20, 1, 1, 1] had been reported as tracking, and a 1e12 m box bent the fused 2D box)
         if b.shape != (6,) or not np.all(np.isfinite(b)) or np.any(b[3:] <= 0.0) or b[2] <= 0.0 \
                 or np.any(np.abs(b) > MAX_COORD_M):
+            self._say_once("box3d", f"the box estimator {self.estimator_name or self.estimator!r} returned "
+                                    f"{np.array2string(b, precision=3, threshold=8)}: not a box in front of the "
+                                    "camera ((6,) [cx, cy, cz, sx, sy, sz], finite, sizes > 0, cz > 0, within "
+                                    f"{MAX_COORD_M:g} m): taken as no estimate")
             return None
         return b
 
@@ -785,7 +803,7 @@ class Track3D:
         if points is not None and self.needs_points:
             self._check_units(points, b)
         self.category = category
-        self.tracker2d.init(image, b)
+        self.tracker2d.init(_read_only(image), b)
         self.box2d = b.copy()
         self.box3d = np.full(6, np.nan)
         self.bad_frames = 0
@@ -853,6 +871,30 @@ class Track3D:
         far = (b[2] + b[5] / 2.0) * float(np.sqrt(1.0 + (b[0] / b[2]) ** 2 + (b[1] / b[2]) ** 2))
         return far >= EMPTY_RANGE_SHARE * self.depth_range_m
 
+    def _protocol_broken(self, res) -> str:
+        """The one line naming a 2D tracker whose update() broke the (ok, box) protocol."""
+        got = " ".join(repr(res).split())
+        return (f"the 2D tracker {self.tracker_name or self.tracker2d!r} returned {got:.80} from update(image); "
+                "the protocol is (ok: bool, box: [x, y, w, h])")
+
+    def _say_once(self, what: str, message: str) -> None:
+        """A plug-in that breaks its protocol in a way the loop survives (a 2D box that is no box,
+        a score outside 0..1, a 3D box that is no box): one warning per kind and tracker, never
+        silent (a plug-in walkthrough: each had been taken as "lost" / clamped / no estimate)."""
+        said = self.__dict__.setdefault("_said", set())
+        if what not in said:
+            said.add(what)
+            warnings.warn(message, RuntimeWarning, stacklevel=3)
+
+    def _score(self) -> float | None:
+        """The 2D tracker's score (_tracker_score), with one warning when it gives one outside 0..1."""
+        s = getattr(self.tracker2d, "score", None)
+        got = _tracker_score(self.tracker2d)
+        if s is not None and not isinstance(s, bool) and (got is None or got != s):
+            self._say_once("score", f"the 2D tracker {self.tracker_name or self.tracker2d!r} has score {s!r}, "
+                                    f"not a number in 0..1: taken as {got}")
+        return got
+
     def _check_started(self, call: str) -> None:
         if not self._started:
             raise ValueError(f"Track3D.{call} before init(): start the tracker with init(image, box2d) first")
@@ -892,14 +934,22 @@ class Track3D:
         # None: the depth did not arrive (a sensor fault), unlike an empty cloud, which is the
         # sensor seeing nothing (a body that left the view: EMPTY_LOST_AFTER)
         points = check_cloud(points, needed=False) if self.needs_points else points
-        res = self.tracker2d.update(image)
+        res = self.tracker2d.update(_read_only(image))
         own = None   # the tracker's own box when the loop went on from another (the depth's body)
         try:
             ok, raw = res
-            raw = np.asarray(raw, dtype=np.float64).reshape(-1)
+            shape = np.shape(raw)
+            # a copy: a tracker that returns its own array and moves it in correct() had its fused
+            # box recorded as its own (a plug-in walkthrough)
+            raw = np.array(raw, dtype=np.float64).reshape(-1)
         except (TypeError, ValueError):  # a plug-in's bug, named as such (not numpy's message)
-            raise ValueError(f"the 2D tracker {self.tracker_name or self.tracker2d!r} returned {res!r:.80} from "
-                             f"update(image); the protocol is (ok: bool, box: [x, y, w, h])") from None
+            raise ValueError(self._protocol_broken(res)) from None
+        if not _is_flag(ok) or (ok and shape not in ((4,), (1, 4))):
+            # ok="no" had counted as found, a (2, 2) array as a box
+            raise ValueError(self._protocol_broken(res))
+        if ok and not _valid_box2d(raw):
+            self._say_once("box2d", f"the 2D tracker {self.tracker_name or self.tracker2d!r} returned ok=True with "
+                                    f"{raw.tolist()}, not a box (a non-finite value or a size <= 0): taken as lost")
         t1 = time.perf_counter()
         ms["track2d"] = (t1 - t0) * 1e3
         if not ok or raw.shape != (4,) or not _valid_box2d(raw):
@@ -935,7 +985,7 @@ class Track3D:
             if body is None:
                 ms["total"] = (time.perf_counter() - t0) * 1e3
                 r = TrackResult(self._shown(self.box2d if held is None else held), raw, self.box3d.copy(), status,
-                                n, ms, _tracker_score(self.tracker2d))
+                                n, ms, self._score())
                 # a 3D box measured from the body's outline in the depth is the body in view: not
                 # a bad frame (EVIDENCE_POINTS' notes)
                 return self._judge(r, estimated=False, seen=measured)
@@ -945,7 +995,7 @@ class Track3D:
             self.box2d = raw.copy()
             ms["total"] = (time.perf_counter() - t0) * 1e3
             r = TrackResult(self._shown(raw), raw.copy(), self.box3d.copy(), TRACKING, 0, ms,
-                            _tracker_score(self.tracker2d))
+                            self._score())
             return self._judge(r, estimated=False)
         if points is None:
             # the depth did not arrive: the 2D tracker's box, the last 3D box held; a frame the 2D
@@ -954,7 +1004,7 @@ class Track3D:
             self.box2d = raw.copy()
             ms["total"] = (time.perf_counter() - t0) * 1e3
             r = TrackResult(self._shown(raw), raw.copy(), self.box3d.copy(), NO_POINTS, 0, ms,
-                            _tracker_score(self.tracker2d))
+                            self._score())
             return self._judge(r, estimated=False, seen=_judges_loss(self.tracker2d))
         lit = None   # the outline where it is off (stereo: the lit part), for containment and the share
         dark = None  # that outline reaching into the body's dark side (track3d.dark_side), with the sun known
@@ -1070,7 +1120,7 @@ class Track3D:
         ms["total"] = (t4 - t0) * 1e3
         r = TrackResult(self._shown(box), (raw if own is None else own).copy(), self.box3d.copy(), status,
                         int(len(pts)), ms,
-                        _tracker_score(self.tracker2d))
+                        self._score())
         return self._judge(r, estimated=est is not None, seen=_judges_loss(self.tracker2d),
                            empty=est is None and len(pts) == 0)
 

@@ -363,12 +363,16 @@ _REGISTRY: dict[str, Callable[..., Tracker2D]] = {
 }
 
 
-def register_tracker(name: str, factory: Callable[..., Tracker2D]) -> None:
-    """Add (or replace) a tracker: ``factory(**options)`` returns a :class:`Tracker2D`."""
-    if not name or not isinstance(name, str):
-        raise ValueError("a tracker name is a non-empty string")
-    if not callable(factory):
-        raise TypeError("factory must be callable")
+_BUILT_IN = frozenset(_REGISTRY)
+
+
+def register_tracker(name: str, factory: Callable[..., Tracker2D], replace: bool = False) -> None:
+    """Add a tracker: ``factory(**options)`` returns a :class:`Tracker2D`. A built-in name is
+    refused unless `replace` (a plug-in named "EdgeTrack" had silently run in its place and
+    written under its results' name)."""
+    from .plugins import check_registration
+
+    check_registration("tracker", name, factory, _BUILT_IN, replace)
     _REGISTRY[name.lower()] = factory
 
 
@@ -397,6 +401,6 @@ def create_tracker(name: str, **options) -> Tracker2D:
     if factory is None:
         raise ValueError(f"unknown 2D tracker {name!r}; available: {', '.join(available_trackers())} "
                          "(a plug-in: --plugin MODULE or an entry point in the track3d.trackers group)")
-    from .plugins import call_factory
+    from .plugins import call_factory, check_built
 
-    return call_factory("2D tracker", name, factory, options)
+    return check_built("2D tracker", name, call_factory("2D tracker", name, factory, options), ("init", "update"))

@@ -1,12 +1,15 @@
 """`track3d-train boxnet`: prepare the frustum caches, train, export and evaluate A3BoxNet.
 
-Typical run (the shipped model; see docs/models.md):
+Typical run (a model of your own, written under runs/mine; see docs/models.md):
 
-    track3d-train boxnet prepare --data data/small --split train --jitters 5 --out runs/boxnet/cache
-    track3d-train boxnet prepare --data data/small --split test --jitters 0 --out runs/boxnet/cache
-    track3d-train boxnet train --cache runs/boxnet/cache/boxnet_train_*.npz --out runs/boxnet/main
-    track3d-train boxnet export --checkpoint runs/boxnet/main/best.pt --out runtime/track3d/models/a3boxnet.onnx --force
-    track3d-train boxnet eval --model runtime/track3d/models/a3boxnet.onnx --cache runs/boxnet/cache/boxnet_test_*.npz
+    track3d-train boxnet prepare --data data/small --split train --jitters 5 --out runs/mine/cache/train.npz
+    track3d-train boxnet prepare --data data/small --split test --jitters 0 --out runs/mine/cache/test.npz
+    track3d-train boxnet train --cache runs/mine/cache/train.npz --no-category --size-norm extent --out runs/mine/run
+    track3d-train boxnet export --checkpoint runs/mine/run/best.pt --out runs/mine/a3boxnet.onnx
+    track3d-train boxnet eval --model runs/mine/a3boxnet.onnx --cache runs/mine/cache/test.npz
+
+The shipped models come from recipes, not from this run: `track3d-train recipe run
+a3boxnet-engine` makes a3boxnet.onnx (`track3d-train recipe list` names the others).
 """
 from __future__ import annotations
 

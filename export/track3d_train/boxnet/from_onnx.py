@@ -68,7 +68,9 @@ def model_from_onnx(path: str | Path, calibration: np.ndarray | None = None):
     model.eval()
     ck = {"model": model.state_dict(), "model_config": cfg.to_dict(), "epoch": -1, "step": 0,
           "imported_from": {"file": path.name, "exported": meta.get("exported"),
-                            "train_data_hash": meta.get("train_data_hash")}}
+                            "train_data_hash": meta.get("train_data_hash"),
+                            # None: a model exported before the metadata recorded its box coding
+                            "size_norm": meta.get("size_norm")}}
     return model, ck
 
 

@@ -216,6 +216,28 @@ def _load_source(path, train_ds) -> tuple[str, dict]:
     return str(path), torch.load(str(path), map_location="cpu", weights_only=False)
 
 
+def _refuse_other_flags(path, src: dict, cfg: TrainConfig) -> None:
+    """An exported model (--init-from X.onnx) is fine-tuned only with the flags its metadata
+    records: --no-category alone had fine-tuned the shipped extent-coded model as "points"
+    without a word. The width may be narrower (the model is cut to it), never wider."""
+    s = src.get("model_config")
+    if not isinstance(s, dict):
+        return
+    want = []
+    if int(s["num_points"]) != cfg.num_points:
+        want.append(f"--num-points {int(s['num_points'])}")
+    if float(s["width"]) < cfg.width:
+        want.append(f"--width {float(s['width']):g}")
+    if bool(s["use_category"]) != cfg.use_category:
+        want.append("--no-category" if cfg.use_category else "no --no-category")
+    recorded = (src.get("imported_from") or {}).get("size_norm")
+    if recorded and recorded != cfg.size_norm:
+        want.append(f"--size-norm {recorded}")
+    if want:
+        raise ValueError(f"{path} was trained with other flags than this run's: pass {' '.join(want)} "
+                         "to fine-tune it")
+
+
 def _teacher(cfg: TrainConfig, train_ds, log):
     """The distillation teacher in eval mode (an .onnx, e.g. the shipped model, or a checkpoint)."""
     from .model import A3BoxNet, BoxNetConfig
@@ -316,8 +338,11 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
             log(f"resumed from {last}: epoch {start_epoch}, step {step}")
     elif init_from:
         init_from, src = _load_source(init_from, train_ds)
-        # the weights carry over between box codings (same layers; the heads re-learn what their
-        # outputs mean), and to a narrower net (narrow.py: the channels that matter most), not
+        if init_from.endswith(".onnx"):
+            _refuse_other_flags(init_from, src, cfg)
+        # a checkpoint's weights carry over between box codings (same layers; the heads re-learn
+        # what their outputs mean; an exported model's recorded coding must be the run's, above),
+        # and to a narrower net (narrow.py: the channels that matter most), not
         # between other architectures
         arch = {k: v for k, v in mcfg.to_dict().items() if k != "size_norm"}
         src_cfg = src.get("model_config") if isinstance(src, dict) else None
