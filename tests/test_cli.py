@@ -272,3 +272,35 @@ def test_bench_mistakes_are_named_before_any_timing(argv, needle, capsys):
     assert main(["bench", "--threads", "1", "--frames", "3", *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and needle in err[0], err
+
+
+def test_eval_scores_the_trackers_own_boxes_on_request(synth, tmp_path, capsys):
+    """With ideal depth the loop's boxes follow the depth's outline whatever the 2D tracker did (a
+    tracker answering [0, 0, 10, 10] on every frame scored AO_2d 1.000, a plug-in walkthrough):
+    --tracker-boxes scores the tracker's own boxes, 2D only."""
+    import numpy as np
+
+    from track3d.boxes import iou_2d
+    from track3d.dataset import Dataset
+
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert main(["track", "--data", str(synth), "--tracker", "oracle", "--sequence", "a", "--results", str(res),
+                 "--video", "none", "--quiet"]) == 0
+    raw = res / "test" / "oracle+a3boxnet" / "a" / "a_raw_001.txt"
+    rows = np.loadtxt(raw, delimiter=",")
+    rows[1:] = [0.0, 0.0, 10.0, 10.0]            # the tracker's own box: nowhere near the body
+    np.savetxt(raw, rows, delimiter=",", fmt="%.4f")
+    capsys.readouterr()
+    assert main(["eval", "--data", str(synth), "--sequence", "a", "--results", str(res), "--out", str(rep),
+                 "--quiet", "--no-plots"]) == 0
+    loop = json.loads((rep / "report.json").read_text())["trackers"]["oracle+a3boxnet"]["overall"]
+    assert main(["eval", "--data", str(synth), "--sequence", "a", "--results", str(res), "--out", str(rep),
+                 "--quiet", "--no-plots", "--tracker-boxes"]) == 0
+    out = capsys.readouterr()
+    own = json.loads((rep / "report.json").read_text())
+    seq = Dataset(synth).sequences("test")[0]
+    want = float(np.mean(iou_2d(rows[1:], seq.gt2d[1:])))   # hand: every frame after the init
+    assert own["boxes"] == "tracker's own 2D" and "ao_3d" not in own["trackers"]["oracle+a3boxnet"]["overall"]
+    assert own["trackers"]["oracle+a3boxnet"]["overall"]["ao_2d"] == pytest.approx(want)
+    assert loop["ao_2d"] > 0.9 and want < 0.1
+    assert "the 2D trackers' own boxes" in out.err

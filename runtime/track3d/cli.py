@@ -291,6 +291,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="the run the others are compared with sequence by sequence (mean difference, its "
                         "bootstrap interval, sequences better / worse; default: the first compared run)")
     e.add_argument("--no-plots", action="store_true", help="skip the plots (no matplotlib needed)")
+    e.add_argument("--tracker-boxes", action="store_true",
+                   help="score the 2D trackers' own boxes (_raw_001.txt, before the loop corrected them), in 2D "
+                        "only: with ideal or flash-LiDAR depth the reported boxes follow the depth's outline "
+                        "whatever the tracker did, so they say little of the 2D tracker itself")
     e.add_argument("--trajectories", type=bounded(int, 0), default=4,
                    help="sequences with a 3D trajectory plot and a line-of-sight plot (depth_<seq>.png): the "
                         "worst ones, lowest AO_3d averaged over the compared runs (default 4)")
@@ -523,7 +527,8 @@ def _cmd_eval(a) -> int:
         raise FileNotFoundError(f"--results {results}: the folder does not exist (run `track3d track --results "
                                 f"{results}` first)")
     # the dataset and its split first: a wrong --split is the split's fault, not the results'
-    exp = Experiment(a.data, a.split, a.results, a.out, sequences=_unique(a.sequences), max_frames=a.frames)
+    exp = Experiment(a.data, a.split, a.results, a.out, sequences=_unique(a.sequences), max_frames=a.frames,
+                     own_2d=a.tracker_boxes)
     if a.trackers:
         names = _unique(a.trackers)
     elif split_dir.is_dir():
@@ -569,6 +574,8 @@ def _cmd_eval(a) -> int:
         exp.sequences = have
     if a.baseline is not None and a.baseline not in names:
         raise ValueError(f"--baseline {a.baseline} is not one of the compared runs: {', '.join(names)}")
+    if a.tracker_boxes:
+        notes.append("scored: the 2D trackers' own boxes (--tracker-boxes), 2D only")
     plots = not a.no_plots
     if plots and not _have_module("matplotlib"):   # the lean install: scores first, plots optional
         plots = False

@@ -339,10 +339,13 @@ class Experiment:
                  report_dir: str | Path = "reports", sequences: list[str] | None = None,
                  max_frames: int | None = None, restart: bool = True, restart_skip: int = 1,
                  depth: str = "map", max_sequences: int | None = None, init_3d: bool = False,
-                 stereo_params: StereoParams | None = None):
+                 stereo_params: StereoParams | None = None, own_2d: bool = False):
         """sequences: names to run (default: the whole split); max_sequences: only the first N;
         init_3d: every initialisation also gets the ground truth's 3D box (run_sequence);
-        stereo_params: the matcher's settings with depth "stereo" (default StereoParams())."""
+        stereo_params: the matcher's settings with depth "stereo" (default StereoParams());
+        own_2d: score the 2D trackers' own boxes (`_raw_001.txt`, before the loop corrected them),
+        in 2D only: with ideal or flash-LiDAR depth the loop's boxes follow the depth's outline
+        whatever the tracker did, so the reported boxes say little of the tracker itself."""
         self.dataset = Dataset(root)
         self.split = split
         all_seqs = self.dataset.sequences(split)
@@ -370,6 +373,7 @@ class Experiment:
         if depth not in DEPTH_SOURCES:
             raise ValueError(f"depth must be one of {', '.join(DEPTH_SOURCES)}, got {depth!r}")
         self.depth = depth
+        self.own_2d = bool(own_2d)
         if stereo_params is not None and depth != "stereo":
             raise ValueError("stereo_params set the matcher of depth='stereo'")
         self.stereo_params = stereo_params
@@ -529,18 +533,29 @@ class Experiment:
                                  "row (nan for no output); --frames N scores the first N frames of every run")
         return res if self.max_frames is None else res.head(self.max_frames)
 
-    def _run_3d(self, name: str) -> bool:
+    def _has_3d(self, name: str) -> bool:
         """Whether `name` is a 3D run: some sequence has a 3D box (decided per run: a sequence of a 3D
         run without any 3D box has no output, it is not a 2D-only sequence)."""
         return any(np.isfinite(self._read_rows(name, seq).box3d).any() for seq in self.sequences)
 
+    def _run_3d(self, name: str) -> bool:
+        """Whether `name` is scored as a 3D run (never when scoring the trackers' own 2D boxes)."""
+        return False if self.own_2d else self._has_3d(name)
+
     def _read(self, name: str, seq: Sequence, run_3d: bool | None = None) -> SequenceResult:
         """The results of `name` on `seq` (_read_rows), checked against the protocol (_check_protocol);
-        frames marked skipped have no output (their boxes read as nan: IoU 0, no centre error)."""
+        frames marked skipped have no output (their boxes read as nan: IoU 0, no centre error).
+        With own_2d: the 2D tracker's own boxes in place of the reported ones, and no 3D box."""
         res = self._read_rows(name, seq)
-        if run_3d is None:
-            run_3d = self._run_3d(name)
+        if run_3d is None or self.own_2d:   # the protocol is the run's, whatever is scored of it
+            run_3d = self._has_3d(name)
         self._check_protocol(name, seq, res, read_run_record(self.result_dir, self.split, name), run_3d)
+        if self.own_2d:
+            if "raw_001" in res.missing:
+                raise ValueError(f"{name}/{seq.name}: no {seq.name}_raw_001.txt: the 2D tracker's own boxes "
+                                 "were not written, there is nothing to score")
+            res.box2d = res.box2d_raw.copy()
+            res.box3d = np.full_like(res.box3d, np.nan)
         skipped = res.status == SKIPPED
         if skipped.any():
             for k in ("box2d", "box2d_raw", "box3d"):
@@ -690,6 +705,8 @@ class Experiment:
         report: dict = {
             "dataset": str(self.dataset.root), "split": self.split, "sequences": [s.name for s in self.sequences],
             "max_frames": self.max_frames, "restart": self.restart, "restart_skip": self.restart_skip,
+            # which boxes were scored: the loop's reported ones, or the 2D trackers' own (own_2d)
+            **({"boxes": "tracker's own 2D"} if self.own_2d else {}),
             "cpu": cpu_name(), "thresholds": {"iou": IOU_THRESHOLDS, "ce_2d_px": CE2D_THRESHOLDS,
                                               "ce_3d_m": CE3D_THRESHOLDS},
             "trackers": {},
