@@ -632,7 +632,7 @@ class Track3D:
         # [0, 0, -20, 1, 1, 1] had been reported as tracking, and a 1e12 m box bent the fused 2D box)
         if b.shape != (6,) or not np.all(np.isfinite(b)) or np.any(b[3:] <= 0.0) or b[2] <= 0.0 \
                 or np.any(np.abs(b) > MAX_COORD_M):
-            self._say_once("box3d", f"the box estimator {self.estimator_name or self.estimator!r} returned "
+            self._say_once("box3d", f"the box estimator {self._name3d!r} returned "
                                     f"{np.array2string(b, precision=3, threshold=8)}: not a box in front of the "
                                     "camera ((6,) [cx, cy, cz, sx, sy, sz], finite, sizes > 0, cz > 0, within "
                                     f"{MAX_COORD_M:g} m): taken as no estimate")
@@ -871,10 +871,19 @@ class Track3D:
         far = (b[2] + b[5] / 2.0) * float(np.sqrt(1.0 + (b[0] / b[2]) ** 2 + (b[1] / b[2]) ** 2))
         return far >= EMPTY_RANGE_SHARE * self.depth_range_m
 
+    @property
+    def _name2d(self) -> str:
+        """The 2D tracker's registry name, or its class's: what a message calls it."""
+        return self.tracker_name or type(self.tracker2d).__name__
+
+    @property
+    def _name3d(self) -> str:
+        return self.estimator_name or type(self.estimator).__name__
+
     def _protocol_broken(self, res) -> str:
         """The one line naming a 2D tracker whose update() broke the (ok, box) protocol."""
         got = " ".join(repr(res).split())
-        return (f"the 2D tracker {self.tracker_name or self.tracker2d!r} returned {got:.80} from update(image); "
+        return (f"the 2D tracker {self._name2d!r} returned {got:.80} from update(image); "
                 "the protocol is (ok: bool, box: [x, y, w, h])")
 
     def _say_once(self, what: str, message: str) -> None:
@@ -891,7 +900,7 @@ class Track3D:
         s = getattr(self.tracker2d, "score", None)
         got = _tracker_score(self.tracker2d)
         if s is not None and not isinstance(s, bool) and (got is None or got != s):
-            self._say_once("score", f"the 2D tracker {self.tracker_name or self.tracker2d!r} has score {s!r}, "
+            self._say_once("score", f"the 2D tracker {self._name2d!r} has score {s!r}, "
                                     f"not a number in 0..1: taken as {got}")
         return got
 
@@ -948,7 +957,7 @@ class Track3D:
             # ok="no" had counted as found, a (2, 2) array as a box
             raise ValueError(self._protocol_broken(res))
         if ok and not _valid_box2d(raw):
-            self._say_once("box2d", f"the 2D tracker {self.tracker_name or self.tracker2d!r} returned ok=True with "
+            self._say_once("box2d", f"the 2D tracker {self._name2d!r} returned ok=True with "
                                     f"{raw.tolist()}, not a box (a non-finite value or a size <= 0): taken as lost")
         t1 = time.perf_counter()
         ms["track2d"] = (t1 - t0) * 1e3
@@ -1342,7 +1351,7 @@ class Track3D:
 
         get2d = getattr(self.tracker2d, "get_state", None)
         if get2d is None:
-            raise ValueError(f"the 2D tracker {self.tracker2d!r} has no get_state(): it cannot be checkpointed")
+            raise ValueError(f"the 2D tracker {self._name2d!r} has no get_state(): it cannot be checkpointed")
         get3d = getattr(self.estimator, "get_state", None)
         return to_plain({
             "version": STATE_VERSION, "tracker": self.tracker_name or type(self.tracker2d).__name__,
@@ -1397,7 +1406,7 @@ class Track3D:
                              f"{mine[0]}+{mine[1]} tracker")
         set2d = getattr(self.tracker2d, "set_state", None)
         if set2d is None:
-            raise ValueError(f"the 2D tracker {self.tracker2d!r} has no set_state()")
+            raise ValueError(f"the 2D tracker {self._name2d!r} has no set_state()")
         # another model file or other loop options would go on from the state, but not as the
         # tracker that wrote it (a stereo model's state had restored into the ideal-depth loop);
         # states written before the key are taken as they are
