@@ -328,3 +328,9 @@ def test_option_values_that_are_names_stay_names():
 
     got = _options(["a=1", "b=-2.5", "c=1e-3", "d=nan", "e=inf", "f=1_000", "g=true", "h=.5"])
     assert got == {"a": 1, "b": -2.5, "c": 1e-3, "d": "nan", "e": "inf", "f": "1_000", "g": True, "h": 0.5}
+
+
+def test_a_tracker_that_cannot_be_checkpointed_is_named_not_its_repr():
+    t, img = _loop(_Still())
+    with pytest.raises(ValueError, match=r"the 2D tracker '_Still' has no get_state\(\)"):
+        t.get_state()
