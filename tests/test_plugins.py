@@ -334,3 +334,23 @@ def test_a_tracker_that_cannot_be_checkpointed_is_named_not_its_repr():
     t, img = _loop(_Still())
     with pytest.raises(ValueError, match=r"the 2D tracker '_Still' has no get_state\(\)"):
         t.get_state()
+
+
+def test_create_takes_threads_for_the_parts_that_run_models():
+    """`Track3D.create(cam, tracker="kcf", estimator="a3boxnet", threads=1)` was a TypeError of
+    __init__ (a walkthrough with the README's `threads=` of the API)."""
+    from track3d.tracker import Track3D
+
+    cam = Camera.from_fov(64, 48, 45.0)
+    t = Track3D.create(cam, tracker="kcf", estimator="a3boxnet", threads=1)
+    assert t.estimator_options == {"threads": 1} and t.tracker_options == {"threads": 1}
+    class Plain(_Still):
+        def __init__(self):
+            super().__init__()
+
+    trackers2d.register_tracker("plain", Plain)        # a plug-in without a threads option: none given
+    assert Track3D.create(cam, tracker="plain", estimator="baseline", threads=1).tracker_options == {}
+    t = Track3D.create(cam, tracker="kcf", estimator="a3boxnet", estimator_options={"threads": 2}, threads=1)
+    assert t.estimator_options == {"threads": 2}                                  # its own option stands
+    with pytest.raises(ValueError, match="threads"):
+        Track3D.create(cam, tracker="kcf", estimator="baseline", threads=0)

@@ -27,7 +27,7 @@ from .boxes import box3d_from_points
 from .frames import check_category, check_estimator_points, check_point_bounds, point_bounds
 
 __all__ = ["BoxEstimator", "BaselineEstimator", "NoEstimator", "EstimatorUnavailable", "create_estimator",
-           "available_estimators", "register_estimator"]
+           "available_estimators", "register_estimator", "estimator_factory"]
 
 
 class EstimatorUnavailable(RuntimeError):
@@ -131,10 +131,9 @@ def available_estimators() -> list[str]:
     return sorted(_REGISTRY)
 
 
-def create_estimator(name: str, **options) -> BoxEstimator:
-    """Build the estimator registered as `name` (e.g. ``create_estimator("a3boxnet", threads=1)``)."""
-    from .plugins import call_factory, check_built
-
+def estimator_factory(name: str) -> Callable[..., BoxEstimator]:
+    """The factory registered as `name` (plug-ins loaded when it is not yet known); ValueError
+    listing the names there are."""
     factory = _REGISTRY.get(str(name).lower())
     if factory is None:
         _load_plugins()
@@ -142,5 +141,13 @@ def create_estimator(name: str, **options) -> BoxEstimator:
     if factory is None:
         raise ValueError(f"unknown 3D box estimator {name!r}; available: {', '.join(available_estimators())} "
                          "(a plug-in: --plugin MODULE or an entry point in the track3d.estimators group)")
+    return factory
+
+
+def create_estimator(name: str, **options) -> BoxEstimator:
+    """Build the estimator registered as `name` (e.g. ``create_estimator("a3boxnet", threads=1)``)."""
+    from .plugins import call_factory, check_built
+
+    factory = estimator_factory(name)
     return check_built("3D box estimator", name, call_factory("3D box estimator", name, factory, options),
                        ("estimate",))

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Callable
 
 __all__ = ["TRACKER_GROUP", "ESTIMATOR_GROUP", "load_entry_points", "import_plugin", "call_factory", "check_built",
-           "check_registration", "plugin_frame"]
+           "check_registration", "plugin_frame", "takes_option"]
 
 TRACKER_GROUP = "track3d.trackers"
 ESTIMATOR_GROUP = "track3d.estimators"
@@ -85,6 +85,18 @@ def import_plugin(spec: str):
         if isinstance(e, ModuleNotFoundError) and e.name == spec and Path(f"{spec}.py").is_file():
             hint = f" (the file {spec}.py is here: give its path, --plugin ./{spec}.py)"
         raise ValueError(f"plug-in {spec!r} cannot be imported: {type(e).__name__}: {e}{hint}") from None
+
+
+def takes_option(factory: Callable, option: str) -> bool:
+    """Whether factory(**{option: ...}) binds: a named parameter or **kwargs."""
+    import inspect
+
+    try:
+        params = inspect.signature(factory).parameters.values()
+    except (TypeError, ValueError):
+        return False
+    return any(p.name == option and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) or p.kind == p.VAR_KEYWORD
+               for p in params)
 
 
 def call_factory(kind: str, name: str, factory: Callable, options: dict):

@@ -538,16 +538,30 @@ class Track3D:
     @classmethod
     def create(cls, camera: Camera, tracker: str = "kcf", estimator: str = "baseline",
                tracker_options: dict | None = None, estimator_options: dict | None = None,
-               **options) -> "Track3D":
+               threads: int | None = None, **options) -> "Track3D":
         """Build from registry names; `options` go to Track3D (fusion, weight_3d, z_range,
         min_points, lost_after, min_score, frustum_margin, depth_range_m, weight_2d, section_limbs,
         measured_faces, depth_smoothing, evidence_points, reacquire_threshold, hold_cut_size, edge_pad,
         front_quantile, front_filter, silhouette, outline_share, outline_share_phase, outline_contain,
-        texture_trim, resume_outline, dark_side, fusion_cover, body_views, first_box_fade, drop_stray)."""
-        t = cls(camera, create_tracker(tracker, **(tracker_options or {})),
-                create_estimator(estimator, **(estimator_options or {})), **options)
+        texture_trim, resume_outline, dark_side, fusion_cover, body_views, first_box_fade, drop_stray).
+        threads: the CPU threads of each part that runs a model (a `threads` option of its factory,
+        unless its own options give one; track3d.threads.check_threads); parts without one
+        (OpenCV's trackers, the baseline box) run on the calling thread."""
+        from .estimators import estimator_factory
+        from .plugins import takes_option
+        from .trackers2d import tracker_factory
+
+        topts, eopts = dict(tracker_options or {}), dict(estimator_options or {})
+        if threads is not None:   # `Track3D.create(..., threads=1)` had been a TypeError of __init__
+            from .threads import check_threads
+
+            threads = check_threads(threads)
+            for opts, factory in ((topts, tracker_factory(tracker)), (eopts, estimator_factory(estimator))):
+                if "threads" not in opts and takes_option(factory, "threads"):
+                    opts["threads"] = threads
+        t = cls(camera, create_tracker(tracker, **topts), create_estimator(estimator, **eopts), **options)
         t.tracker_name, t.estimator_name = str(tracker).lower(), str(estimator).lower()
-        t.tracker_options, t.estimator_options = dict(tracker_options or {}), dict(estimator_options or {})
+        t.tracker_options, t.estimator_options = topts, eopts
         return t
 
     @classmethod

@@ -47,7 +47,7 @@ from .state import damaged, read_array, read_flag, read_int
 
 __all__ = [
     "Tracker2D", "OpenCVTracker", "OracleTracker", "TrackerUnavailable", "MIN_SIDE",
-    "create_tracker", "available_trackers", "register_tracker", "NANOTRACK_ENV", "nanotrack_dir",
+    "create_tracker", "tracker_factory", "available_trackers", "register_tracker", "NANOTRACK_ENV", "nanotrack_dir",
 ]
 
 # runtime/track3d/trackers2d.py -> the repository root is two folders up from the package.
@@ -392,8 +392,9 @@ def available_trackers() -> list[str]:
     return sorted(_REGISTRY)
 
 
-def create_tracker(name: str, **options) -> Tracker2D:
-    """Build the tracker registered as `name` with its options (e.g. ``gt=`` for "oracle")."""
+def tracker_factory(name: str) -> Callable[..., Tracker2D]:
+    """The factory registered as `name` (plug-ins loaded when it is not yet known); ValueError
+    listing the names there are."""
     factory = _REGISTRY.get(str(name).lower())
     if factory is None:
         _load_plugins()
@@ -401,6 +402,12 @@ def create_tracker(name: str, **options) -> Tracker2D:
     if factory is None:
         raise ValueError(f"unknown 2D tracker {name!r}; available: {', '.join(available_trackers())} "
                          "(a plug-in: --plugin MODULE or an entry point in the track3d.trackers group)")
+    return factory
+
+
+def create_tracker(name: str, **options) -> Tracker2D:
+    """Build the tracker registered as `name` with its options (e.g. ``gt=`` for "oracle")."""
+    factory = tracker_factory(name)
     from .plugins import call_factory, check_built
 
     return check_built("2D tracker", name, call_factory("2D tracker", name, factory, options), ("init", "update"))
