@@ -649,3 +649,15 @@ def test_a_held_frame_gives_a_views_model_its_views_and_feeds_them():
             assert r.status == NO_POINTS and np.all(np.isfinite(r.box3d))   # held, measured from the outline
             assert len(given) - before == 1 and given[-1]                   # the views model got its views
             assert t._views.views > views_before                            # and the frame went into them
+
+
+@pytest.mark.parametrize("name, value", [("carve_views", 65), ("carve_views", 100_000), ("max_points", 10**7),
+                                         ("view_points", 10**6), ("carve_rays", 10**5), ("carve_samples", 10**5)])
+def test_settings_whose_cost_grows_each_frame_are_bounded(name, value):
+    """carve_views=100000 (the docs had said 0 meant "no limit"; 0 is no carving) grew the state
+    16 KB a frame and get_state to 0.7 s over 2,000 frames (a latency walkthrough)."""
+    from track3d.body_views import BodyViewsParams
+
+    with pytest.raises(ValueError, match=f"BodyViewsParams.{name} must be an integer >= .* and <= "):
+        BodyViewsParams(**{name: value})
+    assert BodyViewsParams(carve_views=64).carve_views == 64 and BodyViewsParams(carve_views=0).carve_views == 0

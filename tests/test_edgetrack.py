@@ -817,3 +817,31 @@ def test_a_vanishing_box_is_raised_to_the_minimum_side_not_a_crash(name):
     t.correct([5.0, 5.0, 1e-300, 1e-300])
     ok, box = t.update(image)
     assert np.all(np.isfinite(box)) and np.all(box[2:] > 0)
+
+
+def _sweep_cells_as_listed(side, ww, hh, k):
+    """The sweep's cell as the first implementation listed them all (the reference)."""
+    step = 0.8 * side
+    xs = np.arange(side / 2.0, max(ww - side / 2.0, side / 2.0) + step, step)
+    ys = np.arange(side / 2.0, max(hh - side / 2.0, side / 2.0) + step, step)
+    cells = [(min(x, ww - side / 2.0) if ww > side else ww / 2.0, min(y, hh - side / 2.0) if hh > side else hh / 2.0)
+             for y in ys for x in xs]
+    return np.array(cells[(k // 2 - 1) % len(cells)], dtype=np.float64)
+
+
+def test_the_sweep_of_a_sub_pixel_target_is_bounded_and_normal_ones_unchanged():
+    """A lost target of a 0.1 px box listed every cell of a grid 0.08 px apart (0.6 s a frame;
+    smaller, all the memory: a latency walkthrough). The cell is now found by its index and cells
+    are at least SWEEP_MIN_STEP apart; for a search side of 10 px and more, the same cells."""
+    from track3d import edgetrack as E
+
+    t = E.create(threads=1)
+    t.center = np.array([100.0, 100.0])
+    for side, ww, hh in ((120.0, 640, 480), (37.5, 640, 480), (10.0, 320, 240), (700.0, 640, 480)):
+        for lost in range(E.SWEEP_AFTER + 2, E.SWEEP_AFTER + 160, 2):   # even k: a sweep frame
+            t.lost_frames = lost
+            np.testing.assert_array_equal(t._lost_search_centre(side, ww, hh),
+                                          _sweep_cells_as_listed(side, ww, hh, lost - E.SWEEP_AFTER))
+    t.lost_frames = E.SWEEP_AFTER + 6     # before: a list of 2e15 cells (MemoryError)
+    c = t._lost_search_centre(1e-4, 4000, 3000)
+    assert 0 <= c[0] <= 4000 and 0 <= c[1] <= 3000

@@ -588,3 +588,30 @@ def test_a_cloud_in_other_units_is_named_at_init(scale):
     assert np.isnan(t.box3d).all()
     t.init(image, box2d, 0, points=cloud)
     assert np.isfinite(t.box3d).all() and 15.0 < t.box3d[2] < 25.0
+
+
+def test_a_cloud_past_max_cloud_points_is_thinned_as_documented():
+    """The loop's time grows with the cloud (1e6 returns past the body's: ~65 ms, 5e6: ~0.5 s a
+    frame; a latency walkthrough). `max_cloud_points` bounds it: every k-th return, k the least
+    that fits; the same boxes as giving that thinned cloud oneself."""
+    from track3d.bench import synthetic_frames
+
+    frames = synthetic_frames(CAM, n=3)
+    rng = np.random.default_rng(3)
+    far = np.column_stack([rng.uniform(-20, 20, 30_000), rng.uniform(-15, 15, 30_000),
+                           rng.uniform(40, 44, 30_000)]).astype(np.float32)
+    clouds = [np.concatenate([f[1], far]) for f in frames]
+    cap = 20_000
+    outs = []
+    for thin_here in (False, True):
+        t = Track3D.create(CAM, tracker="kcf", estimator="baseline", max_cloud_points=None if thin_here else cap)
+        k = -(-len(clouds[0]) // cap)
+        t.init(frames[0][0], frames[0][2], 0)
+        c = clouds[1][::k] if thin_here else clouds[1]
+        outs.append(t.update(frames[1][0], c))
+        assert t.describe()["options"].get("max_cloud_points") == (None if thin_here else cap)
+    np.testing.assert_array_equal(outs[0].box3d, outs[1].box3d)
+    assert outs[0].num_points == outs[1].num_points
+    for bad in (0, 999, 2.5, True, "1e6"):
+        with pytest.raises(ValueError, match="max_cloud_points must be None"):
+            Track3D.create(CAM, tracker="kcf", estimator="baseline", max_cloud_points=bad)

@@ -49,6 +49,14 @@ __all__ = ["BodyViewsParams", "BodyViews", "SurfaceGrid", "surface_grid", "grid_
            "projective_fit", "carved_back", "hold_back_face"]
 
 
+# Upper bounds of the settings whose cost grows each frame or whose points ride in the state: a
+# carve_views of 100,000 grew the state by 16 KB a frame (32 MB after 2,000 frames, get_state 0.7 s;
+# a latency walkthrough)
+CARVE_VIEWS_MAX = 64
+_HIGH = {"carve_views": CARVE_VIEWS_MAX, "max_points": 200_000, "view_points": 20_000, "carve_rays": 4096,
+         "carve_samples": 1024}
+
+
 @dataclass(frozen=True)
 class BodyViewsParams:
     """How `BodyViews` samples, registers and keeps views."""
@@ -61,7 +69,8 @@ class BodyViewsParams:
     min_fit: float = 0.6        # a registration fitting fewer of the points starts the views over
     view_points: int = 400      # points of each view kept in the body frame
     max_points: int = 8000      # view points kept (every other one dropped past it)
-    carve_views: int = 12       # views kept for the carved limit of the back face (0: no limit)
+    carve_views: int = 12       # views kept for the carved limit of the back face (0: no carving; at
+                                # most CARVE_VIEWS_MAX: each is carved every frame and rides in the state)
     carve_angle_deg: float = 10.0   # a view is kept when this far from every kept one
     carve_rays: int = 64        # lines of sight through this view's outline carved
     carve_samples: int = 24     # samples along each, front to carve_reach x the body's width behind
@@ -75,8 +84,10 @@ class BodyViewsParams:
                      "carve_rays", "carve_samples", "cut_extent"):
             v = getattr(self, name)
             low = 0 if name in ("carve_views", "cut_extent") else 1
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
-                raise ValueError(f"BodyViewsParams.{name} must be an integer >= {low}, got {v!r}")
+            high = _HIGH.get(name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low or (high and v > high):
+                raise ValueError(f"BodyViewsParams.{name} must be an integer >= {low}"
+                                 + (f" and <= {high}" if high else "") + f", got {v!r}")
         for name in ("max_dist_m", "good_m", "carve_reach", "carve_tol_m"):
             v = getattr(self, name)
             if not (np.isfinite(float(v)) and float(v) > 0.0):

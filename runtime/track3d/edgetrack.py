@@ -57,6 +57,7 @@ MOTION_DEAD_ZONE = 0.05
 # far while the tracker was lost was otherwise never found again (a held-out sequence: lost for
 # its last 22 frames with the body in view ~330 px from the last centre).
 SWEEP_AFTER = 3
+SWEEP_MIN_STEP = 8.0   # px: the sweep's cells are never closer (a search side of 10 px and more is unaffected)
 # The frame after a re-acquisition ("settling") searches the wide lost region without the cosine
 # window: the velocity is unknown then (a re-acquisition's jump is not motion), and a body that
 # came back into view fast crossed the normal region in one frame (a held-out sequence: found at
@@ -250,12 +251,16 @@ class EdgeTracker:
         k = self.lost_frames - SWEEP_AFTER
         if k <= 0 or k % 2 == 1:
             return self.center
-        step = 0.8 * side
+        # cells at least SWEEP_MIN_STEP px apart, the cell found by its index: a list of every cell
+        # of a sub-pixel target's grid had taken 0.6 s a frame and, smaller still, all the memory
+        # (a latency walkthrough); for targets of a few pixels and more the same cells as before
+        step = max(0.8 * side, SWEEP_MIN_STEP)
         xs = np.arange(side / 2.0, max(ww - side / 2.0, side / 2.0) + step, step)
         ys = np.arange(side / 2.0, max(hh - side / 2.0, side / 2.0) + step, step)
-        cells = [(min(x, ww - side / 2.0) if ww > side else ww / 2.0, min(y, hh - side / 2.0) if hh > side else hh / 2.0)
-                 for y in ys for x in xs]
-        return np.array(cells[(k // 2 - 1) % len(cells)], dtype=np.float64)
+        i = (k // 2 - 1) % (len(xs) * len(ys))
+        x, y = xs[i % len(xs)], ys[i // len(xs)]
+        return np.array((min(x, ww - side / 2.0) if ww > side else ww / 2.0,
+                         min(y, hh - side / 2.0) if hh > side else hh / 2.0), dtype=np.float64)
 
     def _predicted(self, side: float) -> np.ndarray:
         """The search centre's offset (2,) pixels for a search region of `side` image pixels."""

@@ -114,6 +114,7 @@ LOST_AFTER = 10          # consecutive frames without a usable estimate (or belo
 # sequences 0.7071 -> 0.7072 (held frames counted good without the measured box: the same flags,
 # 0.7071).
 EVIDENCE_POINTS = 48
+MIN_CLOUD_CAP = 1000   # the least max_cloud_points: a thinner cloud would not box a body
 # A frame EdgeTrack calls lost while the depth's outline at its last box holds the body in view
 # (at least RESUME_SHARE of that box's area in the image, not cut by the image border on one side
 # only, returns short of the sensor's range) is not held with the last 2D box: with
@@ -360,7 +361,7 @@ class Track3D:
                  dark_side: float = DARK_SIDE, fusion_cover: float = FUSION_COVER, texture_trim: bool = False,
                  resume_outline: bool = False,
                  body_views: bool | BodyViewsParams = BODY_VIEWS, first_box_fade: float = FIRST_BOX_FADE,
-                 drop_stray: bool = DROP_STRAY):
+                 drop_stray: bool = DROP_STRAY, max_cloud_points: int | None = None):
         if not isinstance(camera, Camera):
             raise TypeError(f"camera must be a track3d.Camera, got {type(camera).__name__}")
         if not 0.0 <= float(weight_3d) <= 1.0:
@@ -446,6 +447,15 @@ class Track3D:
         if not isinstance(drop_stray, (bool, np.bool_)):
             raise ValueError(f"drop_stray must be True or False, got {drop_stray!r}")
         self.drop_stray = bool(drop_stray)
+        # the loop's time grows with the cloud (~65 ns a return past the body's own, mostly the
+        # false-alarm rule's sort of the frustum): a sensor of more returns than a frame's budget
+        # holds is thinned to at most this many, every k-th return (None: all; docs/runtime.md)
+        if max_cloud_points is not None and (isinstance(max_cloud_points, bool)
+                                             or not isinstance(max_cloud_points, (int, np.integer))
+                                             or max_cloud_points < MIN_CLOUD_CAP):
+            raise ValueError(f"max_cloud_points must be None (all) or an integer >= {MIN_CLOUD_CAP}, "
+                             f"got {max_cloud_points!r}")
+        self.max_cloud_points = None if max_cloud_points is None else int(max_cloud_points)
         if not isinstance(resume_outline, (bool, np.bool_)):
             raise ValueError(f"resume_outline must be True or False, got {resume_outline!r}")
         self.resume_outline = bool(resume_outline)
@@ -543,7 +553,8 @@ class Track3D:
         min_points, lost_after, min_score, frustum_margin, depth_range_m, weight_2d, section_limbs,
         measured_faces, depth_smoothing, evidence_points, reacquire_threshold, hold_cut_size, edge_pad,
         front_quantile, front_filter, silhouette, outline_share, outline_share_phase, outline_contain,
-        texture_trim, resume_outline, dark_side, fusion_cover, body_views, first_box_fade, drop_stray).
+        texture_trim, resume_outline, dark_side, fusion_cover, body_views, first_box_fade, drop_stray,
+        max_cloud_points).
         threads: the CPU threads of each part that runs a model (a `threads` option of its factory,
         unless its own options give one; track3d.threads.check_threads); parts without one
         (OpenCV's trackers, the baseline box) run on the calling thread."""
@@ -809,7 +820,7 @@ class Track3D:
         first = None if box3d is None else check_init_box3d(box3d)
         category = check_category(category, getattr(self.estimator, "num_categories", None))
         image = self.camera.undistort_image(check_image(image, self._size))
-        points = check_cloud(points, needed=False) if self.needs_points else None
+        points = self._thinned(check_cloud(points, needed=False)) if self.needs_points else None
         if callable(points):
             # called (for the box _frustum would cut) before anything changes: a callable that fails
             # had left the tracker started
@@ -918,6 +929,14 @@ class Track3D:
                                     f"not a number in 0..1: taken as {got}")
         return got
 
+    def _thinned(self, points):
+        """`points` with at most `max_cloud_points` returns (every k-th, k the least that fits), or
+        as they are (no cap, a callable, None)."""
+        cap = self.max_cloud_points
+        if cap is None or not isinstance(points, np.ndarray) or len(points) <= cap:
+            return points
+        return np.ascontiguousarray(points[:: -(-len(points) // cap)])
+
     def _check_started(self, call: str) -> None:
         if not self._started:
             raise ValueError(f"Track3D.{call} before init(): start the tracker with init(image, box2d) first")
@@ -957,6 +976,7 @@ class Track3D:
         # None: the depth did not arrive (a sensor fault), unlike an empty cloud, which is the
         # sensor seeing nothing (a body that left the view: EMPTY_LOST_AFTER)
         points = check_cloud(points, needed=False) if self.needs_points else points
+        points = self._thinned(points)
         res = self.tracker2d.update(_read_only(image))
         own = None   # the tracker's own box when the loop went on from another (the depth's body)
         try:
@@ -1569,6 +1589,7 @@ class Track3D:
                         # only when on: the records of runs without the views stay as they were
                         **({"body_views": asdict(self._views.params)} if self._views is not None else {}),
                         **({"drop_stray": True} if self.drop_stray else {}),
+                        **({"max_cloud_points": self.max_cloud_points} if self.max_cloud_points else {}),
                         # acts only with a first 3D box (init(box3d=)); named when not the default
                         **({"first_box_fade": self.first_box_fade} if self.first_box_fade != FIRST_BOX_FADE else {})},
             "models": models,
