@@ -304,3 +304,21 @@ def test_eval_scores_the_trackers_own_boxes_on_request(synth, tmp_path, capsys):
     assert own["trackers"]["oracle+a3boxnet"]["overall"]["ao_2d"] == pytest.approx(want)
     assert loop["ao_2d"] > 0.9 and want < 0.1
     assert "the 2D trackers' own boxes" in out.err
+
+
+def test_eval_writes_its_files_before_a_closed_pipe_stops_it(synth, tmp_path):
+    """`track3d eval ... | head -2` stopped at the first print into the closed pipe (here a reader
+    that left at once: `| true`), before it
+    wrote sequences.txt (found writing this session's results); now the files come first."""
+    import subprocess
+    import sys
+
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert main(["track", "--data", str(synth), "--tracker", "oracle", "--results", str(res), "--video", "none",
+                 "--quiet"]) == 0
+    code = ("import sys; from track3d.cli import main; sys.exit(main(['eval', '--data', sys.argv[1], '--results', "
+            "sys.argv[2], '--out', sys.argv[3], '--quiet', '--no-plots']))")
+    p = subprocess.run(f"{sys.executable} -c \"{code}\" {synth} {res} {rep} | true", shell=True,
+                       capture_output=True, text=True, timeout=120)
+    assert (rep / "report.json").is_file() and (rep / "sequences.txt").is_file()
+    assert "Broken pipe" not in p.stderr and "Traceback" not in p.stderr

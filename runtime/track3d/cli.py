@@ -586,6 +586,9 @@ def _cmd_eval(a) -> int:
     if notes:   # into report.json as well
         report["warnings"] = notes + report.get("warnings", [])
         write_json(Path(a.out) / "report.json", report)
+    per_seq = sequence_table(report)
+    if per_seq:   # written before anything is printed: a reader that leaves (`| head`) loses no file
+        (Path(a.out) / "sequences.txt").write_text(per_seq + "\n")
     print(summary_table(report))
     axes = axis_table(report)
     if axes:
@@ -596,11 +599,8 @@ def _cmd_eval(a) -> int:
     where = condition_table(report)
     if where:
         print(where)
-    per_seq = sequence_table(report)
-    if per_seq:
-        (Path(a.out) / "sequences.txt").write_text(per_seq + "\n")
-        if a.per_sequence:
-            print(per_seq)
+    if per_seq and a.per_sequence:
+        print(per_seq)
     for w in report.get("warnings", []):
         print(f"track3d eval: WARNING: {w}", file=sys.stderr)
     print(f"report: {Path(a.out) / 'report.json'}")
