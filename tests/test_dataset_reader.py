@@ -13,17 +13,17 @@ def _write_fake(root, n=3):
     for sub in (D.LEFT_DIR, D.RIGHT_DIR, D.DEPTH_DIR):
         (seq / sub).mkdir(parents=True)
     depth = np.zeros((24, 32), np.float32)
-    depth[10:12, 10:14] = 5.0
+    depth[8:16, 12:20] = 5.0     # the 1 m cube at 5 m fills the 2D label, as the 3D label projects
     for i in range(n):
         img = np.full((24, 32, 3), i * 10, np.uint8)
         D.write_rgb(seq / D.LEFT_DIR / D.frame_name(i), img)
         D.write_rgb(seq / D.RIGHT_DIR / D.frame_name(i), img)
         D.write_depth_png(seq / D.DEPTH_DIR / D.frame_name(i), depth)
-    np.savetxt(seq / D.GT2D, np.tile([10, 10, 4, 2], (n, 1)), delimiter=",", fmt="%.3f")
+    np.savetxt(seq / D.GT2D, np.tile([12, 8, 8, 8], (n, 1)), delimiter=",", fmt="%.3f")
     np.savetxt(seq / D.GT3D, np.tile([0, 0, 5, 1, 1, 1], (n, 1)), delimiter=",", fmt="%.4f")
     np.savetxt(seq / D.ABSENCE, [0, 1, 0][:n], fmt="%d")
     np.savetxt(seq / D.CUT, [0, 0, 0][:n], fmt="%d")
-    (seq / D.META).write_text(json.dumps({"family_index": 2}))
+    (seq / D.META).write_text(json.dumps({"family_index": 2, "depth_sensor": "ideal"}))
     (root / D.DATASET_JSON).write_text(json.dumps({
         "format": D.FORMAT, "version": 1, "camera": cam.to_dict(), "splits": {"test": ["0001"]}}))
     return cam
@@ -38,8 +38,8 @@ def test_reader_roundtrip(tmp_path):
     assert seq.absent.tolist() == [False, True, False]
     f = seq[1]
     assert f.image.shape == (24, 32, 3) and f.image[0, 0, 0] == 10
-    assert f.points.shape == (8, 3) and np.allclose(f.points[:, 2], 5.0)
-    np.testing.assert_allclose(f.box2d, [10, 10, 4, 2])
+    assert f.points.shape == (64, 3) and np.allclose(f.points[:, 2], 5.0)
+    np.testing.assert_allclose(f.box2d, [12, 8, 8, 8])
 
 
 def test_depth_png_is_millimetres(tmp_path):
@@ -95,10 +95,10 @@ def test_writer_and_reader_round_trip(tmp_path):
     n = 3
     for i in range(n):
         D.write_rgb(seq / D.LEFT_DIR / D.frame_name(i), np.zeros((8, 10, 3), np.uint8))
-        D.write_depth_png(seq / D.DEPTH_DIR / D.frame_name(i), np.full((8, 10), 2.0))
+        D.write_depth_png(seq / D.DEPTH_DIR / D.frame_name(i), np.full((8, 10), 5.0))
     gt2d = np.array([[1, 2, 3, 4], [0, 0, 0, 0], [2, 2, 5, 5]])
     gt3d = np.array([[0.1, 0.2, 5.0, 1.0, 1.0, 1.0]] * n)
-    D.write_labels(seq, gt2d, gt3d, [0, 1, 0], [0, 0, 1], {"family_index": 1, "z": [1, 2]})
+    D.write_labels(seq, gt2d, gt3d, [0, 1, 0], [0, 0, 1], {"family_index": 1, "z": [1, 2], "depth_sensor": "ideal"})
     D.write_dataset_json(tmp_path, {"format": D.FORMAT, "version": D.FORMAT_VERSION,
                                     "camera": Camera.from_fov(10, 8, 45.0).to_dict(), "splits": {"test": ["0001"]}})
     assert (seq / D.GT2D).read_text().splitlines()[0] == "1,2,3,4"

@@ -255,7 +255,20 @@ class Camera:
     def from_dict(cls, d: dict) -> "Camera":
         """Inverse of to_dict. A dict with a K and "calibrated": true, or with a K and no
         perspective angles, is a calibrated camera (any fx, fy, cx, cy, optional "dist");
-        otherwise the angles define K (eq. 1) and a K given next to them must agree."""
+        otherwise the angles define K (eq. 1) and a K given next to them must agree. A key
+        other than DICT_KEYS is refused (a "baseline" for "baseline_m" had been ignored: no
+        stereo pair, silently)."""
+        if not isinstance(d, dict):
+            raise ValueError(f"a camera description is a JSON object, got {type(d).__name__}")
+        unknown = sorted(str(k) for k in d if k not in DICT_KEYS)
+        if unknown:
+            import difflib
+
+            near = difflib.get_close_matches(unknown[0], DICT_KEYS, n=1, cutoff=0.6)
+            raise ValueError(f"camera description has the unknown key {unknown[0]!r}"
+                             + (f" (did you mean {near[0]!r}?)" if near else "")
+                             + (f" and {len(unknown) - 1} more" if len(unknown) > 1 else "")
+                             + f"; the known keys: {', '.join(DICT_KEYS)}")
         if "K" in d and (d.get("calibrated") or "fov_x_deg" not in d or d.get("dist")):
             try:
                 # a calibrated camera's file without a baseline has no known pair
@@ -271,6 +284,12 @@ class Camera:
             raise ValueError("camera K in the file disagrees with its perspective angles and resolution "
                              "(a calibrated K needs \"calibrated\": true)")
         return cam
+
+
+# The keys of a camera description (to_dict / from_dict, dataset.json "camera"): width, height
+# (pixels), fov_x_deg, fov_y_deg (degrees, eq. 1), baseline_m (metres or null), K (3x3 pixels),
+# calibrated (K authoritative), dist (OpenCV distortion coefficients).
+DICT_KEYS = ("width", "height", "fov_x_deg", "fov_y_deg", "baseline_m", "K", "calibrated", "dist")
 
 
 def _resolution(width, height) -> tuple[int, int]:

@@ -27,7 +27,7 @@ __all__ = [
     "FORMAT", "FORMAT_VERSION", "DATASET_JSON", "GENERATE_RUN_FILE", "LEFT_DIR", "RIGHT_DIR", "DEPTH_DIR", "GT2D", "GT3D",
     "ABSENCE", "CUT", "META", "frame_name", "write_meta", "write_depth_png", "read_depth_png", "read_rgb", "write_rgb",
     "write_labels", "write_dataset_json", "COARSE_CATEGORIES",
-    "DatasetError", "Dataset", "Sequence", "Frame",
+    "DatasetError", "DatasetWarning", "Dataset", "Sequence", "Frame", "PROJECTION_TOLERANCE", "DEPTH_RATIO_LIMITS",
 ]
 
 FORMAT = "track3d-dataset"
@@ -46,6 +46,39 @@ COARSE_CATEGORIES = ("contact_binary", "spinning_top", "irregular")
 
 class DatasetError(Exception):
     """A dataset, split or sequence on disk is missing or malformed; the message says which."""
+
+
+class DatasetWarning(UserWarning):
+    """A dataset that reads but looks wrong (docs/dataset.md "What the reader checks"): one line
+    naming the file or sequence, issued once per message and process."""
+
+
+# The consistency checks run when a sequence is opened (docs/dataset.md "What the reader checks").
+# Projection: on present frames not cut by the image border, each edge of the 2D label must lie
+# where the 3D label box can put it (between the nearest and farthest projection of the box face
+# that edge touches; 1 px of slack for the pixel grid); the per-frame excess, over the 2D box's
+# width (x edges) or height (y edges), has a median over the sequence above this -> one warning.
+# Every sequence of data/ (867 with such frames: engine-*, calib-*, long-tof, fa-*, ceil-*,
+# big-ideal-2027) and the tests' synthetic spheres measure 0.000 (at most 0.0015 without the
+# slack); a hand-made set's mistakes measured 0.11 (principal point 11 px off), 0.22 (half
+# extents), 0.44 (y up, a body 0.4 m off the axis).
+PROJECTION_TOLERANCE = 0.05
+PROJECTION_SLACK_PX = 1.0
+# Depth units: the median depth of the returns inside the first present frame's 2D label over the
+# 3D label's z span [cz - sz/2, cz + sz/2] (1 inside it). data/ measures 0.991 .. 1.0; depth
+# maps in centimetres 0.10, in metres 0.001, 3D labels in millimetres 0.001.
+DEPTH_RATIO_LIMITS = (0.5, 2.0)
+_MIN_DEPTH_RETURNS = 10
+_warned: set[str] = set()
+
+
+def _warn_once(message: str) -> None:
+    """One DatasetWarning per message and process (a split is opened by the run and again by the
+    evaluation: the same words once)."""
+    if message in _warned:
+        return
+    _warned.add(message)
+    warnings.warn(message, DatasetWarning, stacklevel=4)
 
 
 def frame_name(index: int) -> str:
@@ -170,6 +203,122 @@ def _read_flags(path: Path, n: int) -> np.ndarray:
     return f.astype(bool)
 
 
+def _lines(bad: np.ndarray) -> str:
+    """' (and N more lines)' after the first bad line of a label file, or ''."""
+    return f" (and {len(bad) - 1} more line(s))" if len(bad) > 1 else ""
+
+
+def _check_labels(seq: Path, gt2d: np.ndarray, gt3d: np.ndarray, absent: np.ndarray, width: int, height: int) -> None:
+    """Refuse labels that cannot be right on a present frame, in one line naming file and line:
+    a 3D box behind the camera or of no size, a 2D box 0,0,0,0 (the absence flag forgotten) or
+    of no size, a 2D box outside the image or reaching past it by more than 1 px (labels are
+    clipped to the image)."""
+    present = ~absent
+    f3, f2 = seq / GT3D, seq / GT2D
+    bad = np.flatnonzero(present & (gt3d[:, 2] <= 0))
+    if len(bad):
+        i = bad[0]
+        raise DatasetError(f"{f3} line {i + 1}: cz = {gt3d[i, 2]:g} on a present frame: the 3D label's centre must be "
+                           f"in front of the camera (cz > 0; left camera frame, x right, y down, z forward, "
+                           f"metres){_lines(bad)}")
+    bad = np.flatnonzero(present & np.any(gt3d[:, 3:] <= 0, axis=1))
+    if len(bad):
+        i = bad[0]
+        k = int(np.argmax(gt3d[i, 3:] <= 0))
+        raise DatasetError(f"{f3} line {i + 1}: {('sx', 'sy', 'sz')[k]} = {gt3d[i, 3 + k]:g} on a present frame: "
+                           f"sx, sy, sz are the box's full extents in metres, > 0{_lines(bad)}")
+    bad = np.flatnonzero(present & np.all(gt2d == 0, axis=1))
+    if len(bad):
+        i = bad[0]
+        raise DatasetError(f"{f2} line {i + 1}: 0,0,0,0 on a frame that {ABSENCE} marks present (its line {i + 1} "
+                           f"is 0): a frame without the target is flagged 1 in {ABSENCE}{_lines(bad)}")
+    x, y, w, h = gt2d.T
+    bad = np.flatnonzero(present & ((w <= 0) | (h <= 0)))
+    if len(bad):
+        i = bad[0]
+        raise DatasetError(f"{f2} line {i + 1}: w = {w[i]:g}, h = {h[i]:g} on a present frame: a 2D label is "
+                           f"x, y, w, h with w, h > 0{_lines(bad)}")
+    bad = np.flatnonzero(present & ((x >= width) | (y >= height) | (x + w <= 0) | (y + h <= 0)))
+    if len(bad):
+        i = bad[0]
+        raise DatasetError(f"{f2} line {i + 1}: {','.join(f'{v:g}' for v in gt2d[i])} lies wholly outside the "
+                           f"{width}x{height} image on a present frame{_lines(bad)}")
+    past = np.max(np.stack([-x, -y, x + w - width, y + h - height]), axis=0)
+    bad = np.flatnonzero(present & (past > 1.0))
+    if len(bad):
+        i = bad[0]
+        raise DatasetError(f"{f2} line {i + 1}: {','.join(f'{v:g}' for v in gt2d[i])} reaches {past[i]:g} px past "
+                           f"the {width}x{height} image: 2D labels are clipped to the image (and x, y, w, h, not "
+                           f"x1, y1, x2, y2){_lines(bad)}")
+
+
+def _check_frame_files(seq: Path, sub: str, n: int) -> None:
+    """The folder `sub` of a sequence holds exactly frame_name(0) .. frame_name(n - 1) (n label
+    rows), checked when the sequence is opened; what differs is named in one line."""
+    folder = seq / sub
+    try:
+        names = [f.name for f in folder.iterdir()] if folder.is_dir() else []
+    except OSError as e:
+        raise DatasetError(f"cannot list {folder}: {e}") from None
+    pngs = {f for f in names if f.lower().endswith(".png")}
+    want = {frame_name(i) for i in range(n)}
+    if pngs == want:
+        return
+    span = f"{frame_name(0)} .. {frame_name(n - 1)} for the {n} label rows in {GT2D}" if n else \
+        f"no frames for the 0 label rows in {GT2D}"
+    stems = sorted(f[:-4] for f in pngs if f[:-4].isdigit())
+    if pngs and len(stems) == len(pngs):
+        digits = {len(t) for t in stems}
+        if digits != {6}:
+            eg = next(t for t in stems if len(t) != 6)
+            raise DatasetError(f"{folder} has {min(digits) if len(digits) == 1 else 'other than 6'}-digit frame "
+                               f"names ({eg}.png): frames are named {span}")
+        if stems[0] == "000000":
+            raise DatasetError(f"{folder} is numbered from 000000.png: frames are numbered from 1, {span}")
+    others = sorted(f for f in names if f.lower().rsplit(".", 1)[-1] in ("jpg", "jpeg", "bmp", "tif", "tiff"))
+    if not pngs and others:
+        raise DatasetError(f"{folder} holds {len(others)} {others[0].rsplit('.', 1)[-1]} image(s) and no PNG: "
+                           f"frames are PNG files, {span}")
+    missing, extra = sorted(want - pngs), sorted(pngs - want)
+    what = []
+    if missing:
+        what.append(f"lacks {missing[0]}" + (f" and {len(missing) - 1} more" if len(missing) > 1 else ""))
+    if extra:
+        what.append(f"also holds {extra[0]}" + (f" and {len(extra) - 1} more" if len(extra) > 1 else ""))
+    raise DatasetError(f"{seq}: {len(pngs)} images in {sub}/ but {n} label rows in {GT2D} ({sub}/ "
+                       f"{' and '.join(what)}; frames are {span})")
+
+
+def _projection_excess(camera: Camera, gt2d: np.ndarray, gt3d: np.ndarray, uncut: np.ndarray) -> np.ndarray:
+    """Per usable frame, how far the 2D label's edges lie beyond where the 3D label can put them,
+    over the 2D box's width (x edges) or height (y edges), PROJECTION_SLACK_PX forgiven.
+
+    Usable: `uncut` (present, not cut by the image border), a 2D box of size that does not touch
+    the border, and the whole 3D box in front of the camera. An edge of the silhouette is the
+    image of a point on the 3D box face it touches (its left edge of a point with x = cx - sx/2,
+    any y, z in the box), so it lies between that face's nearest and farthest projection, and
+    inside the box's projected corners."""
+    W, H = camera.width, camera.height
+    x, y, w, h = gt2d.T
+    lo = gt3d[:, :3] - gt3d[:, 3:] / 2
+    hi = gt3d[:, :3] + gt3d[:, 3:] / 2
+    use = uncut & (w > 0) & (h > 0) & (x > 1) & (y > 1) & (x + w < W - 1) & (y + h < H - 1) & (lo[:, 2] > 1e-6)
+    if not use.any():
+        return np.zeros(0)
+    lo, hi, b = lo[use], hi[use], gt2d[use]
+    zs = np.stack([lo[:, 2], hi[:, 2]], axis=1)
+    out = np.zeros(len(b))
+    for axis, f, c in ((0, camera.fx, camera.cx), (1, camera.fy, camera.cy)):
+        a = f * lo[:, axis:axis + 1] / zs + c       # the low face (x = cx - sx/2) at the near / far z
+        z = f * hi[:, axis:axis + 1] / zs + c       # the high face
+        first, size = b[:, axis], b[:, 2 + axis]
+        last = first + size
+        worst = np.maximum.reduce([np.minimum(a.min(1), z.min(1)) - first, first - a.max(1),
+                                   z.min(1) - last, last - np.maximum(a.max(1), z.max(1))])
+        out = np.maximum(out, np.maximum(worst - PROJECTION_SLACK_PX, 0.0) / size)
+    return out
+
+
 @dataclass
 class Frame:
     """One frame of a sequence. Arrays: image/right (H, W, 3) uint8 RGB; depth_m (H, W) float32;
@@ -212,20 +361,94 @@ class Sequence:
             raise DatasetError(f"{meta} is not valid JSON: {e}") from None
         if not isinstance(self.meta, dict):
             raise DatasetError(f"{meta} is not a JSON object")
-        if not isinstance(self.meta.get("family_index", -1), int) or self.meta.get("family_index", -1) < -1:
-            raise DatasetError(f"{meta}: family_index must be an integer >= -1")
+        family = self.meta.get("family_index", -1)
+        if not isinstance(family, int) or isinstance(family, bool) or family < -1:
+            raise DatasetError(f"{meta}: family_index must be an integer >= -1, got {family!r}")
         # points-only data (track3d-sim --points-only): depth and labels, no images
         self.points_only = bool(self.meta.get("points_only", False) if points_only is None else points_only)
         left = self.path / LEFT_DIR
         if not self.points_only and not left.is_dir():
             raise DatasetError(f"{self.path} has no {LEFT_DIR}/ image folder")
-        # Labels and images must cover the same frames: shorter labels would silently drop
-        # frames from tracking and scoring, missing images would fail mid-run. Points-only data
-        # has no images: its depth maps are the frames.
-        frames = self.path / DEPTH_DIR if self.points_only else left
-        images = sum(1 for f in frames.iterdir() if f.suffix == ".png") if frames.is_dir() else 0
-        if images != n:
-            raise DatasetError(f"{self.path}: {images} images in {frames.name}/ but {n} label rows in {GT2D}")
+        # labels that cannot be right: refused, naming the file and line
+        _check_labels(self.path, self.gt2d, self.gt3d, self.absent, int(camera.width), int(camera.height))
+        # Labels and images must cover the same frames, named 000001.png .. : shorter labels would
+        # silently drop frames from tracking and scoring, missing or misnamed images would fail
+        # mid-run. Points-only data has no images: its depth maps are the frames.
+        for sub in (DEPTH_DIR,) if self.points_only else (LEFT_DIR, DEPTH_DIR, RIGHT_DIR):
+            if sub == LEFT_DIR or self.points_only or (self.path / sub).is_dir():
+                _check_frame_files(self.path, sub, n)
+        # what reads but looks wrong: one warning each, naming the file or the sequence
+        self._check_meta(meta)
+        self._check_projection()
+        self._check_depth_units()
+
+    def _check_meta(self, meta: Path) -> None:
+        from .sensor_options import DEPTH_SENSORS
+
+        issues = []
+        name = self.depth_sensor
+        known = ", ".join(DEPTH_SENSORS)
+        if name is None:
+            if self.meta.get("depth_sensor", "") is not None:   # an explicit null: unknown, said on purpose
+                issues.append(f"no depth sensor named (\"depth_sensor\": one of {known}, or an object with that "
+                              f"\"name\"; null: unknown on purpose)")
+        elif name.lower() not in DEPTH_SENSORS:
+            issues.append(f"depth sensor {name!r} is none the runtime knows ({known})")
+        if issues:
+            issues[-1] += ": the loop uses an unknown sensor's defaults"
+        if "sun" in self.meta and self.sun_direction is None:
+            issues.append("sun is not {\"direction\": [x, y, z]} (toward the sun, left camera frame): ignored")
+        if issues:
+            _warn_once(f"{meta}: " + "; ".join(issues))
+
+    def _check_projection(self) -> None:
+        """Warn once when the 3D labels, projected with the dataset's camera, cannot make the 2D
+        labels (a convention mistake: module constant PROJECTION_TOLERANCE)."""
+        d = _projection_excess(self.camera, self.gt2d, self.gt3d, ~self.absent & ~self.cut)
+        if len(d) == 0:
+            return
+        m = float(np.median(d))
+        if m > PROJECTION_TOLERANCE:
+            _warn_once(f"{self.path}: the 3D labels projected with the dataset's camera do not give the 2D labels "
+                       f"(edges {m:.2f} of the 2D box size beyond where the 3D box can put them, median of "
+                       f"{len(d)} uncut frames): 3D labels y-up, in half extents or not in the left camera "
+                       f"frame, 2D labels 1-based or x1,y1,x2,y2, or a principal point (K in {DATASET_JSON}) "
+                       f"that is not the data's? (docs/dataset.md)")
+
+    def _check_depth_units(self) -> None:
+        """Warn once when the first present frame's depth inside its 2D label is far from the 3D
+        label's z (depth maps or 3D labels in other units: module constant DEPTH_RATIO_LIMITS)."""
+        present = np.flatnonzero(~self.absent & (self.gt2d[:, 2] > 0) & (self.gt2d[:, 3] > 0))
+        if not len(present):
+            return
+        i = int(present[0])
+        path = self.path / DEPTH_DIR / frame_name(i)
+        try:
+            depth = self._sized(read_depth_png(path), path)
+        except DatasetError:   # missing or damaged: the frame says so when read (scoring needs no depth)
+            return
+        full = float(np.mean(depth >= DEPTH_MAX_M - 5e-4))
+        if full > 0.5:
+            _warn_once(f"{path}: {100 * full:.0f}% of the pixels hold 65535: no return is 0 in a depth map, "
+                       f"not the largest value")
+            return
+        x, y, w, h = self.gt2d[i]
+        x0, y0 = max(int(np.floor(x)), 0), max(int(np.floor(y)), 0)
+        x1, y1 = min(int(np.ceil(x + w)), depth.shape[1]), min(int(np.ceil(y + h)), depth.shape[0])
+        crop = depth[y0:y1, x0:x1]
+        z = crop[crop > 0]
+        if len(z) < _MIN_DEPTH_RETURNS:
+            return
+        med = float(np.median(z))
+        cz, sz = float(self.gt3d[i, 2]), float(self.gt3d[i, 5])
+        near, far = cz - sz / 2, cz + sz / 2
+        ratio = med / far if med > far else (med / near if 0 < near and med < near else 1.0)
+        lo, hi = DEPTH_RATIO_LIMITS
+        if not lo <= ratio <= hi:
+            _warn_once(f"{path}: the depth inside the 2D label (median {med:.4g} m) is {ratio:.3g}x the 3D label's z "
+                       f"({near:.4g} .. {far:.4g} m, line {i + 1} of {GT3D}): depth maps are 16-bit millimetres "
+                       f"of z and 3D labels metres (a depth map in centimetres or metres, or 3D labels in "
+                       f"millimetres?)")
 
     def __len__(self) -> int:
         return len(self.gt2d)
@@ -241,10 +464,13 @@ class Sequence:
     @property
     def depth_sensor(self) -> str | None:
         """Name of the depth sensor that made the depth maps ("ideal", "tof", "flash-lidar",
-        "stereo"), None when meta.json does not say."""
+        "stereo"): meta.json depth_sensor (a name, or an object with "name"), else its alias
+        sensor (a name); None when neither says."""
         sensor = self.meta.get("depth_sensor")
         name = sensor.get("name") if isinstance(sensor, dict) else sensor
-        return str(name) if isinstance(name, str) else None
+        if not (isinstance(name, str) and name):
+            name = self.meta.get("sensor")
+        return name if isinstance(name, str) and name else None
 
     @property
     def depth_range_m(self) -> float | None:
@@ -370,8 +596,13 @@ class Dataset:
             raise DatasetError(f"{meta} is not a JSON object")
         if self.info.get("format") != FORMAT:
             raise DatasetError(f"{meta} is not a {FORMAT} file")
-        version = self.info.get("version", -1)
-        if not isinstance(version, int) or version > FORMAT_VERSION:
+        if "version" not in self.info:
+            raise DatasetError(f"{meta} has no 'version' (the format version, an integer: {FORMAT_VERSION})")
+        version = self.info["version"]
+        if not isinstance(version, int) or isinstance(version, bool) or version < 1:
+            raise DatasetError(f"{meta}: 'version' must be an integer >= 1 (this reader's is {FORMAT_VERSION}), "
+                               f"got {version!r:.40}")
+        if version > FORMAT_VERSION:
             raise DatasetError(f"{meta} has format version {version!r}, "
                                f"this reader knows up to {FORMAT_VERSION}")
         if not isinstance(self.info.get("camera"), dict):

@@ -118,7 +118,8 @@ def make_synthetic_dataset(root: Path, sequences: dict[str, int] | None = None, 
             gt3d.append(b3)
             flags.append(int(gone))
         write_labels(d, np.array(gt2d, dtype=np.float64), np.array(gt3d), np.array(flags), np.zeros(n),
-                     {"family_index": 0}, decimals_3d=6)
+                     # depth_sensor null: no sensor of the simulator's, said on purpose (no warning)
+                     {"family_index": 0, "depth_sensor": None}, decimals_3d=6)
     info = {"format": FORMAT, "version": FORMAT_VERSION, "camera": camera.to_dict(),
             "splits": {split: list(sequences)}}
     (root / "dataset.json").write_text(json.dumps(info))
