@@ -10,8 +10,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["load_checkpoint_dict", "save_checkpoint", "network_of", "SIGNATURES", "random_state",
-           "restore_random_state"]
+__all__ = ["load_checkpoint_dict", "save_checkpoint", "write_text_atomic", "network_of", "SIGNATURES",
+           "random_state", "restore_random_state", "flag_differences", "refuse_other_flags",
+           "refuse_other_data", "check_run_folder", "RunLock"]
 
 
 def _config_with(key: str, config: str = "config") -> Callable[[dict], bool]:
@@ -37,6 +38,111 @@ def save_checkpoint(path: str | Path, ck: dict) -> None:
     tmp = p.with_name(p.name + ".tmp")
     torch.save(ck, str(tmp))
     os.replace(tmp, p)
+
+
+def write_text_atomic(path: str | Path, text: str) -> None:
+    """Write `text` to `path` through a temporary file beside it (a kill leaves the old file whole)."""
+    import os
+
+    p = Path(path)
+    tmp = p.with_name(p.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, p)
+
+
+def check_run_folder(out: str | Path) -> Path:
+    """A training's --out: a folder or nothing yet; an existing file is a one-line ValueError (it
+    had been FileExistsError's traceback)."""
+    p = Path(out)
+    if p.exists() and not p.is_dir():
+        raise ValueError(f"--out {p} is a file, not a run folder: give a folder (new or a run's own)")
+    return p
+
+
+def _flag_text(flag: str, value, invert: bool = False) -> str:
+    if isinstance(value, bool):   # a switch: given or not (`invert`: the flag turns the setting off)
+        return flag if value != invert else f"no {flag}"
+    if isinstance(value, (list, tuple)):
+        return f"{flag} {' '.join(f'{v:g}' if isinstance(v, float) else str(v) for v in value)}"
+    return f"{flag} {value:g}" if isinstance(value, float) else f"{flag} {value}"
+
+
+def flag_differences(saved: dict, now: dict, flags: dict) -> list[str]:
+    """The flags of a resumed run whose value differs from its checkpoint's, as the checkpoint has
+    them ("--batch 8", "no --flip-y"). `flags`: setting -> flag, or (flag, True) for a switch that
+    turns the setting off (--no-flip); a setting the checkpoint does not record (an older one) is
+    not compared."""
+    out = []
+    for key, flag in flags.items():
+        flag, invert = (flag, False) if isinstance(flag, str) else flag
+        if key not in saved or key not in now:
+            continue
+        a, b = saved[key], now[key]
+        same = (list(a) == list(b)) if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)) else a == b
+        if not same:
+            out.append(_flag_text(flag, a, invert))
+    return out
+
+
+class RunLock:
+    """An exclusive lock (fcntl.flock, on the run folder itself: no file left behind) held while a
+    training writes its run folder: a second trainer on the same --out is a one-line ValueError
+    (two had written the same checkpoint and log, e.g. a recipe run again while the trainer of a
+    recipe killed with kill -9 still ran). `acquire` takes it once the folder exists (a training
+    checks its inputs before it makes the folder); leaving the `with` block, or the process
+    ending in any way, releases it. Without fcntl (not POSIX) there is no lock."""
+
+    def __init__(self):
+        self.fd: int | None = None
+
+    def acquire(self, folder: str | Path) -> None:
+        import os
+
+        folder = Path(folder)
+        if self.fd is not None or not folder.is_dir():
+            return
+        try:
+            import fcntl
+        except ImportError:
+            return
+        fd = os.open(str(folder), os.O_RDONLY)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:   # BlockingIOError: another process (or this one) holds it
+            os.close(fd)
+            raise ValueError(f"another training is running in {folder}: wait for it to end (or stop it), "
+                             "or give another --out") from None
+        self.fd = fd
+
+    def release(self) -> None:
+        import os
+
+        if self.fd is not None:
+            os.close(self.fd)   # closing the descriptor releases the lock
+            self.fd = None
+
+    def __enter__(self) -> "RunLock":
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        self.release()
+        return False
+
+
+def refuse_other_flags(ck_path: str | Path, differ: list[str]) -> None:
+    """A run resumed with other settings than its checkpoint's: one line naming the flags
+    (`flag_differences`), instead of taking them silently."""
+    if differ:
+        raise ValueError(f"{ck_path} was trained with other flags than this run's: resume with the same "
+                         f"flags ({', '.join(differ)}), or start a new --out (or pass --no-resume)")
+
+
+def refuse_other_data(ck_path: str | Path, cache, saved_hash, hash_now) -> None:
+    """A run resumed on another training cache than its checkpoint's (compared by the data's
+    hash, not the path's spelling): one line. No recorded hash (an older checkpoint): not compared."""
+    if saved_hash and hash_now and saved_hash != hash_now:
+        raise ValueError(f"{ck_path} was trained on other data than {cache}: resume with the run's own cache, "
+                         "or start a new --out (or pass --no-resume)")
 
 
 def random_state(rng) -> dict:

@@ -8,7 +8,8 @@ from pathlib import Path
 from track3d.onnxmodel import META_KEY
 
 __all__ = ["attach_metadata", "set_fields", "read_metadata", "rewrite_metadata", "doc_string", "file_hash", "hash_files",
-           "refuse_shipped", "PRODUCER", "check_portable"]
+           "refuse_shipped", "refuse_existing", "PRODUCER", "check_portable", "load_model", "save_model",
+           "temp_beside", "AtomicFiles"]
 
 PRODUCER = "track3d-train"
 
@@ -60,14 +61,88 @@ def read_metadata(model) -> dict:
     return json.loads(props[META_KEY])
 
 
+def load_model(path: str | Path, what: str = "an ONNX model"):
+    """onnx.load, a file that is not a whole ONNX model (truncated, another file) being a one-line
+    ValueError naming `what` (it had been protobuf's DecodeError traceback)."""
+    import onnx
+
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"model file {p} does not exist" if not p.exists() else f"{p} is a folder, not {what}")
+    try:
+        return onnx.load(str(p))
+    except Exception as e:   # google.protobuf DecodeError, RuntimeError, ...: not a complete ONNX file
+        raise ValueError(f"{p} is not {what} (not a complete ONNX file: {type(e).__name__})") from None
+
+
+def temp_beside(path: str | Path) -> Path:
+    """The temporary file an atomic write of `path` goes through (the same folder, so that
+    os.replace is a rename)."""
+    p = Path(path)
+    return p.with_name(p.name + ".tmp")
+
+
+def save_model(model, path: str | Path) -> None:
+    """onnx.save through a temporary file beside `path`, then os.replace: a kill while writing
+    leaves the file that was there whole."""
+    import os
+
+    import onnx
+
+    tmp = temp_beside(path)
+    try:
+        onnx.save(model, str(tmp))
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+class AtomicFiles:
+    """Write several files all or none: ``with AtomicFiles(a, b) as (ta, tb):`` write the
+    temporaries beside them; leaving the block normally replaces a then b by them, an exception
+    (or a kill) leaves a and b as they were and no temporary behind (after an exception)."""
+
+    def __init__(self, *paths):
+        self.paths = [Path(p) for p in paths]
+        self.temps = [temp_beside(p) for p in self.paths]
+
+    def __enter__(self) -> list[Path]:
+        for p in self.paths:
+            if p.is_dir():
+                raise ValueError(f"{p} is a folder: give the path of a file to write")
+        return list(self.temps)
+
+    def __exit__(self, kind, value, tb) -> bool:
+        import os
+
+        try:
+            if kind is None:
+                for t, p in zip(self.temps, self.paths):
+                    os.replace(t, p)
+        finally:
+            for t in self.temps:
+                t.unlink(missing_ok=True)
+        return False
+
+
+def refuse_existing(paths, force: bool = False, out_flag: str = "--out") -> None:
+    """ValueError when an export would overwrite a file that exists (a model of an earlier export,
+    or any other file) unless force; a folder where a file goes is refused even with force."""
+    for p in (Path(x) for x in paths):
+        if p.is_dir():
+            raise ValueError(f"{out_flag} would write {p}, which is a folder: give the path of a file to write")
+    hit = [Path(p) for p in paths if Path(p).exists()]
+    if hit and not force:
+        raise ValueError(f"{hit[0]} exists: pass --force to overwrite it, or write elsewhere with {out_flag}")
+
+
 def exported_weights(path: str | Path, kind: str, what: str) -> tuple[dict, dict, list]:
     """(metadata, initialisers by name, (weight, bias or None) of every Conv node in graph order)
     of an exported model whose metadata kind is `kind`; ValueError naming `what` for any other
     ONNX file. The reader the from-ONNX converters (A3BoxNet, EdgeTrack) share."""
-    import onnx
     from onnx import numpy_helper
 
-    m = onnx.load(str(path))
+    m = load_model(path, what)
     try:
         meta = read_metadata(m)
     except ValueError:
@@ -100,7 +175,7 @@ def attach_metadata(onnx_path: str | Path, meta: dict) -> None:
 
     model = onnx.load(str(onnx_path))
     set_fields(model, meta)
-    onnx.save(model, str(onnx_path))
+    save_model(model, onnx_path)
 
 
 def rewrite_metadata(onnx_path: str | Path, meta: dict) -> None:
@@ -113,7 +188,7 @@ def rewrite_metadata(onnx_path: str | Path, meta: dict) -> None:
     set_fields(model, meta)
     if model.graph.SerializeToString() != before:
         raise AssertionError(f"{onnx_path}: the graph changed while rewriting metadata")
-    onnx.save(model, str(onnx_path))
+    save_model(model, onnx_path)
     if onnx.load(str(onnx_path)).graph.SerializeToString() != before:
         raise AssertionError(f"{onnx_path}: the graph bytes changed on disk")
 

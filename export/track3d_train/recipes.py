@@ -60,6 +60,8 @@ class Recipe:
     notes: tuple[str, ...] = field(default_factory=tuple)
 
 
+# The exports pass --force: a recipe run again exports again over its own earlier export (an
+# export refuses to overwrite a file that exists without it); the models land under {runs}.
 def _a(text: str) -> tuple[str, ...]:
     return tuple(shlex.split(text))
 
@@ -123,7 +125,7 @@ A3BOXNET_ENGINE = Recipe(
             "--out {runs}/boxnet-engine/more --time-budget-min {more_minutes} --stretch-aug 0.3 --size-norm extent "
             "--lr 3e-4 --init-from {runs}/boxnet-engine/stretch/best.pt")),
         Step("export with a parity check", _a(
-            "track3d-train boxnet export --checkpoint {runs}/boxnet-engine/more/best.pt "
+            "track3d-train boxnet export --force --checkpoint {runs}/boxnet-engine/more/best.pt "
             "--out {runs}/boxnet-engine/a3boxnet.onnx")),
     ),
     notes=("The shipped phase 2 started from phase 1's best checkpoint at epoch 51, copied while phase 1 ran "
@@ -167,7 +169,7 @@ EDGETRACK_ENGINE = Recipe(
             "--init-from {runs}/edgetrack/run/ckpt.pt --border-cut {border_cut} --lr 1e-3 --max-steps {pad_steps} "
             "--batch {batch} --threads {threads} --quiet")),
         Step("export with a parity check", _a(
-            "track3d-train edgetrack export --checkpoint {runs}/edgetrack/pad/ckpt.pt "
+            "track3d-train edgetrack export --force --checkpoint {runs}/edgetrack/pad/ckpt.pt "
             "--out {runs}/edgetrack/model/edgetrack")),
         Step("data: held-out sequences for the lost threshold", _a(
             "track3d-sim generate --preset small --seed 3 --train 12 --test 0 --test-unseen 1 --frames 60 "
@@ -210,9 +212,9 @@ SIAMFC = Recipe(
             "track3d-train siamfc train --variant faithful --cache {runs}/siamfc/cache --out {runs}/siamfc_faithful "
             "--max-steps {faithful_steps} --batch 8 --time-budget-min {faithful_minutes} --threads 2 --quiet")),
         Step("export SiamFC-edge", _a(
-            "track3d-train siamfc export --checkpoint {runs}/siamfc_edge/ckpt.pt --out {runs}/siamfc_edge/model")),
+            "track3d-train siamfc export --force --checkpoint {runs}/siamfc_edge/ckpt.pt --out {runs}/siamfc_edge/model")),
         Step("export SiamFC (faithful)", _a(
-            "track3d-train siamfc export --checkpoint {runs}/siamfc_faithful/ckpt.pt "
+            "track3d-train siamfc export --force --checkpoint {runs}/siamfc_faithful/ckpt.pt "
             "--out {runs}/siamfc_faithful/model")),
     ),
 )
@@ -249,7 +251,7 @@ A3BOXNET_STEREO = Recipe(
             "--no-category --threads {threads} --quiet --out {runs}/boxnet-stereo/run --time-budget-min {minutes} "
             "--stretch-aug 0.3 --size-norm extent --lr 3e-4 --init-from {parent}")),
         Step("export with a parity check", _a(
-            "track3d-train boxnet export --checkpoint {runs}/boxnet-stereo/run/best.pt "
+            "track3d-train boxnet export --force --checkpoint {runs}/boxnet-stereo/run/best.pt "
             "--out {runs}/boxnet-stereo/a3boxnet_stereo.onnx --depth-sensor stereo")),
     ),
     notes=("`parent` is the shipped a3boxnet.onnx by name (or any A3BoxNet .onnx / checkpoint path).",),
@@ -275,7 +277,7 @@ A3BOXNET_STEREO_NARROW = Recipe(
             "--time-budget-min {minutes} --stretch-aug 0.3 --size-norm extent --lr 3e-4 --width {width} "
             "--init-from {teacher} --distill-from {teacher} --distill-weight {distill_weight}")),
         Step("export with a parity check", _a(
-            "track3d-train boxnet export --checkpoint {runs}/boxnet-stereo-narrow/run/best.pt "
+            "track3d-train boxnet export --force --checkpoint {runs}/boxnet-stereo-narrow/run/best.pt "
             "--out {runs}/boxnet-stereo-narrow/a3boxnet_stereo_narrow.onnx --depth-sensor stereo")),
     ),
     notes=("The data and caches are the a3boxnet-stereo recipe's (made once for both).",
@@ -314,7 +316,7 @@ A3BOXNET_STEREO_BACKLIT = Recipe(
             "--no-category --threads {threads} --quiet --out {runs}/boxnet-stereo-backlit/run "
             "--time-budget-min {minutes} --stretch-aug 0.3 --size-norm extent --lr {lr} --init-from {parent}")),
         Step("export with a parity check", _a(
-            "track3d-train boxnet export --checkpoint {runs}/boxnet-stereo-backlit/run/best.pt "
+            "track3d-train boxnet export --force --checkpoint {runs}/boxnet-stereo-backlit/run/best.pt "
             "--out {runs}/boxnet-stereo-backlit/a3boxnet_stereo_backlit.onnx --depth-sensor stereo")),
     ),
     notes=("`parent` is the shipped a3boxnet_stereo.onnx by name (recipe a3boxnet-stereo; or any A3BoxNet .onnx / "
@@ -365,7 +367,7 @@ A3BOXNET_NARROW = Recipe(
             "--stretch-aug 0.3 --size-norm extent --lr 3e-4 --width {width} --init-from {teacher} "
             "--distill-from {teacher} --distill-weight {distill_weight}")),
         Step("export stage 1 with a parity check", _a(
-            "track3d-train boxnet export --checkpoint {runs}/boxnet-narrow/run/best.pt "
+            "track3d-train boxnet export --force --checkpoint {runs}/boxnet-narrow/run/best.pt "
             "--out {runs}/boxnet-narrow/stage1/a3boxnet_narrow.onnx")),
         Step("train stage 2: stage 1 fine-tuned with the superquadric bodies added, still distilled", _a(
             "track3d-train boxnet train --cache {runs}/boxnet-engine/cache/engine-train-po.npz "
@@ -376,7 +378,7 @@ A3BOXNET_NARROW = Recipe(
             "--init-from {runs}/boxnet-narrow/stage1/a3boxnet_narrow.onnx "
             "--distill-from {teacher} --distill-weight {distill_weight}")),
         Step("export stage 2 with a parity check", _a(
-            "track3d-train boxnet export --checkpoint {runs}/boxnet-narrow/sq/best.pt "
+            "track3d-train boxnet export --force --checkpoint {runs}/boxnet-narrow/sq/best.pt "
             "--out {runs}/boxnet-narrow/stage2/a3boxnet_narrow.onnx")),
         Step("train stage 3: stage 2 fine-tuned with the Gaussian random spheres added, still distilled", _a(
             "track3d-train boxnet train --cache {runs}/boxnet-engine/cache/engine-train-po.npz "
@@ -388,7 +390,7 @@ A3BOXNET_NARROW = Recipe(
             "--init-from {runs}/boxnet-narrow/stage2/a3boxnet_narrow.onnx "
             "--distill-from {teacher} --distill-weight {distill_weight}")),
         Step("export with a parity check", _a(
-            "track3d-train boxnet export --checkpoint {runs}/boxnet-narrow/gs/best.pt "
+            "track3d-train boxnet export --force --checkpoint {runs}/boxnet-narrow/gs/best.pt "
             "--out {runs}/boxnet-narrow/a3boxnet_narrow.onnx")),
         Step("int8 twin, calibrated on the superquadric bodies (ships only if it passes the accuracy rule, "
              "docs/models.md)", _a(
@@ -448,7 +450,7 @@ A3BOXNET_VIEWS = Recipe(
             "--time-budget-min {minutes} --stretch-aug 0.3 --size-norm extent --lr 3e-4 --width {width} "
             "--init-from {init}")),
         Step("export with a parity check (the metadata's past_views comes from the caches)", _a(
-            "track3d-train boxnet export --checkpoint {runs}/boxnet-views/run/best.pt "
+            "track3d-train boxnet export --force --checkpoint {runs}/boxnet-views/run/best.pt "
             "--out {runs}/boxnet-views/a3boxnet_views.onnx")),
     ),
     notes=("The shipped a3boxnet_views.onnx ran its 70 min, 133 epochs, best by validation AO_3d at epoch 132 "
@@ -523,6 +525,31 @@ def _program(name: str) -> str:
     return found
 
 
+def _dies_with_recipe():
+    """The preexec_fn of a step on Linux: SIGTERM to the step when the recipe dies, however it dies
+    (prctl PR_SET_PDEATHSIG; a training then checkpoints and ends). A `kill -9` of the recipe had
+    left its running trainer alive (PPID 1), and the recipe run again started a second one on the
+    same run folder (the trainers refuse that now too: checkpoint.RunLock). None elsewhere."""
+    import os
+
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        import ctypes
+
+        prctl = ctypes.CDLL(None, use_errno=True).prctl   # looked up here, not between fork and exec
+    except (OSError, AttributeError):
+        return None
+    parent = os.getpid()
+
+    def set_death_signal():
+        prctl(1, int(signal.SIGTERM))      # PR_SET_PDEATHSIG
+        if os.getppid() != parent:         # the recipe died before that: as if the signal had come
+            os._exit(128 + int(signal.SIGTERM))
+
+    return set_death_signal
+
+
 # what the recipe passes on to the running step (SIGHUP, a closed terminal, as SIGTERM)
 _FORWARDED = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
 
@@ -556,7 +583,7 @@ def _call(argv: list[str]) -> int:
             if signal.getsignal(s) is not signal.SIG_IGN:
                 old[s] = signal.signal(s, forward)
     try:
-        proc.append(subprocess.Popen(argv, start_new_session=True))
+        proc.append(subprocess.Popen(argv, start_new_session=True, preexec_fn=_dies_with_recipe()))
         pass_on()
         rc = proc[0].wait()
     finally:

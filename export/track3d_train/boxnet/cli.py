@@ -23,6 +23,11 @@ from track3d.argparsing import ArgumentParser, apply_formatter, bounded, hidden_
 from track3d.size_coding import SIZE_CODINGS
 
 
+# --num-points' bound: 16x the paper's 1024 (and 2x prepare's default --max-points). 100000 had run
+# until the kernel killed it (24 GB).
+MAX_NUM_POINTS = 16384
+
+
 def _log(msg: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
 
@@ -80,11 +85,14 @@ def _train(a) -> int:
 def _export(a) -> int:
     from .export import export_checkpoint
 
-    from ..onnx_meta import refuse_shipped
+    from ..onnx_meta import refuse_existing, refuse_shipped
 
     if not a.ckpt:
         raise ValueError("give --checkpoint CKPT (an A3BoxNet best.pt / last.pt)")
+    if Path(a.out).is_dir():   # it had been IsADirectoryError's traceback, after the whole export
+        raise ValueError(f"--out {a.out} is a folder: give the ONNX file to write (e.g. {Path(a.out) / 'a3boxnet.onnx'})")
     refuse_shipped([Path(a.out)], a.force)
+    refuse_existing([Path(a.out)], a.force)   # it had been overwritten without a word
     meta = export_checkpoint(a.ckpt, a.out, check=not a.no_parity, log=_log, depth_sensor=a.depth_sensor)
     if a.meta_json:
         Path(a.meta_json).write_text(json.dumps(meta, indent=1))
@@ -158,7 +166,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "validation AO_3d on held-out train sequences), history.json, loss_curve.png.")
     t.add_argument("--cache", required=True, nargs="+", help="training .npz file(s) from `prepare` (several are concatenated)")
     t.add_argument("--out", default="runs/boxnet/main", help="run folder")
-    t.add_argument("--num-points", type=bounded(int, 1), default=512, help="N input points (paper: 1024)")
+    t.add_argument("--num-points", type=bounded(int, 1, high=MAX_NUM_POINTS), default=512,
+                   help="N input points (paper: 1024); at most the points the cache stores per frustum "
+                        "(prepare --max-points)")
     t.add_argument("--width", type=bounded(float, above=0), default=1.0, help="channel multiplier (1 = Frustum PointNets v1)")
     t.add_argument("--no-category", action="store_true", help="ablation: no one-hot category vector")
     t.add_argument("--size-norm", choices=list(SIZE_CODINGS), default="points",
@@ -215,7 +225,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--out", required=True,
                    help="ONNX file to write (a shipped model in track3d/models only with --force; a file named "
                         "like a shipped model in the folder a run starts from is taken instead of it)")
-    e.add_argument("--force", action="store_true", help="overwrite a shipped model in track3d/models")
+    e.add_argument("--force", action="store_true",
+                   help="overwrite a file that exists at --out (a shipped model in track3d/models too)")
     e.add_argument("--no-parity", action="store_true", help="skip the torch / onnxruntime parity check")
     e.add_argument("--meta-json", default=None, help="also write the metadata to this JSON file")
     e.add_argument("--depth-sensor", default=None, choices=("ideal", "tof", "flash-lidar", "stereo"),
@@ -229,7 +240,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--model", required=True, help="ONNX model")
     v.add_argument("--cache", required=True, help="test .npz from `prepare --jitters 0`")
     v.add_argument("--all-boxes", action="store_true", help="also the jittered boxes of the cache")
-    v.add_argument("--num-points", type=bounded(int, 1), default=None,
+    v.add_argument("--num-points", type=bounded(int, 1, high=MAX_NUM_POINTS), default=None,
                    help="N, the points sampled from each frustum as the model's input (default: the model's own, "
                         "from its metadata)")
     v.add_argument("--threads", type=thread_count, default=1, help="onnxruntime threads")

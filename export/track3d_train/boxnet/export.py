@@ -18,7 +18,7 @@ from track3d.dataset import COARSE_CATEGORIES
 from track3d.boxnet import INPUT_CATEGORY, INPUT_POINTS, KIND, OUTPUTS
 from track3d.size_coding import size_coding
 
-from ..onnx_meta import attach_metadata
+from ..onnx_meta import AtomicFiles, attach_metadata
 
 __all__ = ["MODEL_VERSION", "OPSET", "export_onnx", "parity_check", "model_metadata"]
 
@@ -65,11 +65,13 @@ def export_onnx(model, path: str | Path, extra_meta: dict | None = None, opset: 
 
     # The TorchScript exporter (dynamo=False): the dynamo exporter needs onnxscript, which the
     # `train` extra does not install; this one is deprecated but exact for this graph.
-    with torch.no_grad(), warnings.catch_warnings():
+    # Written beside `path` with its metadata, then renamed: a kill while exporting leaves the file
+    # that was there whole (it had been written in place, then saved over to add the metadata).
+    with AtomicFiles(path) as (tmp,), torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        torch.onnx.export(model, args, str(path), input_names=names, output_names=list(OUTPUTS),
+        torch.onnx.export(model, args, str(tmp), input_names=names, output_names=list(OUTPUTS),
                           dynamic_axes=dyn, opset_version=opset, dynamo=False, do_constant_folding=True)
-    attach_metadata(path, model_metadata(model, extra_meta))
+        attach_metadata(tmp, model_metadata(model, extra_meta))
     return path
 
 

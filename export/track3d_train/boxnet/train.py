@@ -50,6 +50,70 @@ class TrainConfig:
     extra: dict = field(default_factory=dict)
 
 
+# The settings a resumed run must share with its checkpoint (TrainConfig field -> the flag that sets
+# it; (flag, True): a switch that turns it off). Not compared: where the run stops (--epochs,
+# --time-budget-min, --max-steps: a run may be given more), --threads, --out, the caches (their
+# data is, by `_cache_identity`) and --distill-from (compared as a file, not as text).
+RESUME_FLAGS = {"num_points": "--num-points", "width": "--width", "use_category": ("--no-category", True),
+                "size_norm": "--size-norm", "epoch_samples": "--epoch-samples", "batch": "--batch", "lr": "--lr",
+                "lr_min": "lr_min", "weight_decay": "weight_decay", "flip": ("--no-flip", True),
+                "cat_dropout": "--cat-dropout", "flip_y": "--flip-y", "scale_aug": "--scale-aug",
+                "stretch_aug": "--stretch-aug", "val_every": "--val-every", "val_max": "val_max", "seed": "--seed",
+                "num_categories": "num_categories", "distill_weight": "--distill-weight",
+                "iou_weight": "--iou-weight"}
+
+
+def _cache_identity(info: dict) -> str:
+    """A hash of what a training cache holds, from its info (the source data's hash, the jitter,
+    the points kept, the seed, the sequences; for caches joined, every part in order; not where
+    the dataset lay): the same for the same cache under another path's spelling, another for
+    another cache at the same path."""
+    import hashlib
+
+    def what(d: dict) -> dict:
+        return {k: ([what(x) for x in v] if k == "parts" else v) for k, v in d.items() if k != "root"}
+
+    return hashlib.sha256(json.dumps(what(info), sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _same_file(a, b) -> bool:
+    import os
+
+    if str(a or "") == str(b or ""):
+        return True
+    try:
+        return bool(a) and bool(b) and os.path.samefile(str(a), str(b))
+    except OSError:
+        return False
+
+
+def _refuse_other_run(last: Path, ck: dict, cfg: "TrainConfig", cache) -> None:
+    """A run resumed from `last` on another cache or with other settings than its own: one line.
+    The caches were compared by their path's text: another spelling of the same file was refused
+    and another file at the same path resumed in silence; other flags were taken in silence."""
+    from ..checkpoint import flag_differences, refuse_other_data, refuse_other_flags
+
+    hist = ck.get("history") or {}
+    saved = hist.get("cache_identity") or (_cache_identity(hist["cache"]) if isinstance(hist.get("cache"), dict)
+                                           else None)
+    refuse_other_data(last, " ".join(str(c) for c in (cfg.train_cache if isinstance(cfg.train_cache, list)
+                                                        else [cfg.train_cache])),
+                      saved, _cache_identity(cache.info))
+    tc = ck.get("train_config") or {}
+    differ = flag_differences(tc, asdict(cfg), RESUME_FLAGS)
+    if "distill_from" in tc and not _same_file(tc["distill_from"], cfg.distill_from):
+        differ.append(f"--distill-from {tc['distill_from']}" if tc["distill_from"] else "no --distill-from")
+    refuse_other_flags(last, differ)
+
+
+def _max_points(cache) -> int | None:
+    """The points a cache stores per frustum at most (`prepare --max-points`; for caches joined the
+    smallest of theirs), or None when its info does not say."""
+    parts = cache.info.get("parts") or [cache.info]
+    found = [int(p["max_points"]) for p in parts if p.get("max_points")]
+    return min(found) if found else None
+
+
 def _split_val(cache, every: int, seed: int):
     seqs = np.unique(cache.seq)
     if every <= 0 or len(seqs) < 2:
@@ -204,7 +268,7 @@ def _onnx_source(path, train_ds, samples: int = 256) -> dict:
 def _load_source(path, train_ds) -> tuple[str, dict]:
     """(resolved path, checkpoint dict) of the A3BoxNet a run starts from or learns from: an
     exported .onnx (a bare name such as a3boxnet.onnx: the shipped one) or a checkpoint."""
-    import torch
+    from ..checkpoint import load_checkpoint_dict
 
     if str(path).endswith(".onnx"):
         from track3d.onnxmodel import model_path, shipped_model
@@ -213,7 +277,9 @@ def _load_source(path, train_ds) -> tuple[str, dict]:
         if not path.is_file() and path.name == str(path):   # a bare name shipped nowhere: say which are
             shipped_model(path.name)
         return str(path), _onnx_source(path, train_ds)
-    return str(path), torch.load(str(path), map_location="cpu", weights_only=False)
+    # a damaged file or another network's checkpoint is one line (it had been EOFError's or
+    # UnpicklingError's traceback)
+    return str(path), load_checkpoint_dict(path, "A3BoxNet")
 
 
 def _refuse_other_flags(path, src: dict, cfg: TrainConfig) -> None:
@@ -261,7 +327,15 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
     """Train (or resume) into cfg.out: last.pt, best.pt, history.json, loss_curve.png.
     ``init_from``: a checkpoint, or an exported A3BoxNet .onnx such as the shipped model, whose
     weights start a new run (fine-tuning: a fresh optimiser and schedule); ignored when the run
-    resumes from its own last.pt."""
+    resumes from its own last.pt. A second training on the same cfg.out while this one runs is
+    refused (checkpoint.RunLock)."""
+    from ..checkpoint import RunLock
+
+    with RunLock() as lock:
+        return _train(cfg, resume, progress, log, init_from, lock)
+
+
+def _train(cfg: TrainConfig, resume: bool, progress: bool, log, init_from: str | None, lock) -> dict:
     import torch
 
     from ..interrupt import StopOnSignal
@@ -272,10 +346,18 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
     if cfg.iou_weight > 0 and cfg.size_norm == "paper":
         # the paper's labels are scaled by max(size), its decoding by L: the label's box cannot be decoded
         raise ValueError("iou_weight needs a box coding whose labels decode as its outputs do: not 'paper'")
+    from ..checkpoint import check_run_folder, load_checkpoint_dict, save_checkpoint, write_text_atomic
+
     torch.set_num_threads(check_threads(cfg.threads))
-    out = Path(cfg.out)
-    cache = PointCache.concat(cfg.train_cache)   # first: a wrong cache leaves no empty run folder behind
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_run_folder(cfg.out)
+    lock.acquire(out)
+    # first: a wrong cache (or --init-from, --num-points) leaves no empty run folder behind
+    cache = PointCache.concat(cfg.train_cache)
+    stored = _max_points(cache)
+    if stored is not None and cfg.num_points > stored:   # it had sampled each frustum's points twice over
+        raise ValueError(f"--num-points {cfg.num_points} is more than the {stored} points the cache stores per "
+                         f"frustum: give at most {stored}, or prepare the cache with --max-points "
+                         f"{cfg.num_points}")
     tr_cache, va_cache = _split_val(cache, cfg.val_every, cfg.seed)
     train_ds = BoxNetSamples(tr_cache, cfg.num_points, cfg.num_categories, cfg.size_norm, cfg.seed, cfg.flip,
                              cfg.cat_dropout if cfg.use_category else 0.0, cfg.flip_y, cfg.scale_aug,
@@ -314,16 +396,17 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
 
     history = {"config": asdict(cfg), "steps": [], "epochs": [], "train_items": len(train_ds),
                "val_items": len(val_ds) if val_ds else 0, "data_hash": cache.info.get("data_hash"),
-               "cache": cache.info, "seconds": 0.0}
+               "cache": cache.info, "cache_identity": _cache_identity(cache.info), "seconds": 0.0}
     start_epoch, step, best = 0, 0, -1.0
     # an epoch a stop cut short (--max-steps, the time budget, a signal): {"epoch", "batches" done,
     # "sums" of the terms, "train_seconds"}; a resumed run completes it, the same batches in order
     partial = None
     last = out / "last.pt"
     if resume and last.is_file():
-        ck = torch.load(str(last), map_location="cpu", weights_only=False)
-        if ck["train_config"].get("train_cache") != cfg.train_cache or ck["model_config"] != mcfg.to_dict():
-            raise ValueError(f"{last} was trained with another cache or model; use a new --out or --no-resume")
+        ck = load_checkpoint_dict(last, "A3BoxNet")
+        _refuse_other_run(last, ck, cfg, cache)
+        if ck["model_config"] != mcfg.to_dict():
+            raise ValueError(f"{last} was trained with another model; use a new --out or --no-resume")
         model.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optim"])
         start_epoch, step, best, history = ck["epoch"] + 1, ck["step"], ck["best"], ck["history"]
@@ -361,6 +444,8 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
                                 "size_norm": src_cfg.get("size_norm")}
         log(f"initialised from {init_from} (epoch {src.get('epoch')}, step {src.get('step')})")
     teacher = _teacher(cfg, train_ds, log) if cfg.distill_from and cfg.distill_weight > 0 else None
+    out.mkdir(parents=True, exist_ok=True)   # every input read and checked
+    lock.acquire(out)
     t_session = time.time()
     t_before = history["seconds"]
     if budget_s > 0 and progress_at(step, t_before) >= 1.0:
@@ -404,12 +489,11 @@ def train(cfg: TrainConfig, resume: bool = True, progress: bool = True, log=prin
               "model_config": mcfg.to_dict(), "train_config": asdict(cfg), "torch_random": torch.get_rng_state()}
         if cut:
             ck["partial"] = {"epoch": epoch, "batches": n, "sums": dict(sums), "train_seconds": train_seconds}
-        if score is not None and score > best:
+        if score is not None and score > best:   # atomically too: a kill while writing keeps the previous best
             best = score
-            torch.save(ck, str(out / "best.pt"))
-        torch.save(ck, str(out / "last.tmp"))
-        (out / "last.tmp").replace(last)
-        (out / "history.json").write_text(json.dumps(history, indent=1))
+            save_checkpoint(out / "best.pt", ck)
+        save_checkpoint(last, ck)
+        write_text_atomic(out / "history.json", json.dumps(history, indent=1))
 
     # SIGTERM / SIGINT: last.pt at the next step boundary (a cut epoch resumes there), then
     # TrainingInterrupted

@@ -56,13 +56,18 @@ def _train(a) -> int:
 def _export(a) -> int:
     import dataclasses
 
-    from ..onnx_meta import refuse_shipped
+    from ..onnx_meta import refuse_existing, refuse_shipped
     from .export import export_onnx, parity
     from .train import load_checkpoint
 
     if not a.checkpoint:
         raise ValueError("give --checkpoint CKPT (an EdgeTrack ckpt.pt)")
-    refuse_shipped([Path(f"{a.out}_template.onnx"), Path(f"{a.out}_search.onnx")], a.force)
+    if Path(a.out).is_dir():
+        raise ValueError(f"--out {a.out} is a folder: give a path prefix (e.g. {Path(a.out) / 'edgetrack'} writes "
+                         f"edgetrack_template.onnx and edgetrack_search.onnx in it)")
+    outs = [Path(f"{a.out}_template.onnx"), Path(f"{a.out}_search.onnx")]
+    refuse_shipped(outs, a.force)
+    refuse_existing(outs, a.force)   # they had been overwritten without a word
     net, ck = load_checkpoint(a.checkpoint)
     over = {k: getattr(a, k) for k in ("window_influence", "penalty_k", "size_lr", "score_threshold",
                                        "instance_size", "lost_instance_size") if getattr(a, k) is not None}
@@ -260,7 +265,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="stop (and checkpoint) after this many minutes of training, summed over resumed runs "
                         "(default: none, only --max-steps)")
     t.add_argument("--init-from", help="start from another run's checkpoint or from an exported pair (a prefix, "
-                                       "either .onnx file, or a shipped name such as edgetrack): fine-tuning")
+                                       "either .onnx file, or a shipped name such as edgetrack): fine-tuning "
+                                       "(default: none, random weights; ignored when the run resumes)")
     t.add_argument("--border-cut", type=bounded(float, low=0.0, high=1.0), default=0.0,
                    help="share of target pairs cut at a simulated image border (slivers of a body leaving "
                         "the view; a resumed run keeps its own)")
@@ -273,10 +279,14 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--checkpoint", help="ckpt.pt of an EdgeTrack run; required")
     hidden_alias(e, "--ckpt", "checkpoint")
     e.add_argument("--out", required=True, help="path prefix")
-    e.add_argument("--force", action="store_true", help="overwrite the shipped models in track3d/models")
-    e.add_argument("--data-note", default=None, help="what the model was trained on (metadata)")
+    e.add_argument("--force", action="store_true",
+                   help="overwrite files that exist at --out (the shipped models in track3d/models too)")
+    e.add_argument("--data-note", default=None,
+                   help="what the model was trained on (metadata; default: the data name the checkpoint records, "
+                        "else 'track3d simulator train split')")
     e.add_argument("--cache", default=None,
-                   help="the run's cache folder: the training data's hash for checkpoints that do not record it")
+                   help="the run's cache folder: the training data's hash for checkpoints that do not record it "
+                        "(default: none, the checkpoint's own record)")
     # bounds: a value the runtime cannot use must not be written into a model file
     unit = bounded(float, 0, high=1)
     for k, ty in (("window-influence", unit), ("penalty-k", bounded(float, 0)), ("size-lr", unit),

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import cv2
@@ -30,7 +31,7 @@ from track3d.edgetrack import pad_colour
 from track3d.resample import warp_affine_gray_numpy, warp_axis_aligned
 from track3d.siamfc import crop_square
 
-from ..caches import load_npy, not_a_cache
+from ..caches import CacheError, load_npy, not_a_cache
 from ..siamfc.data import CropCache, build_cache, sequences_from_dataset, synthetic_sequences
 
 __all__ = ["prepare", "PairSampler", "CropCache", "CACHE_SIZE", "PAD", "load_background", "cut_at_border"]
@@ -42,6 +43,7 @@ CACHE_SIZE = 384   # 3 x the default template's image extent
 # bodies; with this colour the network learns where the image ends (held-out sequences, seeds
 # 3 / 4 / 7: the lost flag's precision 0.76 -> 0.88, 0.47 -> 0.82, 0.77 -> 0.85, AO_3d level).
 PAD = (255.0, 0.0, 255.0)
+COMPLETE = "bg.json"   # written last by `prepare`: a cache without it is incomplete
 
 
 
@@ -85,9 +87,13 @@ def _background(sequences, out_dir: Path, exemplar_size: int, instance_size: int
         crops.append(crop_square(img, c, x_sz, instance_size, fill))
         origin.append([name, int(i), kind])
     arr = np.stack(crops) if crops else np.zeros((0, instance_size, instance_size, 3), np.uint8)
-    np.save(out_dir / "bg.npy", arr)
-    (out_dir / "bg.json").write_text(json.dumps({"origin": origin, "instance_size": instance_size,
-                                                 "pad": None if pad is None else [float(v) for v in pad]}))
+    with open(out_dir / "bg.npy.tmp", "wb") as f:   # whole or not at all
+        np.save(f, arr)
+    os.replace(out_dir / "bg.npy.tmp", out_dir / "bg.npy")
+    # bg.json last: the cache's completion marker (`load_background`; the recipes skip a cache that has it)
+    (out_dir / "bg.json.tmp").write_text(json.dumps({"origin": origin, "instance_size": instance_size,
+                                                     "pad": None if pad is None else [float(v) for v in pad]}))
+    os.replace(out_dir / "bg.json.tmp", out_dir / COMPLETE)
     return len(arr)
 
 
@@ -103,6 +109,10 @@ def prepare(out_dir, data=None, split: str = "train", synthetic: int = 0, synthe
     out = Path(out_dir)
     pad = pad_colour(pad)
     roots = [data] if isinstance(data, (str, Path)) else list(data or [])
+    # a re-run over a cache: not complete until this run's marker is written, and the temporaries
+    # of a run killed before (crops.npy.tmp can be gigabytes) go
+    for name in (COMPLETE, "bg.npy.tmp", "bg.json.tmp"):   # (build_cache cleans the target's)
+        (out / "background" / name).unlink(missing_ok=True)
 
     def seqs():
         if synthetic:
@@ -123,15 +133,24 @@ def prepare(out_dir, data=None, split: str = "train", synthetic: int = 0, synthe
 MAKER = "track3d-train edgetrack prepare"   # the command that writes the caches (named in errors)
 
 
+def _incomplete(cache_dir, missing: str) -> CacheError:
+    return CacheError(f"{cache_dir} is an incomplete EdgeTrack cache (no background/{missing}: its prepare did not "
+                      f"finish): run `{MAKER}` again")
+
+
 def load_background(cache_dir) -> np.ndarray:
-    """The background crops (N, S, S, 3) uint8 of a cache (none if it has no background/bg.npy);
-    a bg.npy that is not such an array is a CacheError."""
+    """The background crops (N, S, S, 3) uint8 of a complete cache (`prepare` writes
+    background/bg.json last); a cache without them is a CacheError saying it is incomplete (a
+    prepare killed before had trained with no background crop, in silence), a bg.npy that is not
+    such an array a CacheError naming it."""
     p = Path(cache_dir) / "background" / "bg.npy"
     if not p.exists():
-        return np.zeros((0, 256, 256, 3), np.uint8)
+        raise _incomplete(cache_dir, "bg.npy")
     bg = load_npy(p, "a background crop array", MAKER, mmap_mode="r")
     if bg.ndim != 4 or bg.shape[3] != 3 or bg.dtype != np.uint8:
         raise not_a_cache(p, "a background crop array", MAKER, f"a {bg.dtype} array of shape {bg.shape}")
+    if not (p.parent / COMPLETE).is_file():
+        raise _incomplete(cache_dir, COMPLETE)
     return bg
 
 

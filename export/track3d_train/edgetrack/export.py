@@ -18,7 +18,7 @@ import numpy as np
 import torch
 import torch.nn as nn
 
-from ..onnx_meta import attach_metadata
+from ..onnx_meta import AtomicFiles, attach_metadata
 from .model import EdgeTrack
 
 __all__ = ["TemplateGraph", "SearchGraph", "export_onnx", "parity", "model_metadata", "count_macs", "time_search"]
@@ -105,18 +105,20 @@ def export_onnx(net: EdgeTrack, prefix: str | Path, extra_meta: dict | None = No
     px = prefix.parent / f"{prefix.name}_search.onnx"
     z = torch.randint(0, 256, (1, cfg.exemplar_size, cfg.exemplar_size, 3), dtype=torch.uint8)
     x = torch.randint(0, 256, (1, cfg.instance_size, cfg.instance_size, 3), dtype=torch.uint8)
-    with warnings.catch_warnings(), torch.no_grad():
+    # both written beside their paths with their metadata, then renamed (all or none: a kill while
+    # exporting leaves the pair that was there whole)
+    with AtomicFiles(pz, px) as (tz_path, tx_path), warnings.catch_warnings(), torch.no_grad():
         warnings.simplefilter("ignore")
         tz = TemplateGraph(net)
         k = tz(z)
-        torch.onnx.export(tz, (z,), str(pz), dynamo=False, opset_version=opset, input_names=["template"],
+        torch.onnx.export(tz, (z,), str(tz_path), dynamo=False, opset_version=opset, input_names=["template"],
                           output_names=["kernel"])
-        torch.onnx.export(SearchGraph(net), (x, k), str(px), dynamo=False, opset_version=opset,
+        torch.onnx.export(SearchGraph(net), (x, k), str(tx_path), dynamo=False, opset_version=opset,
                           input_names=["search", "kernel"], output_names=["logit", "ltrb"],
                           dynamic_axes={"search": {1: "height", 2: "width"},
                                         "logit": {1: "rows", 2: "cols"}, "ltrb": {2: "rows", 3: "cols"}})
-    attach_metadata(pz, model_metadata(net, "edgetrack-template", extra_meta))
-    attach_metadata(px, model_metadata(net, "edgetrack-search", extra_meta))
+        attach_metadata(tz_path, model_metadata(net, "edgetrack-template", extra_meta))
+        attach_metadata(tx_path, model_metadata(net, "edgetrack-search", extra_meta))
     return pz, px
 
 

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 from track3d.threads import check_threads
 
-from ..checkpoint import random_state, restore_random_state, save_checkpoint
+from ..checkpoint import random_state, restore_random_state, save_checkpoint, write_text_atomic
 from ..interrupt import StopOnSignal
 from ..training_log import read_log, trim_log
 from .data import MAKER, CropCache, PairSampler, load_background
@@ -156,6 +156,13 @@ def _onnx_source(source, sampler, net, pairs: int = 64) -> dict:
     return model_from_onnx(source, calibration=crops)[1]
 
 
+# The settings a resumed run must share with its checkpoint (train()'s argument -> its flag). Not
+# compared: where the run stops (--max-steps, --time-budget-min: a run may be given more), how
+# often it checkpoints, --threads, and --border-cut (a resumed run keeps its own, as its config).
+RESUME_FLAGS = {"batch": "--batch", "lr": "--lr", "weight_decay": "weight_decay", "seed": "--seed",
+                "max_gap": "--max-gap", "val_every": "--val-every"}
+
+
 def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: int = 32, lr: float = 3e-3,
           weight_decay: float = 1e-4, seed: int = 0, threads: int = 1, time_budget_s: float | None = None,
           ckpt_every_s: float = 180.0, log_every: int = 10, val_every: int = 200, val_sequences: int = 2,
@@ -163,18 +170,50 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
           border_cut: float = 0.0, progress: bool = True) -> dict:
     """Train (or resume) into out_dir; stops at `steps` or after `time_budget_s` of training time
     (summed over resumed runs). `border_cut`: the share of target pairs cut at a simulated image
-    border (`data.cut_at_border`; validation pairs the same). Returns a summary dict."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    border (`data.cut_at_border`; validation pairs the same). Returns a summary dict. A second
+    training on the same out_dir while this one runs is refused (checkpoint.RunLock)."""
+    kwargs = dict(locals())   # the arguments, as given (first: no other local yet)
+    from ..checkpoint import RunLock
+
+    with RunLock() as lock:
+        return _train(lock=lock, **kwargs)
+
+
+def _train(lock, cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: int = 32, lr: float = 3e-3,
+           weight_decay: float = 1e-4, seed: int = 0, threads: int = 1, time_budget_s: float | None = None,
+           ckpt_every_s: float = 180.0, log_every: int = 10, val_every: int = 200, val_sequences: int = 2,
+           val_pairs: int = 256, max_gap: int = 50, resume: bool = True, init_from: str | None = None,
+           border_cut: float = 0.0, progress: bool = True) -> dict:
+    from ..checkpoint import check_run_folder, flag_differences, load_checkpoint_dict, refuse_other_data, \
+        refuse_other_flags
+    from ..siamfc.data import cache_data_info
+
+    out = check_run_folder(out_dir)   # made once every input is read and checked (no empty run folder)
+    lock.acquire(out)   # a run folder that exists: before anything in it is read or changed
     torch.set_num_threads(check_threads(threads))
     torch.manual_seed(seed)
     ck_path, log_path = out / "ckpt.pt", out / "log.jsonl"
-    ck = torch.load(str(ck_path), map_location="cpu", weights_only=False) if resume and ck_path.is_file() else None
+    ck = load_checkpoint_dict(ck_path, "EdgeTrack") if resume and ck_path.is_file() else None
     if ck is not None:   # the run's own architecture, calibration and sampling, whatever the caller's defaults
         cfg = EdgeTrackConfig.from_dict(ck["config"])
         border_cut = float(ck.get("border_cut", 0.0))
     cache = CropCache(Path(cache_dir) / "target", maker=MAKER)
     bg = load_background(cache_dir)
+    data_info = cache_data_info(Path(cache_dir) / "target", MAKER)   # the training data's identity, for the export
+    settings = {"batch": batch, "lr": lr, "weight_decay": weight_decay, "seed": seed, "max_gap": max_gap,
+                "val_every": val_every}
+    if ck is not None:
+        # another cache or other flags had been taken in silence: one line (the cache by its data's hash)
+        refuse_other_data(ck_path, cache_dir, ck.get("train_data_hash"), data_info["train_data_hash"])
+        refuse_other_flags(ck_path, flag_differences(ck, settings, RESUME_FLAGS))
+        done = int(ck["step"]) >= steps or (time_budget_s is not None
+                                             and float(ck.get("elapsed_s", 0.0)) >= time_budget_s)
+        if done:   # a finished run stays finished, its files as they are (it had trained one more step)
+            stopped = "steps" if int(ck["step"]) >= steps else "time budget"
+            print(f"{ck_path}: the run is finished (step {int(ck['step'])}, {float(ck.get('elapsed_s', 0.0)) / 60:.1f} "
+                  f"min trained; its {'step cap' if stopped == 'steps' else 'time budget'} reached): nothing to do")
+            return {"step": int(ck["step"]), "stopped": stopped, "elapsed_s": float(ck.get("elapsed_s", 0.0)),
+                    "checkpoint": str(ck_path), "calib": [cfg.calib_a, cfg.calib_b]}
     nseq = len(cache.index["sequences"])
     nval = min(val_sequences, max(0, nseq - 1))
     train_ids, val_ids = list(range(nseq - nval)), list(range(nseq - nval, nseq))
@@ -211,23 +250,25 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
                                                           max_gap=max_gap, sequences=train_ids, seed=20_000 + seed,
                                                           border_cut=border_cut), net)
             else:
-                from ..checkpoint import load_checkpoint_dict
-
                 src = load_checkpoint_dict(init_from, "EdgeTrack")
-            net.load_state_dict(src["model"])
+            try:
+                net.load_state_dict(src["model"])
+            except RuntimeError:   # another architecture: a size-mismatch traceback before
+                theirs = (src.get("config") or {}).get("widths")
+                raise ValueError(f"{init_from} is an EdgeTrack of another architecture (widths {theirs}, this run's "
+                                 f"{list(cfg.widths)}): it cannot start this run") from None
             origin = {"name": Path(str(init_from)).name, "step": src.get("step"),
                       "train_data_hash": (src.get("imported_from") or src).get("train_data_hash")}
             print(f"initialised from {init_from} (step {src.get('step')})")
         if log_path.exists():
             log_path.unlink()
-
-    from ..siamfc.data import cache_data_info
-    data_info = cache_data_info(Path(cache_dir) / "target", MAKER)   # the training data's identity, for the export
+    out.mkdir(parents=True, exist_ok=True)
+    lock.acquire(out)
 
     def checkpoint(elapsed):
         save_checkpoint(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
                         "config": net.cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
-                        "batch": batch, "seed": seed, "border_cut": border_cut, "calib": [net.cfg.calib_a, net.cfg.calib_b],
+                        **settings, "border_cut": border_cut, "calib": [net.cfg.calib_a, net.cfg.calib_b],
                         "pad": sampler.pad, "init_from": origin, "random": random_state(sampler.rng),
                         "log_acc": [acc, nacc], **data_info})
 
@@ -306,5 +347,5 @@ def train(cfg: EdgeTrackConfig, cache_dir, out_dir, steps: int = 20000, batch: i
         print(f"curve plot failed: {e}")
     summary = {"step": step, "stopped": stopped, "elapsed_s": elapsed, "checkpoint": str(ck_path),
                "calib": [net.cfg.calib_a, net.cfg.calib_b]}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    write_text_atomic(out / "summary.json", json.dumps(summary, indent=1))
     return summary

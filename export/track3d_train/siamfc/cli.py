@@ -70,7 +70,7 @@ def _export(a) -> int:
     from .export import export_onnx, parity, quantize_search
     from .train import load_checkpoint
 
-    from ..onnx_meta import refuse_shipped
+    from ..onnx_meta import refuse_existing, refuse_shipped
 
     if not a.checkpoint:
         raise ValueError("give --checkpoint CKPT (a SiamFC ckpt.pt)")
@@ -79,8 +79,12 @@ def _export(a) -> int:
     # the int8 twin where the runtime looks for it (variant_path: <prefix>_search_int8.onnx); it
     # had been written as <prefix>_int8_search.onnx, which precision="int8" / "auto" never found
     int8_search = variant_path(Path(str(a.out) + "_search.onnx"), "int8")
-    refuse_shipped([Path(str(a.out) + "_exemplar.onnx"), Path(str(a.out) + "_search.onnx")]
-                   + ([int8_search] if a.int8 else []), a.force)
+    if Path(a.out).is_dir():
+        raise ValueError(f"--out {a.out} is a folder: give a path prefix (e.g. {Path(a.out) / 'siamfc_edge'} writes "
+                         f"siamfc_edge_exemplar.onnx and siamfc_edge_search.onnx in it)")
+    outs = [Path(str(a.out) + "_exemplar.onnx"), Path(str(a.out) + "_search.onnx")] + ([int8_search] if a.int8 else [])
+    refuse_shipped(outs, a.force)
+    refuse_existing(outs, a.force)   # they had been overwritten without a word
     net, ck = load_checkpoint(a.checkpoint)
     over = {k: getattr(a, k) for k in ("instance_size", "scale_num", "window_influence", "scale_lr",
                                        "scale_step", "scale_penalty") if getattr(a, k) is not None}
@@ -172,7 +176,9 @@ def build_parser() -> argparse.ArgumentParser:
         t.add_argument("--time-budget-min", type=bounded(float, above=0), default=None,
                        help="stop (and checkpoint) after this many minutes of training (default: none, "
                             "only --max-steps)")
-        t.add_argument("--init-from", help="start from another run's checkpoint (fine-tuning)")
+        t.add_argument("--init-from", help="start from another run's checkpoint of the same --variant and --width "
+                                           "(fine-tuning; default: none, random weights; ignored when the run "
+                                           "resumes)")
         t.add_argument("--no-resume", action="store_true", help="start over even if <out>/ckpt.pt exists")
         t.add_argument("--quiet", action="store_true", help="no progress bar")
         hidden_alias(t, "--no-progress", "quiet", action="store_true")
@@ -182,8 +188,11 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--checkpoint", dest="checkpoint", help="SiamFC checkpoint (ckpt.pt); required")
     hidden_alias(e, "--ckpt", "checkpoint")
     e.add_argument("--out", required=True, help="path prefix")
-    e.add_argument("--force", action="store_true", help="overwrite the shipped models in track3d/models")
-    e.add_argument("--data-note", default=None, help="what the model was trained on (metadata)")
+    e.add_argument("--force", action="store_true",
+                   help="overwrite files that exist at --out (the shipped models in track3d/models too)")
+    e.add_argument("--data-note", default=None,
+                   help="what the model was trained on (metadata; default: 'track3d small train split (no "
+                        "ILSVRC-VID pre-training)')")
     e.add_argument("--int8", metavar="CACHE",
                    help="also write the search graph's int8 twin (<out>_search_int8.onnx), calibrated on CACHE "
                         "(the exemplar's twin and the accuracy verdict auto needs: track3d-train quantize, "
@@ -193,7 +202,8 @@ def build_parser() -> argparse.ArgumentParser:
     for k, ty in (("instance-size", bounded(int, 1)), ("scale-num", bounded(int, 1)), ("window-influence", unit),
                   ("scale-lr", unit), ("scale-step", bounded(float, above=0)),
                   ("scale-penalty", bounded(float, above=0, high=1))):
-        e.add_argument(f"--{k}", type=ty, default=None, help="tracking default stored in the metadata")
+        e.add_argument(f"--{k}", type=ty, default=None,
+                       help="tracking default stored in the metadata (default: the checkpoint's config's)")
     e.set_defaults(fn=_export)
 
     v = sub.add_parser("eval", help="OPE on a dataset split with the ONNX runtime tracker")
@@ -205,7 +215,8 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--threads", type=thread_count, default=1, help="onnxruntime threads")
     for k, ty in (("instance-size", bounded(int, 1)), ("scale-num", bounded(int, 1)), ("window-influence", unit),
                   ("scale-lr", unit)):
-        v.add_argument(f"--{k}", type=ty, default=None, help="override the model's tracking default")
+        v.add_argument(f"--{k}", type=ty, default=None,
+                       help="override the model's tracking default (default: the model's own)")
     v.set_defaults(fn=_eval)
     return apply_formatter(p)
 

@@ -60,6 +60,11 @@ def build_cache(sequences, out_dir, exemplar_size: int = 127, cache_size: int = 
     the image (recorded in index.json); None: each frame's mean colour."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    # a re-run over a cache: not complete until this run's index.json is written (the recipes skip
+    # a cache that has one); the temporaries a run killed before left go
+    (out / "index.json").unlink(missing_ok=True)
+    for name in ("crops.npy.tmp", "index.json.tmp"):
+        (out / name).unlink(missing_ok=True)
     seqs = []
     for name, get, boxes, absent, stride in sequences:
         idx = [i for i in range(0, len(boxes), stride) if _usable(boxes[i], absent[i])]
@@ -102,11 +107,12 @@ def build_cache(sequences, out_dir, exemplar_size: int = 127, cache_size: int = 
     crops.flush()
     del crops
     (out / "crops.npy.tmp").replace(out / "crops.npy")
-    (out / "index.json").write_text(json.dumps({
+    (out / "index.json.tmp").write_text(json.dumps({
         "sequences": [p[0] for p in plan], "seq": seq_of, "frame": frame_of, "size_in_crop": sizes,
         "cache_size": cache_size, "exemplar_size": exemplar_size, "context_amount": context_amount,
         "data_hash": data_hash, "data_name": data_name,
         "pad": None if pad is None else [float(v) for v in pad]}))
+    (out / "index.json.tmp").replace(out / "index.json")   # last, whole: the cache is complete
     return out
 
 

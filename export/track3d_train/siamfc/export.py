@@ -18,7 +18,7 @@ import torch
 import torch.nn as nn
 from track3d.threads import check_threads
 
-from ..onnx_meta import attach_metadata
+from ..onnx_meta import AtomicFiles, attach_metadata
 from .model import SiamFC, SiamFCConfig, xcorr_matmul
 
 __all__ = ["ExemplarGraph", "SearchGraph", "export_onnx", "parity", "model_metadata", "quantize_search"]
@@ -77,18 +77,20 @@ def export_onnx(net: SiamFC, prefix: str | Path, extra_meta: dict | None = None,
     px = prefix.parent / f"{prefix.name}_search.onnx"
     z = torch.randint(0, 256, (1, cfg.exemplar_size, cfg.exemplar_size, 3), dtype=torch.uint8)
     x = torch.randint(0, 256, (cfg.scale_num, cfg.instance_size, cfg.instance_size, 3), dtype=torch.uint8)
-    with warnings.catch_warnings(), torch.no_grad():
+    # both written beside their paths with their metadata, then renamed (all or none: a kill while
+    # exporting leaves the pair that was there whole)
+    with AtomicFiles(pz, px) as (ez_path, ex_path), warnings.catch_warnings(), torch.no_grad():
         warnings.simplefilter("ignore")
         ez = ExemplarGraph(net)
         feat = ez(z)
-        torch.onnx.export(ez, (z,), str(pz), dynamo=False, opset_version=opset, input_names=["exemplar"],
+        torch.onnx.export(ez, (z,), str(ez_path), dynamo=False, opset_version=opset, input_names=["exemplar"],
                           output_names=["exemplar_feature"])
-        torch.onnx.export(SearchGraph(net), (x, feat), str(px), dynamo=False, opset_version=opset,
+        torch.onnx.export(SearchGraph(net), (x, feat), str(ex_path), dynamo=False, opset_version=opset,
                           input_names=["search", "exemplar_feature"], output_names=["response"],
                           dynamic_axes={"search": {0: "scales", 1: "height", 2: "width"},
                                         "response": {0: "scales", 1: "rh", 2: "rw"}})
-    attach_metadata(pz, model_metadata(cfg, "siamfc-exemplar", extra_meta))
-    attach_metadata(px, model_metadata(cfg, "siamfc-search", extra_meta))
+        attach_metadata(ez_path, model_metadata(cfg, "siamfc-exemplar", extra_meta))
+        attach_metadata(ex_path, model_metadata(cfg, "siamfc-search", extra_meta))
     return pz, px
 
 
@@ -116,16 +118,18 @@ def quantize_search(search_path: str | Path, out_path: str | Path, calib_crops: 
     except Exception:
         src = Path(search_path)
     meta = {p.key: p.value for p in onnx.load(str(search_path)).metadata_props}
-    # the correlation (MatMul with the exemplar) stays float: quantise the backbone convs only
-    quantize_static(str(src), str(out_path), Reader(), quant_format=QuantFormat.QDQ,
-                    activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8, per_channel=True,
-                    reduce_range=True, op_types_to_quantize=["Conv"])
-    if pre.exists():
-        pre.unlink()
     import json
     m = json.loads(meta["track3d"])
     m["quantization"] = "int8 static QDQ, per-channel int8 weights, uint8 activations, reduce_range"
-    attach_metadata(out_path, m)
+    try:
+        with AtomicFiles(out_path) as (tmp,):   # written whole, with its metadata, or not at all
+            # the correlation (MatMul with the exemplar) stays float: quantise the backbone convs only
+            quantize_static(str(src), str(tmp), Reader(), quant_format=QuantFormat.QDQ,
+                            activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8, per_channel=True,
+                            reduce_range=True, op_types_to_quantize=["Conv"])
+            attach_metadata(tmp, m)
+    finally:
+        pre.unlink(missing_ok=True)
     return out_path
 
 

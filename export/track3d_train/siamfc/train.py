@@ -3,13 +3,12 @@ from __future__ import annotations
 
 import json
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
 from track3d.threads import check_threads
 
-from ..checkpoint import random_state, restore_random_state, save_checkpoint
+from ..checkpoint import random_state, restore_random_state, save_checkpoint, write_text_atomic
 from ..interrupt import StopOnSignal
 from ..training_log import read_log, trim_log
 from .data import CropCache, PairSampler
@@ -53,14 +52,47 @@ def plot_log(log_path, png_path, title="SiamFC training") -> None:
     plt.close(fig)
 
 
+# The settings a resumed run must share with its checkpoint (train()'s argument -> its flag). Not
+# compared: where the run stops (--max-steps, --time-budget-min: a run may be given more), how
+# often it checkpoints, --threads. The network (--variant, --width, --train-instance-size) is
+# compared by ARCH_FLAGS.
+RESUME_FLAGS = {"batch": "--batch", "lr": "--lr", "lr_end": "--lr-end", "weight_decay": "weight_decay",
+                "seed": "--seed", "max_gap": "--max-gap"}
+ARCH_FLAGS = {"variant": "--variant", "width": "--width", "train_instance_size": "--train-instance-size"}
+
+
+def _other_network(theirs: dict, cfg: SiamFCConfig) -> list[str]:
+    """The flags (as a checkpoint's config `theirs` has them) whose network differs from `cfg`'s: its weights
+    do not fit this run's (a size-mismatch traceback before)."""
+    from ..checkpoint import flag_differences
+
+    return flag_differences(theirs or {}, cfg.to_dict(), ARCH_FLAGS)
+
+
 def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int = 16, lr: float = 1e-2,
           lr_end: float = 1e-4, weight_decay: float = 5e-4, seed: int = 0, threads: int = 1,
           time_budget_s: float | None = None, ckpt_every_s: float = 60.0, log_every: int = 10,
           init_from: str | None = None, resume: bool = True, progress: bool = True,
           max_gap: int = 50) -> dict:
-    """Train (or resume) into out_dir: ckpt.pt (latest), log.jsonl, loss.png. Returns a summary."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    """Train (or resume) into out_dir: ckpt.pt (latest), log.jsonl, loss.png. Returns a summary. A second
+    training on the same out_dir while this one runs is refused (checkpoint.RunLock)."""
+    kwargs = dict(locals())   # the arguments, as given (first: no other local yet)
+    from ..checkpoint import RunLock
+
+    with RunLock() as lock:
+        return _train(lock=lock, **kwargs)
+
+
+def _train(lock, cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int = 16, lr: float = 1e-2,
+           lr_end: float = 1e-4, weight_decay: float = 5e-4, seed: int = 0, threads: int = 1,
+           time_budget_s: float | None = None, ckpt_every_s: float = 60.0, log_every: int = 10,
+           init_from: str | None = None, resume: bool = True, progress: bool = True,
+           max_gap: int = 50) -> dict:
+    from ..checkpoint import check_run_folder, flag_differences, load_checkpoint_dict, refuse_other_data, \
+        refuse_other_flags
+
+    out = check_run_folder(out_dir)   # made once every input is read and checked (no empty run folder)
+    lock.acquire(out)   # a run folder that exists: before anything in it is read or changed
     torch.set_num_threads(check_threads(threads))
     torch.manual_seed(seed)
     ck_path, log_path = out / "ckpt.pt", out / "log.jsonl"
@@ -75,14 +107,29 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
 
     data_info = cache_data_info(cache_dir)   # the training data's identity, for the export
 
+    settings = {"batch": batch, "lr": lr, "lr_end": lr_end, "weight_decay": weight_decay, "seed": seed,
+                "max_gap": max_gap}
+
     def checkpoint(elapsed):
         save_checkpoint(ck_path, {"model": net.state_dict(), "optim": opt.state_dict(), "step": step,
                                   "config": cfg.to_dict(), "elapsed_s": elapsed, "steps_planned": steps,
-                                  "batch": batch, "seed": seed, "random": random_state(sampler.rng),
+                                  **settings, "random": random_state(sampler.rng),
                                   "log_acc": [acc, nacc], **data_info})
 
     if resume and ck_path.is_file():
-        ck = torch.load(str(ck_path), map_location="cpu", weights_only=False)
+        ck = load_checkpoint_dict(ck_path, "SiamFC")
+        # another cache, network or flags: one line (they had been taken in silence, or ended in a
+        # size-mismatch traceback); the cache by its data's hash
+        refuse_other_data(ck_path, cache_dir, ck.get("train_data_hash"), data_info["train_data_hash"])
+        refuse_other_flags(ck_path, _other_network(ck.get("config"), cfg)
+                           + flag_differences(ck, settings, RESUME_FLAGS))
+        ck_elapsed = float(ck.get("elapsed_s", 0.0))
+        if int(ck["step"]) >= steps or (time_budget_s is not None and ck_elapsed >= time_budget_s):
+            # a finished run stays finished, its files as they are (it had trained one more step)
+            stopped = "steps" if int(ck["step"]) >= steps else "time budget"
+            print(f"{ck_path}: the run is finished (step {int(ck['step'])}, {ck_elapsed / 60:.1f} min trained; its "
+                  f"{'step cap' if stopped == 'steps' else 'time budget'} reached): nothing to do")
+            return {"step": int(ck["step"]), "stopped": stopped, "elapsed_s": ck_elapsed, "checkpoint": str(ck_path)}
         net.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optim"])
         step, elapsed0 = int(ck["step"]), float(ck.get("elapsed_s", 0.0))
@@ -95,15 +142,19 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
         trim_log(log_path, step)   # rows logged after the checkpoint (a kill between checkpoints)
         print(f"resumed from {ck_path} at step {step}")
     elif init_from:
-        from ..checkpoint import load_checkpoint_dict
-
         src = load_checkpoint_dict(init_from, "SiamFC")
+        other = _other_network(src.get("config"), cfg)
+        if other:   # a size-mismatch traceback before
+            raise ValueError(f"{init_from} is a SiamFC of another network than this run's: pass {' '.join(other)} "
+                             "to start from it")
         net.load_state_dict(src["model"])
         print(f"initialised from {init_from} (step {src.get('step')})")
         if log_path.exists():
             log_path.unlink()
     elif log_path.exists():
         log_path.unlink()
+    out.mkdir(parents=True, exist_ok=True)
+    lock.acquire(out)
     net.train()
     r_pos_cells = cfg.r_pos / cfg.total_stride
     t_start = time.perf_counter()
@@ -159,5 +210,5 @@ def train(cfg: SiamFCConfig, cache_dir, out_dir, steps: int = 2000, batch: int =
         print(f"loss plot failed: {e}")
     summary = {"step": step, "stopped": stopped, "elapsed_s": elapsed0 + time.perf_counter() - t_start,
                "checkpoint": str(ck_path)}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    write_text_atomic(out / "summary.json", json.dumps(summary, indent=1))
     return summary
