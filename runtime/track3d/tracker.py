@@ -330,6 +330,11 @@ def _valid_box2d(b: np.ndarray) -> bool:
     return bool(np.all(np.isfinite(b)) and b[2] > 0 and b[3] > 0)
 
 
+def _built_in(part) -> bool:
+    """Whether a tracker or estimator is one of track3d's own (a protocol break is a plug-in's to hear of)."""
+    return type(part).__module__.split(".")[0] == "track3d"
+
+
 def _is_flag(ok) -> bool:
     """A 2D tracker's `ok`: a bool (numpy's too) or the integers 0 / 1."""
     return isinstance(ok, (bool, np.bool_)) or (isinstance(ok, (int, np.integer)) and int(ok) in (0, 1))
@@ -657,10 +662,11 @@ class Track3D:
         # [0, 0, -20, 1, 1, 1] had been reported as tracking, and a 1e12 m box bent the fused 2D box)
         if b.shape != (6,) or not np.all(np.isfinite(b)) or np.any(b[3:] <= 0.0) or b[2] <= 0.0 \
                 or np.any(np.abs(b) > MAX_COORD_M):
-            self._say_once("box3d", f"the box estimator {self._name3d!r} returned "
-                                    f"{np.array2string(b, precision=3, threshold=8)}: not a box in front of the "
-                                    "camera ((6,) [cx, cy, cz, sx, sy, sz], finite, sizes > 0, cz > 0, within "
-                                    f"{MAX_COORD_M:g} m): taken as no estimate")
+            if not _built_in(self.estimator):   # the baseline's box of a flat cap is no box, and no mistake
+                self._say_once("box3d", f"the box estimator {self._name3d!r} returned "
+                                        f"{np.array2string(b, precision=3, threshold=8)}: not a box in front of the "
+                                        "camera ((6,) [cx, cy, cz, sx, sy, sz], finite, sizes > 0, cz > 0, within "
+                                        f"{MAX_COORD_M:g} m): taken as no estimate")
             return None
         return b
 
