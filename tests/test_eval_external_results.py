@@ -298,3 +298,20 @@ def test_a_2d_box_past_the_border_is_scored_on_its_part_in_the_image(synth, tmp_
         assert g[:, 0].min() > 0          # the case: the true box off the left border
         want = float(np.mean(g[:, 2] / (g[:, 0] + g[:, 2])))
         assert rep["trackers"]["mine"]["sequences"][seq.name]["ao_2d"] == pytest.approx(want)
+
+
+def test_a_2d_box_wholly_off_the_image_keeps_its_centre_error(synth, tmp_path):
+    """Clipped for the IoU only (as GOT-10k): a box 2000 px off the image had been clipped to a
+    sliver on the border and charged its distance from there (a review of the clipping)."""
+    from track3d.boxes import center_error_2d
+
+    def far_off(seq, r):
+        r.box2d[1:, 0] -= 2000.0
+    _exact(synth, tmp_path / "res", change=far_off)
+    rep = _report(synth, tmp_path)
+    for seq in _seqs(synth):
+        scored = ~seq.absent & (np.arange(len(seq)) > 0)
+        want = float(np.mean(center_error_2d(seq.gt2d[scored] - [2000.0, 0, 0, 0], seq.gt2d[scored])))
+        got = rep["trackers"]["mine"]["sequences"][seq.name]
+        assert got["ace_2d"] == pytest.approx(want) and want == pytest.approx(2000.0)
+        assert got["ao_2d"] == 0.0

@@ -354,3 +354,47 @@ def test_create_takes_threads_for_the_parts_that_run_models():
     assert t.estimator_options == {"threads": 2}                                  # its own option stands
     with pytest.raises(ValueError, match="threads"):
         Track3D.create(cam, tracker="kcf", estimator="baseline", threads=0)
+
+
+def test_an_error_in_a_plug_in_packages_submodule_is_one_line(synth, tmp_path, capsys, monkeypatch):
+    """--plugin mypkg whose tracker lives in mypkg.trk: its error came out as a traceback (a review)."""
+    pkg = tmp_path / "oopspkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("from track3d.trackers2d import register_tracker\n"
+                                     "from .trk import Oops\nregister_tracker('oopspkg', Oops)\n")
+    (pkg / "trk.py").write_text(textwrap.dedent('''
+        class Oops:
+            def init(self, image, box):
+                self.box = list(box)
+            def update(self, image):
+                return True, self.box[7]
+    '''))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert main(["track", "--plugin", "oopspkg", "--data", str(synth), "--tracker", "oopspkg",
+                 "--results", str(tmp_path / "r"), "--video", "none", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the plug-in raised IndexError at trk.py:" in err
+
+
+@pytest.mark.parametrize("flag", [True, np.bool_(True), np.array(True), np.array(1), 1, np.int64(1)])
+def test_ok_may_be_any_zero_d_bool(flag):
+    """`ok = score > threshold` on a 0-d array (or a torch tensor) had become a protocol error (a review)."""
+    class Flagged(_Still):
+        def update(self, image):
+            return flag, self.box
+
+    t, img = _loop(Flagged())
+    assert t.update(img, np.zeros((0, 3), np.float32)).status != "lost"
+
+
+def test_a_plug_ins_broken_pipe_is_an_error_not_a_closed_stdout(synth, tmp_path, capsys):
+    """Any BrokenPipeError had ended the run with exit 0 and no word, as if `| head` had closed
+    stdout (a review): a plug-in's own pipe to a helper process is an error like any other."""
+    class Piped(_Still):
+        def update(self, image):
+            raise BrokenPipeError(32, "Broken pipe")
+
+    trackers2d.register_tracker("piped", Piped)
+    assert main(["track", "--data", str(synth), "--tracker", "piped", "--results", str(tmp_path / "r"),
+                 "--video", "none", "--quiet"]) == 2
+    assert "Broken pipe" in capsys.readouterr().err

@@ -424,6 +424,23 @@ def test_a_second_trainer_on_the_same_run_folder_is_refused(sf_caches, bx_caches
     assert sf_train(_sf_cfg(), sf_caches[0], out, steps=1, **SF_KW)["step"] == 1   # released: it runs
 
 
+def test_a_file_system_that_cannot_lock_a_folder_trains_with_a_warning(tmp_path, monkeypatch):
+    """On NFS flock is emulated with fcntl locks, which need a file open for writing: every training
+    there had been refused as "another training is running" (a review)."""
+    import errno
+    import fcntl
+
+    from track3d_train.checkpoint import RunLock
+
+    def no_flock(fd, op):
+        raise OSError(errno.EBADF, "Bad file descriptor")
+    monkeypatch.setattr(fcntl, "flock", no_flock)
+    with pytest.warns(RuntimeWarning, match="no lock against a second trainer"):
+        with RunLock() as lock:
+            lock.acquire(tmp_path)
+            assert lock.fd is None
+
+
 _CHILD = """
 import os, pathlib, signal, sys, time
 out = pathlib.Path(sys.argv[1])

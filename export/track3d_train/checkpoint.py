@@ -84,6 +84,13 @@ def flag_differences(saved: dict, now: dict, flags: dict) -> list[str]:
     return out
 
 
+def _no_lock(folder: Path, e: OSError) -> None:
+    import warnings
+
+    warnings.warn(f"{folder}: no lock against a second trainer on this run folder ({e.strerror or e}): this "
+                  "file system does not lock folders; run one trainer per --out", RuntimeWarning, stacklevel=3)
+
+
 class RunLock:
     """An exclusive lock (fcntl.flock, on the run folder itself: no file left behind) held while a
     training writes its run folder: a second trainer on the same --out is a one-line ValueError
@@ -105,13 +112,21 @@ class RunLock:
             import fcntl
         except ImportError:
             return
-        fd = os.open(str(folder), os.O_RDONLY)
+        try:
+            fd = os.open(str(folder), os.O_RDONLY)
+        except OSError as e:
+            _no_lock(folder, e)
+            return
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:   # BlockingIOError: another process (or this one) holds it
+        except BlockingIOError:   # another process (or this one) holds it
             os.close(fd)
             raise ValueError(f"another training is running in {folder}: wait for it to end (or stop it), "
                              "or give another --out") from None
+        except OSError as e:   # a file system without flock on a folder (NFS emulates it with fcntl
+            os.close(fd)       # locks, which need a file open for writing): train, unguarded, and say so
+            _no_lock(folder, e)
+            return
         self.fd = fd
 
     def release(self) -> None:

@@ -681,11 +681,15 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "docs":
             return _cmd_docs(args)
         return _cmd_trackers(args)
-    except BrokenPipeError:   # `track3d eval ... | head`: the reader left, nothing went wrong here
+    except BrokenPipeError as e:   # `track3d eval ... | head`: the reader left, nothing went wrong here
         import os
 
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # no second error at exit's flush
-        return 0
+        if _stdout_closed():
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # no second error at exit's flush
+            return 0
+        # another pipe (a plug-in's socket to a helper process): an error like any other
+        print(f"track3d {args.command}: error: {_plugin_said(e) or e}", file=sys.stderr)
+        return 2
     except (DatasetError, TrackerUnavailable, EstimatorUnavailable, ModelError, OSError,
             ValueError, RuntimeError) as e:
         print(f"track3d {args.command}: error: {_plugin_said(e) or e}", file=sys.stderr)
@@ -699,6 +703,23 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"track3d {args.command}: error: {said}", file=sys.stderr)
         return 2
+
+
+def _stdout_closed() -> bool:
+    """Whether stdout is a pipe whose reader has gone (poll says POLLERR on its write end); True
+    where poll is missing (not POSIX), as any broken pipe was taken before."""
+    import io
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, io.UnsupportedOperation, OSError, ValueError):   # not a file (captured): not it
+        return False
+    if not hasattr(select, "poll"):
+        return True
+    p = select.poll()
+    p.register(fd, select.POLLOUT)
+    return any(ev & select.POLLERR for _, ev in p.poll(0))
 
 
 def _plugin_said(e: BaseException) -> str | None:

@@ -67,6 +67,8 @@ _ext_sample = getattr(_ext, "sample_points", None)
 _ext_bounds = getattr(_ext, "extract_frustum_bounds", None)
 _ext_lone = getattr(_ext, "lone_scan", None)
 HAVE_EXTENSION = _ext_extract is not None and _ext_sample is not None
+# every function of this code's extension present (an older build runs some in numpy)
+EXTENSION_COMPLETE = None not in (_ext_extract, _ext_sample, _ext_bounds, _ext_lone)
 if _ext is not None and None in (_ext_extract, _ext_sample, _ext_bounds, _ext_lone):
     # an editable install whose C++ was not rebuilt after a pull: right, but slower
     warnings.warn("track3d: its compiled extension track3d._frustum is older than this code (it lacks "

@@ -172,8 +172,9 @@ def versions() -> dict:
         out["opencv"] = None
     # a missing or stale C++ extension gives the same results more slowly: a timing says which ran
     from . import frustum, resample
-    out["extension"] = ("compiled" if frustum.HAVE_EXTENSION and resample.HAVE_EXTENSION
-                        else "missing: the numpy reference ran (slower)")
+    out["extension"] = ("compiled" if frustum.EXTENSION_COMPLETE and resample.HAVE_EXTENSION
+                        else "missing: the numpy reference ran (slower)" if not frustum.HAVE_EXTENSION
+                        else "partly: an older build, some functions ran in numpy (slower)")
     try:
         from importlib.metadata import version
         out["track3d"] = version("track3d")

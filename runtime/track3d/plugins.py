@@ -155,8 +155,11 @@ def plugin_frame(exc: BaseException) -> str | None:
     files = {}
     for mod in list(sys.modules.values()):
         f = getattr(mod, "__file__", None)
-        if f and (getattr(mod, "__name__", "").startswith("track3d_plugin_") or mod.__name__ in _imported):
-            files[str(Path(f).resolve())] = mod.__name__
+        name = getattr(mod, "__name__", "") or ""
+        # a plug-in package's submodules too (--plugin mypkg whose tracker lives in mypkg.trk)
+        if f and (name.startswith("track3d_plugin_")
+                  or any(name == p or name.startswith(p + ".") for p in _imported if p)):
+            files[str(Path(f).resolve())] = name
     found = None
     for fr in traceback.extract_tb(exc.__traceback__):
         path = str(Path(fr.filename).resolve())

@@ -336,8 +336,15 @@ def _built_in(part) -> bool:
 
 
 def _is_flag(ok) -> bool:
-    """A 2D tracker's `ok`: a bool (numpy's too) or the integers 0 / 1."""
-    return isinstance(ok, (bool, np.bool_)) or (isinstance(ok, (int, np.integer)) and int(ok) in (0, 1))
+    """A 2D tracker's `ok`: a bool or the integers 0 / 1, as Python, numpy or a 0-d array / tensor
+    of one (`score > threshold` on an array); not a string, a box or a list."""
+    if isinstance(ok, (str, bytes)):
+        return False
+    try:
+        a = np.asarray(ok)
+    except Exception:   # an object numpy cannot take
+        return False
+    return a.ndim == 0 and (a.dtype == np.bool_ or (a.dtype.kind in "iu" and int(a) in (0, 1)))
 
 
 def _read_only(image: np.ndarray) -> np.ndarray:

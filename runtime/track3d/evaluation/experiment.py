@@ -304,9 +304,10 @@ def run_sequence(track_factory: Callable[[Sequence], Track3D], seq: Sequence, ma
 
 
 def _in_image(box2d: np.ndarray, seq) -> np.ndarray:
-    """(..., 4) predicted 2D boxes clipped to the sequence's image, as its labels are: a box is
-    scored on what of it lies in the image (the GOT-10k toolkit's bound; a tracker's box reaching
-    past the border had lost IoU for the part no label can hold). nan rows stay nan."""
+    """(..., 4) predicted 2D boxes clipped to the sequence's image, as its labels are, for an IoU:
+    a box is scored on what of it lies in the image (the GOT-10k toolkit's bound; a tracker's box
+    reaching past the border had lost IoU for the part no label can hold; score_sequence does the
+    same through its image_size, keeping centre errors on the box as given). nan rows stay nan."""
     return clip_box2d(box2d, seq.camera.width, seq.camera.height)
 
 
@@ -643,11 +644,10 @@ class Experiment:
             timed = res.tracked
             pred3d = res.box3d if run_3d else None
             scores.append(score_sequence(
-                seq.name, _in_image(res.box2d_raw if raw else res.box2d, seq), pred3d, seq.gt2d[:n], seq.gt3d[:n],
-                scored,
+                seq.name, res.box2d_raw if raw else res.box2d, pred3d, seq.gt2d[:n], seq.gt3d[:n], scored,
                 res.restarts,
                 tracker_seconds=float(res.seconds[timed].sum()), e2e_seconds=float(res.e2e_seconds[timed].sum()),
-                timed_frames=int(timed.sum())))
+                timed_frames=int(timed.sum()), image_size=(seq.camera.width, seq.camera.height)))
         return scores
 
     def score_conditions(self, name: str) -> dict[str, ConditionScore]:

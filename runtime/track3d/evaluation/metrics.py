@@ -51,7 +51,7 @@ from dataclasses import asdict, astuple, dataclass, field
 
 import numpy as np
 
-from ..boxes import center_error_2d, center_error_3d, iou_2d, iou_3d, iou_bev
+from ..boxes import center_error_2d, center_error_3d, clip_box2d, iou_2d, iou_3d, iou_bev
 
 __all__ = [
     "IOU_THRESHOLDS", "CE2D_THRESHOLDS", "CE3D_THRESHOLDS", "success_curve", "precision_curve",
@@ -158,10 +158,15 @@ def latency_ms(ms) -> dict[str, float]:
 
 def score_sequence(name: str, pred2d: np.ndarray, pred3d: np.ndarray | None, gt2d: np.ndarray,
                    gt3d: np.ndarray | None, scored: np.ndarray, restarts: int = 0, tracker_seconds: float = 0.0,
-                   e2e_seconds: float = 0.0, timed_frames: int = 0) -> SequenceScore:
+                   e2e_seconds: float = 0.0, timed_frames: int = 0,
+                   image_size: tuple[int, int] | None = None) -> SequenceScore:
     """Score one sequence. pred2d/gt2d (T, 4), pred3d/gt3d (T, 6); scored (T,) bool marks the
     frames that count (present target, not an init frame). Predictions may be nan (no output).
-    pred3d None: 2D only (the 3D values are nan, no 3D curves; gt3d is then not needed)."""
+    pred3d None: 2D only (the 3D values are nan, no 3D curves; gt3d is then not needed).
+    image_size (width, height): a predicted 2D box's IoU is taken on its part in the image, as the
+    labels are clipped to it (the GOT-10k toolkit's bound); its centre error on the box as given
+    (a box wholly off the image clipped to a sliver on the border had been charged its distance
+    from the border)."""
     two_d_only = pred3d is None
     pred2d = np.asarray(pred2d, np.float64).reshape(-1, 4)
     gt2d = np.asarray(gt2d, np.float64).reshape(-1, 4)
@@ -176,7 +181,7 @@ def score_sequence(name: str, pred2d: np.ndarray, pred3d: np.ndarray | None, gt2
                          f"({len(pred2d)}, {len(pred3d)}, {len(gt2d)}, {len(gt3d)}, {n})")
     p2, p3, g2, g3 = pred2d[scored], pred3d[scored], gt2d[scored], gt3d[scored]
     kinds = ("2d",) if two_d_only else KINDS
-    ious = {"2d": iou_2d(p2, g2)}
+    ious = {"2d": iou_2d(p2 if image_size is None else clip_box2d(p2, *image_size), g2)}
     if not two_d_only:
         ious.update(bev=iou_bev(p3, g3), **{"3d": iou_3d(p3, g3)})
     with np.errstate(invalid="ignore"):
