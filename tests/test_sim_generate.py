@@ -77,6 +77,23 @@ def test_killed_run_resumes_to_the_same_result(tmp_path):
     assert _hashes(out) == _hashes(ref)
 
 
+def test_a_kill_while_a_file_was_renamed_into_place_leaves_nothing_behind(tmp_path):
+    """A run killed while it wrote dataset.json left `.dataset.json.tmp-PID` (kept by the resume:
+    not the uninterrupted bytes); killed while it wrote its run file, a folder holding only
+    `..track3d-sim-run.json.tmp-PID` was refused as foreign, --overwrite too (a simulator walkthrough)."""
+    s = make_settings("tiny", seed=5, train=1, test=0, frames=2)
+    ref = generate(s, tmp_path / "ref", progress=False, log=_quiet)
+    early = tmp_path / "early"
+    early.mkdir()
+    (early / f".{RUN_FILE}.tmp-4242").write_text("{")
+    assert _hashes(generate(s, early, progress=False, log=_quiet)) == _hashes(ref)
+    late = tmp_path / "late"
+    generate(s, late, progress=False, log=_quiet)
+    (late / DATASET_JSON).unlink()
+    (late / f".{DATASET_JSON}.tmp-4243").write_text("{")
+    assert _hashes(generate(s, late, progress=False, log=_quiet)) == _hashes(ref)
+
+
 def test_resume_refuses_other_settings(tmp_path):
     out = tmp_path / "d"
     assert main(["generate", "--preset", "tiny", "--train", "1", "--test", "0", "--frames", "2", "--out", str(out),
@@ -87,6 +104,7 @@ def test_resume_refuses_other_settings(tmp_path):
 
 @pytest.mark.parametrize("argv, needle", [
     (["--workers", "0"], "--workers"),
+    (["--workers", "1000"], "--workers must be an integer from 1 to"),   # had started a process a sequence
     (["--frames", "0"], "frames"),
     (["--resolution", "8x8"], "resolution"),
     (["--fov", "200"], "field of view"),

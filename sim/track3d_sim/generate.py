@@ -18,6 +18,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import shutil
 import sys
 import time
@@ -321,6 +322,13 @@ def prepare_output(out: Path, settings: dict, overwrite: bool = False) -> str:
     ident = _identity(settings)
     if out.exists() and not out.is_dir():
         raise SimError(f"output path {out} exists and is not a folder")
+    if out.is_dir():
+        # a run killed while it wrote its run file or dataset.json leaves `.<name>.tmp-<pid>`: not
+        # part of any dataset (a resume had kept it, and a folder holding only the run file's was
+        # taken for a foreign one)
+        for tmp in out.glob(".*.tmp-*"):
+            if tmp.is_file() and re.fullmatch(r"\..+\.tmp-\d+", tmp.name):
+                tmp.unlink()
     if out.exists() and overwrite:
         if any(out.iterdir()) and not (out / RUN_FILE).exists() and not (out / ds.DATASET_JSON).exists():
             raise SimError(f"refusing to --overwrite {out}: it is not empty and not a track3d-sim output folder")
@@ -471,8 +479,11 @@ def generate(settings: dict, out: str | Path, workers: int = 1, overwrite: bool 
     ray: None (processes), "local" (start a local Ray instance, `ray_num_cpus` CPUs, default all)
     or the address of a running Ray cluster ("auto", "HOST:6379", "ray://HOST:10001")."""
     log = log or (lambda msg: print(msg, file=sys.stderr))
-    if int(workers) < 1:
-        raise SimError(f"--workers must be >= 1, got {workers}")
+    from track3d.threads import max_threads, threads_rule
+
+    if int(workers) < 1 or (ray is None and int(workers) > max_threads()):
+        # 1,000 had started a process per sequence on 2 cores (495 for --preset paper)
+        raise SimError(f"--workers must be {threads_rule()}, got {workers}")
     out = Path(out)
     plan_of(settings)  # plan errors before Ray starts
     with contextlib.ExitStack() as stack:
