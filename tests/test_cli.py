@@ -322,3 +322,21 @@ def test_eval_writes_its_files_before_a_closed_pipe_stops_it(synth, tmp_path):
                        capture_output=True, text=True, timeout=120)
     assert (rep / "report.json").is_file() and (rep / "sequences.txt").is_file()
     assert "Broken pipe" not in p.stderr and "Traceback" not in p.stderr
+
+
+def test_stdout_closed_is_told_from_a_real_pipe():
+    """_stdout_closed on a pipe whose reader left (POLLERR on Linux, POLLHUP on macOS / BSD) and on
+    one still read."""
+    import os
+    import subprocess
+    import sys
+
+    code = "import sys; from track3d.cli import _stdout_closed; sys.stderr.write(str(_stdout_closed()))"
+    r, w = os.pipe()
+    os.close(r)                                        # the reader has gone
+    p = subprocess.run([sys.executable, "-c", code], stdout=w, stderr=subprocess.PIPE, text=True, timeout=60)
+    os.close(w)
+    assert p.stderr.strip() == "True"
+    p = subprocess.run([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                       timeout=60)
+    assert p.stderr.strip() == "False"

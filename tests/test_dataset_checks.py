@@ -222,3 +222,12 @@ def test_frame_files_are_checked_when_the_sequence_is_opened(tmp_path, mistake, 
     with pytest.raises(D.DatasetError, match=message) as e:
         D.Dataset(root).sequences("test")
     assert "\n" not in str(e.value) and str(root / "test" / "b") in str(e.value)
+
+
+def test_hidden_files_in_a_frame_folder_are_no_frames(tmp_path):
+    """macOS leaves ._000001.png beside each frame on a FAT / exFAT / SMB copy: it had been refused
+    as an extra image (a review)."""
+    root = _synth(tmp_path / "ds", sequences={"a": 3})
+    (root / "test" / "a" / "left" / "._000001.png").write_bytes(b"junk")
+    seqs, w = _open(root)
+    assert len(seqs) == 1 and w == []

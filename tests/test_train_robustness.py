@@ -489,3 +489,23 @@ def test_a_recipes_running_step_dies_with_the_recipe(tmp_path):
                 os.kill(child, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+
+
+def test_a_second_sigterm_does_not_cut_the_checkpoint_short():
+    """A recipe killed with kill -9 sends its step's death signal once per thread the orphan is
+    handed to: two SIGTERMs had ended the training before its checkpoint (a review). A second
+    Ctrl-C still stops at once."""
+    import signal as S
+
+    from track3d_train.interrupt import StopOnSignal
+
+    stop = StopOnSignal()
+    stop._handle(S.SIGTERM, None)
+    stop._handle(S.SIGTERM, None)               # ignored: the checkpoint is still written
+    assert stop.signum == S.SIGTERM
+    with pytest.raises(KeyboardInterrupt):
+        stop._handle(S.SIGINT, None)
+    ctrl_c = StopOnSignal()
+    ctrl_c._handle(S.SIGINT, None)
+    with pytest.raises(KeyboardInterrupt):
+        ctrl_c._handle(S.SIGINT, None)

@@ -77,9 +77,13 @@ class StopOnSignal:
         return self
 
     def _handle(self, signum, frame) -> None:
-        if self.signum is not None:   # the second: stop now
+        # a second Ctrl-C: stop now. A second SIGTERM is not a person's hurry: a recipe killed with
+        # kill -9 sends its step's death signal once per thread the orphan is handed to, and two
+        # had ended the training before its checkpoint (a review)
+        if self.signum is not None and signum == signal.SIGINT:
             raise KeyboardInterrupt
-        self.signum = signum
+        if self.signum is None:
+            self.signum = signum
 
     def __exit__(self, *exc) -> bool:
         for s, old in self._old.items():

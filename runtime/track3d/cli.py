@@ -706,7 +706,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _stdout_closed() -> bool:
-    """Whether stdout is a pipe whose reader has gone (poll says POLLERR on its write end); True
+    """Whether stdout is a pipe whose reader has gone (poll says so on its write end); True
     where poll is missing (not POSIX), as any broken pipe was taken before."""
     import io
     import select
@@ -719,7 +719,8 @@ def _stdout_closed() -> bool:
         return True
     p = select.poll()
     p.register(fd, select.POLLOUT)
-    return any(ev & select.POLLERR for _, ev in p.poll(0))
+    # Linux says POLLERR for a pipe without a reader, macOS and the BSDs POLLHUP
+    return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in p.poll(0))
 
 
 def _plugin_said(e: BaseException) -> str | None:

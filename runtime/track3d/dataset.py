@@ -260,7 +260,8 @@ def _check_frame_files(seq: Path, sub: str, n: int) -> None:
         names = [f.name for f in folder.iterdir()] if folder.is_dir() else []
     except OSError as e:
         raise DatasetError(f"cannot list {folder}: {e}") from None
-    pngs = {f for f in names if f.lower().endswith(".png")}
+    # hidden files are no frames (macOS's ._000001.png on a FAT / exFAT / SMB copy)
+    pngs = {f for f in names if f.lower().endswith(".png") and not f.startswith(".")}
     want = {frame_name(i) for i in range(n)}
     if pngs == want:
         return
