@@ -557,7 +557,8 @@ def _not_a_root(root: Path) -> str:
     if (root / GT2D).is_file() or (root / LEFT_DIR).is_dir():
         up = root.parent.parent
         return (f"{root} is a sequence folder, not a dataset root: pass the folder holding {DATASET_JSON}"
-                + (f" ({up}) with --sequence {root.name}" if (up / DATASET_JSON).is_file() else ""))
+                + (f" ({up}; `track3d track` / `eval` take --sequence {root.name})" if (up / DATASET_JSON).is_file()
+                   else ""))
     if (root.parent / DATASET_JSON).is_file():
         return f"{root} is a split folder of a dataset: pass its parent {root.parent} and --split {root.name}"
     try:
