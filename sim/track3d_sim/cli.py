@@ -208,7 +208,10 @@ def main(argv=None) -> int:
                   f"{c['current']} already current, {c['other']} of other depth sensors left alone")
         elif args.cmd == "stats":
             from .stats import plot_stats
-            plot_stats(args.root, args.out, args.split)
+            st = plot_stats(args.root, args.out, args.split)
+            # one line naming the file, as `preview` does: it had printed nothing
+            print(f"track3d-sim stats: {st['n_seq']} sequences, {st['n_frames']} frames ({args.split}) "
+                  f"-> {Path(args.out)}")
         elif args.cmd == "preview":
             from .preview import preview, shown_frames
             out = preview(args.sequence, args.out, n=args.frames, gain=args.gain, right=args.right)

@@ -360,8 +360,38 @@ def prepare_output(out: Path, settings: dict, overwrite: bool = False) -> str:
 _W = {}
 
 
-def _init_worker(settings, root, queue):
+def _die_with_parent(parent: int) -> None:
+    """Linux: SIGKILL to this worker when the run that started it dies, however it dies (prctl
+    PR_SET_PDEATHSIG). A `kill -9` of `generate --workers N` had left its workers rendering on
+    into --out (PPID 1) until their sequences were complete, renamed into place with nobody to
+    collect them and racing a resume, then dying on BrokenPipeError tracebacks. SIGKILL, not
+    SIGTERM: a worker has nothing to save (its .partial folder is redone on resume), and nothing in
+    it can catch or delay the signal. Elsewhere, or without prctl, nothing: SIGTERM and Ctrl-C
+    still end the workers through _run_pool.
+
+    The idea of track3d_train.recipes._dies_with_recipe, not that code: it is a preexec_fn of the
+    training package (the simulator does not depend on it), and a spawned worker sets the signal
+    itself, after its interpreter started."""
     import signal
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        import ctypes
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return
+    # The kernel sends the signal when the *thread* that started the worker ends: the pool's
+    # creator (it waits in _run_pool until the pool is gone) or, for a replaced worker, the
+    # pool's own handler thread (it ends with the pool)
+    if prctl(1, int(signal.SIGKILL)) != 0:    # 1 = PR_SET_PDEATHSIG
+        return
+    if os.getppid() != parent:                # the run died before the call: as if the signal had come
+        os._exit(128 + int(signal.SIGKILL))
+
+
+def _init_worker(settings, root, queue, parent: int):
+    import signal
+    _die_with_parent(parent)
     # Ctrl-C reaches the whole process group: the parent ends the pool, the workers do not each
     # print a traceback
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -389,7 +419,7 @@ def _run_pool(todo, settings, out: Path, workers: int, update) -> None:
     before = signal.signal(signal.SIGTERM, _interrupted)
     try:
         with ctx.Pool(min(workers, len(todo)), initializer=_init_worker,
-                      initargs=(settings, str(out), queue)) as pool:
+                      initargs=(settings, str(out), queue, os.getpid())) as pool:
             res = pool.map_async(_work, todo, chunksize=1)
             while True:
                 try:

@@ -31,7 +31,10 @@ def collect(root: str | Path, split: str = "all") -> dict:
     except DatasetError as e:
         raise SimError(str(e)) from None
     if not seqs:
-        raise SimError(f"no sequences in {root} ({split})")
+        # which splits do hold sequences: the user picks another --split without a second look
+        have = ", ".join(f"{k} {len(v)}" for k, v in data.splits.items())
+        where = "any split" if split == "all" else f"split {split}"
+        raise SimError(f"no sequences in {where} of {root} (sequences per split: {have or 'none'})")
     sizes, speeds, vel, irr, dn = [], [], [], [], []
     n_points_only = sum(bool(s.points_only) for s in seqs)
     for s in seqs:
@@ -104,8 +107,15 @@ def plot_stats(root: str | Path, out: str | Path, split: str = "all") -> dict:
             ax[1, 0].hist(vel[:, k], bins=bins, histtype="step", lw=1.5, color=col,
                           label=f"v{name}: sd {vel[:, k].std():.2f} m/s")
         ax[1, 0].legend(fontsize=7)
-    ax[1, 0].set(title=f"(c) translation velocity (mean speed {st['speed'].mean():.2f} m/s)",
-                 xlabel="velocity component (m/s)", ylabel="frame pairs")
+        ax[1, 0].set(title=f"(c) translation velocity (mean speed {st['speed'].mean():.2f} m/s)",
+                     xlabel="velocity component (m/s)", ylabel="frame pairs")
+    else:
+        # one-frame sequences have no frame pair: the mean of no speeds had put two numpy
+        # RuntimeWarnings on stderr and "nan m/s" in the title
+        ax[1, 0].set_title("(c) translation velocity")
+        ax[1, 0].text(0.5, 0.5, "no velocities:\nevery sequence has one frame", ha="center", va="center",
+                      transform=ax[1, 0].transAxes, fontsize=10, color="0.3")
+        ax[1, 0].set_axis_off()
     illumination_panel(ax[1, 1], st)
     fig.suptitle(f"{Path(os.path.abspath(root)).name}: {st['n_seq']} sequences, {st['n_frames']} frames ({split})")
     fig.tight_layout()
