@@ -69,3 +69,26 @@ def test_restereo_refuses_points_only_data_and_non_datasets(tmp_path, capsys):
     assert "points-only" in err and len(err.strip().splitlines()) == 1
     assert main(["restereo", str(tmp_path / "nothing"), "--quiet"]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_restereo_rewrites_an_upper_case_depth_folder_in_place(tmp_path, capsys):
+    """A depth folder of 000001.PNG files (the reader takes them): restereo had written a second
+    file per frame, 000001.png, and the next open refused the folder as holding both."""
+    root = generate(make_settings("tiny", seed=21, train=1, test=1, frames=3, sensors="stereo"),
+                    tmp_path / "d", progress=False, log=_quiet)
+    fresh = {k.lower(): v for k, v in _depth_hashes(root).items()}
+    for s in Dataset(root).sequences("test"):
+        for f in sorted((s.path / "depth").glob("*.png")):
+            z = read_depth_png(f)
+            write_depth_png(f.with_suffix(".PNG"), np.where(z > 0, z + 0.5, 0.0))
+            f.unlink()
+        meta = json.loads((s.path / "meta.json").read_text())
+        meta["depth_sensor"]["edge_erode_px"] = 0
+        (s.path / "meta.json").write_text(json.dumps(meta, indent=1, sort_keys=True))
+    assert main(["restereo", str(root), "--quiet"]) == 0
+    capsys.readouterr()
+    (s,) = Dataset(root).sequences("test")                       # opens: one file per frame
+    assert sorted(p.name for p in (s.path / "depth").iterdir()) == ["000001.PNG", "000002.PNG", "000003.PNG"]
+    got = {str(p.relative_to(root)).lower(): hashlib.sha256(p.read_bytes()).hexdigest()
+           for p in sorted(root.rglob("depth/*.PNG"))}
+    assert got == {k: v for k, v in fresh.items() if k.startswith("test")}

@@ -21,6 +21,7 @@ from typing import Iterator
 import cv2
 import numpy as np
 
+from .boxes import clip_box2d
 from .camera import Camera
 
 __all__ = [
@@ -28,6 +29,7 @@ __all__ = [
     "ABSENCE", "CUT", "META", "frame_name", "write_meta", "write_depth_png", "read_depth_png", "read_rgb", "write_rgb",
     "write_labels", "write_dataset_json", "COARSE_CATEGORIES",
     "DatasetError", "DatasetWarning", "Dataset", "Sequence", "Frame", "PROJECTION_TOLERANCE", "DEPTH_RATIO_LIMITS",
+    "LABEL_SLACK_PX", "LABEL_CLIP_PX", "LABEL_CLIP_SHARE",
 ]
 
 FORMAT = "track3d-dataset"
@@ -68,6 +70,18 @@ PROJECTION_SLACK_PX = 1.0
 # 3D label's z span [cz - sz/2, cz + sz/2] (1 inside it). data/ measures 0.991 .. 1.0; depth
 # maps in centimetres 0.10, in metres 0.001, 3D labels in millimetres 0.001.
 DEPTH_RATIO_LIMITS = (0.5, 2.0)
+# 2D labels past the image border (docs/dataset.md "Label and frame files"). Up to LABEL_SLACK_PX:
+# the pixel grid's rounding, taken as given. Beyond it, on a frame cut_by_image.label flags cut:
+# an annotation tool's box dragged a few pixels past the border (GOT-10k style tools allow it),
+# clipped to the image with one warning per sequence, as the evaluation clips predicted boxes
+# (boxes.clip_box2d); each side at most LABEL_CLIP_PX or LABEL_CLIP_SHARE of the box's side on
+# that axis, whichever is larger. Further is no drag but another box (the whole body's, or
+# x1,y1,x2,y2 read as x,y,w,h) and is refused, as is a label past the border on a frame flagged
+# uncut (the target then lies inside the image: the synthetic spheres' x1,y1,x2,y2 reach 3-5 px
+# past it). data/ has no label past the border (54,292 present frames).
+LABEL_SLACK_PX = 1.0
+LABEL_CLIP_PX = 5.0
+LABEL_CLIP_SHARE = 0.1
 _MIN_DEPTH_RETURNS = 10
 _warned: set[str] = set()
 
@@ -208,11 +222,14 @@ def _lines(bad: np.ndarray) -> str:
     return f" (and {len(bad) - 1} more line(s))" if len(bad) > 1 else ""
 
 
-def _check_labels(seq: Path, gt2d: np.ndarray, gt3d: np.ndarray, absent: np.ndarray, width: int, height: int) -> None:
-    """Refuse labels that cannot be right on a present frame, in one line naming file and line:
-    a 3D box behind the camera or of no size, a 2D box 0,0,0,0 (the absence flag forgotten) or
-    of no size, a 2D box outside the image or reaching past it by more than 1 px (labels are
-    clipped to the image)."""
+def _check_labels(seq: Path, gt2d: np.ndarray, gt3d: np.ndarray, absent: np.ndarray, cut: np.ndarray,
+                  width: int, height: int) -> tuple[np.ndarray, str | None]:
+    """(2D labels, warning or None): refuse labels that cannot be right on a present frame, in one
+    line naming file and line: a 3D box behind the camera or of no size, a 2D box 0,0,0,0 (the
+    absence flag forgotten) or of no size, or wholly outside the image; clip those reaching a few
+    pixels past it on a frame flagged cut (the warning says how many and how far), refuse those
+    reaching further or past it on a frame flagged uncut (LABEL_SLACK_PX, LABEL_CLIP_PX,
+    LABEL_CLIP_SHARE)."""
     present = ~absent
     f3, f2 = seq / GT3D, seq / GT2D
     bad = np.flatnonzero(present & (gt3d[:, 2] <= 0))
@@ -243,44 +260,76 @@ def _check_labels(seq: Path, gt2d: np.ndarray, gt3d: np.ndarray, absent: np.ndar
         i = bad[0]
         raise DatasetError(f"{f2} line {i + 1}: {','.join(f'{v:g}' for v in gt2d[i])} lies wholly outside the "
                            f"{width}x{height} image on a present frame{_lines(bad)}")
-    past = np.max(np.stack([-x, -y, x + w - width, y + h - height]), axis=0)
-    bad = np.flatnonzero(present & (past > 1.0))
+    sides = np.stack([-x, -y, x + w - width, y + h - height], axis=1)     # px past the left, top, right, bottom
+    past = sides.max(axis=1)
+    over = present & (past > LABEL_SLACK_PX)
+    if not over.any():
+        return gt2d, None
+
+    def shown(i):
+        return (f"{f2} line {i + 1}: {','.join(f'{v:g}' for v in gt2d[i])} reaches {past[i]:g} px past the "
+                f"{width}x{height} image")
+
+    bad = np.flatnonzero(over & ~cut)
     if len(bad):
         i = bad[0]
-        raise DatasetError(f"{f2} line {i + 1}: {','.join(f'{v:g}' for v in gt2d[i])} reaches {past[i]:g} px past "
-                           f"the {width}x{height} image: 2D labels are clipped to the image (and x, y, w, h, not "
-                           f"x1, y1, x2, y2){_lines(bad)}")
+        raise DatasetError(f"{shown(i)} on a frame {CUT} marks uncut (its line {i + 1} is 0): 2D labels are clipped "
+                           f"to the image (and x, y, w, h, not x1, y1, x2, y2); a target cut by the border is "
+                           f"flagged 1 there{_lines(bad)}")
+    limit = np.maximum(LABEL_CLIP_PX, LABEL_CLIP_SHARE * np.stack([w, h, w, h], axis=1))
+    bad = np.flatnonzero(over & np.any(sides > limit, axis=1))
+    if len(bad):
+        i = bad[0]
+        raise DatasetError(f"{shown(i)}: a few px past it are clipped (up to {LABEL_CLIP_PX:g} px or "
+                           f"{100 * LABEL_CLIP_SHARE:g}% of the box's side), further is not the visible part's "
+                           f"box (the whole body's, or x1, y1, x2, y2?){_lines(bad)}")
+    rows = np.flatnonzero(over)
+    i = rows[np.argmax(past[rows])]
+    gt2d = gt2d.copy()
+    # clipped as the evaluation clips a predicted box for its IoU: a perfect prediction scores 1
+    gt2d[rows] = clip_box2d(gt2d[rows], width, height)
+    return gt2d, (f"{f2}: {len(rows)} line(s) reach past the {width}x{height} image, by up to {past[i]:g} px "
+                  f"(line {i + 1}): clipped to the image (2D labels are the visible part's box; docs/dataset.md)")
 
 
-def _check_frame_files(seq: Path, sub: str, n: int) -> None:
+def _check_frame_files(seq: Path, sub: str, n: int) -> dict[int, str]:
     """The folder `sub` of a sequence holds exactly frame_name(0) .. frame_name(n - 1) (n label
-    rows), checked when the sequence is opened; what differs is named in one line."""
+    rows), the extension in any case (000001.PNG: some cameras and Windows tools write it), checked
+    when the sequence is opened; what differs is named in one line. Returns {index: file name} of
+    the frames whose name is not frame_name(index) (it is opened by that name: on a case-sensitive
+    file system 000001.png is not 000001.PNG)."""
     folder = seq / sub
     try:
         names = [f.name for f in folder.iterdir()] if folder.is_dir() else []
     except OSError as e:
         raise DatasetError(f"cannot list {folder}: {e}") from None
     # hidden files are no frames (macOS's ._000001.png on a FAT / exFAT / SMB copy)
-    pngs = {f for f in names if f.lower().endswith(".png") and not f.startswith(".")}
+    found: dict[str, str] = {}   # the name in lower case -> the file's name
+    for f in sorted(f for f in names if f.lower().endswith(".png") and not f.startswith(".")):
+        if f.lower() in found:   # two files of one name: which one is the frame is not ours to guess
+            raise DatasetError(f"{folder} holds both {found[f.lower()]} and {f} (names that differ only in case): "
+                               f"keep one")
+        found[f.lower()] = f
+    pngs = set(found)
     want = {frame_name(i) for i in range(n)}
     if pngs == want:
-        return
+        return {i: found[frame_name(i)] for i in range(n) if found[frame_name(i)] != frame_name(i)}
     span = f"{frame_name(0)} .. {frame_name(n - 1)} for the {n} label rows in {GT2D}" if n else \
         f"no frames for the 0 label rows in {GT2D}"
     stems = sorted(f[:-4] for f in pngs if f[:-4].isdigit())
     if pngs and len(stems) == len(pngs):
         digits = {len(t) for t in stems}
         if digits != {6}:
-            eg = next(t for t in stems if len(t) != 6)
+            eg = next(found[f"{t}.png"] for t in stems if len(t) != 6)
             raise DatasetError(f"{folder} has {min(digits) if len(digits) == 1 else 'other than 6'}-digit frame "
-                               f"names ({eg}.png): frames are named {span}")
+                               f"names ({eg}): frames are named {span}")
         if stems[0] == "000000":
-            raise DatasetError(f"{folder} is numbered from 000000.png: frames are numbered from 1, {span}")
+            raise DatasetError(f"{folder} is numbered from {found['000000.png']}: frames are numbered from 1, {span}")
     others = sorted(f for f in names if f.lower().rsplit(".", 1)[-1] in ("jpg", "jpeg", "bmp", "tif", "tiff"))
     if not pngs and others:
         raise DatasetError(f"{folder} holds {len(others)} {others[0].rsplit('.', 1)[-1]} image(s) and no PNG: "
                            f"frames are PNG files, {span}")
-    missing, extra = sorted(want - pngs), sorted(pngs - want)
+    missing, extra = sorted(want - pngs), sorted(found[f] for f in pngs - want)
     what = []
     if missing:
         what.append(f"lacks {missing[0]}" + (f" and {len(missing) - 1} more" if len(missing) > 1 else ""))
@@ -370,15 +419,19 @@ class Sequence:
         left = self.path / LEFT_DIR
         if not self.points_only and not left.is_dir():
             raise DatasetError(f"{self.path} has no {LEFT_DIR}/ image folder")
-        # labels that cannot be right: refused, naming the file and line
-        _check_labels(self.path, self.gt2d, self.gt3d, self.absent, int(camera.width), int(camera.height))
+        # labels that cannot be right: refused, naming the file and line; a few px past the image: clipped
+        self.gt2d, clipped = _check_labels(self.path, self.gt2d, self.gt3d, self.absent, self.cut, int(camera.width),
+                                           int(camera.height))
         # Labels and images must cover the same frames, named 000001.png .. : shorter labels would
         # silently drop frames from tracking and scoring, missing or misnamed images would fail
         # mid-run. Points-only data has no images: its depth maps are the frames.
+        self._names: dict[str, dict[int, str]] = {}   # per folder, the frames not named frame_name(i)
         for sub in (DEPTH_DIR,) if self.points_only else (LEFT_DIR, DEPTH_DIR, RIGHT_DIR):
             if sub == LEFT_DIR or self.points_only or (self.path / sub).is_dir():
-                _check_frame_files(self.path, sub, n)
+                self._names[sub] = _check_frame_files(self.path, sub, n)
         # what reads but looks wrong: one warning each, naming the file or the sequence
+        if clipped:
+            _warn_once(clipped)
         self._check_meta(meta)
         self._check_projection()
         self._check_depth_units()
@@ -423,7 +476,7 @@ class Sequence:
         if not len(present):
             return
         i = int(present[0])
-        path = self.path / DEPTH_DIR / frame_name(i)
+        path = self.depth_path(i)
         try:
             depth = self._sized(read_depth_png(path), path)
         except DatasetError:   # missing or damaged: the frame says so when read (scoring needs no depth)
@@ -499,7 +552,14 @@ class Sequence:
         return v / n if np.all(np.isfinite(v)) and n > 1e-12 else None
 
     def image_path(self, i: int, side: str = LEFT_DIR) -> Path:
-        return self.path / side / frame_name(i)
+        """The file of frame i in the folder `side` (left, right or depth): frame_name(i), or the
+        name it has there (000001.PNG)."""
+        return self.path / side / self._names.get(side, {}).get(i, frame_name(i))
+
+    def depth_path(self, i: int) -> Path:
+        """The depth map of frame i (a writer replacing it writes this file: another case would be
+        a second file of the frame, refused when the sequence is next opened)."""
+        return self.image_path(i, DEPTH_DIR)
 
     def image(self, i: int) -> np.ndarray:
         if self.points_only:
@@ -512,7 +572,7 @@ class Sequence:
         return self._sized(read_rgb(self.image_path(i, RIGHT_DIR)), self.image_path(i, RIGHT_DIR))
 
     def depth(self, i: int) -> np.ndarray:
-        path = self.path / DEPTH_DIR / frame_name(i)
+        path = self.depth_path(i)
         return self._sized(read_depth_png(path), path)
 
     def _sized(self, a: np.ndarray, path: Path) -> np.ndarray:

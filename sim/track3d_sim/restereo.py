@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from track3d.dataset import DEPTH_DIR, Dataset, frame_name, write_depth_png, write_meta
+from track3d.dataset import Dataset, write_depth_png, write_meta
 from track3d.stereo import StereoMatcher
 
 from .errors import SimError
@@ -43,7 +43,7 @@ def restereo(root: str | Path, progress: bool = True) -> dict[str, int]:
         for s in todo:
             for i in range(len(s)):
                 z = matcher.depth(s.image(i), s.right_image(i))
-                write_depth_png(s.path / DEPTH_DIR / frame_name(i), z)
+                write_depth_png(s.depth_path(i), z)
                 counts["frames"] += 1
                 if bar is not None:
                     bar.update(1)
