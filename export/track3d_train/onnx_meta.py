@@ -5,11 +5,11 @@ import hashlib
 import json
 from pathlib import Path
 
-from track3d.onnxmodel import META_KEY
+from track3d.onnxmodel import EXPORT_ID, META_KEY
 
 __all__ = ["attach_metadata", "set_fields", "read_metadata", "rewrite_metadata", "doc_string", "file_hash", "hash_files",
            "refuse_shipped", "refuse_existing", "PRODUCER", "check_portable", "load_model", "save_model",
-           "temp_beside", "AtomicFiles"]
+           "temp_beside", "AtomicFiles", "export_id", "EXPORT_ID"]
 
 PRODUCER = "track3d-train"
 
@@ -82,9 +82,35 @@ def temp_beside(path: str | Path) -> Path:
     return p.with_name(p.name + ".tmp")
 
 
+def _fsync(path: Path) -> None:
+    """Flush a written file to the disk: a rename is recorded apart from the data it names, and
+    after a power cut a file renamed before its data reached the disk can read empty or short."""
+    import os
+
+    with open(path, "rb") as f:
+        os.fsync(f.fileno())
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Flush a folder's entries (the renames into it); not possible on Windows, where a folder
+    cannot be opened: skipped there."""
+    import os
+
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 def save_model(model, path: str | Path) -> None:
-    """onnx.save through a temporary file beside `path`, then os.replace: a kill while writing
-    leaves the file that was there whole."""
+    """onnx.save through a temporary file beside `path`, flushed to the disk, then os.replace: a
+    kill (or a power cut) while writing leaves the file that was there whole."""
     import os
 
     import onnx
@@ -92,15 +118,30 @@ def save_model(model, path: str | Path) -> None:
     tmp = temp_beside(path)
     try:
         onnx.save(model, str(tmp))
+        _fsync(tmp)
         os.replace(tmp, path)
+        _fsync_folder(Path(path).parent)
     finally:
         tmp.unlink(missing_ok=True)
 
 
+def export_id(paths) -> str:
+    """The id an export writes into the metadata of both files of a model pair (key EXPORT_ID;
+    the runtime refuses a pair whose ids differ, track3d.onnxmodel.check_pair): the sha256 of the
+    files' bytes as exported, before their metadata is attached. Deterministic: the same weights
+    exported again give the same id (their files are interchangeable), other weights another."""
+    h = hashlib.sha256()
+    for p in paths:
+        h.update(Path(p).read_bytes())
+    return h.hexdigest()
+
+
 class AtomicFiles:
     """Write several files all or none: ``with AtomicFiles(a, b) as (ta, tb):`` write the
-    temporaries beside them; leaving the block normally replaces a then b by them, an exception
-    (or a kill) leaves a and b as they were and no temporary behind (after an exception)."""
+    temporaries beside them; leaving the block normally flushes them to the disk and replaces a
+    then b by them, an exception (or a kill) leaves a and b as they were and no temporary behind
+    (after an exception). A kill between the replaces leaves a new a beside an old b: a model pair
+    carries one export id in both files for that (export_id), and the runtime refuses a mixed pair."""
 
     def __init__(self, *paths):
         self.paths = [Path(p) for p in paths]
@@ -117,8 +158,14 @@ class AtomicFiles:
 
         try:
             if kind is None:
+                # all flushed before the first replace: the window in which a power cut mixes old
+                # and new files is the replaces' alone
+                for t in self.temps:
+                    _fsync(t)
                 for t, p in zip(self.temps, self.paths):
                     os.replace(t, p)
+                for folder in {p.parent for p in self.paths}:
+                    _fsync_folder(folder)
         finally:
             for t in self.temps:
                 t.unlink(missing_ok=True)

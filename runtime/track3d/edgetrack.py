@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 
 from .frames import MAX_BOX_SCALE, MIN_BOX_SIDE, check_image
-from .onnxmodel import load_model, model_pair, shipped_model
+from .onnxmodel import check_pair, load_model, model_pair, shipped_model
 from .siamfc import crop_square
 from .state import damaged, read_array, read_flag, read_float, read_int, read_kernel
 
@@ -110,6 +110,8 @@ class EdgeTracker:
         arith = {"precision": precision, "engine": engine}
         self.template_net = load_model(template_model, threads, "edgetrack-template", **arith)
         self.search_net = load_model(search_model, threads, "edgetrack-search", **arith)
+        # a template graph of another export makes kernels the search graph was not trained on
+        check_pair(self.template_net, self.search_net, "track3d-train edgetrack export")
         meta = self.search_net.meta
         self.meta = meta
         unknown = set(overrides) - set(TUNABLE)

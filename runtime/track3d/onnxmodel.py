@@ -25,11 +25,16 @@ import onnxruntime as ort
 from .threads import check_threads
 
 __all__ = ["META_KEY", "MODELS_DIR", "OnnxModel", "ModelError", "EngineUnavailable", "shipped_model", "model_path",
-           "model_pair", "is_model", "load_model", "models_of",
+           "model_pair", "check_pair", "EXPORT_ID", "is_model", "load_model", "models_of",
            "ENGINES", "PRECISIONS", "PARITY_TOLERANCE", "variant_path", "open_session"]
 
 META_KEY = "track3d"
 MODELS_DIR = Path(__file__).resolve().parent / "models"
+# The metadata key of a two-graph tracker's export id: one value written into both files of a pair
+# by one export (track3d_train.onnx_meta.export_id). The export renames the two files into place
+# one after the other; a kill between the renames left a new first graph beside an old search
+# graph, which loaded and tracked with features the search graph was not trained on, silently.
+EXPORT_ID = "export_id"
 
 
 ENGINES = ("onnxruntime", "openvino")
@@ -103,6 +108,26 @@ def model_pair(model, first, search, parts: tuple[str, str], shipped) -> tuple[P
     if first is None:
         return shipped()
     return first, search
+
+
+def check_pair(first, search, command: str) -> None:
+    """ModelError unless the two loaded graphs of a two-graph tracker come from one export: their
+    metadata's EXPORT_ID are equal, or neither has one (models exported before it, the shipped
+    ones among them). One file with an id and one without are two exports too: every export that
+    writes the id writes it into both. `command`: the export that writes the pair, for the message."""
+    a, b = first.meta.get(EXPORT_ID), search.meta.get(EXPORT_ID)
+    if a == b:
+        return
+
+    def name(m):
+        return getattr(m, "file", None) or getattr(m, "path", None) or f"the {m.meta.get('kind')} model given"
+
+    def shown(v):
+        return "none" if v is None else str(v)[:12]
+
+    raise ModelError(f"{name(first)} and {name(search)} are not one export's pair (export ids {shown(a)} and "
+                     f"{shown(b)}): `{command}` writes both; an export killed between its two renames, or files "
+                     f"copied from two exports, mix them: export the pair again")
 
 
 def session_options(threads: int = 1) -> ort.SessionOptions:

@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from .frames import MAX_BOX_SCALE, MIN_BOX_SIDE, check_image, check_init_box
-from .onnxmodel import load_model, model_pair, shipped_model
+from .onnxmodel import check_pair, load_model, model_pair, shipped_model
 from .resample import warp_axis_aligned
 from .state import damaged, read_array, read_flag, read_float, read_int, read_kernel
 
@@ -107,6 +107,8 @@ class SiamFCTracker:
         # each model a path or a model object (onnxmodel.load_model)
         self.exemplar = load_model(exemplar_model, threads, "siamfc-exemplar", precision=precision, engine=engine)
         self.search = load_model(search_model, threads, "siamfc-search", precision=precision, engine=engine)
+        # an exemplar graph of another export makes features the search graph was not trained on
+        check_pair(self.exemplar, self.search, "track3d-train siamfc export")
         meta = self.search.meta
         self.meta = meta
         unknown = set(overrides) - set(TUNABLE)

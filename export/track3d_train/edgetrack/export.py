@@ -6,7 +6,8 @@
 
 Both files carry the same metadata (key 'track3d'): kind 'edgetrack-template' /
 'edgetrack-search', sizes, stride, the cell-centre rule, the score calibration and every
-tracking hyper-parameter, so the runtime needs nothing else.
+tracking hyper-parameter, so the runtime needs nothing else, and one export id (`export_id`,
+the sha256 of the two graphs as exported): the runtime refuses a pair whose ids differ.
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ import numpy as np
 import torch
 import torch.nn as nn
 
-from ..onnx_meta import AtomicFiles, attach_metadata
+from ..onnx_meta import EXPORT_ID, AtomicFiles, attach_metadata, export_id
 from .model import EdgeTrack
 
 __all__ = ["TemplateGraph", "SearchGraph", "export_onnx", "parity", "model_metadata", "count_macs", "time_search"]
@@ -117,8 +118,11 @@ def export_onnx(net: EdgeTrack, prefix: str | Path, extra_meta: dict | None = No
                           input_names=["search", "kernel"], output_names=["logit", "ltrb"],
                           dynamic_axes={"search": {1: "height", 2: "width"},
                                         "logit": {1: "rows", 2: "cols"}, "ltrb": {2: "rows", 3: "cols"}})
-        attach_metadata(tz_path, model_metadata(net, "edgetrack-template", extra_meta))
-        attach_metadata(tx_path, model_metadata(net, "edgetrack-search", extra_meta))
+        # one id in both files: the runtime refuses a template of another export beside the search
+        # graph (a kill between AtomicFiles' two renames leaves such a pair)
+        pair = {EXPORT_ID: export_id([tz_path, tx_path])}
+        attach_metadata(tz_path, {**model_metadata(net, "edgetrack-template", extra_meta), **pair})
+        attach_metadata(tx_path, {**model_metadata(net, "edgetrack-search", extra_meta), **pair})
     return pz, px
 
 

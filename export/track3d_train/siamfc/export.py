@@ -5,7 +5,8 @@
                              exemplar_feature (1, C, 6, 6) -> response (S, R, R), R = (H-127)/8 + 1
 
 Normalisation happens inside both graphs. Both files carry the same metadata (key 'track3d'):
-kind 'siamfc-exemplar' / 'siamfc-search', sizes, stride, tracking hyper-parameters.
+kind 'siamfc-exemplar' / 'siamfc-search', sizes, stride, tracking hyper-parameters, and one export id
+(`export_id`, the sha256 of the two graphs as exported): the runtime refuses a pair whose ids differ.
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ import torch
 import torch.nn as nn
 from track3d.threads import check_threads
 
-from ..onnx_meta import AtomicFiles, attach_metadata
+from ..onnx_meta import EXPORT_ID, AtomicFiles, attach_metadata, export_id
 from .model import SiamFC, SiamFCConfig, xcorr_matmul
 
 __all__ = ["ExemplarGraph", "SearchGraph", "export_onnx", "parity", "model_metadata", "quantize_search"]
@@ -89,8 +90,11 @@ def export_onnx(net: SiamFC, prefix: str | Path, extra_meta: dict | None = None,
                           input_names=["search", "exemplar_feature"], output_names=["response"],
                           dynamic_axes={"search": {0: "scales", 1: "height", 2: "width"},
                                         "response": {0: "scales", 1: "rh", 2: "rw"}})
-        attach_metadata(ez_path, model_metadata(cfg, "siamfc-exemplar", extra_meta))
-        attach_metadata(ex_path, model_metadata(cfg, "siamfc-search", extra_meta))
+        # one id in both files: the runtime refuses an exemplar graph of another export beside the
+        # search graph (a kill between AtomicFiles' two renames leaves such a pair)
+        pair = {EXPORT_ID: export_id([ez_path, ex_path])}
+        attach_metadata(ez_path, {**model_metadata(cfg, "siamfc-exemplar", extra_meta), **pair})
+        attach_metadata(ex_path, {**model_metadata(cfg, "siamfc-search", extra_meta), **pair})
     return pz, px
 
 
