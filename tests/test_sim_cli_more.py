@@ -202,3 +202,12 @@ def test_a_pool_run_killed_with_sigkill_resumes_to_the_same_bytes(tmp_path):
                 os.kill(p, signal.SIGKILL)
     assert _hashes(out) == _hashes(ref)
     assert not list(out.rglob(".partial-*"))
+
+
+def test_shapes_says_what_it_wrote(tmp_path, capsys):
+    """`track3d-sim shapes` had printed nothing on success (as `stats` and `ply` had)."""
+    from track3d_sim.cli import main
+
+    out = tmp_path / "s.png"
+    assert main(["shapes", "--out", str(out), "--count", "1", "--generator", "fragment", "--no-progress"]) == 0
+    assert out.is_file() and capsys.readouterr().out.strip().endswith(f"-> {out}")

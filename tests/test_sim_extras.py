@@ -49,12 +49,13 @@ def test_trilinear_hand_case():
     assert trilinear(grid, np.array([[2.0, 2.0, 2.0]]), wrap=True)[0] == pytest.approx(0.0)
 
 
-def test_ply_export_writes_the_frame_cloud(tiny_dataset, tmp_path):
+def test_ply_export_writes_the_frame_cloud(tiny_dataset, tmp_path, capsys):
     from track3d.dataset import Dataset
 
     seq = Dataset(tiny_dataset).sequences("train")[0]
     out = tmp_path / "f.ply"
     assert main(["ply", str(seq.path), "--frame", "2", "--out", str(out)]) == 0
+    assert capsys.readouterr().out.strip().endswith(f"-> {out}")     # it had printed nothing
     raw = out.read_bytes()
     head, body = raw.split(b"end_header\n", 1)
     n = int([l for l in head.decode().splitlines() if l.startswith("element vertex")][0].split()[-1])

@@ -221,7 +221,8 @@ def main(argv=None) -> int:
             print(f"track3d-sim preview: {shown} of {total} frames{more} -> {out}")
         elif args.cmd == "ply":
             from .preview import export_ply
-            export_ply(args.sequence, args.frame, args.out)
+            out = export_ply(args.sequence, args.frame, args.out)
+            print(f"track3d-sim ply: frame {args.frame} of {args.sequence} -> {out}")
         elif args.cmd == "demo":
             from track3d.onnxmodel import ModelError
             from .demo import run_demo
@@ -231,8 +232,9 @@ def main(argv=None) -> int:
                 raise SimError(str(e)) from None
         elif args.cmd == "shapes":
             from .contact_sheet import contact_sheet
-            contact_sheet(args.out, args.generator or None, count=args.count, seed=args.seed, detail=args.detail,
-                          cell=args.cell, progress=not args.no_progress)
+            out = contact_sheet(args.out, args.generator or None, count=args.count, seed=args.seed, detail=args.detail,
+                                cell=args.cell, progress=not args.no_progress)
+            print(f"track3d-sim shapes: {args.count} bodies per generator -> {out}")
     except (SimError, DatasetError, OSError) as e:  # damaged data met while reading frames, an unwritable --out
         print(f"track3d-sim: error: {e}", file=sys.stderr)
         return 2
