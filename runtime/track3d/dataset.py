@@ -23,6 +23,7 @@ import numpy as np
 
 from .boxes import clip_box2d
 from .camera import Camera
+from .frames import IMAGE_BITS, as_rgb
 
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "DATASET_JSON", "GENERATE_RUN_FILE", "LEFT_DIR", "RIGHT_DIR", "DEPTH_DIR", "GT2D", "GT3D",
@@ -118,8 +119,43 @@ def read_depth_png(path: str | Path) -> np.ndarray:
     if mm is None:
         raise DatasetError(f"cannot read depth map {path}")
     if mm.dtype != np.uint16 or mm.ndim != 2:
-        raise DatasetError(f"depth map {path} is not a 16-bit single-channel PNG")
+        # what it is and how to make one: a camera pipeline's depth is often float metres (a
+        # TIFF under a .png name reads as one) or 8-bit
+        raise DatasetError(f"depth map {path} is {_describe(mm)}, not a 16-bit single-channel PNG: millimetres of z, "
+                           f"0 = no return (float metres: write them with track3d.dataset.write_depth_png)")
     return mm.astype(np.float32) / 1000.0
+
+
+def _describe(a: np.ndarray) -> str:
+    """'8-bit, 3 channels', '32-bit float, 1 channel': what an image file decoded to."""
+    depth = {np.dtype(np.uint8): "8-bit", np.dtype(np.uint16): "16-bit"}.get(a.dtype, f"{8 * a.itemsize}-bit "
+                                                                             f"{'float' if a.dtype.kind == 'f' else a.dtype}")
+    c = 1 if a.ndim == 2 else a.shape[2]
+    return f"{depth}, {c} channel{'s' if c > 1 else ''}"
+
+
+def _png_bit_depth(path: Path) -> int | None:
+    """The bit depth a PNG's header declares (1, 2, 4, 8, 16), from its first 26 bytes, or None
+    for a file that is no PNG (reading it says so)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(26)
+    except OSError:
+        return None
+    return head[24] if len(head) == 26 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR" else None
+
+
+def _image_bits(info: dict, where: Path) -> int | None:
+    """dataset.json's "image_bits" (the bit depth of the samples of 16-bit frames), None when
+    not given; DatasetError when malformed."""
+    b = info.get("image_bits")
+    if b is None:
+        return None
+    if not isinstance(b, int) or isinstance(b, bool) or b not in IMAGE_BITS:
+        raise DatasetError(f"{where}: 'image_bits' must be an integer in {IMAGE_BITS.start}..{IMAGE_BITS.stop - 1}, "
+                           f"the bit depth of the camera's samples in 16-bit frames (12 for values 0..4095), "
+                           f"got {b!r:.40}")
+    return b
 
 
 def write_rgb(path: str | Path, rgb: np.ndarray) -> None:
@@ -129,14 +165,26 @@ def write_rgb(path: str | Path, rgb: np.ndarray) -> None:
         raise OSError(f"could not write {path}")
 
 
-def read_rgb(path: str | Path) -> np.ndarray:
-    """PNG -> (H, W, 3) uint8 RGB."""
+def read_rgb(path: str | Path, bits: int | None = None) -> np.ndarray:
+    """PNG -> (H, W, 3) uint8 RGB. A camera's PNG of 8 or 16 bits, grey, grey + alpha, RGB, RGBA
+    or a palette, converted by track3d.frames.as_rgb (grey repeated, alpha dropped); the samples
+    of a 16-bit PNG are `bits`-bit (dataset.json "image_bits"; None: 16), scaled to 0..255 by
+    frames.to_uint8. OpenCV's IMREAD_COLOR had read them as value >> 8: a 12-bit camera's frames
+    came out nearly black and were tracked, worse, without a word."""
     if not Path(path).is_file():
         raise DatasetError(f"missing image {path}")
-    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if bgr is None:
+    a = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)   # as stored (palettes expanded); an 8-bit RGB PNG as fast
+    if a is None:
         raise DatasetError(f"cannot read image {path}")
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    if a.dtype not in (np.uint8, np.uint16):
+        raise DatasetError(f"image {path} is {_describe(a)}: frames are 8- or 16-bit PNG")
+    if a.ndim == 3 and a.shape[2] in (3, 4):
+        a = cv2.cvtColor(a, cv2.COLOR_BGR2RGB if a.shape[2] == 3 else cv2.COLOR_BGRA2RGB)
+    try:
+        return as_rgb(a, 16 if bits is None else bits)
+    except ValueError as e:
+        # the only refusal here: a sample above the declared bits (PNG has no other dtype or channels)
+        raise DatasetError(f"image {path}: {e}" + (f" ({DATASET_JSON} \"image_bits\" is {bits})" if bits else "")) from None
 
 
 def write_labels(seq_dir: str | Path, gt2d: np.ndarray, gt3d: np.ndarray, absent, cut, meta: dict,
@@ -325,10 +373,14 @@ def _check_frame_files(seq: Path, sub: str, n: int) -> dict[int, str]:
                                f"names ({eg}): frames are named {span}")
         if stems[0] == "000000":
             raise DatasetError(f"{folder} is numbered from {found['000000.png']}: frames are numbered from 1, {span}")
-    others = sorted(f for f in names if f.lower().rsplit(".", 1)[-1] in ("jpg", "jpeg", "bmp", "tif", "tiff"))
+    # float depth (metres) often comes as TIFF, EXR, PFM or a numpy file
+    others = sorted(f for f in names if f.lower().rsplit(".", 1)[-1] in ("jpg", "jpeg", "bmp", "tif", "tiff", "exr",
+                                                                         "pfm", "npy"))
     if not pngs and others:
         raise DatasetError(f"{folder} holds {len(others)} {others[0].rsplit('.', 1)[-1]} image(s) and no PNG: "
-                           f"frames are PNG files, {span}")
+                           f"frames are PNG files, {span}"
+                           + (" (depth: 16-bit millimetres of z; track3d.dataset.write_depth_png writes float metres "
+                              "as such)" if sub == DEPTH_DIR else ""))
     missing, extra = sorted(want - pngs), sorted(found[f] for f in pngs - want)
     what = []
     if missing:
@@ -388,8 +440,12 @@ class Frame:
 class Sequence:
     """One sequence folder; labels load eagerly (small), images lazily per frame."""
 
-    def __init__(self, path: str | Path, camera: Camera, split: str | None = None, points_only: bool | None = None):
+    def __init__(self, path: str | Path, camera: Camera, split: str | None = None, points_only: bool | None = None,
+                 image_bits: int | None = None):
+        """image_bits: dataset.json's "image_bits" (Dataset passes it); None: looked up in the
+        dataset.json two folders up when the frames are 16-bit."""
         self.path = Path(path)
+        self.image_bits = image_bits
         if not self.path.is_dir():
             raise DatasetError(f"sequence folder {self.path} does not exist")
         self.name = self.path.name
@@ -435,6 +491,44 @@ class Sequence:
         self._check_meta(meta)
         self._check_projection()
         self._check_depth_units()
+        if not self.points_only:
+            self._check_image_bits()
+
+    def _check_image_bits(self) -> None:
+        """16-bit frames (the first left and right frame's PNG header): refuse, before anything is
+        tracked, a first frame whose samples exceed the declared "image_bits", or, with none
+        declared, one whose samples stay below 2**14: read as 16-bit it is at most a quarter of
+        full scale (63 of 255), as a 10-, 12- or 14-bit camera's frame whose samples sit in the low
+        bits is (EdgeTrack on a ToF test set with 12-bit frames read as 16: AO_2d 0.895 -> 0.699;
+        14-bit: 0.841), and which bits are right only the camera's owner knows. One header read
+        per folder; a 16-bit first frame is decoded (a few ms)."""
+        for sub in (LEFT_DIR, RIGHT_DIR):
+            if sub not in self._names or not len(self):
+                continue
+            path = self.image_path(0, sub)
+            if _png_bit_depth(path) != 16:
+                continue
+            if self.image_bits is None:   # a Sequence opened without its Dataset (track3d-sim preview)
+                root_json = self.path.parent.parent / DATASET_JSON
+                try:
+                    info = json.loads(root_json.read_text())
+                except (OSError, ValueError):
+                    info = None
+                self.image_bits = _image_bits(info, root_json) if isinstance(info, dict) else None
+            a = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+            if a is None or a.dtype != np.uint16:
+                continue   # read_rgb names what is wrong with it when the frame is read
+            top = int((a if a.ndim == 2 else a[..., :min(a.shape[2], 3)]).max(initial=0))
+            bits = self.image_bits
+            if bits is None and top < 1 << 14:
+                raise DatasetError(f"{path} is a 16-bit image whose largest sample is {top} of 65535: read as 16-bit it is "
+                                   f"nearly black ({(top * 255 + 32767) // 65535} of 255 at most); set \"image_bits\" in "
+                                   f"{DATASET_JSON} to the camera's bit depth (12 for samples 0..4095), or "
+                                   f"to 16 if its frames are this dark (docs/dataset.md)")
+            if bits is not None and top >> bits:
+                raise DatasetError(f"{path} holds a sample of {top}, above the {bits}-bit camera's {(1 << bits) - 1} "
+                                   f"that \"image_bits\" in {DATASET_JSON} declares: its bits are more (16 for samples "
+                                   f"in the high bits)")
 
     def _check_meta(self, meta: Path) -> None:
         from .sensor_options import DEPTH_SENSORS
@@ -565,11 +659,11 @@ class Sequence:
         if self.points_only:
             raise DatasetError(f"{self.path} is points-only data (depth and labels, no images): "
                                f"generate without --points-only to track in images")
-        return self._sized(read_rgb(self.image_path(i)), self.image_path(i))
+        return self._sized(read_rgb(self.image_path(i), self.image_bits), self.image_path(i))
 
     def right_image(self, i: int) -> np.ndarray:
         """(H, W, 3) uint8 RGB of the right camera (stereo pairs)."""
-        return self._sized(read_rgb(self.image_path(i, RIGHT_DIR)), self.image_path(i, RIGHT_DIR))
+        return self._sized(read_rgb(self.image_path(i, RIGHT_DIR), self.image_bits), self.image_path(i, RIGHT_DIR))
 
     def depth(self, i: int) -> np.ndarray:
         path = self.depth_path(i)
@@ -679,6 +773,7 @@ class Dataset:
                                             for n in v) for v in splits.values()):
             raise DatasetError(f"{meta}: 'splits' must map each split name to a list of sequence names")
         self.points_only = bool(self.info.get("points_only", False))
+        self.image_bits = _image_bits(self.info, meta)
 
     @cached_property
     def splits(self) -> dict[str, list[str]]:
@@ -692,10 +787,10 @@ class Dataset:
         if split not in self.splits:
             has = ", ".join(f"{k}" if v else f"{k} (empty)" for k, v in self.splits.items())
             raise DatasetError(f"split {split!r} not in {self.root} (has: {has or 'none'})")
-        return [Sequence(self.root / split / name, self.camera, split, self.points_only or None)
+        return [Sequence(self.root / split / name, self.camera, split, self.points_only or None, self.image_bits)
                 for name in self.splits[split]]
 
     def sequence(self, split: str, name: str) -> Sequence:
         if name not in self.splits.get(split, []):
             raise DatasetError(f"sequence {name!r} not in split {split!r} of {self.root}")
-        return Sequence(self.root / split / name, self.camera, split, self.points_only or None)
+        return Sequence(self.root / split / name, self.camera, split, self.points_only or None, self.image_bits)
