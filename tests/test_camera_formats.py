@@ -7,6 +7,7 @@ camera's frames had been read as value >> 8, nearly black, and tracked worse).""
 from __future__ import annotations
 
 import json
+import warnings
 
 import cv2
 import numpy as np
@@ -125,6 +126,17 @@ def test_a_sequence_opened_alone_takes_image_bits_from_its_dataset(rgb_root, tmp
     assert s.image_bits == 12 and np.array_equal(s.image(0), _originals(rgb_root)[0])
 
 
+def test_a_sequence_opened_alone_by_a_relative_path_takes_image_bits_from_its_dataset(rgb_root, tmp_path,
+                                                                                     monkeypatch):
+    """"s" from inside the split folder: dataset.json had been looked for two folders up of "s",
+    which is ".", and the 12-bit frames were refused as undeclared."""
+    root = _copy(rgb_root, tmp_path / "u12", lambda bgr: _bits(bgr, 12), image_bits=12)
+    camera = D.Dataset(root).camera
+    monkeypatch.chdir(root / "test")
+    s = D.Sequence("s", camera, "test")
+    assert s.image_bits == 12 and np.array_equal(s.image(0), _originals(rgb_root)[0])
+
+
 # --- 8-bit camera formats -----------------------------------------------------------------------
 
 def _grey_alpha_png(path, grey):
@@ -156,6 +168,49 @@ def test_monochrome_pngs_read_as_rgb_of_equal_channels(rgb_root, tmp_path, kind)
             cv2.imwrite(str(p), np.dstack([g] * 3 + [np.full_like(g, 128)]))   # alpha is no part of the scene
     s = _seq(root)
     assert all(np.array_equal(s.image(i), w) for i, w in enumerate(want))
+
+
+def _with_exif(path, orientation, after_image=False, byte_order="<"):
+    """Put an eXIf chunk holding one EXIF orientation into the PNG at `path`, after its header or
+    after its image data (both are read by OpenCV's IMREAD_COLOR)."""
+    import struct
+    import zlib
+
+    magic = b"II*\0" if byte_order == "<" else b"MM\0*"
+    exif = (magic + struct.pack(byte_order + "IH", 8, 1)
+            + struct.pack(byte_order + "HHIHH", 0x0112, 3, 1, orientation, 0) + struct.pack(byte_order + "I", 0))
+    chunk = struct.pack(">I", len(exif)) + b"eXIf" + exif + struct.pack(">I", zlib.crc32(b"eXIf" + exif))
+    b = path.read_bytes()
+    at = len(b) - 12 if after_image else 33   # before IEND (12 bytes), or after signature + IHDR
+    path.write_bytes(b[:at] + chunk + b[at:])
+
+
+@pytest.mark.parametrize("orientation, after_image, byte_order", [(6, False, "<"), (3, True, ">"), (1, False, "<")])
+def test_frames_are_read_as_stored_whatever_their_exif_orientation(rgb_root, tmp_path, orientation, after_image,
+                                                                  byte_order):
+    """The labels are in stored pixels, so a frame is read as stored (OpenCV's IMREAD_COLOR had
+    turned a PNG by its EXIF orientation, IMREAD_UNCHANGED does not); an orientation other than 1
+    in the first frame is said once per sequence, naming the file."""
+    root = _copy(rgb_root, tmp_path / "exif")
+    left = sorted((root / "test" / "s" / "left").glob("*.png"))
+    for p in left:
+        _with_exif(p, orientation, after_image, byte_order)
+    turned = cv2.imread(str(left[0]), cv2.IMREAD_COLOR)
+    stored = cv2.imread(str(left[0]), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    assert (turned.shape == stored.shape and np.array_equal(turned, stored)) == (orientation == 1)   # as written
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        s = _seq(root)
+        _seq(root)   # opened again (the run, then the evaluation): not repeated
+    said = [str(x.message) for x in w if issubclass(x.category, D.DatasetWarning)]
+    assert all(np.array_equal(s.image(i), o) for i, o in enumerate(_originals(rgb_root)))
+    if orientation == 1:
+        assert said == []
+    else:
+        assert said == [f"{left[0]}: its EXIF orientation ({orientation}: "
+                        f"{'rotated 90 degrees clockwise' if orientation == 6 else 'rotated 180 degrees'}) is "
+                        f"ignored: frames are read as stored, as the labels are in stored pixels (a viewer may show "
+                        f"it turned; docs/dataset.md \"Camera formats\")"], said
 
 
 # --- depth maps ---------------------------------------------------------------------------------

@@ -143,3 +143,28 @@ def test_a_wide_box_may_reach_a_tenth_of_its_side_past_the_image(tmp_path):
     (s,), w = _open(root)
     assert len(w) == 1 and "2 line(s)" in w[0] and "by up to 10 px (line 2)" in w[0]
     np.testing.assert_allclose(s.gt2d[1:3], [[70, 30, 90, 40]] * 2)
+
+
+def test_an_external_trackers_init_row_may_be_the_raw_label_the_reader_clips(tmp_path, capsys):
+    """A tracker started from groundtruth_2d.txt reports the label as the file has it; on a frame
+    the reader clips (a few px past the image, flagged cut) `track3d eval` had refused that init
+    row as 'not the ground truth's'. The raw row and the clipped one are both the ground truth;
+    another box still is not."""
+    from track3d.cli import main
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 5})
+    _set_lines(root / "test" / "a", {0: [-3, 40, 30, 30]}, {0: 1})
+    res = tmp_path / "res"
+    assert main(["track", "--data", str(root), "--tracker", "oracle", "--estimator", "baseline",
+                 "--results", str(res), "--quiet", "--video", "none"]) == 0
+    (run,) = res.rglob("a_001.txt")
+    rows = run.read_text().splitlines()
+    assert np.allclose(np.array(rows[0].split(","), float), [0, 40, 27, 30])   # track3d's own: clipped
+    evaluate = ["eval", "--data", str(root), "--results", str(res), "--out", str(tmp_path / "rep")]
+    for first, rc in (("-3,40,30,30", 0), ("-2,40,30,30", 2)):   # the raw label; 1 px off it
+        run.write_text("\n".join([first] + rows[1:]) + "\n")
+        capsys.readouterr()
+        assert main(evaluate) == rc, first
+        err = capsys.readouterr().err
+        assert "Traceback" not in err
+        assert ("is 'init' but its box is not the ground truth's" in err) == (rc == 2), err

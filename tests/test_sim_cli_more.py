@@ -211,3 +211,47 @@ def test_shapes_says_what_it_wrote(tmp_path, capsys):
     out = tmp_path / "s.png"
     assert main(["shapes", "--out", str(out), "--count", "1", "--generator", "fragment", "--no-progress"]) == 0
     assert out.is_file() and capsys.readouterr().out.strip().endswith(f"-> {out}")
+
+
+# ---- preview / ply -----------------------------------------------------------------------------------
+
+def test_preview_and_ply_of_a_12_bit_sequence_named_from_its_split_folder(tmp_path, capsys, monkeypatch):
+    """`cd ds/test && track3d-sim preview a`: the 12-bit frames had been refused as undeclared
+    ("image_bits" was looked for two folders up of "a", which is ".")."""
+    import json
+
+    import cv2
+    import numpy as np
+    from track3d.synthetic import make_synthetic_dataset
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 3})
+    for side in ("left", "right"):
+        for f in sorted((root / "test" / "a" / side).glob("*.png")):
+            a = cv2.imread(str(f), cv2.IMREAD_UNCHANGED).astype(np.uint32)
+            assert cv2.imwrite(str(f), ((a * 4095 + 127) // 255).astype(np.uint16))   # 0..4095
+    info = json.loads((root / "dataset.json").read_text())
+    (root / "dataset.json").write_text(json.dumps({**info, "image_bits": 12}))
+    monkeypatch.chdir(root / "test")
+    assert main(["preview", "a", "--out", str(tmp_path / "p.png")]) == 0
+    assert main(["ply", "a", "--out", str(tmp_path / "a.ply")]) == 0
+    cap = capsys.readouterr()
+    assert cap.err == "" and len(cap.out.splitlines()) == 2, cap
+    assert (tmp_path / "p.png").is_file() and (tmp_path / "a.ply").is_file()
+
+
+def test_stats_of_zero_frame_sequences_is_one_line(tmp_path, capsys):
+    """Sequences whose label files and frame folders are empty open (0 frames); `stats` had failed
+    with a traceback (the volume panel's range of no frames)."""
+    from track3d.synthetic import make_synthetic_dataset
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 3})
+    seq = root / "test" / "a"
+    for f in ("groundtruth_2d.txt", "groundtruth_3d.txt", "absence.label", "cut_by_image.label"):
+        (seq / f).write_text("")
+    for sub in ("left", "right", "depth"):
+        for p in (seq / sub).glob("*.png"):
+            p.unlink()
+    out = tmp_path / "s.png"
+    assert main(["stats", str(root), "--out", str(out)]) == 2
+    _one_line(capsys, "no frames in any split", "1 sequence holds none")
+    assert not out.exists()

@@ -12,7 +12,9 @@ Point clouds are not stored: they are the depth map back-projected with K on loa
 from __future__ import annotations
 
 import json
+import struct
 import warnings
+import zlib
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -23,7 +25,7 @@ import numpy as np
 
 from .boxes import clip_box2d
 from .camera import Camera
-from .frames import IMAGE_BITS, as_rgb
+from .frames import IMAGE_BITS, as_rgb, to_uint8
 
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "DATASET_JSON", "GENERATE_RUN_FILE", "LEFT_DIR", "RIGHT_DIR", "DEPTH_DIR", "GT2D", "GT3D",
@@ -84,6 +86,10 @@ LABEL_SLACK_PX = 1.0
 LABEL_CLIP_PX = 5.0
 LABEL_CLIP_SHARE = 0.1
 _MIN_DEPTH_RETURNS = 10
+_EXIF_TAIL = 1 << 16   # bytes of a PNG's end searched for an eXIf after the image data
+# EXIF orientation values: how a viewer turns the stored pixels to show them
+_ORIENTATIONS = {2: "mirrored", 3: "rotated 180 degrees", 4: "flipped upside down", 5: "transposed",
+                 6: "rotated 90 degrees clockwise", 7: "transversed", 8: "rotated 90 degrees counterclockwise"}
 _warned: set[str] = set()
 
 
@@ -143,6 +149,60 @@ def _png_bit_depth(path: Path) -> int | None:
     except OSError:
         return None
     return head[24] if len(head) == 26 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR" else None
+
+
+def _png_orientation(path: Path) -> int | None:
+    """The orientation (1..8) in a PNG's eXIf chunk, as OpenCV's IMREAD_COLOR applies it, or
+    None: no eXIf chunk (or a malformed one, which libpng ignores), no orientation in it, or no
+    PNG (reading it says so). A few small reads of one file, never the image data: the chunk
+    headers before the image data, then the file's last _EXIF_TAIL bytes (an eXIf after the
+    image data, where some writers put it, found by its CRC)."""
+    try:
+        with open(path, "rb") as f:
+            if f.read(8) != b"\x89PNG\r\n\x1a\n":
+                return None
+            for _ in range(64):
+                head = f.read(8)
+                if len(head) < 8:
+                    return None
+                size, kind = struct.unpack(">I4s", head)
+                if kind == b"eXIf":
+                    return _exif_orientation(f.read(min(size, _EXIF_TAIL)))
+                if kind in (b"IDAT", b"IEND"):
+                    break
+                f.seek(size + 4, 1)   # its data and CRC
+            else:
+                return None
+            end = f.seek(0, 2)
+            f.seek(max(0, end - _EXIF_TAIL))
+            tail = f.read()
+    except OSError:
+        return None
+    k = tail.rfind(b"eXIf")
+    while k >= 4:
+        size = struct.unpack(">I", tail[k - 4:k])[0]
+        data = tail[k + 4:k + 4 + size]
+        if len(data) == size and tail[k + 4 + size:k + 8 + size] == struct.pack(">I", zlib.crc32(b"eXIf" + data)):
+            return _exif_orientation(data)
+        k = tail.rfind(b"eXIf", 0, k)
+    return None
+
+
+def _exif_orientation(exif: bytes) -> int | None:
+    """The Orientation tag (0x0112) of the first IFD of an EXIF block (TIFF, either byte order),
+    or None."""
+    order = {b"II*\0": "<", b"MM\0*": ">"}.get(exif[:4])
+    if order is None:
+        return None
+    try:
+        ifd = struct.unpack(order + "I", exif[4:8])[0]
+        for k in range(struct.unpack(order + "H", exif[ifd:ifd + 2])[0]):
+            tag, kind, _, value = struct.unpack(order + "HHIH", exif[ifd + 2 + 12 * k:ifd + 12 + 12 * k])
+            if tag == 0x0112 and kind == 3:   # Orientation, SHORT
+                return value
+    except struct.error:   # cut short
+        return None
+    return None
 
 
 def _image_bits(info: dict, where: Path) -> int | None:
@@ -493,6 +553,7 @@ class Sequence:
         self._check_depth_units()
         if not self.points_only:
             self._check_image_bits()
+            self._check_orientation()
 
     def _check_image_bits(self) -> None:
         """16-bit frames (the first left and right frame's PNG header): refuse, before anything is
@@ -508,8 +569,9 @@ class Sequence:
             path = self.image_path(0, sub)
             if _png_bit_depth(path) != 16:
                 continue
-            if self.image_bits is None:   # a Sequence opened without its Dataset (track3d-sim preview)
-                root_json = self.path.parent.parent / DATASET_JSON
+            if self.image_bits is None:   # a Sequence opened without its Dataset
+                # absolute: the parents of a relative path ("a" from inside the split folder) stop at "."
+                root_json = self.path.absolute().parent.parent / DATASET_JSON
                 try:
                     info = json.loads(root_json.read_text())
                 except (OSError, ValueError):
@@ -522,13 +584,28 @@ class Sequence:
             bits = self.image_bits
             if bits is None and top < 1 << 14:
                 raise DatasetError(f"{path} is a 16-bit image whose largest sample is {top} of 65535: read as 16-bit it is "
-                                   f"nearly black ({(top * 255 + 32767) // 65535} of 255 at most); set \"image_bits\" in "
-                                   f"{DATASET_JSON} to the camera's bit depth (12 for samples 0..4095), or "
+                                   f"nearly black ({to_uint8(np.uint16(top), 16)} of 255 at most); set "
+                                   f"\"image_bits\" in {DATASET_JSON} to the camera's bit depth (12 for samples 0..4095), or "
                                    f"to 16 if its frames are this dark (docs/dataset.md)")
             if bits is not None and top >> bits:
                 raise DatasetError(f"{path} holds a sample of {top}, above the {bits}-bit camera's {(1 << bits) - 1} "
                                    f"that \"image_bits\" in {DATASET_JSON} declares: its bits are more (16 for samples "
                                    f"in the high bits)")
+
+    def _check_orientation(self) -> None:
+        """Warn once when the first left or right frame's PNG has an EXIF orientation other than
+        1: frames are read as stored (the labels are in stored pixels), where OpenCV's
+        IMREAD_COLOR had turned them by it and a viewer shows them turned. Its chunk list is
+        read, not the image."""
+        for sub in (LEFT_DIR, RIGHT_DIR):
+            if sub not in self._names or not len(self):
+                continue
+            path = self.image_path(0, sub)
+            o = _png_orientation(path)
+            if o is not None and o != 1:
+                _warn_once(f"{path}: its EXIF orientation ({o}: {_ORIENTATIONS.get(o, 'unknown')}) is ignored: "
+                           f"frames are read as stored, as the labels are in stored pixels (a viewer may show it "
+                           f"turned; docs/dataset.md \"Camera formats\")")
 
     def _check_meta(self, meta: Path) -> None:
         from .sensor_options import DEPTH_SENSORS

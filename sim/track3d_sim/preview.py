@@ -37,9 +37,10 @@ def _open_sequence(path: Path):
         raise SimError(f"{given} is not a sequence of a dataset (no {DATASET_JSON} in {root})")
     try:
         data = Dataset(root)
-        # the user's spelling in messages, unless it has no folder name (".")
+        # the user's spelling in messages, unless it has no folder name ("."); the Dataset's
+        # image_bits, which the Sequence would otherwise look up in dataset.json again
         seq = Sequence(given if given.name == path.name else path, data.camera, path.parent.name,
-                       data.points_only or None)
+                       data.points_only or None, data.image_bits)
     except DatasetError as e:
         raise SimError(str(e)) from None
     if seq.points_only:

@@ -49,6 +49,12 @@ def collect(root: str | Path, split: str = "all") -> dict:
         m = s.meta.get("frame_data", {}).get("mean_object_dn", [])
         dn.extend(x for x in m if x is not None)
     sizes = np.concatenate(sizes)
+    if not len(sizes):
+        # sequences of zero frames only: every panel would be empty (the volume panel's range had
+        # failed with a traceback), so there is nothing to plot
+        where = "any split" if split == "all" else f"split {split}"
+        raise SimError(f"no frames in {where} of {root}: its {len(seqs)} sequence{'s' if len(seqs) > 1 else ''} "
+                       f"hold{'' if len(seqs) > 1 else 's'} none, nothing to plot")
     cls, _ = boxes.size_class_of(sizes)
     return {"size_class": cls, "volume": np.prod(sizes, axis=1),
             "speed": np.concatenate(speeds) if speeds else np.zeros(0),
@@ -110,10 +116,10 @@ def plot_stats(root: str | Path, out: str | Path, split: str = "all") -> dict:
         ax[1, 0].set(title=f"(c) translation velocity (mean speed {st['speed'].mean():.2f} m/s)",
                      xlabel="velocity component (m/s)", ylabel="frame pairs")
     else:
-        # one-frame sequences have no frame pair: the mean of no speeds had put two numpy
+        # one-frame (or empty) sequences have no frame pair: the mean of no speeds had put two numpy
         # RuntimeWarnings on stderr and "nan m/s" in the title
         ax[1, 0].set_title("(c) translation velocity")
-        ax[1, 0].text(0.5, 0.5, "no velocities:\nevery sequence has one frame", ha="center", va="center",
+        ax[1, 0].text(0.5, 0.5, "no velocities:\nno sequence has two frames", ha="center", va="center",
                       transform=ax[1, 0].transAxes, fontsize=10, color="0.3")
         ax[1, 0].set_axis_off()
     illumination_panel(ax[1, 1], st)
