@@ -5,11 +5,11 @@ import hashlib
 import json
 from pathlib import Path
 
-from track3d.onnxmodel import EXPORT_ID, META_KEY
+from track3d.onnxmodel import EXPORT_ID, META_KEY, PARENT_SHA256, file_sha256, made_from, variant_path
 
 __all__ = ["attach_metadata", "set_fields", "read_metadata", "rewrite_metadata", "doc_string", "file_hash", "hash_files",
            "refuse_shipped", "refuse_existing", "PRODUCER", "check_portable", "load_model", "save_model",
-           "temp_beside", "AtomicFiles", "export_id", "EXPORT_ID"]
+           "temp_beside", "AtomicFiles", "export_id", "EXPORT_ID", "parent_fields", "remove_stale_twins"]
 
 PRODUCER = "track3d-train"
 
@@ -87,8 +87,12 @@ def _fsync(path: Path) -> None:
     after a power cut a file renamed before its data reached the disk can read empty or short."""
     import os
 
-    with open(path, "rb") as f:
-        os.fsync(f.fileno())
+    # opened for writing: on Windows fsync (_commit) of a read-only descriptor fails with EBADF
+    fd = os.open(path, os.O_RDWR | getattr(os, "O_BINARY", 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def _fsync_folder(folder: Path) -> None:
@@ -129,7 +133,10 @@ def export_id(paths) -> str:
     """The id an export writes into the metadata of both files of a model pair (key EXPORT_ID;
     the runtime refuses a pair whose ids differ, track3d.onnxmodel.check_pair): the sha256 of the
     files' bytes as exported, before their metadata is attached. Deterministic: the same weights
-    exported again give the same id (their files are interchangeable), other weights another."""
+    exported again give the same id (their files are interchangeable), other weights another.
+    Not hash_files (which hashes the names too, sorted): the files hashed here are the export's
+    temporaries (temp_beside, `<name>.tmp`), not yet under their final names, and the id must
+    not depend on the prefix a pair is exported to; the order is the pair's (first, search)."""
     h = hashlib.sha256()
     for p in paths:
         h.update(Path(p).read_bytes())
@@ -172,15 +179,58 @@ class AtomicFiles:
         return False
 
 
-def refuse_existing(paths, force: bool = False, out_flag: str = "--out") -> None:
+def _twins(paths) -> list[Path]:
+    """The variant files (variant_path: `<stem>_int8.onnx`) that exist beside the files `paths`,
+    other than `paths` themselves (an export that writes a twin too, siamfc export --int8)."""
+    own = {Path(p) for p in paths}
+    twins = [variant_path(p, "int8") for p in own]
+    return sorted({t for t in twins if t not in own and t.exists()})
+
+
+def refuse_existing(paths, force: bool = False, out_flag: str = "--out") -> list[Path]:
     """ValueError when an export would overwrite a file that exists (a model of an earlier export,
-    or any other file) unless force; a folder where a file goes is refused even with force."""
+    or any other file), or write a model beside an int8 twin (`<stem>_int8.onnx`, made by
+    `track3d-train quantize` from the model there before), unless force; a folder where a file goes
+    is refused even with force. Returns the twins found: with force the export removes them after
+    writing (remove_stale_twins), as a twin left beside a new model is the old model's weights."""
     for p in (Path(x) for x in paths):
         if p.is_dir():
             raise ValueError(f"{out_flag} would write {p}, which is a folder: give the path of a file to write")
     hit = [Path(p) for p in paths if Path(p).exists()]
     if hit and not force:
         raise ValueError(f"{hit[0]} exists: pass --force to overwrite it, or write elsewhere with {out_flag}")
+    twins = _twins(paths)
+    if twins and not force:
+        raise ValueError(f"{twins[0]} exists (an int8 twin of the model this export would replace): pass --force "
+                         f"to export and remove it (remake it with `track3d-train quantize`), or write elsewhere "
+                         f"with {out_flag}")
+    return twins
+
+
+def remove_stale_twins(twins) -> list[Path]:
+    """After an export: delete each twin (refuse_existing's list) that was not made from the file
+    now beside it (made_from is not True: another parent, none recorded, or not a model), saying
+    so in one line each; the runtime would refuse the first kind, and could not tell the others.
+    Returns the files removed."""
+    removed = []
+    for t in (Path(x) for x in twins):
+        parent = t.with_name(t.stem[: -len("_int8")] + t.suffix)   # variant_path's rule, backwards
+        try:
+            fresh = parent.is_file() and made_from(parent, read_metadata(load_model(t))) is True
+        except ValueError:   # not an ONNX file, or no track3d metadata
+            fresh = False
+        if not fresh and t.is_file():
+            t.unlink()
+            removed.append(t)
+            print(f"removed {t}: the int8 twin of the model this export replaced (remake it with "
+                  f"`track3d-train quantize`)")
+    return removed
+
+
+def parent_fields(parent: str | Path) -> dict:
+    """The metadata a variant file records of the fp32 file it is made from: its name and sha256
+    (PARENT_SHA256; the runtime refuses a variant whose parent changed since, track3d.onnxmodel.made_from)."""
+    return {"parent_model": Path(parent).name, PARENT_SHA256: file_sha256(parent)}
 
 
 def exported_weights(path: str | Path, kind: str, what: str) -> tuple[dict, dict, list]:
@@ -258,7 +308,8 @@ def check_portable(meta) -> None:
 
 
 def file_hash(path: str | Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    """The sha256 of a file's bytes (the runtime's file_sha256: one rule for a recorded and a checked hash)."""
+    return file_sha256(path)
 
 
 def hash_files(paths) -> str:

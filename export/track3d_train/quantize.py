@@ -24,8 +24,10 @@ runtime's own input preparation:
   its sequence's exemplar feature; Conv is quantised (the correlation stays float).
 
 The int8 file carries the parent's metadata plus ``precision``, ``quantization`` (recipe),
-``parent_sha256`` (hash of the fp32 file) and ``calibration`` (split, count, data hash: sha256
-of the split's labels, ``track3d_train.boxnet.data.split_hash``). Whether a variant SHIPS is
+``parent_sha256`` (hash of the fp32 file: the runtime refuses the int8 file once the fp32 file
+is re-exported, retrained or its metadata rewritten, ``track3d.onnxmodel.made_from``) and
+``calibration`` (split, count, data hash: sha256 of the split's labels,
+``track3d_train.boxnet.data.split_hash``). Whether a variant SHIPS is
 decided by the accuracy rule in docs/models.md ("Arithmetic"), not here.
 """
 from __future__ import annotations
@@ -39,7 +41,7 @@ from track3d.onnxmodel import MODELS_DIR, variant_path
 
 from track3d.argparsing import ArgumentParser, bounded
 
-from .onnx_meta import attach_metadata, file_hash, read_metadata, refuse_shipped
+from .onnx_meta import attach_metadata, parent_fields, read_metadata, refuse_shipped
 
 __all__ = ["QUANT_RECIPE", "calibration_boxnet", "calibration_siamfc", "calibration_edgetrack", "quantize_file",
            "build_parser", "main"]
@@ -249,7 +251,7 @@ def quantize_file(fp32: Path, out: Path, feeds: list[dict], op_types: list[str],
                                          "entropy": "Entropy"}[calibration]}
     meta.update({"precision": "int8", "quantization": {**recipe, "op_types": op_types,
                                                        "float_nodes": exclude},
-                 "parent_model": fp32.name, "parent_sha256": file_hash(fp32),
+                 **parent_fields(fp32),   # the runtime refuses this file once fp32 changes (made_from)
                  "calibration": {"split": split, "samples": len(feeds), "data_hash": data_hash}})
     attach_metadata(out, meta)
     return out

@@ -15,6 +15,7 @@ which and why.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from pathlib import Path
@@ -26,7 +27,8 @@ from .threads import check_threads
 
 __all__ = ["META_KEY", "MODELS_DIR", "OnnxModel", "ModelError", "EngineUnavailable", "shipped_model", "model_path",
            "model_pair", "check_pair", "EXPORT_ID", "is_model", "load_model", "models_of",
-           "ENGINES", "PRECISIONS", "PARITY_TOLERANCE", "variant_path", "open_session"]
+           "ENGINES", "PRECISIONS", "PARITY_TOLERANCE", "variant_path", "open_session", "PARENT_SHA256",
+           "file_sha256", "made_from"]
 
 META_KEY = "track3d"
 MODELS_DIR = Path(__file__).resolve().parent / "models"
@@ -35,6 +37,12 @@ MODELS_DIR = Path(__file__).resolve().parent / "models"
 # one after the other; a kill between the renames left a new first graph beside an old search
 # graph, which loaded and tracked with features the search graph was not trained on, silently.
 EXPORT_ID = "export_id"
+# The metadata key of a variant file's parent hash: the sha256 of the fp32 file it was made from
+# (file_sha256), written by `track3d-train quantize`. A re-export or retraining replaced the fp32
+# file and left its `_int8` twin beside it; the twin carries the parent's metadata (its export id
+# too), so precision="int8" loaded the previous model's weights without a word. OnnxModel refuses
+# a variant whose recorded parent is not the fp32 file beside it (made_from).
+PARENT_SHA256 = "parent_sha256"
 
 
 ENGINES = ("onnxruntime", "openvino")
@@ -68,6 +76,28 @@ def variant_path(path: str | Path, precision: str) -> Path:
     if precision != "int8" or p.stem.endswith("_int8"):
         return p
     return p.with_name(f"{p.stem}_int8{p.suffix}")
+
+
+def file_sha256(path: str | Path) -> str:
+    """The sha256 (hex) of a file's bytes: what a variant records of its parent (PARENT_SHA256) and
+    what the loader compares it with (made_from)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def made_from(parent: str | Path, meta: dict) -> bool | None:
+    """Whether the variant whose metadata is `meta` was made from the file `parent` as it is now:
+    its recorded PARENT_SHA256 against the file's sha256; None when it records none (a variant
+    made before the key, or by hand). The whole file is hashed, metadata included: a variant
+    carries its parent's metadata (tracking thresholds, export id ...), so a parent whose metadata
+    was rewritten since (e.g. `track3d-train edgetrack fit-threshold --write`) has a stale twin too."""
+    recorded = meta.get(PARENT_SHA256)
+    if recorded is None:
+        return None
+    return recorded == file_sha256(parent)
 
 
 def shipped_model(name: str) -> Path:
@@ -125,6 +155,15 @@ def check_pair(first, search, command: str) -> None:
     def shown(v):
         return "none" if v is None else str(v)[:12]
 
+    def int8(m):
+        return getattr(m, "precision", None) == "int8" or m.meta.get("precision") == "int8"
+
+    if int8(first) or int8(search):
+        # int8 files are written by `track3d-train quantize`, not by the export: exporting the pair
+        # again does not rewrite them (the message had said so)
+        raise ModelError(f"{name(first)} and {name(search)} are not made from one export's pair (export ids "
+                         f"{shown(a)} and {shown(b)}): `track3d-train quantize` writes the int8 files from the "
+                         f"pair beside them; run it again (after `{command}` if the normal files mix too)")
     raise ModelError(f"{name(first)} and {name(search)} are not one export's pair (export ids {shown(a)} and "
                      f"{shown(b)}): `{command}` writes both; an export killed between its two renames, or files "
                      f"copied from two exports, mix them: export the pair again")
@@ -274,6 +313,13 @@ class OnnxModel:
             raise ModelError(f"{self.file}: metadata is not JSON ({e})") from None
         if kind is not None and self.meta.get("kind") != kind:
             raise ModelError(f"{self.file} is a {self.meta.get('kind')!r} model, expected {kind!r}")
+        if self.file != self.path and made_from(self.path, self.meta) is False:
+            # the variant found beside the fp32 file the caller named was made from another
+            # version of it (re-exported or retrained since): its weights are the old model's
+            raise ModelError(f"{self.file} was made from another {self.path.name} (its recorded parent sha256 "
+                             f"{str(self.meta[PARENT_SHA256])[:12]} is not the file's {file_sha256(self.path)[:12]}: "
+                             f"re-exported, retrained or its metadata rewritten since): remake it with "
+                             f"`track3d-train quantize`, or load precision 'fp32'")
         self.input_names = list(session.input_names)
         self.output_names = list(session.output_names)
         self.run_ms = 0.0   # summed time of run(): benchmarks read it, nothing wraps run

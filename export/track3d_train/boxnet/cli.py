@@ -85,15 +85,20 @@ def _train(a) -> int:
 def _export(a) -> int:
     from .export import export_checkpoint
 
-    from ..onnx_meta import refuse_existing, refuse_shipped
+    from ..onnx_meta import refuse_existing, refuse_shipped, remove_stale_twins
 
     if not a.ckpt:
         raise ValueError("give --checkpoint CKPT (an A3BoxNet best.pt / last.pt)")
     if Path(a.out).is_dir():   # it had been IsADirectoryError's traceback, after the whole export
         raise ValueError(f"--out {a.out} is a folder: give the ONNX file to write (e.g. {Path(a.out) / 'a3boxnet.onnx'})")
     refuse_shipped([Path(a.out)], a.force)
-    refuse_existing([Path(a.out)], a.force)   # it had been overwritten without a word
-    meta = export_checkpoint(a.ckpt, a.out, check=not a.no_parity, log=_log, depth_sensor=a.depth_sensor)
+    twins = refuse_existing([Path(a.out)], a.force)   # it had been overwritten without a word
+    try:
+        meta = export_checkpoint(a.ckpt, a.out, check=not a.no_parity, log=_log, depth_sensor=a.depth_sensor)
+    finally:
+        # the int8 twin of the model just replaced (its old weights), also when the parity check
+        # inside fails after the write; a twin of a file left as it was is kept (made_from)
+        remove_stale_twins(twins)
     if a.meta_json:
         Path(a.meta_json).write_text(json.dumps(meta, indent=1))
     return 0

@@ -56,7 +56,7 @@ def _train(a) -> int:
 def _export(a) -> int:
     import dataclasses
 
-    from ..onnx_meta import refuse_existing, refuse_shipped
+    from ..onnx_meta import refuse_existing, refuse_shipped, remove_stale_twins
     from .export import export_onnx, parity
     from .train import load_checkpoint
 
@@ -67,7 +67,7 @@ def _export(a) -> int:
                          f"edgetrack_template.onnx and edgetrack_search.onnx in it)")
     outs = [Path(f"{a.out}_template.onnx"), Path(f"{a.out}_search.onnx")]
     refuse_shipped(outs, a.force)
-    refuse_existing(outs, a.force)   # they had been overwritten without a word
+    twins = refuse_existing(outs, a.force)   # they had been overwritten without a word
     net, ck = load_checkpoint(a.checkpoint)
     over = {k: getattr(a, k) for k in ("window_influence", "penalty_k", "size_lr", "score_threshold",
                                        "instance_size", "lost_instance_size") if getattr(a, k) is not None}
@@ -90,6 +90,7 @@ def _export(a) -> int:
     if ck.get("pad") is not None:     # the colour the runtime's crop fills outside the image with
         extra["pad"] = [float(v) for v in ck["pad"]]
     pz, px = export_onnx(net, a.out, extra)
+    remove_stale_twins(twins)   # the int8 files of the pair just replaced: its old weights
     p = parity(net, pz, px)
     print(f"wrote {pz} ({pz.stat().st_size / 1e3:.0f} kB), {px} ({px.stat().st_size / 1e3:.0f} kB)")
     print("parity torch vs onnxruntime:", json.dumps(p))

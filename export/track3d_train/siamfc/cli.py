@@ -70,7 +70,7 @@ def _export(a) -> int:
     from .export import export_onnx, parity, quantize_search
     from .train import load_checkpoint
 
-    from ..onnx_meta import refuse_existing, refuse_shipped
+    from ..onnx_meta import refuse_existing, refuse_shipped, remove_stale_twins
 
     if not a.checkpoint:
         raise ValueError("give --checkpoint CKPT (a SiamFC ckpt.pt)")
@@ -84,7 +84,7 @@ def _export(a) -> int:
                          f"siamfc_edge_exemplar.onnx and siamfc_edge_search.onnx in it)")
     outs = [Path(str(a.out) + "_exemplar.onnx"), Path(str(a.out) + "_search.onnx")] + ([int8_search] if a.int8 else [])
     refuse_shipped(outs, a.force)
-    refuse_existing(outs, a.force)   # they had been overwritten without a word
+    twins = refuse_existing(outs, a.force)   # they had been overwritten without a word
     net, ck = load_checkpoint(a.checkpoint)
     over = {k: getattr(a, k) for k in ("instance_size", "scale_num", "window_influence", "scale_lr",
                                        "scale_step", "scale_penalty") if getattr(a, k) is not None}
@@ -95,6 +95,7 @@ def _export(a) -> int:
                           "data": a.data_note or "track3d small train split (no ILSVRC-VID pre-training)"},
              "train_data_hash": ck.get("train_data_hash"), "train_data": ck.get("train_data")}
     pz, px = export_onnx(net, a.out, extra)
+    remove_stale_twins(twins)   # the int8 files of the pair just replaced (--int8 rewrites its own)
     p = parity(net, pz, px)
     print(f"wrote {pz} ({pz.stat().st_size / 1e6:.2f} MB), {px} ({px.stat().st_size / 1e6:.2f} MB)")
     print("parity torch vs onnxruntime:", json.dumps(p))

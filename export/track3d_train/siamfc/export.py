@@ -19,7 +19,7 @@ import torch
 import torch.nn as nn
 from track3d.threads import check_threads
 
-from ..onnx_meta import EXPORT_ID, AtomicFiles, attach_metadata, export_id
+from ..onnx_meta import EXPORT_ID, AtomicFiles, attach_metadata, export_id, parent_fields
 from .model import SiamFC, SiamFCConfig, xcorr_matmul
 
 __all__ = ["ExemplarGraph", "SearchGraph", "export_onnx", "parity", "model_metadata", "quantize_search"]
@@ -125,6 +125,9 @@ def quantize_search(search_path: str | Path, out_path: str | Path, calib_crops: 
     import json
     m = json.loads(meta["track3d"])
     m["quantization"] = "int8 static QDQ, per-channel int8 weights, uint8 activations, reduce_range"
+    # what `track3d-train quantize` records too: the runtime names int8 files in its refusals and
+    # refuses a twin whose parent changed since (track3d.onnxmodel.made_from)
+    m.update({"precision": "int8", **parent_fields(search_path)})
     try:
         with AtomicFiles(out_path) as (tmp,):   # written whole, with its metadata, or not at all
             # the correlation (MatMul with the exemplar) stays float: quantise the backbone convs only
