@@ -350,3 +350,21 @@ def test_fsync_opens_the_file_for_writing(tmp_path, monkeypatch):
     f.write_bytes(b"x")
     onnx_meta._fsync(f)
     assert modes == [os.O_RDWR]
+
+
+def test_a_threshold_fit_written_into_a_pair_removes_its_int8_twins(exports, tmp_path, capsys):
+    """fit-threshold --write rewrites the fp32 files' metadata: their twins keep the old threshold
+    and the old sha256, refused by the runtime from then on; the write removes them, one line each."""
+    from track3d.onnxmodel import variant_path
+    from track3d_train.edgetrack.threshold import write_threshold
+
+    parts, create = PAIRS["edgetrack"]
+    prefix = tmp_path / "m"
+    files = _copy_pair(exports["edgetrack"][0], parts, prefix)
+    twins = [_quantize(f) for f in files]
+    assert all(t.is_file() for t in twins)
+    write_threshold(prefix, 0.3, {"data": "x"})
+    assert not any(variant_path(f, "int8").exists() for f in files)
+    out = capsys.readouterr().out
+    assert out.count("removed ") == 2 and "track3d-train quantize" in out
+    assert OnnxModel(files[1]).meta["tracking"]["score_threshold"] == 0.3

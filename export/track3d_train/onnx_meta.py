@@ -9,7 +9,7 @@ from track3d.onnxmodel import EXPORT_ID, META_KEY, PARENT_SHA256, file_sha256, m
 
 __all__ = ["attach_metadata", "set_fields", "read_metadata", "rewrite_metadata", "doc_string", "file_hash", "hash_files",
            "refuse_shipped", "refuse_existing", "PRODUCER", "check_portable", "load_model", "save_model",
-           "temp_beside", "AtomicFiles", "export_id", "EXPORT_ID", "parent_fields", "remove_stale_twins"]
+           "temp_beside", "AtomicFiles", "export_id", "EXPORT_ID", "parent_fields", "remove_stale_twins", "twins_of"]
 
 PRODUCER = "track3d-train"
 
@@ -179,7 +179,7 @@ class AtomicFiles:
         return False
 
 
-def _twins(paths) -> list[Path]:
+def twins_of(paths) -> list[Path]:
     """The variant files (variant_path: `<stem>_int8.onnx`) that exist beside the files `paths`,
     other than `paths` themselves (an export that writes a twin too, siamfc export --int8)."""
     own = {Path(p) for p in paths}
@@ -199,7 +199,7 @@ def refuse_existing(paths, force: bool = False, out_flag: str = "--out") -> list
     hit = [Path(p) for p in paths if Path(p).exists()]
     if hit and not force:
         raise ValueError(f"{hit[0]} exists: pass --force to overwrite it, or write elsewhere with {out_flag}")
-    twins = _twins(paths)
+    twins = twins_of(paths)
     if twins and not force:
         raise ValueError(f"{twins[0]} exists (an int8 twin of the model this export would replace): pass --force "
                          f"to export and remove it (remake it with `track3d-train quantize`), or write elsewhere "

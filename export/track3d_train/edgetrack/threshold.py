@@ -119,10 +119,10 @@ def write_threshold(model: str | Path, threshold: float, note: dict, motion: flo
                     reacquire: float | None = None) -> list[Path]:
     """Rewrite the threshold (tracking default and score block) of <model>_template/_search.onnx,
     and the motion weight and the re-acquisition threshold when given, weights untouched; ``note`` (data, split, rows) goes to
-    ``score.threshold_fit``."""
+    ``score.threshold_fit``. Its int8 twins (the old threshold) are removed."""
     import onnx
 
-    from ..onnx_meta import read_metadata, rewrite_metadata
+    from ..onnx_meta import read_metadata, remove_stale_twins, rewrite_metadata, twins_of
 
     paths = [Path(f"{model}_template.onnx"), Path(f"{model}_search.onnx")]
     for p in paths:
@@ -140,4 +140,7 @@ def write_threshold(model: str | Path, threshold: float, note: dict, motion: flo
             meta["score"]["threshold"] = float(threshold)
             meta["score"]["threshold_fit"] = note
         rewrite_metadata(p, meta)
+    # an int8 twin beside them keeps the old threshold and the old file's sha256 (the runtime
+    # refuses it from now on): removed with one line each, as an export --force removes it
+    remove_stale_twins(twins_of(paths))
     return paths
