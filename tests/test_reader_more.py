@@ -168,3 +168,33 @@ def test_an_external_trackers_init_row_may_be_the_raw_label_the_reader_clips(tmp
         err = capsys.readouterr().err
         assert "Traceback" not in err
         assert ("is 'init' but its box is not the ground truth's" in err) == (rc == 2), err
+
+
+def test_the_console_scripts_print_their_own_warnings_as_one_line(tmp_path):
+    """A console script's warning from track3d's own code is one line, `<prog>: warning: ...`, as
+    its errors are: Python's form had been two lines, the installed module's path and line and the
+    warnings.warn call's source (argparsing.one_line_warnings). Run as a user runs it, in a process
+    of its own (pytest's recorder leaves the handler alone)."""
+    import subprocess
+    import sys
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 5})
+    _set_lines(root / "test" / "a", {2: [-3, 40, 30, 30]}, {2: 1})
+    code = "import sys; from track3d.cli import main; sys.exit(main(sys.argv[1:]))"
+    run = subprocess.run([sys.executable, "-c", code, "track", "--data", str(root), "--split", "test",
+                          "--tracker", "oracle", "--estimator", "baseline", "--results", str(tmp_path / "r"),
+                          "--quiet"], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    said = [line for line in run.stderr.splitlines() if "clipped to the image" in line]
+    assert len(said) == 1 and said[0].startswith("track3d: warning: ") and f"{D.GT2D}: 1 line(s)" in said[0]
+    assert "DatasetWarning" not in run.stderr and "warnings.warn" not in run.stderr
+    # other code's warnings keep Python's form; the formatter before is back after main()
+    import warnings
+
+    from track3d.argparsing import one_line_warnings
+
+    before = warnings.formatwarning
+    with one_line_warnings("x"):
+        assert warnings.formatwarning("m", UserWarning, "/a/track3d/dataset.py", 3) == "x: warning: m\n"
+        assert warnings.formatwarning("m", UserWarning, "/a/numpy/core.py", 3).startswith("/a/numpy/core.py:3: ")
+    assert warnings.formatwarning is before

@@ -29,6 +29,14 @@ def help_text() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The `track3d-train` console script; its warnings print as one line (argparsing.one_line_warnings)."""
+    from track3d.argparsing import one_line_warnings
+
+    with one_line_warnings("track3d-train"):
+        return _main(argv)
+
+
+def _main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "--version":
         from track3d.argparsing import package_version

@@ -11,10 +11,13 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
+import warnings
+from pathlib import Path
 from typing import Callable
 
-__all__ = ["ArgumentParser", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS", "thread_count", "allowed_cpu",
+__all__ = ["ArgumentParser", "one_line_warnings", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS", "thread_count", "allowed_cpu",
            "missing_extra", "exit_for_missing_extra", "package_version", "bounded"]
 
 
@@ -174,6 +177,40 @@ def _user_errors() -> tuple:
 
 
 USER_ERRORS = _user_errors()
+
+
+# the packages whose warnings a console script prints as one line (one_line_warnings)
+OWN_PACKAGES = ("track3d", "track3d_sim", "track3d_train")
+
+
+def _own(filename: str) -> bool:
+    """Whether a warning was raised in one of OWN_PACKAGES' files (a module or a subpackage's)."""
+    parts = Path(str(filename)).parts[-3:-1]
+    return any(part in OWN_PACKAGES for part in parts)
+
+
+@contextlib.contextmanager
+def one_line_warnings(prog: str):
+    """Around a console script's main(): a warning raised in track3d's own code prints as one line,
+    ``<prog>: warning: <message>``, as the errors do, where Python prints two (the path of the
+    installed module and the warnings.warn call's source line: a dataset's clipped labels read
+    '/.../site-packages/track3d/dataset.py:790: DatasetWarning: ...'). Other code's warnings keep
+    Python's form. Only the text of a shown warning changes (warnings.formatwarning): a recorder
+    (pytest's, catch_warnings(record=True)) still gets the warning itself; the formatter before is
+    back on exit."""
+    before = warnings.formatwarning
+
+    def text(message, category, filename, lineno, line=None):
+        if not _own(filename):
+            return before(message, category, filename, lineno, line)
+        return f"{prog}: warning: {' '.join(str(message).splitlines())}\n"
+
+    warnings.formatwarning = text
+    try:
+        yield
+    finally:
+        if warnings.formatwarning is text:
+            warnings.formatwarning = before
 
 
 def run_main(main: Callable[[], int | None], prog: str) -> int:

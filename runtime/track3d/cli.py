@@ -652,6 +652,14 @@ DEMO_MOVED = ("the demo simulates its data and lives with the simulator: run `tr
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The `track3d` console script; its warnings print as one line (argparsing.one_line_warnings)."""
+    from .argparsing import one_line_warnings
+
+    with one_line_warnings("track3d"):
+        return _main(argv)
+
+
+def _main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["demo"]:  # whatever its flags: one line saying where the demo went
         if any(a in ("-h", "--help") for a in argv[1:]):   # asked for help: that line is the help

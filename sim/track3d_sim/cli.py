@@ -181,7 +181,15 @@ def _join_dash_values(argv: list[str]) -> list[str]:
     return out
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
+    """The `track3d-sim` console script; its warnings print as one line (argparsing.one_line_warnings)."""
+    from track3d.argparsing import one_line_warnings
+
+    with one_line_warnings("track3d-sim"):
+        return _main(argv)
+
+
+def _main(argv=None) -> int:
     from track3d.dataset import DatasetError
 
     parser = build_parser()
