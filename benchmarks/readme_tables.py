@@ -307,14 +307,21 @@ OPENCV_NAMES = ("KCF", "CSRT", "MOSSE", "MIL")
 
 # the 2D trackers alone on the engine's images, one pass (`track3d-train edgetrack eval --compare`)
 PEERS_2D = "edgetrack/engine_eval_{split}_peers.json"
+# ... and on each long watch's images (each depth sensor's long watch is its own scenes)
+PEERS_2D_LONG = "edgetrack/long_eval_{sensor}_{split}_peers.json"
+# the long watches' runs, the peers' among them: EdgeTrack and NanoTrack v2 with restarts too,
+# OpenCV's trackers both ways, each report paired against EdgeTrack's row of its protocol
+LONG_PEERS = "long_watch/engine_baseline.json"
 
 
-def _cell_2d(root: Path) -> str:
-    """EdgeTrack's AO_2d alone against every other tracker of the same run, per split: on how
-    many splits it is ahead of each (by 0.0005 or more), with its AO_2d and the best other's."""
+def _cell_2d(root: Path, files: tuple[str, ...] = tuple(PEERS_2D.format(split=s) for s in ("test", "test_unseen"))
+             ) -> str:
+    """EdgeTrack's AO_2d alone against every other tracker of the same run, per split (one file
+    each): on how many splits it is ahead of each (by 0.0005 or more), with its AO_2d and the best
+    other's."""
     got = []
-    for split in ("test", "test_unseen"):
-        f = root / RESULTS / PEERS_2D.format(split=split)
+    for rel in files:
+        f = root / RESULTS / rel
         if f.exists():
             t = json.loads(f.read_text())["trackers"]
             ours = t.pop("edgetrack", None) or t.pop("model edgetrack", None)
@@ -346,21 +353,49 @@ def peers_table(root: Path) -> str:
     return markdown_table(["sensor", "split", "EdgeTrack (default)", "NanoTrack v2"] + list(OPENCV_NAMES), rows)
 
 
+def long_peers_table(root: Path) -> str:
+    """AO_3d of the loop under each 2D tracker over the long watches (300 frames), one pass and
+    with the paper's restarts (the restarts made in brackets)."""
+    long_, peers = _runs(root, "long_watch/engine_baseline.json"), _runs(root, LONG_PEERS, optional=True)
+
+    def ao(by, key, bold=False, restarts=False):
+        r = by.get(key)
+        if r is None:
+            return "-"
+        text = f"{r['ao_3d']:.3f}" + (f" ({r['restarts']})" if restarts and r.get("restarts") is not None else "")
+        return f"**{text}**" if bold else text
+
+    rows = []
+    for s, sp in ENGINE_SPLITS:
+        rows.append([s, sp, ao(long_, (s, sp, "onepass", "edgetrack+a3boxnet"), True),
+                     ao(long_, (s, sp, "onepass", "nano+a3boxnet"))]
+                    + [ao(peers, (s, sp, "onepass", f"{t}+a3boxnet")) for t in OPENCV_TRACKERS]
+                    + [ao(peers, (s, sp, "restart", "edgetrack+a3boxnet"), True, True),
+                       ao(peers, (s, sp, "restart", "nano+a3boxnet"), restarts=True)]
+                    + [ao(peers, (s, sp, "restart", f"{t}+a3boxnet"), restarts=True) for t in OPENCV_TRACKERS])
+    one = ["EdgeTrack", "NanoTrack v2"] + list(OPENCV_NAMES)
+    return markdown_table(["sensor", "split"] + [f"{n}, one pass" for n in one]
+                          + [f"{n}, restarts" for n in one], rows)
+
+
 def aims_table(root: Path) -> str:
     """Where the shipped loop stands against its aims, from the committed result JSON: every
     accuracy aim on the 60-frame sets and on the long watches, and the speed aim (>= 150 FPS on
     one core) from the speed table's run."""
     short, long_ = _runs(root, "engine_current/engine_baseline.json"), _runs(root, "long_watch/engine_baseline.json")
     rows = [[label, _aim_cell(short, *spec), _aim_cell(long_, *spec)] for label, *spec in AIMS]
+    long_peers = _runs(root, LONG_PEERS, optional=True)
     rows += [[f"Track3D default vs NanoTrack v2 + A3BoxNet (peer), {name}: at or ahead on every sensor and split",
-              _peer_cell(short, protocol), _peer_cell(long_, protocol) if protocol == "onepass" else "-"]
+              _peer_cell(short, protocol), _peer_cell(long_ if protocol == "onepass" else long_peers, protocol)]
              for protocol, name in (("onepass", "one pass"), ("restart", "with restarts"))]
     opencv = _runs(root, OPENCV_PEERS, optional=True)
+    cv = tuple(f"{t}+a3boxnet" for t in OPENCV_TRACKERS)
     rows += [[f"Track3D default vs OpenCV's {', '.join(OPENCV_NAMES)} + A3BoxNet, {name}: at or ahead of each on "
-              "every sensor and split", _peer_cell(opencv, protocol, tuple(f"{t}+a3boxnet" for t in OPENCV_TRACKERS)),
-              "-"] for protocol, name in (("onepass", "one pass"), ("restart", "with restarts"))]
+              "every sensor and split", _peer_cell(opencv, protocol, cv), _peer_cell(long_peers, protocol, cv)]
+             for protocol, name in (("onepass", "one pass"), ("restart", "with restarts"))]
+    long_2d = tuple(PEERS_2D_LONG.format(sensor=s, split=sp) for s, sp in ENGINE_SPLITS)
     rows.append([f"EdgeTrack vs NanoTrack v2 and OpenCV's {', '.join(OPENCV_NAMES)} in 2D alone, one pass: ahead of "
-                 "each on both splits", _cell_2d(root), "-"])
+                 "each on every split", _cell_2d(root), _cell_2d(root, long_2d)])
     label, rel, config, _ = SPEED_ROWS[0]
     r = next(x for x in _load(root, rel)["results"] if x["config"] == config and x["backend"] == "onnxruntime"
              and x["precision"] == "fp32")
@@ -372,7 +407,7 @@ def aims_table(root: Path) -> str:
 
 TABLES = {"speed": speed_table, "engine": engine_table, "long": long_table, "table2": table2_table,
           "table2_engine": table2_engine_table, "first_box": first_box_table, "aims": aims_table,
-          "peers": peers_table}
+          "peers": peers_table, "long_peers": long_peers_table}
 
 
 def render(readme: str, root: Path) -> str:

@@ -274,6 +274,32 @@ def test_the_aims_table_judges_each_aim_on_its_own_numbers(tmp_path):
                                               "kcf": {"ao_2d": 0.5}}}))
     line = next(x for x in readme_tables.aims_table(tmp_path).splitlines() if "2D alone" in x)
     assert "ahead of all 2 on 1 of 2 splits (AO_2d 0.860 / 0.860 vs the best other 0.700 / 0.900): **not met**" in line
+    # the long watches: restarts and OpenCV's trackers from the long watches' table, 2D alone per sensor's watch
+    f = tmp_path / readme_tables.RESULTS / readme_tables.LONG_PEERS
+    f.parent.mkdir(parents=True, exist_ok=True)
+    f.write_text(json.dumps({"rows": [
+        row("stereo", "test", "restart", "edgetrack+a3boxnet", 0.70, 0.5),
+        {**row("stereo", "test", "restart", "nano+a3boxnet", 0.71, 0.5),                # the peer ahead, inside
+         "paired": {"baseline": "edgetrack+a3boxnet", "ao_3d": {"lo": -0.01, "hi": 0.03}}},  # the interval
+        row("stereo", "test", "onepass", "edgetrack+a3boxnet", 0.70, 0.5),
+        {**row("stereo", "test", "onepass", "csrt+a3boxnet", 0.60, 0.5),
+         "paired": {"baseline": "edgetrack+a3boxnet", "ao_3d": {"lo": -0.2, "hi": -0.05}}}]}))
+    f = tmp_path / readme_tables.RESULTS / readme_tables.PEERS_2D_LONG.format(sensor="stereo", split="test")
+    f.write_text(json.dumps({"trackers": {"edgetrack": {"ao_2d": 0.80}, "nano": {"ao_2d": 0.79}}}))
+    cells = {line.split(" | ")[0][2:]: line.split(" | ")[1:]
+             for line in readme_tables.aims_table(tmp_path).splitlines()[2:]}
+    assert [v[1] for k, v in cells.items() if "NanoTrack v2 + A3BoxNet" in k] == [
+        "- |", "ahead on 0, level on 0, behind on 1 (0 beyond the paired 95% interval) of 1: **not met** |"]
+    assert [v[1] for k, v in cells.items() if "OpenCV" in k and "A3BoxNet" in k] == [
+        "ahead on 1 (1 beyond the paired 95% interval), level on 0, behind on 0 of 1: met |", "- |"]
+    assert next(v for k, v in cells.items() if "2D alone" in k)[1] == (
+        "ahead of all 1 on 1 of 1 splits (AO_2d 0.800 vs the best other 0.790): met |")
+    # the long watches' peers table: each tracker one pass and with restarts (the restarts made)
+    rows = json.loads((tmp_path / readme_tables.RESULTS / readme_tables.LONG_PEERS).read_text())["rows"]
+    rows[0]["restarts"], rows[1]["restarts"] = 2, 0
+    (tmp_path / readme_tables.RESULTS / readme_tables.LONG_PEERS).write_text(json.dumps({"rows": rows}))
+    stereo = next(x for x in readme_tables.long_peers_table(tmp_path).splitlines() if x.startswith("| stereo | test |"))
+    assert stereo == "| stereo | test | **0.700** | - | - | 0.600 | - | - | **0.700 (2)** | 0.710 (0) | - | - | - | - |"
     table = readme_tables.peers_table(tmp_path).splitlines()
     tof = next(x for x in table if x.startswith("| tof | test |"))
     # EdgeTrack's and NanoTrack's from engine_current, KCF's and MOSSE's from opencv_peers
