@@ -118,7 +118,10 @@ def test_bench_times_a_stereo_camera_s_loop_from_the_package_alone(capsys):
     assert m["price"]["ns_per_unit"] > 0 and set(m["price"]["budget_for_ms"]) == {"5", "10", "20"}
     assert main(["bench", "--depth", "stereo", "--frames", "4", "--threads", "1", "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "stereo matching" in out and "ns per unit of cost" in out and "max_match_cost=" in out
+    # the budgets depend on this machine's timings: on a loaded one (CI beside other jobs) the p99
+    # above the price passes every deadline and each reads "none fits"
+    assert "stereo matching" in out and "ns per unit of cost" in out
+    assert "max_match_cost=" in out or out.count("none fits") == 3
 
 
 def test_the_price_of_a_unit_of_matching_cost_by_hand():
