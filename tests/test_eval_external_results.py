@@ -315,3 +315,98 @@ def test_a_2d_box_wholly_off_the_image_keeps_its_centre_error(synth, tmp_path):
         got = rep["trackers"]["mine"]["sequences"][seq.name]
         assert got["ace_2d"] == pytest.approx(want) and want == pytest.approx(2000.0)
         assert got["ao_2d"] == 0.0
+
+
+# a walkthrough with a researcher's own result files ------------------------------------------
+def test_a_2d_tracker_copying_the_3d_label_on_its_init_row_is_2d_only(synth, tmp_path):
+    """A 2D tracker that follows "an init row holds the ground truth" in its 3D file too, nan on
+    every other frame, had been taken for a 3D run and scored AO_3d 0; a run whose record names
+    a 3D estimator stays 3D whatever its rows hold (a loop whose estimator never answered)."""
+    def init_only(seq, r):
+        r.box3d[1:] = np.nan
+    _exact(synth, tmp_path / "res", change=init_only)
+    ov = _report(synth, tmp_path)["trackers"]["mine"]["overall"]
+    assert "ao_3d" not in ov and ov["ao_2d"] == pytest.approx(1.0)
+    _exact(synth, tmp_path / "res", change=init_only, record={"track3d": {"estimator": "a3boxnet"}})
+    ov = _report(synth, tmp_path)["trackers"]["mine"]["overall"]
+    assert ov["ao_3d"] == 0.0
+
+
+def test_a_3d_run_missing_a_sequences_3d_file_says_so(synth, tmp_path):
+    """A misnamed `_3D_001.txt` scored the sequence 0 in 3D (AO_3d 0.5 here) with nothing but
+    "ACE_3D undefined" to say why; a folder where the file belongs had been read as no file."""
+    _exact(synth, tmp_path / "res")
+    folder = tmp_path / "res" / "test" / "mine" / "s0002"
+    (folder / "s0002_3d_001.txt").rename(folder / "s0002_3D_001.txt")
+    rep = _report(synth, tmp_path)
+    assert rep["trackers"]["mine"]["overall"]["ao_3d"] == pytest.approx(0.5)
+    assert any(w.startswith("mine: a 3D run, but 1 sequence(s) have no <seq>_3d_001.txt (s0002)")
+               for w in rep["warnings"]), rep["warnings"]
+    (folder / "s0002_3d_001.txt").mkdir()
+    with pytest.raises(ValueError, match=r"s0002_3d_001.txt is not a file"):
+        _report(synth, tmp_path)
+
+
+@pytest.mark.parametrize("text, needle", [
+    ("1 2 3 4\n", r"at line 1, column 1 \(fields are separated by commas"),
+    ("1\t2\t3\t4\n", r"at line 1, column 1 \(fields are separated by commas"),
+    ("1;2;3;4\n", r"'1;2;3;4' .* \(fields are separated by commas"),
+    ("x,y,w,h\n1,2,3,4\n", r"'x' .*at line 1, column 1 \(a header line starts with #\)"),
+    ("# a\n# b\n1,2,3,4\n1,2,3,4\n1.2.3,2,3,4\n", r"'1.2.3' to float64 at line 5, column 1$"),   # numpy: "row 2"
+    ("1,2,3,4\n\n1,2,3\n", r"columns changed from 4 to 3 at line 3$"),                           # numpy: "row 2"
+    ("1,2,-3,4\n", r"line 1: -3 is negative: a box's size is >= 0"),
+])
+def test_a_malformed_row_names_the_files_line_and_what_to_change(tmp_path, text, needle):
+    """numpy's "at row R" counts from 0 past comment and blank lines (or from 1 when the column
+    count changes): the file's own line instead; space-, tab- or ;-separated fields and a header
+    line are named as such; a negative width (scored IoU 0 but charged a centre error) is refused."""
+    from track3d.evaluation.results import _load
+
+    f = tmp_path / "s_001.txt"
+    f.write_text(text)
+    with pytest.raises(ValueError, match=needle):
+        _load(f, 4, 1e15, (2, 3))
+
+
+def test_a_byte_order_mark_is_not_part_of_the_first_number(synth, tmp_path):
+    _exact(synth, tmp_path / "res")
+    for seq in _seqs(synth):
+        for k in ("001", "status"):
+            f = tmp_path / "res" / "test" / "mine" / seq.name / f"{seq.name}_{k}.txt"
+            f.write_bytes(b"\xef\xbb\xbf" + f.read_bytes())
+    assert _report(synth, tmp_path)["trackers"]["mine"]["overall"]["ao_2d"] == pytest.approx(1.0)
+
+
+def test_boxes_without_a_status_file_name_the_missing_file(synth, tmp_path, capsys):
+    """GOT-10k's layout (boxes only): the run had been left out with "no finished sequence", and
+    a misspelt --trackers name listed nothing."""
+    _exact(synth, tmp_path / "res")
+    _exact(synth, tmp_path / "res", name="theirs")
+    for seq in _seqs(synth):
+        (tmp_path / "res" / "test" / "theirs" / seq.name / f"{seq.name}_status.txt").unlink()
+    rc, err = _eval_cli(synth, tmp_path, capsys)
+    assert rc == 0 and "left out theirs" in err and "has s0001_001.txt but no s0001_status.txt" in err, err
+    capsys.readouterr()
+    rc = main(["eval", "--data", str(synth), "--results", str(tmp_path / "res"), "--out", str(tmp_path / "rep"),
+               "--no-plots", "--trackers", "mnie"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "no folder" in err and "runs there: mine, theirs" in err and "Traceback" not in err, err
+
+
+@pytest.mark.parametrize("name", ["_mine", "run$^$x", "my$run$"])
+def test_a_run_named_with_dollars_or_an_underscore_is_drawn_as_written(synth, tmp_path, name):
+    """matplotlib read `$...$` in a run's name as mathtext (an unbalanced one aborted the whole
+    report in pyparsing's words) and left a name starting with `_` out of every legend."""
+    pytest.importorskip("matplotlib")
+    from track3d.evaluation import plots
+
+    _exact(synth, tmp_path / "res", name=name)
+    rep = Experiment(synth, "test", tmp_path / "res", tmp_path / "rep").report([name], plots=True)
+    assert rep["plots"]
+    plt = plots.pyplot()
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1], label=plots._label(name))
+    texts = [t.get_text() for t in ax.legend().get_texts()]
+    fig.canvas.draw()
+    plt.close(fig)
+    assert len(texts) == 1 and texts[0].strip().replace("\\$", "$") == name

@@ -167,7 +167,7 @@ def test_an_external_trackers_init_row_may_be_the_raw_label_the_reader_clips(tmp
         assert main(evaluate) == rc, first
         err = capsys.readouterr().err
         assert "Traceback" not in err
-        assert ("is 'init' but its box is not the ground truth's" in err) == (rc == 2), err
+        assert ("is 'init' but its 2D box" in err) == (rc == 2), err
 
 
 def test_the_console_scripts_print_their_own_warnings_as_one_line(tmp_path):

@@ -549,15 +549,31 @@ def _cmd_eval(a) -> int:
         def done(n: str, s) -> bool:
             return (result_folder(a.results, a.split, n, s.name) / f"{s.name}_status.txt").is_file()
 
+        def why_none(n: str) -> str:
+            """Why run `n` has no finished sequence, where the folders say more than that."""
+            if not (split_dir / n).is_dir():
+                there = sorted(p.name for p in split_dir.iterdir() if p.is_dir()) if split_dir.is_dir() else []
+                return f" (no folder {split_dir / n}; runs there: {', '.join(there) or 'none'})"
+            # another toolkit's layout (GOT-10k's): boxes without the status file this format needs
+            boxes_only = [s.name for s in exp.sequences
+                          if (result_folder(a.results, a.split, n, s.name) / f"{s.name}_001.txt").is_file()]
+            if boxes_only:
+                return (f" ({n}/{boxes_only[0]} has {boxes_only[0]}_001.txt but no {boxes_only[0]}_status.txt: "
+                        "one word a frame, 'init' on the first, 'tracking' after it; docs/runtime.md, "
+                        "'Scoring another tracker's result files')")
+            return ""
+
         if not a.trackers:   # folders with no finished sequence (a run that failed): left out, said so
             empty = [n for n in names if not any(done(n, s) for s in exp.sequences)]
             if empty and len(empty) < len(names):
                 names = [n for n in names if n not in empty]
-                notes.append(f"left out {', '.join(empty)}: no finished sequence of {a.data}/{a.split}")
+                notes.append(f"left out {', '.join(empty)}: no finished sequence of {a.data}/{a.split}"
+                             + "".join(why_none(n) for n in empty[:2]))
         have = [s for s in exp.sequences if all(done(n, s) for n in names)]
         if not have:
+            why = "".join(why_none(n) for n in names if not any(done(n, s) for s in exp.sequences))
             raise FileNotFoundError(f"no sequence of {a.data}/{a.split} has results of {', '.join(names)} "
-                                    f"in {a.results}")
+                                    f"in {a.results}{why}")
         if len(have) < len(exp.sequences):
             # name what is missing: a sequence folder without its status file (written last) is a
             # run killed on it, or a damaged one

@@ -535,9 +535,28 @@ class Experiment:
         return res if self.max_frames is None else res.head(self.max_frames)
 
     def _has_3d(self, name: str) -> bool:
-        """Whether `name` is a 3D run: some sequence has a 3D box (decided per run: a sequence of a 3D
-        run without any 3D box has no output, it is not a 2D-only sequence)."""
-        return any(np.isfinite(self._read_rows(name, seq).box3d).any() for seq in self.sequences)
+        """Whether `name` is a 3D run: some sequence has a 3D box on a frame other than an 'init'
+        (decided per run: a sequence of a 3D run without any 3D box has no output, it is not a
+        2D-only sequence). An init row holds the ground truth, so a 2D tracker that copies the 3D
+        label there and writes nan on every other frame is 2D only (it had been scored AO_3d 0).
+        A run record naming a 3D box estimator makes it 3D whatever its rows hold: a loop whose
+        estimator never answered scores AO_3d 0, not "2D only"."""
+        rec = read_run_record(self.result_dir, self.split, name) or {}
+        made = rec.get("track3d") if isinstance(rec.get("track3d"), dict) else {}
+        if isinstance(made.get("estimator"), str) and made["estimator"] not in ("", "none"):   # "none": 2D alone
+            return True
+        for seq in self.sequences:
+            res = self._read_rows(name, seq)
+            if np.isfinite(res.box3d[res.status != INIT]).any():
+                return True
+        return False
+
+    def missing_3d_files(self, name: str) -> list[str]:
+        """The sequences of a 3D run (`_has_3d`) without a ``<seq>_3d_001.txt``: scored as no 3D
+        output on any frame (IoU 0), which a misnamed file must not do without a word."""
+        if self.own_2d or not self._has_3d(name):
+            return []
+        return [seq.name for seq in self.sequences if "3d_001" in self._read_rows(name, seq).missing]
 
     def _run_3d(self, name: str) -> bool:
         """Whether `name` is scored as a 3D run (never when scoring the trackers' own 2D boxes)."""
@@ -588,12 +607,18 @@ class Experiment:
             # past the image on a frame flagged cut, and a tracker started from groundtruth_2d.txt
             # reports it unclipped (clipped as the scoring clips a box, it is the reader's label)
             b2 = res.box2d[j]
-            if not ((np.allclose(b2, seq.gt2d[j], rtol=0, atol=INIT_TOLERANCE[0])
-                     or np.allclose(_in_image(b2, seq), seq.gt2d[j], rtol=0, atol=INIT_TOLERANCE[0]))
-                    and (np.isnan(b3).all() or np.allclose(b3, seq.gt3d[j], rtol=0, atol=INIT_TOLERANCE[1]))):
-                raise ValueError(f"{where}: frame {j + 1} is 'init' but its box is not the ground truth's "
-                                 f"(an initialisation reports the ground truth; within {INIT_TOLERANCE[0]:g} px, "
-                                 f"{INIT_TOLERANCE[1]:g} m)")
+            ok2 = (np.allclose(b2, seq.gt2d[j], rtol=0, atol=INIT_TOLERANCE[0])
+                   or np.allclose(_in_image(b2, seq), seq.gt2d[j], rtol=0, atol=INIT_TOLERANCE[0]))
+            ok3 = np.isnan(b3).all() or np.allclose(b3, seq.gt3d[j], rtol=0, atol=INIT_TOLERANCE[1])
+            if not (ok2 and ok3):
+                def show(a):
+                    return "[" + ", ".join(f"{v:.4g}" for v in a) + "]"
+                what = (f"its 2D box {show(b2)} is not the label {show(seq.gt2d[j])} (within {INIT_TOLERANCE[0]:g} px)"
+                        if not ok2 else
+                        f"its 3D box {show(b3)} is not the label {show(seq.gt3d[j])} (within {INIT_TOLERANCE[1]:g} m; "
+                        "nan for none)")
+                raise ValueError(f"{where}: frame {j + 1} is 'init' but {what}: an initialisation reports the "
+                                 "ground truth")
         if not ok.any():
             return
         first = int(np.argmax(ok))
@@ -776,8 +801,15 @@ class Experiment:
                 if seqs:
                     no_centre.append(f"{n}: {k.upper()} undefined: {len(seqs)} sequence(s) without a {what} box on "
                                      f"any scored frame ({', '.join(seqs[:4])}{', ...' if len(seqs) > 4 else ''})")
+        no_3d_file = []
+        for n in names:
+            seqs = self.missing_3d_files(n)
+            if seqs:
+                no_3d_file.append(f"{n}: a 3D run, but {len(seqs)} sequence(s) have no <seq>_3d_001.txt "
+                                  f"({', '.join(seqs[:4])}{', ...' if len(seqs) > 4 else ''}): scored as no 3D "
+                                  "output (IoU 0) on every frame")
         report["warnings"] = (label_warnings + _comparison_warnings(names, runs, lengths) + empty + short
-                              + no_centre)
+                              + no_3d_file + no_centre)
         known = [(r.get("restart"), r.get("restart_skip")) for r in runs.values() if r]
         if known and len(set(known)) == 1 and len(known) == len(names) and None not in known[0]:
             report["restart"], report["restart_skip"] = known[0]

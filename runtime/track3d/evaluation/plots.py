@@ -39,6 +39,14 @@ def _save(fig, path: str | Path) -> Path:
     return path
 
 
+def _label(text: str) -> str:
+    """A run's (or a sequence's) name as matplotlib shows it as written: a `$` would start
+    mathtext (an unbalanced one had aborted the whole report), and a legend leaves out a label
+    starting with `_`."""
+    text = str(text).replace("$", r"\$")
+    return " " + text if text.startswith("_") else text
+
+
 def _colours(names) -> dict[str, tuple]:
     """One colour per tracker name, the same in every plot of a report (sorted names, tab10)."""
     plt = pyplot()
@@ -71,7 +79,7 @@ def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path) -> list[P
             ov = overall[name]
             if curve in ov.curves:
                 ax.plot(IOU_THRESHOLDS, ov.curves[curve], color=colour[name],
-                        label=f"{name} [AO {ov.values[key]:.3f}]")
+                        label=f"{_label(name)} [AO {ov.values[key]:.3f}]")
         ax.set(xlabel="overlap threshold", ylabel="success rate", title=f"Success plot ({title})",
                xlim=(0, 1), ylim=(0, 1.02))
         ax.grid(alpha=0.3)
@@ -83,7 +91,7 @@ def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path) -> list[P
         fig, ax = plt.subplots(figsize=(5, 4), dpi=100)
         for name, ov in overall.items():
             if curve in ov.curves:
-                ax.plot(thr, ov.curves[curve], color=colour[name], label=f"{name} [ACE {ov.values[key]:.3f} {unit}]")
+                ax.plot(thr, ov.curves[curve], color=colour[name], label=f"{_label(name)} [ACE {ov.values[key]:.3f} {unit}]")
         ax.set(xlabel=xlabel, ylabel="precision", title=f"Precision plot ({kind.upper()})",
                xlim=(thr[0], thr[-1]), ylim=(0, 1.02))
         ax.grid(alpha=0.3)
@@ -109,14 +117,14 @@ def trajectory_plot(gt3d: np.ndarray, tracks: dict[str, np.ndarray], path: str |
     colour = _colours(tracks)
     for name, boxes in tracks.items():
         b = np.asarray(boxes, np.float64)
-        line, = ax.plot(b[:, 0], b[:, 2], -b[:, 1], lw=1, color=colour[name], label=name)
+        line, = ax.plot(b[:, 0], b[:, 2], -b[:, 1], lw=1, color=colour[name], label=_label(name))
         if restarts is not None and name in restarts and np.any(restarts[name]):
             r = b[restarts[name]]
             ax.scatter(r[:, 0], r[:, 2], -r[:, 1], marker="x", color=line.get_color(), s=25)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("z (m)")
     ax.set_zlabel("-y (m)")
-    ax.set_title(title, fontsize=10)
+    ax.set_title(_label(title), fontsize=10)
     ax.legend(fontsize=7, loc="upper left")
     return _save(fig, path)
 
@@ -140,10 +148,10 @@ def line_of_sight_plot(gt3d: np.ndarray, tracks: dict[str, np.ndarray], path: st
     for name, boxes in tracks.items():
         b = np.asarray(boxes, np.float64)
         tb = np.arange(len(b))
-        ax.plot(tb, b[:, 2] - b[:, 5] / 2, lw=1, color=colour[name], label=f"{name}: near")
-        ax.plot(tb, b[:, 2] + b[:, 5] / 2, lw=1, ls="--", color=colour[name], label=f"{name}: far")
+        ax.plot(tb, b[:, 2] - b[:, 5] / 2, lw=1, color=colour[name], label=f"{_label(name)}: near")
+        ax.plot(tb, b[:, 2] + b[:, 5] / 2, lw=1, ls="--", color=colour[name], label=f"{_label(name)}: far")
     ax.set(xlabel="frame", ylabel="z, along the line of sight (m)")
-    ax.set_title(title, fontsize=10)
+    ax.set_title(_label(title), fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
     return _save(fig, path)
@@ -215,8 +223,8 @@ def sequence_plot(scores: dict[str, list], out_dir: str | Path) -> Path:
         by = {s.name: s for s in scores[name]}
         y = np.arange(rows) + (k - (len(runs) - 1) / 2) * h
         v = [getattr(by[sn], key) if by[sn].frames > 0 else np.nan for sn in order]
-        ax.barh(y, np.nan_to_num(v, nan=0.0), height=h, color=colour[name], label=name)
-    ax.set_yticks(np.arange(rows), order, fontsize=7)
+        ax.barh(y, np.nan_to_num(v, nan=0.0), height=h, color=colour[name], label=_label(name))
+    ax.set_yticks(np.arange(rows), [_label(sn) for sn in order], fontsize=7)
     ax.invert_yaxis()
     ax.set(xlim=(0, 1), xlabel=f"AO_{key[3:]} per sequence", title="Sequences, worst first")
     ax.grid(axis="x", alpha=0.3)
@@ -248,7 +256,7 @@ def axis_error_plot(overall: dict[str, OverallScore], out_dir: str | Path) -> Pa
         xs = at[name]
         mae = np.asarray(overall[name].values["mae_3d"], np.float64)
         bias = np.asarray(overall[name].values["bias_3d"], np.float64)
-        ax.bar(xs, np.nan_to_num(mae), width=w, color=colour[name], label=name)
+        ax.bar(xs, np.nan_to_num(mae), width=w, color=colour[name], label=_label(name))
         ax.scatter(xs, bias, marker="_", s=200 * w, color="black", zorder=3,
                    label="bias (prediction - truth)" if name == runs[0] else None)
     ax.axhline(0.0, color="grey", lw=0.8)
@@ -294,7 +302,7 @@ def condition_plot(conditions: dict[str, dict], out_dir: str | Path) -> Path | N
         c = conditions[name]
         lost = np.array([c[u]["ao_3d_lost"] for u in used], np.float64)
         mean = np.array([np.nan if c[u]["ao_3d"] is None else c[u]["ao_3d"] for u in used], np.float64)
-        ax.bar(xs, np.nan_to_num(lost), width=w, color=colour[name], label=name)
+        ax.bar(xs, np.nan_to_num(lost), width=w, color=colour[name], label=_label(name))
         ao.scatter(xs, mean, marker="_", s=200, color="black")
     ticks = [condition_label(u, [conditions[n].get(u, {}).get("share") for n in runs]) for u in used]
     ax.set_xticks(x, ticks, fontsize=7)

@@ -24,6 +24,7 @@ never scored; the number of restarts is the number of init frames after the firs
 from __future__ import annotations
 
 import json
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -111,38 +112,91 @@ MAX_BOX_VALUE = MAX_COORD_M
 MAX_PIXEL_VALUE = 1e15
 
 
-def _data_lines(path: Path) -> list[int]:
-    """The 1-based line numbers of the rows numpy reads (not blank, not # comments)."""
+def _data_rows(path: Path) -> list[tuple[int, str]]:
+    """(1-based line number, text) of the rows numpy reads (not blank, not # comments)."""
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError):
         return []
-    return [k + 1 for k, line in enumerate(text.splitlines()) if line.strip() and not line.lstrip().startswith("#")]
+    return [(k + 1, line) for k, line in enumerate(text.splitlines())
+            if line.strip() and not line.lstrip().startswith("#")]
 
 
-def _load(path: Path, cols: int, bound: float | None = None) -> np.ndarray:
+def _is_number(field: str) -> bool:
+    try:
+        float(field)
+    except ValueError:
+        return False
+    return True
+
+
+def _not_a_file(path: Path) -> str:
+    return f"{path} is not a file (a folder or another kind of path where the result file belongs)"
+
+
+def _parse_error(path: Path, numpy_message: str) -> str:
+    """numpy's words for a row it could not read, with the file's own line number (numpy counts
+    rows from 0 past comments and blank lines) and what to change: the fields' separator or a
+    header line, the two ways another tool's files most often differ from this format."""
+    msg = numpy_message.split("; use `usecols`")[0].rstrip(".")
+    rows = _data_rows(path)
+    # numpy's "could not convert ... at row R, column C" counts R from 0, its "the number of
+    # columns changed ... at row R" from 1
+    m = re.search(r"at row (\d+)", msg)
+    if m:
+        k = int(m.group(1)) - ("columns changed" in msg)
+        if 0 <= k < len(rows):
+            msg = msg[:m.start()] + f"at line {rows[k][0]}" + msg[m.end():]
+    hint = ""
+    for k, (_, line) in enumerate(rows):
+        fields = line.split(",")
+        bad = next((f for f in fields if not _is_number(f)), None)
+        if bad is None:
+            continue
+        if len(fields) == 1 and re.search(r"\S[ \t;]+\S", line):
+            hint = " (fields are separated by commas, e.g. x,y,w,h)"
+        elif k == 0 and re.search(r"[A-Za-z_]", bad):
+            hint = " (a header line starts with #)"
+        break
+    return f"malformed result file {path}: {msg}{hint}"
+
+
+def _load(path: Path, cols: int, bound: float | None = None, sizes: tuple[int, ...] = ()) -> np.ndarray:
     """The rows of a result file, (T, cols) float64. nan is "no output"; inf, and with `bound` a
-    magnitude beyond it, is refused naming the file and line."""
+    magnitude beyond it, is refused naming the file and line, as is a negative value in one of
+    the `sizes` columns (a box's width, height or extent)."""
+    if path.exists() and not path.is_file():
+        raise ValueError(_not_a_file(path))
     if not path.is_file():
         raise FileNotFoundError(f"missing result file {path}")
     try:
         with warnings.catch_warnings():   # an empty file is an empty array (below), not numpy's warning
             warnings.filterwarnings("ignore", "loadtxt: input contained no data", UserWarning)
-            a = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2)
+            # utf-8-sig: a byte-order mark (a Windows editor's) is not part of the first number
+            a = np.loadtxt(path, delimiter=",", dtype=np.float64, ndmin=2, encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise ValueError(f"malformed result file {path}: not UTF-8 text") from None
     except ValueError as e:   # numpy's words name neither the file nor what to do about it
-        raise ValueError(f"malformed result file {path}: {str(e).split(';')[0]}") from None
+        raise ValueError(_parse_error(path, str(e))) from None
     if a.size == 0:
         return a.reshape(0, cols)
     if a.shape[1] != cols:
         raise ValueError(f"{path} has {a.shape[1]} columns, expected {cols}")
     with np.errstate(invalid="ignore"):
         bad = np.isinf(a) if bound is None else (np.isinf(a) | (np.abs(a) > bound))
-    if bad.any():
-        row = int(np.nonzero(bad.any(axis=1))[0][0])
-        lines = _data_lines(path)
-        line = lines[row] if row < len(lines) else row + 1
-        value = a[row][bad[row]][0]
-        what = "not finite" if np.isinf(value) else f"beyond {bound:g} in magnitude"
+        negative = np.zeros_like(bad)
+        negative[:, list(sizes)] = a[:, list(sizes)] < 0
+    for mask, kind in ((bad, "value"), (negative, "size")):
+        if not mask.any():
+            continue
+        row = int(np.nonzero(mask.any(axis=1))[0][0])
+        rows = _data_rows(path)
+        line = rows[row][0] if row < len(rows) else row + 1
+        value = a[row][mask[row]][0]
+        if kind == "size":
+            what = "negative: a box's size is >= 0"
+        else:
+            what = "not finite" if np.isinf(value) else f"beyond {bound:g} in magnitude"
         raise ValueError(f"malformed result file {path} line {line}: {value:g} is {what} "
                          "(nan is the one way to write no output)")
     return a
@@ -161,10 +215,12 @@ def read_result(folder: str | Path, name: str | None = None) -> SequenceResult:
     folder = Path(folder)
     n = name or folder.name
     status_file = folder / f"{n}_status.txt"
+    if status_file.exists() and not status_file.is_file():
+        raise ValueError(_not_a_file(status_file))
     if not status_file.is_file():
         raise FileNotFoundError(f"no results for sequence {n} in {folder}")
     try:
-        lines = status_file.read_text().splitlines()
+        lines = status_file.read_text(encoding="utf-8-sig").splitlines()
     except UnicodeDecodeError:
         raise ValueError(f"malformed result file {status_file}: not text") from None
     while lines and not lines[-1].strip():
@@ -182,16 +238,17 @@ def read_result(folder: str | Path, name: str | None = None) -> SequenceResult:
                          f"(one of {', '.join(STATUS_WORDS)} a line)")
     status = np.array(words, dtype=object)
     t = len(status)
-    missing = tuple(k for k in OPTIONAL_FILES if not (folder / f"{n}_{k}.txt").is_file())
+    # a folder where an optional file belongs is refused (_load), not taken for "no output"
+    missing = tuple(k for k in OPTIONAL_FILES if not (folder / f"{n}_{k}.txt").exists())
 
-    def opt(kind: str, cols: int, bound: float | None = None) -> np.ndarray:
+    def opt(kind: str, cols: int, bound: float | None = None, sizes: tuple[int, ...] = ()) -> np.ndarray:
         if kind in missing:
             return np.full((t, cols), np.nan)
-        return _load(folder / f"{n}_{kind}.txt", cols, bound)
+        return _load(folder / f"{n}_{kind}.txt", cols, bound, sizes)
 
     r = SequenceResult(
-        n, _load(folder / f"{n}_001.txt", 4, MAX_PIXEL_VALUE), opt("raw_001", 4, MAX_PIXEL_VALUE),
-        opt("3d_001", 6, MAX_BOX_VALUE), status,
+        n, _load(folder / f"{n}_001.txt", 4, MAX_PIXEL_VALUE, (2, 3)), opt("raw_001", 4, MAX_PIXEL_VALUE, (2, 3)),
+        opt("3d_001", 6, MAX_BOX_VALUE, (3, 4, 5)), status,
         opt("time", 1)[:, 0], opt("e2e_time", 1)[:, 0], opt("stages", len(STAGES)), missing)
     lengths = {len(r.box2d), len(r.box2d_raw), len(r.box3d), len(r.status), len(r.seconds),
                len(r.e2e_seconds), len(r.stage_ms)}
