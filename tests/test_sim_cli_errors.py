@@ -92,6 +92,25 @@ def test_out_that_is_a_folder_is_one_line(tiny_dataset, tmp_path, capsys, cmd):
     _one_line(capsys, "is a folder")
 
 
+def test_ply_says_how_many_points_it_wrote(tiny_dataset, tmp_path, capsys):
+    """A frame without a depth return wrote an empty cloud and printed as any other."""
+    import numpy as np
+    from PIL import Image
+
+    import shutil
+
+    shutil.copytree(tiny_dataset, tmp_path / "ds")   # the session's dataset stays as it is
+    seq = tmp_path / "ds" / "test" / "0001"
+    assert main(["ply", str(seq), "--frame", "1", "--out", str(tmp_path / "a.ply")]) == 0
+    out = capsys.readouterr().out
+    n = int(out.split(", ")[1].split()[0])
+    assert n > 0 and "no depth return" not in out
+    depth = sorted((seq / "depth").iterdir())[0]
+    Image.fromarray(np.zeros_like(np.asarray(Image.open(depth)))).save(depth)
+    assert main(["ply", str(seq), "--frame", "1", "--out", str(tmp_path / "b.ply")]) == 0
+    assert ", 0 points (no depth return on this frame" in capsys.readouterr().out
+
+
 def test_out_below_a_file_is_one_line(tiny_dataset, tmp_path, capsys):
     (tmp_path / "f").write_text("a file")
     assert main(["ply", str(tiny_dataset / "test" / "0001"), "--out", str(tmp_path / "f" / "x" / "c.ply")]) == 2

@@ -133,6 +133,26 @@ def test_boxnet_train_init_from_an_exported_model_takes_its_flags_or_names_them(
     _one_line(capsys, "pass --no-category")
 
 
+def test_boxnet_train_init_from_a_views_model_needs_a_cache_with_the_views(tmp_path, capsys):
+    """Fine-tuning the default model (a3boxnet_views.onnx, trained beside the body's past views)
+    on a frustum-only cache had run without a word and exported a single-frame model; a single-
+    frame model on a views cache is how the views model is made (recipe a3boxnet-views)."""
+    from track3d.synthetic import make_synthetic_dataset
+    from track3d_train.boxnet.data import prepare_split
+
+    root = make_synthetic_dataset(tmp_path / "ds", {"a": 4})
+    plain = prepare_split(root, "test", tmp_path / "c.npz", jitters=0, min_points=4, progress=False)
+    views = prepare_split(root, "test", tmp_path / "v.npz", jitters=0, min_points=4, progress=False, past_views=True)
+    run = ["boxnet", "train", "--out", str(tmp_path / "run"), "--num-points", "512", "--batch", "2", "--max-steps",
+           "1", "--val-every", "0", "--no-category", "--width", "0.5", "--size-norm", "extent", "--quiet"]
+    views_model = str(MODELS_DIR / "a3boxnet_views.onnx")
+    assert train_main([*run, "--cache", str(plain), "--init-from", views_model]) == 2
+    _one_line(capsys, "trained beside the body's past views and the cache has none", "--past-views")
+    assert not (tmp_path / "run").exists()
+    assert train_main([*run, "--cache", str(views), "--init-from", views_model]) == 0
+    assert train_main([*run, "--cache", str(views), "--init-from", BOXNET_MODEL, "--out", str(tmp_path / "r2")]) == 0
+
+
 def test_siamfc_and_edgetrack_train_name_a_path_that_is_not_a_crop_cache(tmp_path, capsys):
     from track3d_train.siamfc.data import build_cache, synthetic_sequences
 

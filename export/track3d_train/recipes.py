@@ -328,7 +328,7 @@ A3BOXNET_STEREO_BACKLIT = Recipe(
 A3BOXNET_NARROW = Recipe(
     name="a3boxnet-narrow",
     makes="{runs}/boxnet-narrow/a3boxnet_narrow.onnx",
-    description="The default A3BoxNet: the full-width model (a3boxnet.onnx, recipe a3boxnet-engine) cut to half "
+    description="The single-frame A3BoxNet (the paper's variant; the default model is a3boxnet-views, made from it): the full-width model (a3boxnet.onnx, recipe a3boxnet-engine) cut to half "
                 "width (the channels that matter most to the next layer kept) and fine-tuned on the data engine's "
                 "points-only bodies to fit both the ground truth and the full-width model's outputs "
                 "(distillation, ~45 min on one thread); then fine-tuned again, still distilled, with superquadric "
@@ -425,11 +425,12 @@ _VIEWS_SETS = ("views-a", "views-b", "views-c", "views-sq", "views-gs")
 A3BOXNET_VIEWS = Recipe(
     name="a3boxnet-views",
     makes="{runs}/boxnet-views/a3boxnet_views.onnx",
-    description="A3BoxNet given the body's past views (track3d.boxnet.PAST_VIEWS): the default half-width model "
+    description="The default A3BoxNet (track3d.boxnet.DEFAULT_MODEL), given the body's past views "
+                "(track3d.boxnet.PAST_VIEWS): the single-frame half-width model (a3boxnet_narrow.onnx) "
                 "fine-tuned (~70 min on one thread, not distilled) on frustums of 60-frame points-only "
                 "sequences, each beside the views the loop's track3d.body_views had gathered of the body by "
-                "then, in that frame; the loop gives such a model its views (opt-in: "
-                "--estimator-option model=a3boxnet_views.onnx).",
+                "then, in that frame; the loop gives such a model its views (the single-frame model instead: "
+                "--estimator-option model=a3boxnet_narrow.onnx).",
     knobs={"preset": "small", "a_train": 64, "b_train": 96, "c_train": 96, "sq_train": 48, "gs_train": 48,
            "frames": 60, "jitters": 2, "epoch_samples": 4000, "batch": 32, "max_steps": 0, "minutes": 70,
            "threads": 1, "workers": 1, "width": 0.5, "init": "a3boxnet_narrow.onnx"},

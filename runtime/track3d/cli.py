@@ -254,8 +254,8 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--engine", choices=("onnxruntime", "openvino", "auto"), default=None,
                    help="inference engine of the networks; openvino needs track3d[openvino] (default onnxruntime)")
     t.add_argument("--results", default="results", help="result folder (default ./results)")
-    t.add_argument("--name", type=_result_name, help="result name (default <tracker>+<estimator>, tagged @<model>-<hash> for "
-                                  "non-shipped model files)")
+    t.add_argument("--name", type=_result_name, help="result name (default <tracker>+<estimator>, tagged @<model>-<hash> when a "
+                                  "model option names the model file)")
     t.add_argument("--replace", action="store_true",
                    help="replace results of another configuration or over other frames (--frames) under the same name "
                         "(default: refuse)")

@@ -228,9 +228,13 @@ def _main(argv=None) -> int:
                 Path(out).suffix.lower() != ".gif" else ""
             print(f"track3d-sim preview: {shown} of {total} frames{more} -> {out}")
         elif args.cmd == "ply":
-            from .preview import export_ply
+            from .preview import export_ply, ply_vertices
             out = export_ply(args.sequence, args.frame, args.out)
-            print(f"track3d-sim ply: frame {args.frame} of {args.sequence} -> {out}")
+            n = ply_vertices(out)
+            # an empty cloud is a valid file but rarely what was wanted: a body past a range
+            # sensor's reach, or a frame without it (it had printed as any other)
+            why = " (no depth return on this frame: the body past the sensor's range, or out of view)" if n == 0 else ""
+            print(f"track3d-sim ply: frame {args.frame} of {args.sequence}, {n} points{why} -> {out}")
         elif args.cmd == "demo":
             from track3d.onnxmodel import ModelError
             from .demo import run_demo

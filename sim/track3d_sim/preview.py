@@ -150,3 +150,14 @@ def export_ply(sequence: str | Path, frame: int, out: str | Path) -> Path:
         fh.write(header.encode("ascii"))
         fh.write(rec.tobytes())
     return out
+
+
+def ply_vertices(path: str | Path) -> int:
+    """The vertex count a PLY file's header declares (export_ply's files; 0 when it names none)."""
+    with open(path, "rb") as fh:
+        for line in fh:
+            if line.startswith(b"element vertex "):
+                return int(line.split()[2])
+            if line.strip() == b"end_header":
+                break
+    return 0

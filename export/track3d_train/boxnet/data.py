@@ -395,3 +395,13 @@ class BoxNetSamples:
             cat[:] = 0.0
         return (centred, cat, (gt[:3] - ref).astype(np.float32), np.int64(cls),
                 np.asarray(res, np.float32), np.asarray(loss_scale, np.float32))
+
+
+def cache_past_views(cache_info: dict) -> dict | None:
+    """The past-views counts (track3d.boxnet.PAST_VIEWS) of a run's cache, or None; for caches
+    joined (PointCache.concat) those of any part that had them: their counts must agree."""
+    parts = cache_info.get("parts") or [cache_info]
+    found = [p["past_views"] for p in parts if p.get("past_views")]
+    if any(f != found[0] for f in found):
+        raise ValueError(f"the caches' past_views differ: {found}")
+    return dict(found[0]) if found else None

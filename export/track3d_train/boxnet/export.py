@@ -19,6 +19,7 @@ from track3d.boxnet import INPUT_CATEGORY, INPUT_POINTS, KIND, OUTPUTS
 from track3d.size_coding import size_coding
 
 from ..onnx_meta import AtomicFiles, attach_metadata
+from .data import cache_past_views
 
 __all__ = ["MODEL_VERSION", "OPSET", "export_onnx", "parity_check", "model_metadata"]
 
@@ -113,16 +114,6 @@ def _teacher_record(train_config: dict) -> dict | None:
     return {"file": Path(str(teacher)).name, "weight": weight}
 
 
-def _past_views_of(cache_info: dict) -> dict | None:
-    """The past-views counts (track3d.boxnet.PAST_VIEWS) of a run's cache, or None; for caches
-    joined (PointCache.concat) those of any part that had them: their counts must agree."""
-    parts = cache_info.get("parts") or [cache_info]
-    found = [p["past_views"] for p in parts if p.get("past_views")]
-    if any(f != found[0] for f in found):
-        raise ValueError(f"the caches' past_views differ: {found}")
-    return dict(found[0]) if found else None
-
-
 def export_checkpoint(ckpt: str | Path, out: str | Path, check: bool = True, log=print,
                       depth_sensor: str | None = None) -> dict:
     """The one command: checkpoint -> ONNX with metadata (+ parity). Returns the metadata.
@@ -144,7 +135,7 @@ def export_checkpoint(ckpt: str | Path, out: str | Path, check: bool = True, log
              "exported": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     if depth_sensor:
         extra["depth_sensor"] = str(depth_sensor)
-    past = _past_views_of(hist.get("cache") or {})
+    past = cache_past_views(hist.get("cache") or {})
     if past:   # trained on frustums beside the body's past views: the runtime gives it them
         extra["past_views"] = past
     path = export_onnx(model, out, extra)

@@ -70,7 +70,9 @@ def model_from_onnx(path: str | Path, calibration: np.ndarray | None = None):
           "imported_from": {"file": path.name, "exported": meta.get("exported"),
                             "train_data_hash": meta.get("train_data_hash"),
                             # None: a model exported before the metadata recorded its box coding
-                            "size_norm": meta.get("size_norm")}}
+                            "size_norm": meta.get("size_norm"),
+                            # the counts of a model trained beside the body's past views, else None
+                            "past_views": meta.get("past_views")}}
     return model, ck
 
 

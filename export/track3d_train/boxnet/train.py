@@ -282,13 +282,24 @@ def _load_source(path, train_ds) -> tuple[str, dict]:
     return str(path), load_checkpoint_dict(path, "A3BoxNet")
 
 
-def _refuse_other_flags(path, src: dict, cfg: TrainConfig) -> None:
+def _refuse_other_flags(path, src: dict, cfg: TrainConfig, cache_info: dict | None = None) -> None:
     """An exported model (--init-from X.onnx) is fine-tuned only with the flags its metadata
     records: --no-category alone had fine-tuned the shipped extent-coded model as "points"
-    without a word. The width may be narrower (the model is cut to it), never wider."""
+    without a word. The width may be narrower (the model is cut to it), never wider. A model
+    trained beside the body's past views (metadata ``past_views``: the default a3boxnet_views.onnx)
+    is fine-tuned on a cache that has them: on a frustum-only cache its export had silently come
+    out a single-frame model. (A single-frame model on a views cache is how a views model is made.)"""
+    from .data import cache_past_views
+
     s = src.get("model_config")
     if not isinstance(s, dict):
         return
+    views = (src.get("imported_from") or {}).get("past_views")
+    # (a single-frame model fine-tuned on a views cache is how the views model is made: allowed)
+    if views and cache_info is not None and not cache_past_views(cache_info):
+        raise ValueError(f"{path} was trained beside the body's past views and the cache has none: prepare it "
+                         "with `boxnet prepare --past-views` (or start from a single-frame model, "
+                         "a3boxnet_narrow.onnx)")
     want = []
     if int(s["num_points"]) != cfg.num_points:
         want.append(f"--num-points {int(s['num_points'])}")
@@ -422,7 +433,7 @@ def _train(cfg: TrainConfig, resume: bool, progress: bool, log, init_from: str |
     elif init_from:
         init_from, src = _load_source(init_from, train_ds)
         if init_from.endswith(".onnx"):
-            _refuse_other_flags(init_from, src, cfg)
+            _refuse_other_flags(init_from, src, cfg, cache.info)
         # a checkpoint's weights carry over between box codings (same layers; the heads re-learn
         # what their outputs mean; an exported model's recorded coding must be the run's, above),
         # and to a narrower net (narrow.py: the channels that matter most), not
