@@ -612,6 +612,26 @@ def test_cli_eval_without_a_model_evaluates_the_shipped_pair(tiny_dataset, tmp_p
     assert 0.0 <= report["trackers"]["edgetrack"]["ao_2d"] <= 1.0
 
 
+def test_cli_eval_prints_a_table_and_json_on_asking(tiny_dataset, tmp_path, capsys):
+    """`edgetrack eval` had printed ~20 lines of JSON per tracker: a table now, one row a tracker
+    (the numbers of its --out file), and the JSON with --json."""
+    from track3d.onnxmodel import MODELS_DIR
+    from track3d_train.edgetrack.cli import main
+
+    if not (MODELS_DIR / "edgetrack_search.onnx").is_file():
+        pytest.skip("no EdgeTrack model shipped")
+    args = ["eval", "--data", str(tiny_dataset), "--max-sequences", "1", "--quiet", "--compare", "mosse"]
+    capsys.readouterr()
+    assert main([*args, "--out", str(tmp_path / "e.json")]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    rows = json.loads((tmp_path / "e.json").read_text())["trackers"]
+    assert lines[0].split()[:3] == ["name", "AO_2d", "ACE_2d(px)"] and len(lines) == 3
+    for line, name in zip(lines[1:], ("edgetrack", "mosse")):
+        assert line.split()[0] == name and float(line.split()[1]) == pytest.approx(rows[name]["ao_2d"], abs=6e-4)
+    assert main([*args, "--json"]) == 0
+    assert set(json.loads(capsys.readouterr().out)) == {"edgetrack", "mosse"}
+
+
 def test_an_exported_pair_comes_back_to_torch_exactly_and_fine_tunes(trained, tmp_path, capsys):
     """`--init-from` an exported pair (a prefix, either file, a shipped name): the export folded
     every BatchNorm into its convolution; converted back, the net's outputs equal the graphs'

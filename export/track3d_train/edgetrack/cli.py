@@ -112,7 +112,12 @@ def _eval(a) -> int:
     from track3d.jsonable import jsonable, write_json
 
     rows = evaluate_2d(a.data, a.split, specs, max_sequences=a.max_sequences or None, quiet=a.quiet)
-    print(json.dumps(jsonable(rows), indent=1))   # a missing number (nan) is null: JSON has no NaN
+    if a.json:
+        print(json.dumps(jsonable(rows), indent=1))   # a missing number (nan) is null: JSON has no NaN
+    else:
+        from track3d.evaluation.tables import tracker_2d_table
+
+        print(tracker_2d_table(rows))
     if a.out:
         sequences = next(iter(rows.values()))["sequences"] if rows else 0
         write_json(a.out, {"data_split": a.split, "sequences": sequences, "trackers": rows})
@@ -304,6 +309,7 @@ def build_parser() -> argparse.ArgumentParser:
     hidden_alias(v, "--max-seqs", "max_sequences", type=bounded(int, 0))
     v.add_argument("--threads", type=thread_count, default=1, help="onnxruntime threads")
     v.add_argument("--out", help="also write the numbers to this JSON file")
+    v.add_argument("--json", action="store_true", help="print every number as JSON instead of the table")
     v.add_argument("--quiet", action="store_true", help="no progress bar")
     v.set_defaults(fn=_eval)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 from ..table_text import cell
 from .metrics import AXES_3D, CONDITIONS
 
-__all__ = ["TABLE_COLUMNS", "columns", "summary_table", "axis_table", "paired_table", "condition_table",
+__all__ = ["TABLE_COLUMNS", "columns", "summary_table", "tracker_2d_table", "axis_table", "paired_table", "condition_table",
            "sequence_table"]
 
 TABLE_COLUMNS = (("AO_2d", "ao_2d", "{:.3f}"), ("ACE_2d(px)", "ace_2d", "{:.2f}"), ("AO_bev", "ao_bev", "{:.3f}"),
@@ -30,6 +30,17 @@ def summary_table(report: dict) -> str:
             row.append(cell(ov.get(key), fmt))
         rows.append(row)
     return _aligned(rows)
+
+
+def tracker_2d_table(rows: dict[str, dict]) -> str:
+    """The 2D trackers' one-pass scores (`evaluate_2d`'s rows: name -> overall scores) as the
+    summary table's 2D columns, one line a tracker."""
+    cols = columns("ao_2d", "ace_2d", "lost_precision", "lost_recall", "frames", "fps") + (
+        ("SR50_2d", "sr50_2d", "{:.3f}"), ("SR75_2d", "sr75_2d", "{:.3f}"), ("ms_median", "ms_median", "{:.2f}"))
+    table = [["name"] + [c[0] for c in cols]]
+    for name, r in rows.items():
+        table.append([name] + [cell(r.get(key), fmt) for _, key, fmt in cols])
+    return _aligned(table)
 
 
 def axis_table(report: dict) -> str:
