@@ -123,7 +123,11 @@ def plot_stats(root: str | Path, out: str | Path, split: str = "all") -> dict:
                       transform=ax[1, 0].transAxes, fontsize=10, color="0.3")
         ax[1, 0].set_axis_off()
     illumination_panel(ax[1, 1], st)
-    fig.suptitle(f"{Path(os.path.abspath(root)).name}: {st['n_seq']} sequences, {st['n_frames']} frames ({split})")
+    def count(n: int, word: str) -> str:
+        return f"{n} {word}{'' if n == 1 else 's'}"
+
+    fig.suptitle(f"{Path(os.path.abspath(root)).name}: {count(st['n_seq'], 'sequence')}, "
+                 f"{count(st['n_frames'], 'frame')} ({split})")
     fig.tight_layout()
     make_parent(out)
     fig.savefig(out, dpi=90)
