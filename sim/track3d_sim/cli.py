@@ -37,6 +37,11 @@ def _phase_range(text: str):
         raise argparse.ArgumentTypeError(f"sun phase must look like 100:150 (degrees), got {text!r}") from None
 
 
+# A size written with a unit: "0.5km", "800 m", "2.5e3mm"
+_SIZE_WITH_UNIT = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-zA-Z]+)\s*")
+_METRES_PER = {"m": 1.0, "km": 1000.0, "cm": 0.01, "mm": 0.001}
+
+
 def _mesh(text: str):
     """PATH or PATH:SIZE_M"""
     path, size = text, None
@@ -46,7 +51,14 @@ def _mesh(text: str):
             size = float(tail)
             path = head
         except ValueError:
-            pass
+            unit = _SIZE_WITH_UNIT.fullmatch(tail)
+            if unit and not Path(text).exists():  # a file named so is a file; else a size with a unit
+                # it had been taken for part of the file's name: "user mesh rock.obj:0.5km does not exist"
+                metres = _METRES_PER.get(unit.group(2).lower())
+                say = f": for {unit.group(1)} {unit.group(2)} write {head}:{float(unit.group(1)) * metres:g}" \
+                    if metres is not None else ""
+                raise argparse.ArgumentTypeError(f"mesh size (PATH:SIZE) is a plain number of metres, without a "
+                                                 f"unit, got {tail!r}{say}")
         if size is not None and not (size > 0 and size < float("inf")):
             raise argparse.ArgumentTypeError(f"mesh size must be a positive number of metres, got {tail!r}")
     return {"path": path, "size_m": size}
@@ -111,7 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
                                                     "default: from the preset)")
     g.add_argument("--mesh", action="append", type=_mesh, default=[], metavar="PATH[:SIZE_M]",
                    help="use a user mesh (OBJ/PLY/STL...) as the shape of the sequences (repeat to cycle "
-                        "through several); SIZE_M = largest extent in metres (default: the sampled box volume; "
+                        "through several); SIZE_M = the body's length along its longest axis in metres, a plain "
+                        "number (default: the sampled box volume; "
                         "the file's own units are ignored); a size the scenes cannot hold (about 0.1-42 m for a "
                         "round body; past ~21 m it fills the view: a warning) is refused with the range for "
                         "that shape")

@@ -35,7 +35,7 @@ from .scenes import SCENES
 from .sequence import (SAMPLED_VOLUME_RANGE, SPLITS, USER, body_sources, fine_name, plan, resolve_pool,
                        resolve_unseen, split_categories, write_sequence)
 from .sensors import DEPTH_SENSORS, FALSE_ALARM_SENSORS, SENSORS_NEEDING_IMAGES
-from .shapes import FAMILIES, load_user_mesh, mean_box_volume, user_mesh_warnings
+from .shapes import FAMILIES, USER_MESH_LOADER, load_user_mesh, mean_box_volume, user_mesh_warnings
 from .textures import TEXTURES
 
 RUN_FILE = GENERATE_RUN_FILE   # stated once, beside the layout it belongs to (track3d.dataset)
@@ -52,18 +52,28 @@ PRESETS = {
 # Depth sensors whose depth is computed from the rendered images: they cannot run --points-only.
 
 
-def _mesh_files(folder: Path) -> list[Path]:
-    """The files of `folder` whose extension trimesh reads, sorted by name."""
+def _listed(names: list[str], most: int = 6) -> str:
+    return ", ".join(names[:most]) + (f" and {len(names) - most} more" if len(names) > most else "")
+
+
+def _mesh_files(folder: Path) -> tuple[list[Path], list[str]]:
+    """The files of `folder` whose extension trimesh reads, sorted by name, and the names of the
+    other files (skipped for their extension). Hidden files are neither: a name starting with '.'
+    is the system's (macOS writes `._rock.obj` beside `rock.obj` on foreign disks: AppleDouble
+    metadata under a mesh extension, which had failed the run as "not a mesh")."""
     import trimesh
     if not folder.is_dir():
         raise SimError(f"mesh folder {folder} does not exist or is not a folder")
     formats = {f.lower() for f in trimesh.available_formats()}
-    files = sorted((p for p in folder.iterdir() if p.is_file() and p.suffix.lower().lstrip(".") in formats),
-                   key=lambda p: p.name)
+    visible = sorted((p for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")),
+                     key=lambda p: p.name)
+    files = [p for p in visible if p.suffix.lower().lstrip(".") in formats]
+    skipped = [p.name for p in visible if p.suffix.lower().lstrip(".") not in formats]
     if not files:
         raise SimError(f"mesh folder {folder} holds no mesh file trimesh reads "
-                       f"({', '.join(sorted(formats)[:8])}, ...)")
-    return files
+                       f"({', '.join(sorted(formats)[:8])}, ...)"
+                       + (f"; skipped for their extension: {_listed(skipped)}" if skipped else ""))
+    return files, skipped
 
 
 def _round(x: float, up: bool) -> float:
@@ -88,14 +98,16 @@ def _user_mesh(path, size_m, camera) -> dict:
     r_lo, r_hi = radius_range(camera.tan_half)
     if size:
         radii = (shape.radius, shape.radius)
-        how = f"at {size:g} m (its largest extent) has a bounding radius of {shape.radius:.3g} m"
+        how = f"at {size:g} m (its length along its longest axis) has a bounding radius of {shape.radius:.3g} m"
     else:
         # scaled like sequence.make_shape: vertices * (volume / mean box volume) ** (1/3)
         k = [(v / mean_box_volume(shape.vertices)) ** (1.0 / 3.0) for v in SAMPLED_VOLUME_RANGE]
         radii = (shape.radius * k[0], shape.radius * k[1])
         how = (f"scaled to the sampled box volumes ({SAMPLED_VOLUME_RANGE[0]:g}-{SAMPLED_VOLUME_RANGE[1]:g} m^3, "
                f"no :SIZE) gets bounding radii of {radii[0]:.3g}-{radii[1]:.3g} m")
-    per_m = shape.radius / (size or 1.0)  # bounding radius per metre of largest extent
+    # bounding radius per metre of SIZE: load_user_mesh scales the body's longest own axis (not the
+    # longest side of its box in the file's axes) to SIZE, so the radius at SIZE is per_m * SIZE
+    per_m = shape.radius / (size or 1.0)
     fov = [math.degrees(2 * math.atan(t)) for t in camera.tan_half]
     # below the view's lower bound a body is small in the image; refused only below it AND below
     # SMALL_RADIUS_OK: the lower bound grows without limit as the field of view nears 180 degrees
@@ -120,7 +132,7 @@ def _user_mesh(path, size_m, camera) -> dict:
                         f"border in most frames; --mesh {path}:SIZE with SIZE below "
                         f"{_round(r_hi / per_m, False):g} m keeps it whole")
     return {"path": str(path.resolve()), "name": path.name, "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
-            "size_m": size, "warnings": warnings}
+            "size_m": size, "loader": USER_MESH_LOADER, "warnings": warnings}
 
 
 def _names(value) -> list[str]:
@@ -191,6 +203,8 @@ def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
                        f"{', '.join(sorted(SENSORS_NEEDING_IMAGES & set(sensors)))} measure depth from them")
 
     meshes = []
+    # warnings about the meshes as a set (each mesh's own are in its "warnings"): logged by the run
+    mesh_notes = []
     mesh_dir = s.pop("mesh_dir", None)
     if s.get("meshes") or mesh_dir is not None:
         cam = camera_of(s)
@@ -198,8 +212,21 @@ def make_settings(preset: str = "small", seed: int = 0, **overrides) -> dict:
             m = dict(m) if isinstance(m, dict) else {"path": str(m)}
             meshes.append(_user_mesh(m["path"], m.get("size_m"), cam))
         if mesh_dir is not None:
-            meshes += [_user_mesh(p, None, cam) for p in _mesh_files(Path(mesh_dir))]
+            files, skipped = _mesh_files(Path(mesh_dir))
+            if skipped:
+                mesh_notes.append(f"mesh folder {mesh_dir}: skipped {len(skipped)} file(s) whose extension is "
+                                  f"not a mesh format trimesh reads: {_listed(skipped)}")
+            meshes += [_user_mesh(p, None, cam) for p in files]
+        # sequence i of each split gets mesh i % n (sequence.plan): past the largest split's count
+        # a mesh is the body of no sequence
+        n_seq = max(s["train"], s["test"])
+        if len(meshes) > n_seq:
+            unused = [m["name"] for m in meshes[n_seq:]]
+            mesh_notes.append(f"{len(meshes)} user meshes but the largest split has {n_seq} sequence"
+                              f"{'s' if n_seq != 1 else ''} (sequence i of each split gets mesh i): the last "
+                              f"{len(unused)} are not used ({_listed(unused)}); raise --train / --test to use them")
     s["meshes"] = meshes
+    s["mesh_warnings"] = mesh_notes
     pool = resolve_pool(_names(s.get("shape_generators")))
     if pool is not None and meshes:
         raise SimError("--generators chooses procedural generators; --mesh / --mesh-dir replace them")
@@ -231,8 +258,11 @@ def camera_of(settings: dict):
 
 
 def _public_meshes(settings: dict) -> list[dict]:
-    """The user meshes as they may be written: file name, content hash and size, never a path."""
-    return [{k: m[k] for k in ("name", "sha256", "size_m")} for m in settings.get("meshes") or []]
+    """The user meshes as they may be written: file name, content hash, size and the loader's
+    version (shapes.USER_MESH_LOADER: a run an older loader started renders differently and is
+    not resumed), never a path."""
+    return [{**{k: m[k] for k in ("name", "sha256", "size_m")}, "loader": m.get("loader", USER_MESH_LOADER)}
+            for m in settings.get("meshes") or []]
 
 
 def _identity(settings: dict) -> dict:
@@ -528,6 +558,8 @@ def _generate(settings, out: Path, workers, overwrite, progress, log, ray, ray_m
     state = prepare_output(out, settings, overwrite)
     if settings["unseen_generators"]:
         log(f"test_unseen: {', '.join(settings['unseen_generators'])} ({settings['unseen_note']})")
+    for w in settings.get("mesh_warnings") or ():
+        log(f"warning: {w}")
     for mesh in settings.get("meshes") or []:
         for w in mesh.get("warnings") or ():
             log(f"warning: {w}")

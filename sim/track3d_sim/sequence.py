@@ -28,7 +28,7 @@ from .render import (BASE_EXPOSURE_MS, BLUR_STEP_PX, MAX_BLUR_SUBSTEPS, BodyRend
 from .scenes import SCENES, make_background
 from .sensors import (FALSE_ALARM_SENSORS, RenderedFrame, add_false_alarms, false_alarm_gate, measure_depth,
                       sensor_info)
-from .shapes import FAMILIES, VOLUME_RANGE, Shape, load_user_mesh, scale_to_volume
+from .shapes import FAMILIES, VOLUME_RANGE, Shape, body_extents, load_user_mesh, scale_to_volume
 from .textures import TEXTURES, SolidTexture
 
 SPLITS = ("train", "test", "test_unseen")
@@ -239,9 +239,10 @@ def make_shape(spec: SeqSpec, rng: np.random.Generator, subdivisions: int, user_
         shape.params.update(source=user_mesh["name"], sha256=user_mesh["sha256"])
         if not user_mesh.get("size_m"):
             shape.vertices = scale_to_volume(shape.vertices, volume)
-            # size_m keeps the meaning of --mesh FILE:SIZE_M, the largest extent: the volume
-            # rescale made it what it is, not the 1.0 the mesh was loaded at
-            shape.params["size_m"] = float(shape.extent.max())
+            # size_m keeps the meaning of --mesh FILE:SIZE_M, the length along the body's longest
+            # own axis (shapes.body_extents): the volume rescale made it what it is, not the 1.0
+            # the mesh was loaded at
+            shape.params["size_m"] = float(body_extents(shape.vertices)[2])
             shape.params["target_volume_m3"] = volume
         return shape
     return make_body(spec.generator, rng, volume, subdivisions)

@@ -13,6 +13,7 @@ Each sequence varies its body: lobe sizes, noise seed, craters, boulders, stretc
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -260,19 +261,218 @@ def procedural_shape(family: int, rng: np.random.Generator, volume: float, subdi
     return Shape(v, faces, FAMILIES[int(family)], params)
 
 
+# What load_user_mesh makes of a file, as a number. A run records it beside each user mesh's hash
+# (generate._public_meshes): a loader that renders the same file differently must not resume a run
+# an older one started. 2: texture / normal seams merged, degenerate faces dropped, winding made
+# consistent, open meshes wound inward flipped, OBJ negative indices counted in file order, and
+# SIZE measured along the body's own axes (it had been the file's axes).
+USER_MESH_LOADER = 2
+
+
 def _mesh_formats() -> set[str]:
     import trimesh
     return {f.lower() for f in trimesh.available_formats()}
 
 
+# Extensions of text formats: binary content under one is another format, not a damaged file
+_TEXT_FORMATS = {"obj", "off", "gltf", "xyz", "stl_ascii"}
+
+
+def _sniff_format(path: Path) -> str | None:
+    """The format the start of a file looks like ("obj", "ply", "stl", ..., "binary" for bytes
+    of none of these), or None: trimesh chooses its reader by the extension alone, and a
+    file under another format's extension reads as "no faces found"."""
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return None
+    text = head.lstrip()
+    if head.startswith(b"ply"):
+        return "ply"
+    if head.startswith(b"glTF"):
+        return "glb"
+    if len(head) >= 84 and 84 + 50 * int.from_bytes(head[80:84], "little") == size:
+        return "stl"  # binary STL: an 80-byte header, a triangle count, 50 bytes a triangle
+    if text.startswith(b"solid") and b"facet" in head:
+        return "stl"
+    if text.startswith(b"OFF"):
+        return "off"
+    if text.startswith(b"{") and b'"asset"' in head:
+        return "gltf"
+    if b"\0" in head:
+        return "binary"
+    if re.search(rb"(?m)^[ \t]*v[ \t]+[-+.\d]", head):
+        return "obj"
+    return None
+
+
+def _format_hint(path: Path, suffix: str) -> str:
+    """'; <why>' when the file's content is not what its extension says, else ''."""
+    found = _sniff_format(path)
+    if found is None or found == suffix or (found == "stl" and suffix == "stl_ascii"):
+        return ""
+    if found == "binary":
+        if suffix not in _TEXT_FORMATS:  # a truncated binary file of the right format: not a mix-up
+            return ""
+        what = "binary data"
+    else:
+        what = f"what looks like {found.upper()}"
+    return (f"; it holds {what}, but the reader is chosen by the extension (.{suffix}): is the file "
+            f"another format? (rename it)")
+
+
+# A face line with a negative (relative) index
+_OBJ_RELATIVE = re.compile(rb"(?m)^[ \t]*f[ \t][^\n]*-\d")
+
+
+def _obj_absolute(data: bytes, path: Path) -> bytes | None:
+    """OBJ text with its negative face indices made absolute, or None when it has none.
+
+    OBJ counts index -1 as the last v (vt, vn) line read BEFORE the face line; trimesh counts it
+    from the end of the file. The two agree only when every vertex precedes every face: a file
+    writing each triangle as three v lines and `f -3 -2 -1` had loaded as copies of its last
+    triangle."""
+    if not _OBJ_RELATIVE.search(data):
+        return None
+    seen = {"v": 0, "vt": 0, "vn": 0}
+    lines = data.decode("latin-1").split("\n")  # latin-1: every byte comes back as it was
+    for k, line in enumerate(lines):
+        words = line.split()
+        if not words:
+            continue
+        if words[0] in seen:
+            seen[words[0]] += 1
+        elif words[0] == "f" and "-" in line:
+            for w, word in enumerate(words[1:], 1):
+                parts = word.split("/")
+                for j, kind in enumerate(("v", "vt", "vn")[:len(parts)]):
+                    if not parts[j].startswith("-"):
+                        continue
+                    try:
+                        rel = int(parts[j])
+                    except ValueError:  # not an index: trimesh's reader says what it makes of it
+                        continue
+                    if seen[kind] + rel < 0:
+                        raise SimError(f"user mesh {path} line {k + 1}: face index {rel} points before the "
+                                       f"first {kind} line (only {seen[kind]} read so far): the file is damaged")
+                    parts[j] = str(seen[kind] + rel + 1)
+                words[w] = "/".join(parts)
+            lines[k] = " ".join(words)
+    return "\n".join(lines).encode("latin-1")
+
+
+def _edge_uses(f: np.ndarray) -> np.ndarray:
+    """How many faces use each distinct edge of faces `f` (order of the edges unspecified)."""
+    e = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1).astype(np.int64)
+    key = e[:, 0] * (int(f.max()) + 1) + e[:, 1] if len(e) else e[:, 0]
+    return np.unique(key, return_counts=True)[1]
+
+
+def _bad_edges(f: np.ndarray) -> int:
+    """Edges not used by exactly two faces (open or non-manifold)."""
+    return int(np.count_nonzero(_edge_uses(f) != 2)) if len(f) else 0
+
+
+def consistent_winding(f: np.ndarray) -> np.ndarray:
+    """Faces `f` (F, 3) with each connected part wound one way: a face sharing an edge with a
+    face is flipped when both run along that edge in the same direction. Which way a part ends up
+    is its first face's (the caller turns a closed body outward by its volume's sign).
+
+    Linear in the faces (a breadth-first walk over the faces that share an edge, in scipy):
+    trimesh.repair.fix_winding took ~90 us a face, minutes on a 2-million-face shape model, loaded
+    once per sequence. Edges of more than two faces (non-manifold) do not link their faces."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+    f = np.asarray(f, dtype=np.int64)
+    n = len(f)
+    if n == 0:
+        return f.copy()
+    a = f[:, [0, 1, 2]].reshape(-1)
+    b = f[:, [1, 2, 0]].reshape(-1)
+    face = np.repeat(np.arange(n), 3)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key = lo * (int(f.max()) + 1) + hi
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+    counts = np.diff(np.r_[starts, len(k)])
+    pairs = starts[counts == 2]   # edges of exactly two faces
+    i, j = order[pairs], order[pairs + 1]
+    fi, fj = face[i], face[j]
+    # the same direction (a -> b in both) means one of the two faces is wound the other way
+    flip = (a[i] == a[j]).astype(np.int8)
+    g = coo_matrix((np.ones(len(fi) * 2), (np.r_[fi, fj], np.r_[fj, fi])), shape=(n, n)).tocsr()
+    rel_key = np.r_[fi * n + fj, fj * n + fi]
+    rel_val = np.r_[flip, flip]
+    by = np.argsort(rel_key)
+    rel_key, rel_val = rel_key[by], rel_val[by]
+    parity = np.zeros(n, dtype=np.int8)
+    _, label = connected_components(g, directed=False)
+    roots = np.unique(label, return_index=True)[1]
+    for root in roots:
+        seq, pred = breadth_first_order(g, int(root), directed=False, return_predecessors=True)
+        kids = seq[1:].astype(np.int64)
+        pred = pred.astype(np.int64)   # scipy's int32: pred * n overflowed past 46,000 faces
+        rel = rel_val[np.searchsorted(rel_key, pred[kids] * n + kids)]
+        par = parity   # each face after its predecessor in the walk: one pass in that order
+        for node, parent, r in zip(kids.tolist(), pred[kids].tolist(), rel.tolist()):
+            par[node] = par[parent] ^ r
+    out = f.copy()
+    out[parity == 1] = out[parity == 1][:, ::-1]
+    return out
+
+
+# A box in the file's axes whose longest side is within this factor of the least box's is the
+# body's own box
+BODY_FRAME_TOLERANCE = 1.02
+
+
+def body_extents(vertices: np.ndarray) -> np.ndarray:
+    """The extents (3,) of a body along its own axes, largest last: the sides of its minimum-volume
+    oriented bounding box (trimesh.bounds.oriented_bounds), or of its box in the file's axes when
+    that one's longest side is within BODY_FRAME_TOLERANCE of the least box's. What a scientist
+    calls the body's length does not depend on how the file happens to be rotated: the largest side
+    of the box in the file's axes had made a 20:1 rod written diagonally 1.7x too long.
+
+    trimesh's search costs (hull points) x (directions): on a large hull the box's axes are found
+    from a strided subset of the points and the extents measured along them from all of them."""
+    import trimesh
+    v = np.asarray(vertices, dtype=np.float64)
+    sub = v[::-(-len(v) // 20000)] if len(v) > 20000 else v
+    hull = _hull_points(sub)
+    try:
+        to_origin, _ = trimesh.bounds.oriented_bounds(hull[::-(-len(hull) // 2000)] if len(hull) > 2000 else hull)
+        R = np.asarray(to_origin, dtype=np.float64)[:3, :3]
+    except Exception:  # a point set qhull and the flat fallback both refuse: the file's axes
+        R = np.eye(3)
+    p = v @ R.T
+    ext = np.sort(p.max(0) - p.min(0))
+    aabb = np.sort(v.max(0) - v.min(0))
+    # On a faceted model the least box leans onto the facets and its sides come out short (1.1% on
+    # a 320-face sphere, 0.2% on a 1280-face ellipsoid written along its axes), and trimesh searches
+    # a coarse grid of directions: a box in the file's axes about as long is a model written in its
+    # own frame, measured in it
+    return aabb if abs(aabb[2] - ext[2]) <= (BODY_FRAME_TOLERANCE - 1.0) * ext[2] else ext
+
+
 def load_user_mesh(path: str | Path, size_m: float) -> Shape:
     """Load a user mesh (any format trimesh reads: OBJ, PLY, STL, GLB ...), centre it at its box
-    centre and scale it so its largest extent is `size_m` metres. Raises SimError naming the
-    problem (and the file as `path` names it) for a missing file, a folder, an extension trimesh
-    does not read, a file that is not a mesh, a non-finite vertex, or a degenerate mesh.
+    centre and scale it so its length along its longest own axis (`body_extents`) is `size_m`
+    metres. Raises SimError naming the problem (and the file as `path` names it) for a missing or
+    empty file, a folder, an extension trimesh does not read, a file that is not a mesh (with a
+    hint when its content is another format), a non-finite vertex, or a degenerate mesh.
 
-    A closed mesh wound inside out (negative signed volume, common in published models) has its
-    faces flipped (params winding_flipped); `user_mesh_warnings` says so and flags open meshes."""
+    Repairs what exporters commonly write, recorded in the params (meta.json) and, when the
+    surface changes, in `user_mesh_warnings`: vertices split at texture or normal seams are
+    merged (vertices_merged), faces repeating a vertex and zero-area faces are dropped
+    (degenerate_faces_dropped), a closed mesh wound inconsistently is made consistent
+    (winding_repaired), and a closed mesh wound inside out (negative signed volume) or an open
+    one facing mostly inward has its faces flipped (winding_flipped)."""
+    import io
+
     import trimesh
     path = Path(path)
     if path.is_dir():
@@ -289,58 +489,137 @@ def load_user_mesh(path: str | Path, size_m: float) -> Shape:
         what = f"extension .{suffix} is not a mesh format trimesh reads" if suffix else "has no file extension"
         raise SimError(f"user mesh {path} {what} (the reader is chosen by it: "
                        f"{', '.join(sorted(formats & {'obj', 'ply', 'stl', 'glb', 'gltf', 'off'}))}, ...)")
+    if path.stat().st_size == 0:
+        raise SimError(f"user mesh {path} is empty (0 bytes)")
+    text = _obj_absolute(path.read_bytes(), path) if suffix == "obj" else None
+
+    def load(process: bool):
+        if text is not None:  # the rewritten text, read as the file would be
+            return trimesh.load(io.BytesIO(text), file_type="obj", force="mesh", process=process)
+        return trimesh.load(str(path), force="mesh", process=process)
+
     try:
         # unprocessed first: trimesh's processing drops a NaN / inf vertex with its faces, which
         # would punch a hole in the body without a word
-        raw = trimesh.load(str(path), force="mesh", process=False)
-        m = trimesh.load(str(path), force="mesh", process=True)
+        raw = load(False)
+        m = load(True)
     except Exception as e:  # trimesh raises many types for unreadable input
         msg = str(e).replace(str(path.resolve()), str(path))
-        raise SimError(f"user mesh {path} could not be read as a mesh: {type(e).__name__}: {msg}") from None
+        raise SimError(f"user mesh {path} could not be read as a mesh: {type(e).__name__}: {msg}"
+                       f"{_format_hint(path, suffix)}") from None
     if not isinstance(m, trimesh.Trimesh) or len(getattr(m, "faces", [])) == 0:
-        raise SimError(f"user mesh {path} is not a triangle mesh (no faces found)")
+        raise SimError(f"user mesh {path} is not a triangle mesh (no faces found){_format_hint(path, suffix)}")
     bad = int(np.count_nonzero(~np.all(np.isfinite(np.asarray(getattr(raw, "vertices", np.zeros((0, 3))),
                                                               dtype=np.float64)), axis=1)))
-    v = np.asarray(m.vertices, dtype=np.float64)
-    f = np.asarray(m.faces, dtype=np.int32)
-    if bad or not np.all(np.isfinite(v)):
+    if bad or not np.all(np.isfinite(np.asarray(m.vertices, dtype=np.float64))):
         what = "1 vertex with a non-finite coordinate" if bad == 1 else \
             f"{bad or 'some'} vertices with non-finite coordinates"
         raise SimError(f"user mesh {path} has {what} (NaN or inf): the file is damaged; repair or re-export it")
-    area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+
+    # Readers split a vertex wherever its texture coordinate or normal changes (a UV seam, flat
+    # per-face normals): the surface is then open along every seam, its winding cannot be checked
+    # across them, and an inside-out file was left unflipped (black in every frame). The body's
+    # shape is the positions alone.
+    n_read = len(m.vertices)
+    m.merge_vertices(merge_tex=True, merge_norm=True)
+    params: dict = {}
+    if len(m.vertices) < n_read:
+        params["vertices_merged"] = int(n_read - len(m.vertices))
+    v = np.asarray(m.vertices, dtype=np.float64)
+    f = np.asarray(m.faces, dtype=np.int64)
     ext = v.max(0) - v.min(0)
+    area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    # A face repeating a vertex (a, a, b) has no area but uses its edge twice more: the surface
+    # reads as not closed. A zero-area face on distinct vertices goes too unless the surface needs
+    # it (a T-junction's sliver closes the surface; dropping it would open it). Zero as a text
+    # file writes it: a height below 1e-5 of the body's size (6 decimals on a body of size 1 put
+    # a collinear point up to 1e-6 off its line)
+    keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])
+    longest = np.max(np.linalg.norm(v[f] - v[np.roll(f, 1, axis=1)], axis=2), axis=1)
+    zero = area <= 1e-5 * max(ext.max(), 1e-30) * longest
+    if np.any(keep & zero) and np.any(keep & ~zero) and _bad_edges(f[keep & ~zero]) <= _bad_edges(f[keep]):
+        keep &= ~zero
+    if not keep.all() and keep.any():
+        params["degenerate_faces_dropped"] = int(np.count_nonzero(~keep))
+        m.update_faces(keep)
+        m.remove_unreferenced_vertices()
+        v = np.asarray(m.vertices, dtype=np.float64)
+        f = np.asarray(m.faces, dtype=np.int64)
+        ext = v.max(0) - v.min(0)
+        area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
     if len(f) < 4 or np.count_nonzero(area > 1e-12 * max(ext.max(), 1e-30) ** 2) < 4 \
             or np.any(ext <= 1e-9 * max(ext.max(), 1e-30)):
         raise SimError(f"user mesh {path} is degenerate (flat or without area: extents {ext.tolist()}, "
                        f"{len(f)} faces)")
+    body = body_extents(v)
+    if body[0] <= 1e-9 * body[2]:  # flat, but not in the file's axes
+        raise SimError(f"user mesh {path} is degenerate (flat: extents along its own axes {body.tolist()}, "
+                       f"{len(f)} faces)")
+
     watertight = bool(m.is_watertight)
+    params = {"source": str(path), "size_m": float(size_m), "watertight": watertight, **params}
+    if watertight and not m.is_winding_consistent:
+        # a closed surface is orientable: neighbours are flipped to agree with one face (then the
+        # volume's sign below says whether that face pointed out)
+        m.faces = consistent_winding(np.asarray(m.faces, dtype=np.int64))
+        f = np.asarray(m.faces, dtype=np.int64)
+        if m.is_winding_consistent:
+            params["winding_repaired"] = True
     closed = watertight and bool(m.is_winding_consistent)
-    params = {"source": str(path), "size_m": float(size_m), "watertight": watertight}
     if watertight and not closed:
         params["winding_consistent"] = False
-    if closed and float(m.volume) < 0:
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    normal = np.cross(b - a, c - a)
+    if closed and float(np.einsum("ij,ij->", a, np.cross(b, c))) < 0:
         # wound inward: seen from outside every face is a back face (never lit, no depth sensor
         # return, a negative volume for the inertia); reversing each face's vertex order turns it out
-        f = np.ascontiguousarray(f[:, ::-1])
-        params["winding_flipped"] = True
-    if not watertight:  # edges used by one face only: the rims of the holes
-        params["open_edges"] = int(np.count_nonzero(np.unique(m.edges_sorted, axis=0, return_counts=True)[1] == 1))
+        f = f[:, ::-1]
+        if not params.get("winding_repaired"):  # a repair's first face decided its side: not the file's
+            params["winding_flipped"] = True
+    if not watertight:
+        uses = _edge_uses(f)
+        params["open_edges"] = int(np.count_nonzero(uses == 1))  # the rims of the holes
+        if np.any(uses > 2):  # an edge of three or more faces: a fin, parts touching along an edge
+            params["nonmanifold_edges"] = int(np.count_nonzero(uses > 2))
+        # an open surface has no volume to tell in from out: the faces' share of area facing the
+        # box centre does (a hole does not turn a body inside out)
+        centre = (v.max(0) + v.min(0)) / 2.0
+        towards = np.einsum("ij,ij->i", normal, (a + b + c) / 3.0 - centre) < 0
+        share = float(area[towards].sum() / max(area.sum(), 1e-300))
+        if share > 0.5:
+            f = f[:, ::-1]
+            params["winding_flipped"] = True
+            params["inward_area_share"] = round(share, 3)
     v = v - (v.max(0) + v.min(0)) / 2.0
-    v = v * (size_m / ext.max())
-    return Shape(v, f, "user", params, closed=closed)
+    v = v * (size_m / body[2])
+    return Shape(v, np.ascontiguousarray(f, dtype=np.int32), "user", params, closed=closed)
 
 
 def user_mesh_warnings(shape: Shape, name: str) -> list[str]:
     """One-line warnings (without the "warning: " prefix) about a loaded user mesh `name`."""
     p = shape.params
     out = []
-    if p.get("winding_flipped"):
+    if p.get("winding_repaired"):
+        out.append(f"user mesh {name} was not consistently wound (some of its faces faced inward); its faces "
+                   f"were turned to face outward (meta.json shape.winding_repaired)")
+    if p.get("winding_flipped") and p.get("watertight", True):
         out.append(f"user mesh {name} is wound inside out (its faces face inward: negative volume); its faces "
                    f"were flipped (meta.json shape.winding_flipped)")
+    elif p.get("winding_flipped"):
+        out.append(f"user mesh {name} is open and wound mostly inside out ({p.get('inward_area_share', 1):.0%} of "
+                   f"its area faces its centre); its faces were flipped (meta.json shape.winding_flipped)")
     if not p.get("watertight", True):
-        out.append(f"user mesh {name} is not closed ({p.get('open_edges', 0)} open edges: holes, or a damaged or "
-                   f"truncated file): it spins with a random inertia tensor, not its own, and rays through a hole "
-                   f"see the inside (depth and images show the far wall there)")
+        holes, nm = p.get("open_edges", 0), p.get("nonmanifold_edges", 0)
+        # a surface without holes can still fail the closed test: an edge of three faces or more
+        what = []
+        if holes or not nm:
+            what.append(f"is not closed ({holes} open edges: holes, or a damaged or truncated file)")
+        if nm:
+            what.append(f"has non-manifold edges ({nm} edge{'s' if nm != 1 else ''} shared by more than two "
+                        f"faces: a fin, or parts touching along an edge)")
+        see = ", and rays through a hole see the inside (depth and images show the far wall there)" if holes else ""
+        out.append(f"user mesh {name} {' and '.join(what)}: it spins with a random inertia tensor, not its "
+                   f"own{see}")
     elif p.get("winding_consistent") is False:
         out.append(f"user mesh {name} is closed but not consistently wound: faces wound inward are never lit and "
                    f"give depth sensors no return, and it spins with a random inertia tensor")
