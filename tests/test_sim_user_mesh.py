@@ -466,3 +466,25 @@ def test_consistent_winding_is_linear_and_right_on_a_large_mesh():
     directed = np.stack([g[:, [0, 1, 2]].reshape(-1), g[:, [1, 2, 0]].reshape(-1)], axis=1)
     assert len(np.unique(directed, axis=0)) == len(directed)   # no edge run the same way twice
     assert np.array_equal(np.sort(g, axis=1), np.sort(f, axis=1))   # the same faces, reordered only
+
+
+def test_a_mesh_loaded_again_comes_from_the_cache_as_a_copy_until_the_file_changes(tmp_path):
+    """A run loads each mesh once to check it and once per sequence (seconds a load for a
+    2-million-face model): the last files loaded are kept, each caller gets its own copy, and an
+    edited file is read again."""
+    import os
+
+    import trimesh
+
+    from track3d_sim import shapes
+
+    f = tmp_path / "b.obj"
+    trimesh.creation.icosphere(subdivisions=2).export(f)
+    a = shapes.load_user_mesh(f, 4.0)
+    a.vertices *= 2.0
+    a.params["mine"] = 1
+    b = shapes.load_user_mesh(f, 4.0)
+    assert np.ptp(b.vertices, axis=0).max() == pytest.approx(4.0) and "mine" not in b.params
+    trimesh.creation.icosphere(subdivisions=1).export(f)
+    os.utime(f, ns=(f.stat().st_atime_ns, f.stat().st_mtime_ns + 10**9))
+    assert len(shapes.load_user_mesh(f, 4.0).faces) == 80

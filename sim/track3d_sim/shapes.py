@@ -458,7 +458,33 @@ def body_extents(vertices: np.ndarray) -> np.ndarray:
     return aabb if abs(aabb[2] - ext[2]) <= (BODY_FRAME_TOLERANCE - 1.0) * ext[2] else ext
 
 
+# The last few meshes loaded, by path, size and the file's stat: a run loads each mesh once to
+# check it and once per sequence, and a 2-million-face shape model takes seconds a load
+_LOADED: dict = {}
+_LOADED_MAX = 2
+
+
 def load_user_mesh(path: str | Path, size_m: float) -> Shape:
+    """`_load_user_mesh`'s Shape (a copy: callers rescale and annotate theirs), from a small cache
+    of the last files loaded in this process (keyed by the file's size and modification time,
+    so an edited file is read again)."""
+    p = Path(path)
+    try:
+        st = p.stat()
+        key = (str(p.resolve()), float(size_m), st.st_size, st.st_mtime_ns) if p.is_file() else None
+    except OSError:
+        key = None
+    shape = _LOADED.get(key) if key is not None else None
+    if shape is None:
+        shape = _load_user_mesh(path, size_m)   # errors name the file as `path` gives it
+        if key is not None:
+            if len(_LOADED) >= _LOADED_MAX:
+                _LOADED.pop(next(iter(_LOADED)))
+            _LOADED[key] = shape
+    return Shape(shape.vertices.copy(), shape.faces.copy(), shape.family, dict(shape.params), closed=shape.closed)
+
+
+def _load_user_mesh(path: str | Path, size_m: float) -> Shape:
     """Load a user mesh (any format trimesh reads: OBJ, PLY, STL, GLB ...), centre it at its box
     centre and scale it so its length along its longest own axis (`body_extents`) is `size_m`
     metres. Raises SimError naming the problem (and the file as `path` names it) for a missing or
