@@ -197,7 +197,7 @@ def test_edgetrack_eval_writes_valid_json_with_null_for_a_missing_number(tmp_pat
     root = make_synthetic_dataset(tmp_path / "ds", {"a": 3})   # no absent frame: lost precision undefined
     out = tmp_path / "x.json"
     assert train_main(["edgetrack", "eval", "--model", str(MODELS_DIR / "edgetrack"), "--data", str(root),
-                       "--split", "test", "--out", str(out), "--quiet"]) == 0
+                       "--split", "test", "--out", str(out), "--quiet", "--json"]) == 0
     printed = _strict_json(capsys.readouterr().out)
     report = _strict_json(out.read_text())
     row = next(iter(report["trackers"].values()))

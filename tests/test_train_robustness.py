@@ -198,6 +198,45 @@ def test_an_export_killed_midway_leaves_the_files_that_were_there(tmp_path, monk
     assert all(OnnxModel(f, 1).meta["kind"] for f in files)
 
 
+@pytest.mark.parametrize("name", ["boxnet", "edgetrack", "siamfc"])
+def test_an_export_is_checked_before_it_replaces_anything(tmp_path, name):
+    """The exports renamed their files into place, then ran the parity check: a kill in between
+    left an unchecked model that the same command then refused to redo ('exists: pass --force'),
+    and EdgeTrack's and SiamFC's checks only printed their differences. The check now runs on the
+    temporaries: a failing one (or a kill during it) leaves the earlier files and no temporary."""
+    import importlib
+
+    mod = importlib.import_module(f"track3d_train.{name}.export")
+    net = _tiny_nets()[name]
+    target = tmp_path / ("m.onnx" if name == "boxnet" else "m")
+    files = [target] if name == "boxnet" else [tmp_path / f"m_{p}.onnx" for p in
+                                               (("template", "search") if name == "edgetrack" else ("exemplar", "search"))]
+    for f in files:
+        f.write_bytes(b"the earlier export")
+    seen = []
+
+    def check(*temps):
+        seen.extend(temps)
+        assert all(t.is_file() and t not in files for t in temps)   # the written temporaries
+        raise AssertionError("torch and onnxruntime differ")
+
+    with pytest.raises(AssertionError, match="differ"):
+        mod.export_onnx(net, target, check=check)
+    assert len(seen) == len(files)
+    assert [f.read_bytes() for f in files] == [b"the earlier export"] * len(files)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f.name for f in files)
+
+
+def test_a_pair_exports_parity_beyond_float32_noise_stops_the_export():
+    from track3d_train.onnx_meta import require_parity
+
+    require_parity({"logit_max_abs": 2e-3, "logit_scale": 5.0}, ("logit",), "EdgeTrack")   # 4e-4 of it
+    with pytest.raises(AssertionError, match="EdgeTrack logit: torch and onnxruntime differ by 0.01"):
+        require_parity({"logit_max_abs": 1e-2, "logit_scale": 5.0}, ("logit",), "EdgeTrack")
+    with pytest.raises(AssertionError):
+        require_parity({"kernel_max_abs": float("nan")}, ("kernel",), "EdgeTrack")
+
+
 @pytest.fixture(scope="module")
 def checkpoints(tmp_path_factory):
     """A tiny checkpoint of each network, as its trainer writes it (not trained)."""

@@ -179,6 +179,22 @@ class AtomicFiles:
         return False
 
 
+# The largest torch vs onnxruntime difference an export accepts, relative to the output's
+# magnitude (at least 1): float32 noise of these graphs is ~1e-6 of it
+PARITY_RTOL = 1e-3
+
+
+def require_parity(diffs: dict, outputs, what: str) -> None:
+    """AssertionError when an output's `<name>_max_abs` in `diffs` is beyond PARITY_RTOL of its
+    `<name>_scale` (at least 1): the two runtimes disagree on the graph, and the export stops
+    before its files replace anything (the check had been printed only)."""
+    for name in outputs:
+        d, scale = float(diffs[f"{name}_max_abs"]), float(diffs.get(f"{name}_scale", 1.0))
+        if not d <= PARITY_RTOL * max(1.0, scale):
+            raise AssertionError(f"{what} {name}: torch and onnxruntime differ by {d:.3g} (scale {scale:.3g}, "
+                                 f"tolerance {PARITY_RTOL:g} of it): nothing written")
+
+
 def twins_of(paths) -> list[Path]:
     """The variant files (variant_path: `<stem>_int8.onnx`) that exist beside the files `paths`,
     other than `paths` themselves (an export that writes a twin too, siamfc export --int8)."""

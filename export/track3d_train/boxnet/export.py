@@ -46,7 +46,12 @@ def model_metadata(model, extra: dict | None = None) -> dict:
     return meta
 
 
-def export_onnx(model, path: str | Path, extra_meta: dict | None = None, opset: int = OPSET) -> Path:
+def export_onnx(model, path: str | Path, extra_meta: dict | None = None, opset: int = OPSET,
+                check=None) -> Path:
+    """Write the model with its metadata to `path`; `check(tmp)` (e.g. the parity check) runs on the
+    written file before it replaces `path`: a file that fails it, or an export killed before it
+    passed, never stands at `path` (it had been renamed into place first and checked after, so a
+    kill in between left an unchecked model that the same command then refused to redo)."""
     import torch
 
     model.eval()
@@ -73,6 +78,8 @@ def export_onnx(model, path: str | Path, extra_meta: dict | None = None, opset: 
         torch.onnx.export(model, args, str(tmp), input_names=names, output_names=list(OUTPUTS),
                           dynamic_axes=dyn, opset_version=opset, dynamo=False, do_constant_folding=True)
         attach_metadata(tmp, model_metadata(model, extra_meta))
+        if check is not None:
+            check(tmp)
     return path
 
 
@@ -138,10 +145,10 @@ def export_checkpoint(ckpt: str | Path, out: str | Path, check: bool = True, log
     past = cache_past_views(hist.get("cache") or {})
     if past:   # trained on frustums beside the body's past views: the runtime gives it them
         extra["past_views"] = past
-    path = export_onnx(model, out, extra)
+    worst: dict = {}
+    path = export_onnx(model, out, extra, check=(lambda tmp: worst.update(parity_check(model, tmp))) if check else None)
     meta = json.loads(json.dumps(model_metadata(model, extra)))
     if check:
-        worst = parity_check(model, path)
         log("parity torch vs onnxruntime: max |diff| " + ", ".join(f"{k} {v:.2e}" for k, v in worst.items()))
         meta["parity"] = worst
     log(f"wrote {path} ({Path(path).stat().st_size / 1e6:.2f} MB)")

@@ -89,9 +89,9 @@ def _export(a) -> int:
         extra["training"]["fine_tuned_from"] = ck["init_from"]
     if ck.get("pad") is not None:     # the colour the runtime's crop fills outside the image with
         extra["pad"] = [float(v) for v in ck["pad"]]
-    pz, px = export_onnx(net, a.out, extra)
+    p: dict = {}
+    pz, px = export_onnx(net, a.out, extra, check=lambda z, x: p.update(parity(net, z, x)))
     remove_stale_twins(twins)   # the int8 files of the pair just replaced: its old weights
-    p = parity(net, pz, px)
     print(f"wrote {pz} ({pz.stat().st_size / 1e3:.0f} kB), {px} ({px.stat().st_size / 1e3:.0f} kB)")
     print("parity torch vs onnxruntime:", json.dumps(p))
     return 0

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 import torch.nn as nn
 
-from ..onnx_meta import EXPORT_ID, AtomicFiles, attach_metadata, export_id
+from ..onnx_meta import EXPORT_ID, AtomicFiles, attach_metadata, export_id, require_parity
 from .model import EdgeTrack
 
 __all__ = ["TemplateGraph", "SearchGraph", "export_onnx", "parity", "model_metadata", "count_macs", "time_search"]
@@ -96,8 +96,11 @@ def model_metadata(net: EdgeTrack, kind: str, extra: dict | None = None) -> dict
 
 
 def export_onnx(net: EdgeTrack, prefix: str | Path, extra_meta: dict | None = None,
-                opset: int = 17) -> tuple[Path, Path]:
-    """Write <prefix>_template.onnx and <prefix>_search.onnx with metadata; returns the paths."""
+                opset: int = 17, check=None) -> tuple[Path, Path]:
+    """Write <prefix>_template.onnx and <prefix>_search.onnx with metadata; returns the paths.
+    `check(template_tmp, search_tmp)` (the parity check) runs on the written pair before it
+    replaces the files there: a pair that fails it, or an export killed before it passed, never
+    stands at the paths."""
     prefix = Path(prefix)
     prefix.parent.mkdir(parents=True, exist_ok=True)
     cfg = net.cfg
@@ -123,6 +126,8 @@ def export_onnx(net: EdgeTrack, prefix: str | Path, extra_meta: dict | None = No
         pair = {EXPORT_ID: export_id([tz_path, tx_path])}
         attach_metadata(tz_path, {**model_metadata(net, "edgetrack-template", extra_meta), **pair})
         attach_metadata(tx_path, {**model_metadata(net, "edgetrack-search", extra_meta), **pair})
+        if check is not None:
+            check(tz_path, tx_path)
     return pz, px
 
 
@@ -141,10 +146,13 @@ def parity(net: EdgeTrack, pz, px, seed: int = 0, instance_size: int | None = No
         lg, bx = SearchGraph(net)(x, k)
     kz = OnnxModel(pz, 1, "edgetrack-template").run({"template": z.numpy()})[0]
     lo, bo = OnnxModel(px, 1, "edgetrack-search").run({"search": x.numpy(), "kernel": kz})
-    return {"kernel_max_abs": float(np.abs(kz - k.numpy()).max()),
-            "logit_max_abs": float(np.abs(lo - lg.numpy()).max()),
-            "ltrb_max_abs": float(np.abs(bo - bx.numpy()).max()),
-            "ltrb_scale": float(np.abs(bx.numpy()).max()), "logit_shape": list(lo.shape)}
+    out = {"kernel_max_abs": float(np.abs(kz - k.numpy()).max()),
+           "logit_max_abs": float(np.abs(lo - lg.numpy()).max()),
+           "ltrb_max_abs": float(np.abs(bo - bx.numpy()).max()),
+           "kernel_scale": float(np.abs(k.numpy()).max()), "logit_scale": float(np.abs(lg.numpy()).max()),
+           "ltrb_scale": float(np.abs(bx.numpy()).max()), "logit_shape": list(lo.shape)}
+    require_parity(out, ("kernel", "logit", "ltrb"), "EdgeTrack")
+    return out
 
 
 def time_search(px, kernel: np.ndarray, size: int, threads: int = 1, repeats: int = 50) -> float:

@@ -94,9 +94,9 @@ def _export(a) -> int:
                           "elapsed_s": round(float(ck.get("elapsed_s", 0)), 1),
                           "data": a.data_note or "track3d small train split (no ILSVRC-VID pre-training)"},
              "train_data_hash": ck.get("train_data_hash"), "train_data": ck.get("train_data")}
-    pz, px = export_onnx(net, a.out, extra)
+    p: dict = {}
+    pz, px = export_onnx(net, a.out, extra, check=lambda z, x: p.update(parity(net, z, x)))
     remove_stale_twins(twins)   # the int8 files of the pair just replaced (--int8 rewrites its own)
-    p = parity(net, pz, px)
     print(f"wrote {pz} ({pz.stat().st_size / 1e6:.2f} MB), {px} ({px.stat().st_size / 1e6:.2f} MB)")
     print("parity torch vs onnxruntime:", json.dumps(p))
     if a.int8:

@@ -19,7 +19,7 @@ import torch
 import torch.nn as nn
 from track3d.threads import check_threads
 
-from ..onnx_meta import EXPORT_ID, AtomicFiles, attach_metadata, export_id, parent_fields
+from ..onnx_meta import EXPORT_ID, AtomicFiles, attach_metadata, export_id, parent_fields, require_parity
 from .model import SiamFC, SiamFCConfig, xcorr_matmul
 
 __all__ = ["ExemplarGraph", "SearchGraph", "export_onnx", "parity", "model_metadata", "quantize_search"]
@@ -68,8 +68,10 @@ def model_metadata(cfg: SiamFCConfig, kind: str, extra: dict | None = None) -> d
 
 
 def export_onnx(net: SiamFC, prefix: str | Path, extra_meta: dict | None = None,
-                opset: int = 17) -> tuple[Path, Path]:
-    """Write <prefix>_exemplar.onnx and <prefix>_search.onnx with metadata; returns the paths."""
+                opset: int = 17, check=None) -> tuple[Path, Path]:
+    """Write <prefix>_exemplar.onnx and <prefix>_search.onnx with metadata; returns the paths.
+    `check(exemplar_tmp, search_tmp)` (the parity check) runs on the written pair before it
+    replaces the files there."""
     prefix = Path(prefix)
     prefix.parent.mkdir(parents=True, exist_ok=True)
     cfg = net.cfg
@@ -95,6 +97,8 @@ def export_onnx(net: SiamFC, prefix: str | Path, extra_meta: dict | None = None,
         pair = {EXPORT_ID: export_id([ez_path, ex_path])}
         attach_metadata(ez_path, {**model_metadata(cfg, "siamfc-exemplar", extra_meta), **pair})
         attach_metadata(ex_path, {**model_metadata(cfg, "siamfc-search", extra_meta), **pair})
+        if check is not None:
+            check(ez_path, ex_path)
     return pz, px
 
 
@@ -159,11 +163,13 @@ def parity(net: SiamFC, pz: str | Path, px: str | Path, seed: int = 0, scales: i
     mz, mx = OnnxModel(pz, 1, "siamfc-exemplar"), OnnxModel(px, 1, "siamfc-search")
     fz_o = mz.run({"exemplar": z.numpy()})[0]
     r_o = mx.run({"search": x.numpy(), "exemplar_feature": fz_o})[0]
-    return {"exemplar_max_abs": float(np.abs(fz_o - fz.numpy()).max()),
-            "exemplar_scale": float(np.abs(fz.numpy()).max()),
-            "response_max_abs": float(np.abs(r_o - r_t).max()),
-            "response_vs_conv_xcorr_max_abs": float(np.abs(r_t - r_ref).max()),
-            "response_scale": float(np.abs(r_t).max()), "response_shape": list(r_o.shape)}
+    out = {"exemplar_max_abs": float(np.abs(fz_o - fz.numpy()).max()),
+           "exemplar_scale": float(np.abs(fz.numpy()).max()),
+           "response_max_abs": float(np.abs(r_o - r_t).max()),
+           "response_vs_conv_xcorr_max_abs": float(np.abs(r_t - r_ref).max()),
+           "response_scale": float(np.abs(r_t).max()), "response_shape": list(r_o.shape)}
+    require_parity(out, ("exemplar", "response"), "SiamFC")
+    return out
 
 
 def time_backbone(net: SiamFC, px: str | Path, scales: int, size: int, threads: int = 1,
