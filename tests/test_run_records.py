@@ -323,6 +323,34 @@ def test_a_reused_report_folder_keeps_no_stale_plots(synth, tmp_path):
     assert (rep / "mine.png").read_bytes() == b"a user's file"
 
 
+def test_a_copied_report_folder_and_a_killed_eval_leave_no_stale_report(synth, tmp_path, monkeypatch):
+    """A report folder copied elsewhere listed its plots by the old folder's paths, so a new
+    report there kept them; an eval killed while it drew left the old report.json (and
+    sequences.txt) beside its new plots, a report that did not describe them (a kill walkthrough)."""
+    import shutil
+
+    pytest.importorskip("matplotlib")
+    from track3d.evaluation import plots
+
+    res, rep = tmp_path / "res", tmp_path / "rep"
+    assert _track(synth, res, "--tracker", "oracle") == 0
+    assert main(["eval", "--data", str(synth), "--results", str(res), "--out", str(rep), "--quiet"]) == 0
+    copy = tmp_path / "copy"
+    shutil.copytree(rep, copy)
+    base = ["eval", "--data", str(synth), "--results", str(res), "--out", str(copy), "--quiet"]
+    assert main(base + ["--sequence", "a"]) == 0
+    assert (copy / "trajectory_a.png").is_file() and not (copy / "trajectory_b.png").exists()
+
+    def killed(*a, **k):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(plots, "trajectory_plots", killed)
+    with pytest.raises(KeyboardInterrupt):
+        from track3d.evaluation import Experiment
+        (run,) = [p.name for p in (res / "test").iterdir() if p.is_dir()]
+        Experiment(synth, "test", res, rep).report([run])
+    assert not (rep / "report.json").exists() and not (rep / "sequences.txt").exists()
+
+
 def test_worst_sequences_hand_case():
     from types import SimpleNamespace as S
 
@@ -355,3 +383,38 @@ def test_eval_plots_the_worst_sequences_and_ao_per_sequence(synth, tmp_path, cap
     assert not (rep / "trajectory_a.png").exists()
     assert main(base + ["--trajectories-of", "first"]) == 0
     assert (rep / "trajectory_a.png").is_file() and not (rep / "trajectory_b.png").exists()
+
+
+def test_track_stopped_by_sigterm_says_so_keeps_finished_sequences_and_resumes(synth, tmp_path, capsys, monkeypatch):
+    """SIGTERM (a session's end, a job scheduler) had ended `track3d track` at once, exit 143 with
+    no word and the sequence being tracked half-written; it now unwinds as Ctrl-C does: the
+    finished sequences stay, the half-done one leaves no folder, one line says the same command
+    goes on, and it does."""
+    import os
+    import signal
+
+    from track3d.evaluation import experiment
+
+    res = tmp_path / "res"
+    real = experiment.run_sequence
+    calls = []
+
+    def second_sequence_terminated(factory, seq, *a, **k):
+        calls.append(seq.name)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGTERM)   # arrives while this sequence is tracked
+        return real(factory, seq, *a, **k)
+
+    monkeypatch.setattr(experiment, "run_sequence", second_sequence_terminated)
+    before = signal.getsignal(signal.SIGTERM)
+    capsys.readouterr()
+    assert _track(synth, res, "--tracker", "oracle") == 143
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["track3d track: terminated (SIGTERM): the finished sequences are kept; the same command goes "
+                   "on from the first unfinished one"], err
+    assert signal.getsignal(signal.SIGTERM) is before   # the handler is the console script's only
+    (run,) = (res / "test").iterdir()
+    assert sorted(p.name for p in run.iterdir() if p.is_dir()) == ["a"]
+    monkeypatch.setattr(experiment, "run_sequence", real)
+    assert _track(synth, res, "--tracker", "oracle") == 0
+    assert sorted(p.name for p in run.iterdir() if p.is_dir()) == ["a", "b"]

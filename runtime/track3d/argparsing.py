@@ -17,7 +17,7 @@ import warnings
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["ArgumentParser", "one_line_warnings", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS", "thread_count", "allowed_cpu",
+__all__ = ["ArgumentParser", "one_line_warnings", "Terminated", "terminate_as_interrupt", "HelpFormatter", "apply_formatter", "hidden_alias", "run_main", "USER_ERRORS", "thread_count", "allowed_cpu",
            "missing_extra", "exit_for_missing_extra", "package_version", "bounded"]
 
 
@@ -213,13 +213,51 @@ def one_line_warnings(prog: str):
             warnings.formatwarning = before
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM inside `terminate_as_interrupt`: unwinds as Ctrl-C does (each `finally` and the
+    cleanup of a half-written sequence run), then exits 143 instead of 130."""
+
+
+@contextlib.contextmanager
+def terminate_as_interrupt():
+    """While inside (a console script's main, in the main thread), SIGTERM raises Terminated:
+    Python's default had ended the process at once, exit 143 without a word, a half-written
+    result folder left behind. The handler that was there is put back on exit."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handle(signum, frame):
+        raise Terminated
+
+    try:
+        before = signal.signal(signal.SIGTERM, handle)
+    except (ValueError, OSError):   # no signals here (an embedded interpreter)
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, before if before is not None else signal.SIG_DFL)
+
+
+def interrupt_exit(prog: str, e: KeyboardInterrupt, how: str = "") -> int:
+    """Print one line for an interrupted command (`how`: what to do now) and return its exit code."""
+    what = "terminated (SIGTERM)" if isinstance(e, Terminated) else "interrupted"
+    print(f"{prog}: {what}{': ' + how if how else ''}", file=sys.stderr)
+    return 143 if isinstance(e, Terminated) else 130
+
+
 def run_main(main: Callable[[], int | None], prog: str) -> int:
     """Run a script's main(): the errors a user causes become one line and exit 2."""
     try:
-        return int(main() or 0)
+        with terminate_as_interrupt():
+            return int(main() or 0)
     except USER_ERRORS as e:
         print(f"{prog}: error: {e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        return interrupt_exit(prog, e)

@@ -671,7 +671,9 @@ def main(argv: list[str] | None = None) -> int:
     """The `track3d` console script; its warnings print as one line (argparsing.one_line_warnings)."""
     from .argparsing import one_line_warnings
 
-    with one_line_warnings("track3d"):
+    from .argparsing import terminate_as_interrupt
+
+    with one_line_warnings("track3d"), terminate_as_interrupt():
         return _main(argv)
 
 
@@ -718,9 +720,13 @@ def _main(argv: list[str] | None = None) -> int:
             ValueError, RuntimeError) as e:
         print(f"track3d {args.command}: error: {_plugin_said(e) or e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        from .argparsing import interrupt_exit
+
+        how = {"track": "the finished sequences are kept; the same command goes on from the first unfinished one",
+               "eval": "no report was written; the same command makes it",
+               "bench": "nothing was written; the same command measures again"}.get(args.command, "")
+        return interrupt_exit(f"track3d {args.command}", e, how)
     except Exception as e:   # a plug-in's own bug: named in one line; track3d's own keeps its traceback
         said = _plugin_said(e)
         if said is None:

@@ -840,19 +840,22 @@ class Experiment:
         return {k: c.summary(total, ov.two_d_only) for k, c in cond.items()}
 
     def _remove_old_plots(self) -> None:
-        """The plots a previous report in report_dir listed: a report of fewer sequences or without
-        plots must not sit beside them. Only files that report named, inside report_dir."""
+        """The plots a previous report in report_dir listed, and that report itself: a report of
+        fewer sequences or without plots must not sit beside them, and an evaluation killed while
+        it drew must not leave the old report.json beside its new plots. Only files that report
+        named, by name inside report_dir (a report folder copied or moved elsewhere lists paths
+        of where it was: its plots had stayed)."""
         old = self.report_dir / "report.json"
         try:
             files = json.loads(old.read_text()).get("plots") or []
         except (OSError, ValueError, AttributeError):
             return
-        here = self.report_dir.resolve()
         for f in files:
-            p = Path(str(f))
-            p = p if p.is_absolute() else Path.cwd() / p
-            if p.resolve().parent == here and p.suffix.lower() in (".png", ".pdf", ".svg") and p.is_file():
+            p = self.report_dir / Path(str(f)).name
+            if p.suffix.lower() in (".png", ".pdf", ".svg") and p.is_file():
                 p.unlink()
+        for stale in (old, self.report_dir / "sequences.txt"):   # written again at the end
+            stale.unlink(missing_ok=True)
 
     def _stage_means(self, name: str) -> dict:
         a = self.stage_ms(name)
