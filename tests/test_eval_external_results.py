@@ -327,9 +327,35 @@ def test_a_2d_tracker_copying_the_3d_label_on_its_init_row_is_2d_only(synth, tmp
     _exact(synth, tmp_path / "res", change=init_only)
     ov = _report(synth, tmp_path)["trackers"]["mine"]["overall"]
     assert "ao_3d" not in ov and ov["ao_2d"] == pytest.approx(1.0)
-    _exact(synth, tmp_path / "res", change=init_only, record={"track3d": {"estimator": "a3boxnet"}})
+    _exact(synth, tmp_path / "res", change=init_only, record={"two_d": False})
     ov = _report(synth, tmp_path)["trackers"]["mine"]["overall"]
     assert ov["ao_3d"] == 0.0
+
+
+def test_a_2d_tracker_through_the_loop_with_no_estimator_is_2d_only(synth, tmp_path):
+    """Track3D(camera, tracker, NoEstimator()) built by hand records the estimator's class name;
+    taken for a 3D estimator, its run had been scored AO_3d 0 (a review)."""
+    from track3d.estimators import NoEstimator
+    from track3d.tracker import Track3D
+    from track3d.trackers2d import create_tracker
+
+    exp = Experiment(synth, "test", tmp_path / "res", tmp_path / "rep")
+    exp.run(lambda seq: Track3D(seq.camera, create_tracker("oracle", gt=seq.gt2d), NoEstimator()), name="kcf2d",
+            quiet=True)
+    rep = exp.report(["kcf2d"], plots=False)
+    assert "ao_3d" not in rep["trackers"]["kcf2d"]["overall"] and not rep["warnings"][1:], rep["warnings"]
+
+
+def test_an_eval_refused_on_a_bad_file_keeps_the_previous_report(synth, tmp_path, capsys):
+    _exact(synth, tmp_path / "res")
+    rc, _ = _eval_cli(synth, tmp_path, capsys)
+    assert rc == 0
+    before = (tmp_path / "rep" / "report.json").read_bytes()
+    f = tmp_path / "res" / "test" / "mine" / "s0001" / "s0001_001.txt"
+    f.write_text(f.read_text() + "x,y,w,h\n")
+    rc, err = _eval_cli(synth, tmp_path, capsys)
+    assert rc == 2 and "s0001_001.txt" in err
+    assert (tmp_path / "rep" / "report.json").read_bytes() == before
 
 
 def test_a_3d_run_missing_a_sequences_3d_file_says_so(synth, tmp_path):
@@ -352,6 +378,7 @@ def test_a_3d_run_missing_a_sequences_3d_file_says_so(synth, tmp_path):
     ("1\t2\t3\t4\n", r"at line 1, column 1 \(fields are separated by commas"),
     ("1;2;3;4\n", r"'1;2;3;4' .* \(fields are separated by commas"),
     ("x,y,w,h\n1,2,3,4\n", r"'x' .*at line 1, column 1 \(a header line starts with #\)"),
+    ("1,a,3,4\n", r"'a' to float64 at line 1, column 2$"),                    # a typo, not a header
     ("# a\n# b\n1,2,3,4\n1,2,3,4\n1.2.3,2,3,4\n", r"'1.2.3' to float64 at line 5, column 1$"),   # numpy: "row 2"
     ("1,2,3,4\n\n1,2,3\n", r"columns changed from 4 to 3 at line 3$"),                           # numpy: "row 2"
     ("1,2,-3,4\n", r"line 1: -3 is negative: a box's size is >= 0"),

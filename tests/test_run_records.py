@@ -418,3 +418,25 @@ def test_track_stopped_by_sigterm_says_so_keeps_finished_sequences_and_resumes(s
     monkeypatch.setattr(experiment, "run_sequence", real)
     assert _track(synth, res, "--tracker", "oracle") == 0
     assert sorted(p.name for p in run.iterdir() if p.is_dir()) == ["a", "b"]
+
+
+def test_a_console_script_started_with_sigterm_ignored_keeps_it_ignored():
+    """terminate_as_interrupt had put its handler over an ignored SIGTERM (a job started to ignore
+    it): the signal then stopped the command (a review)."""
+    import signal
+
+    from track3d.argparsing import terminate_as_interrupt
+
+    before = signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    try:
+        with terminate_as_interrupt():
+            assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+        with terminate_as_interrupt():
+            pass
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        with terminate_as_interrupt():
+            assert signal.getsignal(signal.SIGTERM) not in (signal.SIG_DFL, signal.SIG_IGN)
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+    finally:
+        signal.signal(signal.SIGTERM, before)
+

@@ -151,6 +151,10 @@ def test_boxnet_train_init_from_a_views_model_needs_a_cache_with_the_views(tmp_p
     assert not (tmp_path / "run").exists()
     assert train_main([*run, "--cache", str(views), "--init-from", views_model]) == 0
     assert train_main([*run, "--cache", str(views), "--init-from", BOXNET_MODEL, "--out", str(tmp_path / "r2")]) == 0
+    # a checkpoint of a views run, too (its history names its cache; a review)
+    ck = tmp_path / "run" / "last.pt"
+    assert train_main([*run, "--cache", str(plain), "--init-from", str(ck), "--out", str(tmp_path / "r3")]) == 2
+    _one_line(capsys, "trained beside the body's past views and the cache has none")
 
 
 def test_siamfc_and_edgetrack_train_name_a_path_that_is_not_a_crop_cache(tmp_path, capsys):

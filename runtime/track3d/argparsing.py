@@ -234,6 +234,9 @@ def terminate_as_interrupt():
         raise Terminated
 
     try:
+        if signal.getsignal(signal.SIGTERM) is signal.SIG_IGN:   # started to ignore it (nohup-like): it stays so
+            yield
+            return
         before = signal.signal(signal.SIGTERM, handle)
     except (ValueError, OSError):   # no signals here (an embedded interpreter)
         yield

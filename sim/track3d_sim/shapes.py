@@ -375,53 +375,88 @@ def _bad_edges(f: np.ndarray) -> int:
     return int(np.count_nonzero(_edge_uses(f) != 2)) if len(f) else 0
 
 
+def _face_links(f: np.ndarray):
+    """The faces of `f` (F, 3) int64 that share an edge used by exactly two faces: (fi, fj, same),
+    `same` 1 where both run along it in the same direction (one of the two is wound the other
+    way). Edges of more than two faces (non-manifold) link nothing."""
+    n = len(f)
+    a = f[:, [0, 1, 2]].reshape(-1)
+    b = f[:, [1, 2, 0]].reshape(-1)
+    face = np.repeat(np.arange(n, dtype=np.int64), 3)
+    key = np.minimum(a, b) * (int(f.max()) + 1) + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+    counts = np.diff(np.r_[starts, len(k)])
+    pairs = starts[counts == 2]
+    i, j = order[pairs], order[pairs + 1]
+    return face[i], face[j], (a[i] == a[j]).astype(np.int8)
+
+
+def face_parts(f: np.ndarray) -> np.ndarray:
+    """(F,) int labels of the connected parts of faces `f` (faces linked by an edge of two faces)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    f = np.asarray(f, dtype=np.int64)
+    if len(f) == 0:
+        return np.zeros(0, dtype=np.int64)
+    fi, fj, _ = _face_links(f)
+    g = coo_matrix((np.ones(len(fi)), (fi, fj)), shape=(len(f), len(f)))
+    return connected_components(g, directed=False)[1].astype(np.int64)
+
+
+def outward_parts(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, int]:
+    """Faces `f` with every closed part of negative signed volume reversed, and how many parts
+    were: each part of a body (a contact binary written as two shells) faces out on its own; one
+    flip by the whole mesh's volume had left a small part inside out beside a large one."""
+    f = np.asarray(f, dtype=np.int64)
+    labels = face_parts(f)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    vol = np.bincount(labels, weights=np.einsum("ij,ij->i", a, np.cross(b, c)))
+    inward = vol < 0
+    out = f.copy()
+    flip = inward[labels]
+    out[flip] = out[flip][:, ::-1]
+    return out, int(np.count_nonzero(inward))
+
+
 def consistent_winding(f: np.ndarray) -> np.ndarray:
     """Faces `f` (F, 3) with each connected part wound one way: a face sharing an edge with a
     face is flipped when both run along that edge in the same direction. Which way a part ends up
-    is its first face's (the caller turns a closed body outward by its volume's sign).
+    is its first face's (`outward_parts` then turns each closed part out).
 
-    Linear in the faces (a breadth-first walk over the faces that share an edge, in scipy):
-    trimesh.repair.fix_winding took ~90 us a face, minutes on a 2-million-face shape model, loaded
-    once per sequence. Edges of more than two faces (non-manifold) do not link their faces."""
+    Linear in the faces: one breadth-first walk (scipy) from a node joined to the first face of
+    every part; trimesh.repair.fix_winding took ~90 us a face, minutes on a 2-million-face shape
+    model, and a walk started once per part had been quadratic in the parts (a rubble pile of
+    boulders). Edges of more than two faces (non-manifold) do not link their faces."""
     from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import breadth_first_order, connected_components
+    from scipy.sparse.csgraph import breadth_first_order
 
     f = np.asarray(f, dtype=np.int64)
     n = len(f)
     if n == 0:
         return f.copy()
-    a = f[:, [0, 1, 2]].reshape(-1)
-    b = f[:, [1, 2, 0]].reshape(-1)
-    face = np.repeat(np.arange(n), 3)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    key = lo * (int(f.max()) + 1) + hi
-    order = np.argsort(key, kind="stable")
-    k = key[order]
-    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
-    counts = np.diff(np.r_[starts, len(k)])
-    pairs = starts[counts == 2]   # edges of exactly two faces
-    i, j = order[pairs], order[pairs + 1]
-    fi, fj = face[i], face[j]
-    # the same direction (a -> b in both) means one of the two faces is wound the other way
-    flip = (a[i] == a[j]).astype(np.int8)
-    g = coo_matrix((np.ones(len(fi) * 2), (np.r_[fi, fj], np.r_[fj, fi])), shape=(n, n)).tocsr()
-    rel_key = np.r_[fi * n + fj, fj * n + fi]
-    rel_val = np.r_[flip, flip]
+    fi, fj, same = _face_links(f)
+    firsts = np.unique(face_parts(f), return_index=True)[1].astype(np.int64)
+    root = n   # the extra node: its links say nothing (relation 0)
+    src = np.r_[fi, fj, np.full(len(firsts), root)]
+    dst = np.r_[fj, fi, firsts]
+    rel = np.r_[same, same, np.zeros(len(firsts), dtype=np.int8)]
+    g = coo_matrix((np.ones(len(src)), (src, dst)), shape=(n + 1, n + 1)).tocsr()
+    rel_key = src * (n + 1) + dst
     by = np.argsort(rel_key)
-    rel_key, rel_val = rel_key[by], rel_val[by]
-    parity = np.zeros(n, dtype=np.int8)
-    _, label = connected_components(g, directed=False)
-    roots = np.unique(label, return_index=True)[1]
-    for root in roots:
-        seq, pred = breadth_first_order(g, int(root), directed=False, return_predecessors=True)
-        kids = seq[1:].astype(np.int64)
-        pred = pred.astype(np.int64)   # scipy's int32: pred * n overflowed past 46,000 faces
-        rel = rel_val[np.searchsorted(rel_key, pred[kids] * n + kids)]
-        par = parity   # each face after its predecessor in the walk: one pass in that order
-        for node, parent, r in zip(kids.tolist(), pred[kids].tolist(), rel.tolist()):
-            par[node] = par[parent] ^ r
+    rel_key, rel = rel_key[by], rel[by]
+    seq, pred = breadth_first_order(g, root, directed=False, return_predecessors=True)
+    kids = seq[1:].astype(np.int64)
+    parents = pred[kids].astype(np.int64)   # scipy's int32: parent * n overflowed past 46,000 faces
+    step = rel[np.searchsorted(rel_key, parents * (n + 1) + kids)]
+    parity = np.zeros(n + 1, dtype=np.int8)
+    for node, parent, r in zip(kids.tolist(), parents.tolist(), step.tolist()):   # parents come first
+        parity[node] = parity[parent] ^ r
     out = f.copy()
-    out[parity == 1] = out[parity == 1][:, ::-1]
+    turn = parity[:n] == 1
+    out[turn] = out[turn][:, ::-1]
     return out
 
 
@@ -471,7 +506,10 @@ def load_user_mesh(path: str | Path, size_m: float) -> Shape:
     p = Path(path)
     try:
         st = p.stat()
-        key = (str(p.resolve()), float(size_m), st.st_size, st.st_mtime_ns) if p.is_file() else None
+        # the inode and change time too: a file replaced by one of the same size with its time
+        # kept (cp -p, rsync -t, tar) must not bring back the old body
+        key = (str(p.resolve()), float(size_m), st.st_size, st.st_mtime_ns, st.st_ino, st.st_ctime_ns) \
+            if p.is_file() else None
     except OSError:
         key = None
     shape = _LOADED.get(key) if key is not None else None
@@ -594,14 +632,16 @@ def _load_user_mesh(path: str | Path, size_m: float) -> Shape:
     closed = watertight and bool(m.is_winding_consistent)
     if watertight and not closed:
         params["winding_consistent"] = False
+    if closed:
+        # a part wound inward: seen from outside every face is a back face (never lit, no depth
+        # sensor return, a negative volume for the inertia); reversing its faces turns it out
+        f, turned = outward_parts(v, f)
+        if turned and not params.get("winding_repaired"):  # a repair's first face decided its side: not the file's
+            params["winding_flipped"] = True
+            if turned < len(np.unique(face_parts(f))):
+                params["parts_flipped"] = turned
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     normal = np.cross(b - a, c - a)
-    if closed and float(np.einsum("ij,ij->", a, np.cross(b, c))) < 0:
-        # wound inward: seen from outside every face is a back face (never lit, no depth sensor
-        # return, a negative volume for the inertia); reversing each face's vertex order turns it out
-        f = f[:, ::-1]
-        if not params.get("winding_repaired"):  # a repair's first face decided its side: not the file's
-            params["winding_flipped"] = True
     if not watertight:
         uses = _edge_uses(f)
         params["open_edges"] = int(np.count_nonzero(uses == 1))  # the rims of the holes
@@ -628,7 +668,10 @@ def user_mesh_warnings(shape: Shape, name: str) -> list[str]:
     if p.get("winding_repaired"):
         out.append(f"user mesh {name} was not consistently wound (some of its faces faced inward); its faces "
                    f"were turned to face outward (meta.json shape.winding_repaired)")
-    if p.get("winding_flipped") and p.get("watertight", True):
+    if p.get("winding_flipped") and p.get("watertight", True) and p.get("parts_flipped"):
+        out.append(f"user mesh {name} has {p['parts_flipped']} part(s) wound inside out (faces facing inward: "
+                   f"negative volume); their faces were flipped (meta.json shape.winding_flipped)")
+    elif p.get("winding_flipped") and p.get("watertight", True):
         out.append(f"user mesh {name} is wound inside out (its faces face inward: negative volume); its faces "
                    f"were flipped (meta.json shape.winding_flipped)")
     elif p.get("winding_flipped"):

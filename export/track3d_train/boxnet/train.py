@@ -282,6 +282,18 @@ def _load_source(path, train_ds) -> tuple[str, dict]:
     return str(path), load_checkpoint_dict(path, "A3BoxNet")
 
 
+def _refuse_views_lost(path, views, cache_info: dict | None) -> None:
+    """A model trained beside the body's past views (`views`: its counts, or None) fine-tuned on a
+    cache without them would come out a single-frame model without a word. (A single-frame model
+    fine-tuned on a views cache is how the views model is made: allowed.)"""
+    from .data import cache_past_views
+
+    if views and cache_info is not None and not cache_past_views(cache_info):
+        raise ValueError(f"{path} was trained beside the body's past views and the cache has none: prepare it "
+                         "with `boxnet prepare --past-views` (or start from a single-frame model, "
+                         "a3boxnet_narrow.onnx)")
+
+
 def _refuse_other_flags(path, src: dict, cfg: TrainConfig, cache_info: dict | None = None) -> None:
     """An exported model (--init-from X.onnx) is fine-tuned only with the flags its metadata
     records: --no-category alone had fine-tuned the shipped extent-coded model as "points"
@@ -289,17 +301,10 @@ def _refuse_other_flags(path, src: dict, cfg: TrainConfig, cache_info: dict | No
     trained beside the body's past views (metadata ``past_views``: the default a3boxnet_views.onnx)
     is fine-tuned on a cache that has them: on a frustum-only cache its export had silently come
     out a single-frame model. (A single-frame model on a views cache is how a views model is made.)"""
-    from .data import cache_past_views
-
     s = src.get("model_config")
     if not isinstance(s, dict):
         return
-    views = (src.get("imported_from") or {}).get("past_views")
-    # (a single-frame model fine-tuned on a views cache is how the views model is made: allowed)
-    if views and cache_info is not None and not cache_past_views(cache_info):
-        raise ValueError(f"{path} was trained beside the body's past views and the cache has none: prepare it "
-                         "with `boxnet prepare --past-views` (or start from a single-frame model, "
-                         "a3boxnet_narrow.onnx)")
+    _refuse_views_lost(path, (src.get("imported_from") or {}).get("past_views"), cache_info)
     want = []
     if int(s["num_points"]) != cfg.num_points:
         want.append(f"--num-points {int(s['num_points'])}")
@@ -350,7 +355,7 @@ def _train(cfg: TrainConfig, resume: bool, progress: bool, log, init_from: str |
     import torch
 
     from ..interrupt import StopOnSignal
-    from .data import BoxNetSamples, PointCache
+    from .data import BoxNetSamples, PointCache, cache_past_views
     from .losses import boxnet_loss, distill_loss
     from .model import A3BoxNet, BoxNetConfig
 
@@ -434,6 +439,9 @@ def _train(cfg: TrainConfig, resume: bool, progress: bool, log, init_from: str |
         init_from, src = _load_source(init_from, train_ds)
         if init_from.endswith(".onnx"):
             _refuse_other_flags(init_from, src, cfg, cache.info)
+        else:   # a checkpoint: its run's cache says whether it learnt beside the past views
+            _refuse_views_lost(init_from, cache_past_views((src.get("history") or {}).get("cache") or {}),
+                               cache.info)
         # a checkpoint's weights carry over between box codings (same layers; the heads re-learn
         # what their outputs mean; an exported model's recorded coding must be the run's, above),
         # and to a narrower net (narrow.py: the channels that matter most), not

@@ -509,6 +509,8 @@ class Experiment:
                 "labels": {seq.name: labels_digest(seq) for seq in self.sequences},
                 "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
                 "frames": {},
+                # a 2D tracker alone (no 3D box to score): eval's 2D-only or 3D run (_has_3d)
+                "two_d": two_d,
                 # only when on: the records of runs without it stay as they were
                 **({"init_3d": True, "first_box_fade": fade} if self.init_3d else {}),
                 # a 2D-only run restarts on the 2D overlap (before, on a 3D IoU it did not have: every
@@ -539,12 +541,13 @@ class Experiment:
         (decided per run: a sequence of a 3D run without any 3D box has no output, it is not a
         2D-only sequence). An init row holds the ground truth, so a 2D tracker that copies the 3D
         label there and writes nan on every other frame is 2D only (it had been scored AO_3d 0).
-        A run record naming a 3D box estimator makes it 3D whatever its rows hold: a loop whose
-        estimator never answered scores AO_3d 0, not "2D only"."""
+        A run record saying whether the loop boxed in 3D (`two_d`, from the loop's own
+        needs_points, not the estimator's name: NoEstimator built directly records its class name)
+        decides it whatever its rows hold: a loop whose estimator never answered scores AO_3d 0,
+        not "2D only"."""
         rec = read_run_record(self.result_dir, self.split, name) or {}
-        made = rec.get("track3d") if isinstance(rec.get("track3d"), dict) else {}
-        if isinstance(made.get("estimator"), str) and made["estimator"] not in ("", "none"):   # "none": 2D alone
-            return True
+        if isinstance(rec.get("two_d"), bool):
+            return not rec["two_d"]
         for seq in self.sequences:
             res = self._read_rows(name, seq)
             if np.isfinite(res.box3d[res.status != INIT]).any():
@@ -732,7 +735,6 @@ class Experiment:
         if baseline is not None and baseline not in names:
             raise ValueError(f"baseline {baseline!r} is not one of the compared runs: {', '.join(names)}")
         self.report_dir.mkdir(parents=True, exist_ok=True)
-        self._remove_old_plots()
         report: dict = {
             "dataset": str(self.dataset.root), "split": self.split, "sequences": [s.name for s in self.sequences],
             "max_frames": self.max_frames, "restart": self.restart, "restart_skip": self.restart_skip,
@@ -815,6 +817,8 @@ class Experiment:
             report["restart"], report["restart_skip"] = known[0]
         else:   # unknown (results without a record) or mixed: say so, never a made-up value
             report["restart"] = report["restart_skip"] = None
+        # only once every run scored: an eval refused on a bad file keeps the previous report
+        self._remove_old_plots()
         if plots:
             from . import plots as P
 

@@ -155,8 +155,8 @@ def _parse_error(path: Path, numpy_message: str) -> str:
             continue
         if len(fields) == 1 and re.search(r"\S[ \t;]+\S", line):
             hint = " (fields are separated by commas, e.g. x,y,w,h)"
-        elif k == 0 and re.search(r"[A-Za-z_]", bad):
-            hint = " (a header line starts with #)"
+        elif k == 0 and not any(_is_number(x) for x in fields) and re.search(r"[A-Za-z_]", bad):
+            hint = " (a header line starts with #)"   # a typo in one field of a row is no header
         break
     return f"malformed result file {path}: {msg}{hint}"
 
@@ -300,6 +300,7 @@ def _record_problem(rec: dict) -> str | None:
                "an object of sequence: label digest"),
               ("init_3d", lambda v: isinstance(v, bool), "true or false"),
               ("restart_overlap", lambda v: v is None or isinstance(v, str), "a word"),
+              ("two_d", lambda v: isinstance(v, bool), "true or false"),
               ("track3d", lambda v: isinstance(v, dict), "an object"))
     for key, ok, want in checks:
         if key in rec and not ok(rec[key]):
