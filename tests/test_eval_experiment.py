@@ -384,11 +384,17 @@ def test_line_of_sight_plot_draws_each_boxs_near_and_far_faces(tmp_path, monkeyp
     gt = np.array([[0, 0, 10, 1, 1, 2], [0, 0, 12, 1, 1, 4], [0, 0, 14, 1, 1, 2]], float)
     est = np.array([[0, 0, 10, 1, 1, 3], [0, 0, 12, 1, 1, 2], [0, 0, 13, 1, 1, 2]], float)
     P.line_of_sight_plot(gt, {"t": est}, tmp_path / "d.png", absent=np.array([False, True, False]))
-    lines = {ln.get_label(): ln.get_ydata() for ln in drawn["fig"].axes[0].get_lines()}
-    np.testing.assert_allclose(lines["ground truth: near face"], [9, np.nan, 13])
-    np.testing.assert_allclose(lines["ground truth: far face"], [11, np.nan, 15])
-    np.testing.assert_allclose(lines["t: near"], [8.5, 11, 12])
-    np.testing.assert_allclose(lines["t: far"], [11.5, 13, 14])
+    # in drawing order: the ground truth's near and far face, then each tracker's (a legend entry a
+    # run and one key for the faces: 8 runs had made 18 entries over the curves)
+    lines = [ln for ln in drawn["fig"].axes[0].get_lines() if len(ln.get_ydata())]
+    assert [ln.get_label() for ln in lines[::2]] == ["ground truth", "t"]
+    assert [ln.get_linestyle() for ln in lines] == ["-", "--", "-", "--"]
+    np.testing.assert_allclose(lines[0].get_ydata(), [9, np.nan, 13])
+    np.testing.assert_allclose(lines[1].get_ydata(), [11, np.nan, 15])
+    np.testing.assert_allclose(lines[2].get_ydata(), [8.5, 11, 12])
+    np.testing.assert_allclose(lines[3].get_ydata(), [11.5, 13, 14])
+    labels = [t.get_text() for t in drawn["fig"].axes[0].get_legend().get_texts()]
+    assert labels == ["ground truth", "t", "solid: near face", "dashed: far face"]
 
 
 def test_a_damaged_result_file_is_named_in_one_line(synth, tmp_path):
@@ -414,3 +420,25 @@ def test_a_damaged_result_file_is_named_in_one_line(synth, tmp_path):
     assert "usecols" not in str(e.value)
     boxes.write_text("\n".join(rows) + "\n")
     assert len(read_result(folder)) == len(words)
+
+
+def test_trajectory_plots_draw_the_scored_frames_of_the_3d_runs_only(synth, tmp_path, monkeypatch):
+    """trajectory_<seq>.png and depth_<seq>.png read the whole result files: with --frames 3 the
+    table scored 3 frames and the plots drew every frame; and a 2D-only run stood in their
+    legends with no line (a plots walkthrough)."""
+    pytest.importorskip("matplotlib")
+    from track3d.evaluation import plots as P
+
+    exp = Experiment(synth, "test", tmp_path / "res", tmp_path / "rep")
+    exp.run(TrackerSpec("oracle", "baseline"), quiet=True)
+    exp.run(TrackerSpec("oracle", "none"), quiet=True)
+    drawn = []
+    monkeypatch.setattr(P, "trajectory_plot", lambda gt, tracks, *a, **k: drawn.append((len(gt), tracks)) or Path("t"))
+    monkeypatch.setattr(P, "line_of_sight_plot", lambda gt, tracks, *a, **k: drawn.append((len(gt), tracks)) or Path("d"))
+    short = Experiment(synth, "test", tmp_path / "res", tmp_path / "rep", max_frames=3)
+    P.trajectory_plots(short, ["oracle+baseline", "oracle"], ["s0001"], tmp_path / "rep")
+    assert len(drawn) == 2
+    for n, tracks in drawn:
+        assert n == 3 and list(tracks) == ["oracle+baseline"] and len(tracks["oracle+baseline"]) == 3
+    drawn.clear()
+    assert P.trajectory_plots(short, ["oracle"], ["s0001"], tmp_path / "rep") == [] and not drawn

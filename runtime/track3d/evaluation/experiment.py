@@ -822,7 +822,7 @@ class Experiment:
         if plots:
             from . import plots as P
 
-            files = P.curve_plots(overall, self.report_dir)
+            files = P.curve_plots(overall, self.report_dir, own_2d=self.own_2d)
             files.append(P.sequence_plot(per_sequence, self.report_dir))
             axes = P.axis_error_plot(overall, self.report_dir)
             if axes is not None:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .metrics import AXES_3D, CE2D_THRESHOLDS, CE3D_THRESHOLDS, CONDITIONS, IOU_THRESHOLDS, OverallScore
-from .results import INIT, read_result
+from .results import INIT
 
 __all__ = ["pyplot", "curve_plots", "trajectory_plot", "trajectory_plots", "line_of_sight_plot", "sequence_plot",
            "worst_sequences", "axis_error_plot", "condition_plot"]
@@ -34,7 +34,10 @@ def _save(fig, path: str | Path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
-    fig.savefig(path)
+    # a legend beside the axes (_legend) is left out of tight_layout, so the axes keep their size,
+    # and named here, so the saved picture grows to hold it
+    legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
+    fig.savefig(path, bbox_inches="tight", bbox_extra_artists=legends)
     pyplot().close(fig)
     return path
 
@@ -47,11 +50,32 @@ def _label(text: str) -> str:
     return " " + text if text.startswith("_") else text
 
 
+# line styles by run, beside the colours: two runs of the same boxes draw one line over the other,
+# and a reader took the hidden one for missing
+_STYLES = ("-", "--", "-.", ":")
+
+
+def _styles(names) -> dict[str, str]:
+    return {n: _STYLES[k % len(_STYLES)] for k, n in enumerate(sorted(names))}
+
+
+def _legend(ax, entries: int, fontsize: int = 8) -> None:
+    """The legend inside the axes' corner for up to 3 entries, beside the axes for more: inside,
+    8 runs' curves ran under it."""
+    if entries <= 3:
+        ax.legend(fontsize=fontsize, loc="best")
+    else:
+        leg = ax.legend(fontsize=fontsize - 1, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
+        leg.set_in_layout(False)   # the axes keep their size; the saved picture grows to hold it (_save)
+
+
 def _colours(names) -> dict[str, tuple]:
-    """One colour per tracker name, the same in every plot of a report (sorted names, tab10)."""
+    """One colour per tracker name, the same in every plot of a report (sorted names; tab10, or
+    tab20 past 10 runs: tab10 had given the 11th run the 1st one's colour)."""
     plt = pyplot()
-    cmap = plt.get_cmap("tab10")
-    return {n: cmap(k % 10) for k, n in enumerate(sorted(names))}
+    names = sorted(names)
+    cmap = plt.get_cmap("tab10" if len(names) <= 10 else "tab20")
+    return {n: cmap(k % cmap.N) for k, n in enumerate(names)}
 
 
 _SUCCESS = {"2d": ("success_2d", "ao_2d", "2D"), "bev": ("success_bev", "ao_bev", "BEV"),
@@ -60,13 +84,15 @@ _PRECISION = {"2d": ("precision_2d", "ace_2d", CE2D_THRESHOLDS, "centre error (p
               "3d": ("precision_3d", "ace_3d", CE3D_THRESHOLDS, "centre error (m)", "m")}
 
 
-def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path) -> list[Path]:
+def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path, own_2d: bool = False) -> list[Path]:
     """success_{2d,bev,3d}.png (legend: AO) and precision_{2d,3d}.png (legend: ACE); the 3D ones
-    only when some run has 3D curves."""
+    only when some run has 3D curves. own_2d: the 2D trackers' own boxes were scored (the titles
+    say so: the same file names had shown other numbers than the loop's)."""
     plt = pyplot()
     out_dir = Path(out_dir)
     files = []
-    colour = _colours(overall)
+    colour, style = _colours(overall), _styles(overall)
+    what = ", trackers' own boxes" if own_2d else ""
     def drawn(curve: str) -> bool:   # 2D-only runs have no 3D curves: no empty 3D plots
         return any(curve in ov.curves for ov in overall.values())
 
@@ -75,27 +101,31 @@ def curve_plots(overall: dict[str, OverallScore], out_dir: str | Path) -> list[P
             continue
         fig, ax = plt.subplots(figsize=(5, 4), dpi=100)
         order = sorted(overall, key=lambda n: -np.nan_to_num(overall[n].values[key], nan=-1))
-        for name in order:
+        drawn_runs = [n for n in order if curve in overall[n].curves]
+        for name in drawn_runs:
             ov = overall[name]
-            if curve in ov.curves:
-                ax.plot(IOU_THRESHOLDS, ov.curves[curve], color=colour[name],
-                        label=f"{_label(name)} [AO {ov.values[key]:.3f}]")
-        ax.set(xlabel="overlap threshold", ylabel="success rate", title=f"Success plot ({title})",
+            ax.plot(IOU_THRESHOLDS, ov.curves[curve], color=colour[name], ls=style[name],
+                    label=f"{_label(name)} [AO {ov.values[key]:.3f}]")
+        ax.set(xlabel="overlap threshold", ylabel="success rate", title=f"Success plot ({title}{what})",
                xlim=(0, 1), ylim=(0, 1.02))
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="lower left")
+        _legend(ax, len(drawn_runs))
         files.append(_save(fig, out_dir / f"success_{kind}.png"))
     for kind, (curve, key, thr, xlabel, unit) in _PRECISION.items():
         if not drawn(curve):
             continue
         fig, ax = plt.subplots(figsize=(5, 4), dpi=100)
-        for name, ov in overall.items():
-            if curve in ov.curves:
-                ax.plot(thr, ov.curves[curve], color=colour[name], label=f"{_label(name)} [ACE {ov.values[key]:.3f} {unit}]")
-        ax.set(xlabel=xlabel, ylabel="precision", title=f"Precision plot ({kind.upper()})",
+        # the success plots' order (by AO), so that a run is in the same place in both legends
+        order = sorted(overall, key=lambda n: -np.nan_to_num(overall[n].values[_SUCCESS[kind][1]], nan=-1))
+        drawn_runs = [n for n in order if curve in overall[n].curves]
+        for name in drawn_runs:
+            ov = overall[name]
+            ax.plot(thr, ov.curves[curve], color=colour[name], ls=style[name],
+                    label=f"{_label(name)} [ACE {ov.values[key]:.3f} {unit}]")
+        ax.set(xlabel=xlabel, ylabel="precision", title=f"Precision plot ({kind.upper()}{what})",
                xlim=(thr[0], thr[-1]), ylim=(0, 1.02))
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="lower right")
+        _legend(ax, len(drawn_runs))
         files.append(_save(fig, out_dir / f"precision_{kind}.png"))
     return files
 
@@ -113,11 +143,12 @@ def trajectory_plot(gt3d: np.ndarray, tracks: dict[str, np.ndarray], path: str |
     g = np.asarray(gt3d, np.float64).copy()
     if absent is not None:
         g[np.asarray(absent, bool)] = np.nan
-    ax.plot(g[:, 0], g[:, 2], -g[:, 1], color="black", lw=2, label="ground truth")
-    colour = _colours(tracks)
+    # drawn over the runs (zorder): under eight runs' lines it had been buried
+    ax.plot(g[:, 0], g[:, 2], -g[:, 1], color="black", lw=2, label="ground truth", zorder=5)
+    colour, style = _colours(tracks), _styles(tracks)
     for name, boxes in tracks.items():
         b = np.asarray(boxes, np.float64)
-        line, = ax.plot(b[:, 0], b[:, 2], -b[:, 1], lw=1, color=colour[name], label=_label(name))
+        line, = ax.plot(b[:, 0], b[:, 2], -b[:, 1], lw=1, color=colour[name], ls=style[name], label=_label(name))
         if restarts is not None and name in restarts and np.any(restarts[name]):
             r = b[restarts[name]]
             ax.scatter(r[:, 0], r[:, 2], -r[:, 1], marker="x", color=line.get_color(), s=25)
@@ -125,7 +156,7 @@ def trajectory_plot(gt3d: np.ndarray, tracks: dict[str, np.ndarray], path: str |
     ax.set_ylabel("z (m)")
     ax.set_zlabel("-y (m)")
     ax.set_title(_label(title), fontsize=10)
-    ax.legend(fontsize=7, loc="upper left")
+    _legend(ax, len(tracks) + 1, fontsize=8)
     return _save(fig, path)
 
 
@@ -142,18 +173,21 @@ def line_of_sight_plot(gt3d: np.ndarray, tracks: dict[str, np.ndarray], path: st
     if absent is not None:
         g[np.asarray(absent, bool)] = np.nan
     t = np.arange(len(g))
-    ax.plot(t, g[:, 2] - g[:, 5] / 2, color="black", lw=2, label="ground truth: near face")
-    ax.plot(t, g[:, 2] + g[:, 5] / 2, color="black", lw=2, ls="--", label="ground truth: far face")
+    ax.plot(t, g[:, 2] - g[:, 5] / 2, color="black", lw=2, label="ground truth", zorder=5)
+    ax.plot(t, g[:, 2] + g[:, 5] / 2, color="black", lw=2, ls="--", zorder=5)
     colour = _colours(tracks)
     for name, boxes in tracks.items():
         b = np.asarray(boxes, np.float64)
         tb = np.arange(len(b))
-        ax.plot(tb, b[:, 2] - b[:, 5] / 2, lw=1, color=colour[name], label=f"{_label(name)}: near")
-        ax.plot(tb, b[:, 2] + b[:, 5] / 2, lw=1, ls="--", color=colour[name], label=f"{_label(name)}: far")
+        ax.plot(tb, b[:, 2] - b[:, 5] / 2, lw=1, color=colour[name], label=_label(name))
+        ax.plot(tb, b[:, 2] + b[:, 5] / 2, lw=1, ls="--", color=colour[name])
+    # one entry a run (two had made 18 entries for 8 runs, over the curves), the faces' key once
+    ax.plot([], [], color="grey", lw=1, label="solid: near face")
+    ax.plot([], [], color="grey", lw=1, ls="--", label="dashed: far face")
     ax.set(xlabel="frame", ylabel="z, along the line of sight (m)")
     ax.set_title(_label(title), fontsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
+    _legend(ax, len(tracks) + 3, fontsize=8)
     return _save(fig, path)
 
 
@@ -163,11 +197,17 @@ def trajectory_plots(exp, names: list[str], seq_names: list[str], out_dir: str |
     (depth_<seq>.png)."""
     files = []
     by_name = {s.name: s for s in exp.sequences}
+    # 2D-only runs have no 3D track: in the legend with no line they read as a run that failed
+    runs_3d = [name for name in names if exp._run_3d(name)]
+    if not runs_3d:
+        return files
     for sn in seq_names:
         seq = by_name[sn]
-        tracks, restarts, n = {}, {}, len(seq)
-        for name in names:
-            res = read_result(exp.folder(name, sn), sn)
+        tracks, restarts, n = {}, {}, exp._frames(seq)
+        for name in runs_3d:
+            # the rows as scored (--frames cut, skipped frames without a box): the whole files had
+            # drawn 300 frames beside a table of 60
+            res = exp._read(name, seq)
             n = min(n, len(res))
             tracks[name] = res.box3d
             st = res.status
@@ -215,7 +255,8 @@ def sequence_plot(scores: dict[str, list], out_dir: str | Path) -> Path:
     key = _per_sequence_key(scores)
     order = worst_sequences(scores, len(next(iter(scores.values()), [])))
     colour = _colours(scores)
-    runs = sorted(scores)
+    # a 2D-only run has no AO_3d: its bars had been drawn at 0, as a run that lost every frame
+    runs = sorted(n for n in scores if key == "ao_2d" or not all(s.two_d_only for s in scores[n]))
     rows = len(order)
     h = 0.8 / max(len(runs), 1)
     fig, ax = plt.subplots(figsize=(6, 1.0 + 0.28 * rows * max(1, len(runs) / 2)), dpi=100)
@@ -226,7 +267,8 @@ def sequence_plot(scores: dict[str, list], out_dir: str | Path) -> Path:
         ax.barh(y, np.nan_to_num(v, nan=0.0), height=h, color=colour[name], label=_label(name))
     ax.set_yticks(np.arange(rows), [_label(sn) for sn in order], fontsize=7)
     ax.invert_yaxis()
-    ax.set(xlim=(0, 1), xlabel=f"AO_{key[3:]} per sequence", title="Sequences, worst first")
+    ax.set(xlim=(0, 1), xlabel=f"AO_{key[3:]} per sequence",
+           title=f"AO_{key[3:]} per sequence, worst (mean over the runs) first")
     ax.grid(axis="x", alpha=0.3)
     # beside the bars, not under them: below the axes it covered the x label on short plots
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
@@ -266,7 +308,7 @@ def axis_error_plot(overall: dict[str, OverallScore], out_dir: str | Path) -> Pa
     ax.set(ylabel="metres", title="3D error per box coordinate: mean |error| (bars), bias (ticks)")
     ax.title.set_fontsize(10)
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(fontsize=7)
+    _legend(ax, len(runs) + 1, fontsize=8)
     return _save(fig, Path(out_dir) / "errors_3d.png")
 
 
