@@ -77,6 +77,7 @@ def draw_frame(seq, i: int, gain: float = 1.0, right: bool = False):
     d.text((3, 2), tag, fill=(255, 255, 0))
     if right:
         r = Image.fromarray(np.clip(fr.right.astype(np.float32) * gain, 0, 255).astype(np.uint8))
+        ImageDraw.Draw(r).text((3, 2), f"{seq.name}#{i + 1} right", fill=(255, 255, 0))   # the right tile said nothing
         both = Image.new("RGB", (im.width * 2 + 4, im.height), (40, 40, 40))
         both.paste(im, (0, 0))
         both.paste(r, (im.width + 4, 0))
@@ -118,9 +119,14 @@ def preview(sequence: str | Path, out: str | Path, n: int = 12, gain: float = 1.
     for k, t in enumerate(tiles):
         sheet.paste(t, ((k % cols) * (tw + 2), (k // cols) * (th + 2) + 16))
     m = seq.meta
-    ImageDraw.Draw(sheet).text((4, 2), f"{seq.split}/{seq.name}: {m.get('fine_category')}  scene={m.get('scene')}  "
-                               f"sun E={m.get('sun', {}).get('irradiance', 0):.2f} phase={m.get('sun', {}).get('phase_deg', 0):.0f}deg",
-                               fill=(255, 255, 255))
+    head = ImageDraw.Draw(sheet)
+    text = (f"{seq.split}/{seq.name}: {m.get('fine_category')}  scene={m.get('scene')}  "
+            f"sun E={m.get('sun', {}).get('irradiance', 0):.2f} phase={m.get('sun', {}).get('phase_deg', 0):.0f}deg  ")
+    head.text((4, 2), text, fill=(255, 255, 255))
+    # the boxes' key: nothing had said which colour is which
+    x = 4 + head.textlength(text)
+    head.text((x, 2), "green: 2D label", fill=(60, 255, 60))
+    head.text((x + head.textlength("green: 2D label  "), 2), "red: 3D label", fill=(255, 60, 60))
     make_parent(out)
     sheet.save(out)
     return out

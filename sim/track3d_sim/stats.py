@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SimError
+from .shapes import VOLUME_RANGE
 from .outfile import check_out, make_parent
 
 
@@ -101,8 +102,10 @@ def plot_stats(root: str | Path, out: str | Path, split: str = "all") -> dict:
     v = st["volume"]
     ax[0, 1].hist(v, bins=np.logspace(np.log10(max(v.min(), 1e-3)), np.log10(v.max() + 1e-9), 40), color="tab:orange")
     ax[0, 1].set_xscale("log")
-    ax[0, 1].axvline(16, color="k", ls="--", lw=0.8)
-    ax[0, 1].axvline(1600, color="k", ls="--", lw=0.8)
+    # the paper's volume range (VOLUME_RANGE), named: two unexplained dashed lines had been drawn
+    ax[0, 1].axvline(VOLUME_RANGE[0], color="k", ls="--", lw=0.8, label=f"paper's range {VOLUME_RANGE[0]:g}-{VOLUME_RANGE[1]:g} m^3")
+    ax[0, 1].axvline(VOLUME_RANGE[1], color="k", ls="--", lw=0.8)
+    ax[0, 1].legend(fontsize=7)
     ax[0, 1].set(title=f"(b) box volumes, m^3 ({v.min():.0f} .. {v.max():.0f})", xlabel="axis-aligned box volume (m^3)",
                  ylabel="frames")
     vel = st["velocity"]
