@@ -166,19 +166,25 @@ def _tiny_nets():
             "siamfc": SiamFC(_sf_cfg())}
 
 
-@pytest.mark.parametrize("name", ["boxnet", "edgetrack", "siamfc"])
-def test_an_export_killed_midway_leaves_the_files_that_were_there(tmp_path, monkeypatch, name):
-    """The exports wrote torch.onnx.export straight to the target, then saved over it to add the
-    metadata: a kill in between left a model without metadata (or half a pair)."""
+def _earlier_export(tmp_path, name):
+    """(export module, tiny net, the export's target, the files it writes) of network `name`,
+    those files already there holding b"the earlier export"."""
     import importlib
 
     mod = importlib.import_module(f"track3d_train.{name}.export")
-    net = _tiny_nets()[name]
     target = tmp_path / ("m.onnx" if name == "boxnet" else "m")
     files = [target] if name == "boxnet" else [tmp_path / f"m_{p}.onnx" for p in
                                                (("template", "search") if name == "edgetrack" else ("exemplar", "search"))]
     for f in files:
         f.write_bytes(b"the earlier export")
+    return mod, _tiny_nets()[name], target, files
+
+
+@pytest.mark.parametrize("name", ["boxnet", "edgetrack", "siamfc"])
+def test_an_export_killed_midway_leaves_the_files_that_were_there(tmp_path, monkeypatch, name):
+    """The exports wrote torch.onnx.export straight to the target, then saved over it to add the
+    metadata: a kill in between left a model without metadata (or half a pair)."""
+    mod, net, target, files = _earlier_export(tmp_path, name)
     real, calls = mod.attach_metadata, []
 
     def attach(path, meta):   # the last file's metadata: the kill
@@ -204,15 +210,7 @@ def test_an_export_is_checked_before_it_replaces_anything(tmp_path, name):
     left an unchecked model that the same command then refused to redo ('exists: pass --force'),
     and EdgeTrack's and SiamFC's checks only printed their differences. The check now runs on the
     temporaries: a failing one (or a kill during it) leaves the earlier files and no temporary."""
-    import importlib
-
-    mod = importlib.import_module(f"track3d_train.{name}.export")
-    net = _tiny_nets()[name]
-    target = tmp_path / ("m.onnx" if name == "boxnet" else "m")
-    files = [target] if name == "boxnet" else [tmp_path / f"m_{p}.onnx" for p in
-                                               (("template", "search") if name == "edgetrack" else ("exemplar", "search"))]
-    for f in files:
-        f.write_bytes(b"the earlier export")
+    mod, net, target, files = _earlier_export(tmp_path, name)
     seen = []
 
     def check(*temps):
